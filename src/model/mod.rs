@@ -1,0 +1,214 @@
+//! Forward models: the fibre shading ladder of MODEL.md §3, cheap to exact, behind one trait.
+//!
+//! Every model is linear in its albedos, so a model returns a [`Basis`]: the BRDF (1/sr) per unit
+//! albedo of each linear component. The caller combines it with grey or RGB albedos; the fitter
+//! can solve those exactly (separable least squares).
+
+pub mod cross_section;
+pub mod frame;
+pub mod hast_diffuse;
+pub mod lambert;
+pub mod max_normal;
+pub mod params;
+pub mod poulin_fournier;
+pub mod quadrature;
+pub mod reference;
+pub mod topology;
+pub mod varying_topology;
+pub mod ward;
+
+use std::fmt;
+use std::str::FromStr;
+
+pub use frame::{DirectionPair, FibreFrame, Local, Vec3};
+pub use params::{Albedo, ModelParams};
+
+/// The rungs of the ladder, by the ids the CLI and JSON use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ModelId {
+    Lambert,
+    MaxNormal,
+    HastDiffuse,
+    PoulinFournier,
+    VaryingTopology,
+    Reference,
+    Ward,
+}
+
+impl ModelId {
+    /// Cheapest first.
+    pub const ALL: [ModelId; 7] = [
+        ModelId::Lambert,
+        ModelId::MaxNormal,
+        ModelId::HastDiffuse,
+        ModelId::Ward,
+        ModelId::PoulinFournier,
+        ModelId::VaryingTopology,
+        ModelId::Reference,
+    ];
+
+    pub fn as_str(self) -> &'static str {
+        match self {
+            ModelId::Lambert => "lambert",
+            ModelId::MaxNormal => "max-normal",
+            ModelId::HastDiffuse => "hast-diffuse",
+            ModelId::PoulinFournier => "poulin-fournier",
+            ModelId::VaryingTopology => "varying-topology",
+            ModelId::Reference => "reference",
+            ModelId::Ward => "ward",
+        }
+    }
+
+    /// Models built on the fibre cross-section of MODEL.md §2 (reciprocal, with hiding and
+    /// shadowing).
+    pub fn is_cross_section(self) -> bool {
+        matches!(self, ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference)
+    }
+
+    /// Models whose elevation comes from the topology (height, map).
+    pub fn has_topology(self) -> bool {
+        matches!(self, ModelId::VaryingTopology | ModelId::Reference)
+    }
+}
+
+impl fmt::Display for ModelId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for ModelId {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        ModelId::ALL.iter().copied().find(|m| m.as_str() == s).ok_or_else(|| {
+            let ids: Vec<&str> = ModelId::ALL.iter().map(|m| m.as_str()).collect();
+            format!("unknown model id '{s}'; expected one of: {}", ids.join(", "))
+        })
+    }
+}
+
+/// BRDF (1/sr) per unit albedo of each linear component.
+///
+/// `diffuse` multiplies `kd` (Ward: `rho_d`), `specular` multiplies `ks` (Ward: `rho_s`) and
+/// `substrate` multiplies `substrate_albedo`.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Basis {
+    pub diffuse: f64,
+    pub specular: f64,
+    pub substrate: f64,
+}
+
+impl Basis {
+    pub fn scaled(self, w: f64) -> Basis {
+        Basis { diffuse: self.diffuse * w, specular: self.specular * w, substrate: self.substrate * w }
+    }
+
+    pub fn add(self, o: Basis) -> Basis {
+        Basis {
+            diffuse: self.diffuse + o.diffuse,
+            specular: self.specular + o.specular,
+            substrate: self.substrate + o.substrate,
+        }
+    }
+
+    /// The BRDF for one colour channel of `albedos`.
+    pub fn brdf(&self, albedos: &Albedos, channel: usize) -> f64 {
+        self.diffuse * albedos.diffuse[channel]
+            + self.specular * albedos.specular[channel]
+            + self.substrate * albedos.substrate[channel]
+    }
+
+    pub fn is_finite(&self) -> bool {
+        self.diffuse.is_finite() && self.specular.is_finite() && self.substrate.is_finite()
+    }
+}
+
+/// Albedos of the three linear components, per channel (grey models repeat one value).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Albedos {
+    pub diffuse: [f64; 3],
+    pub specular: [f64; 3],
+    pub substrate: [f64; 3],
+    /// Whether any albedo was given per channel.
+    pub rgb: bool,
+}
+
+impl Albedos {
+    pub fn grey(diffuse: f64, specular: f64, substrate: f64) -> Self {
+        Self { diffuse: [diffuse; 3], specular: [specular; 3], substrate: [substrate; 3], rgb: false }
+    }
+
+    pub fn channels(&self) -> usize {
+        if self.rgb {
+            3
+        } else {
+            1
+        }
+    }
+}
+
+/// One rung of the ladder. Implementations check their ranges at construction so evaluation is
+/// cheap and never produces NaN.
+pub trait ShadingModel: Send + Sync {
+    fn id(&self) -> ModelId;
+
+    /// The basis for a pair with both directions strictly above the horizon.
+    fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis;
+
+    /// The basis with the fibre topology fixed at one height H (one texel), for models that have
+    /// a topology; `None` otherwise.
+    fn basis_at_height_above_horizon(&self, _pair: &DirectionPair, _height: f64) -> Option<Basis> {
+        None
+    }
+
+    /// The basis; zero when either direction is at or below the horizon (MODEL.md §1).
+    fn basis(&self, pair: &DirectionPair) -> Basis {
+        if pair.above_horizon() {
+            self.basis_above_horizon(pair)
+        } else {
+            Basis::default()
+        }
+    }
+
+    /// The basis at one height (see [`ShadingModel::basis_at_height_above_horizon`]).
+    fn basis_at_height(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
+        if !self.id().has_topology() {
+            None
+        } else if pair.above_horizon() {
+            self.basis_at_height_above_horizon(pair, height)
+        } else {
+            Some(Basis::default())
+        }
+    }
+}
+
+/// Shaded intensity I = f (N.l) (MODEL.md §1), zero below the horizon.
+pub fn intensity(brdf: f64, pair: &DirectionPair) -> f64 {
+    if pair.above_horizon() {
+        brdf * pair.l.n
+    } else {
+        0.0
+    }
+}
+
+/// Build the model `id` from validated parameters.
+pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
+    Ok(match id {
+        ModelId::Lambert => Box::new(lambert::Lambert),
+        ModelId::MaxNormal => Box::new(max_normal::MaxNormal::new(p.exponent)),
+        ModelId::HastDiffuse => Box::new(hast_diffuse::HastDiffuse),
+        ModelId::PoulinFournier => {
+            Box::new(poulin_fournier::PoulinFournier::new(p.spacing, p.exponent, p.quadrature_order))
+        }
+        ModelId::VaryingTopology => Box::new(varying_topology::VaryingTopology::new(
+            p.spacing,
+            p.exponent,
+            p.quadrature_order,
+            p.topology.discretise(p.spacing, p.histogram_bins),
+        )),
+        ModelId::Reference => {
+            Box::new(reference::Reference::new(p.spacing, p.exponent, p.topology.clone()))
+        }
+        ModelId::Ward => Box::new(ward::Ward::new(p.alpha_x, p.alpha_y)),
+    })
+}

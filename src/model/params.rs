@@ -1,0 +1,294 @@
+//! Model parameters (MODEL.md §5): read from TOML or JSON, checked against their ranges, and
+//! turned into the values models are built from (radians, heights, albedos per channel).
+
+use super::lambert::Preview;
+use super::topology::{max_elevation, max_height, Topology, TopologyMap};
+use super::{Albedos, ModelId};
+use anyhow::{anyhow, bail, Context, Result};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// A grey or RGB albedo.
+#[derive(Clone, Copy, Debug, Deserialize, PartialEq, serde::Serialize)]
+#[serde(untagged)]
+pub enum Albedo {
+    Grey(f64),
+    Rgb([f64; 3]),
+}
+
+impl Albedo {
+    pub fn channels(&self) -> [f64; 3] {
+        match *self {
+            Albedo::Grey(v) => [v; 3],
+            Albedo::Rgb(c) => c,
+        }
+    }
+    pub fn is_rgb(&self) -> bool {
+        matches!(self, Albedo::Rgb(_))
+    }
+}
+
+/// The parameter file as written by a user (every name of MODEL.md §5 plus the knobs).
+#[derive(Clone, Debug, Default, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RawParams {
+    /// Model id; optional (the CLI's `--model` wins).
+    pub model: Option<String>,
+    pub kd: Option<Albedo>,
+    pub ks: Option<Albedo>,
+    pub exponent: Option<f64>,
+    pub spacing: Option<f64>,
+    pub height: Option<f64>,
+    pub elevation_deg: Option<f64>,
+    pub map_scale: Option<f64>,
+    pub fibre_azimuth_deg: Option<f64>,
+    pub substrate_albedo: Option<Albedo>,
+    pub alpha_x: Option<f64>,
+    pub alpha_y: Option<f64>,
+    pub rho_d: Option<Albedo>,
+    pub rho_s: Option<Albedo>,
+    /// Grayscale PNG/EXR topology map; relative paths are relative to the parameter file.
+    pub topology_map: Option<PathBuf>,
+    /// Specular Gauss–Legendre order N (default 16).
+    pub quadrature_order: Option<usize>,
+    /// Height histogram bins K (default 16).
+    pub histogram_bins: Option<usize>,
+    /// `lambert` preview: light both sides (seed 003).
+    pub two_sided: Option<bool>,
+    /// `lambert` preview: ambient term (seed 003), irradiance-relative.
+    pub ambient: Option<f64>,
+}
+
+pub const DEFAULT_QUADRATURE_ORDER: usize = 16;
+pub const DEFAULT_HISTOGRAM_BINS: usize = 16;
+
+impl RawParams {
+    /// Read a `.toml` or `.json` file (by extension; otherwise TOML, then JSON).
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read parameter file", path.display()))?;
+        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let mut raw: RawParams = if ext == "json" {
+            serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?
+        } else {
+            toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?
+        };
+        if let Some(map) = &raw.topology_map {
+            if map.is_relative() {
+                raw.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
+            }
+        }
+        Ok(raw)
+    }
+}
+
+/// Validated parameters in model units.
+#[derive(Clone, Debug)]
+pub struct ModelParams {
+    pub albedos: Albedos,
+    pub exponent: f64,
+    pub spacing: f64,
+    /// psi, radians.
+    pub fibre_azimuth: f64,
+    pub topology: Topology,
+    pub alpha_x: f64,
+    pub alpha_y: f64,
+    pub quadrature_order: usize,
+    pub histogram_bins: usize,
+    pub preview: Preview,
+}
+
+fn check_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64> {
+    if !v.is_finite() {
+        bail!("parameter `{name}` is {v}; it must be a finite number in [{lo}, {hi}]");
+    }
+    if v < lo || v > hi {
+        bail!("parameter `{name}` = {v} is out of range [{lo}, {hi}]");
+    }
+    Ok(v)
+}
+
+fn check_albedo(name: &str, a: &Albedo) -> Result<()> {
+    for c in a.channels() {
+        check_range(name, c, 0.0, 1.0)?;
+    }
+    Ok(())
+}
+
+/// Which parameters each model reads (for warnings about ignored ones).
+fn uses(id: ModelId, name: &str) -> bool {
+    use ModelId::*;
+    match name {
+        "kd" => id != Ward,
+        "ks" | "exponent" => matches!(id, MaxNormal | PoulinFournier | VaryingTopology | Reference),
+        "spacing" | "substrate_albedo" | "quadrature_order" => {
+            matches!(id, PoulinFournier | VaryingTopology | Reference)
+        }
+        "height" | "elevation_deg" | "map_scale" | "topology_map" => matches!(id, VaryingTopology | Reference),
+        "histogram_bins" => id == VaryingTopology,
+        "fibre_azimuth_deg" => id != Lambert,
+        "alpha_x" | "alpha_y" | "rho_d" | "rho_s" => id == Ward,
+        "two_sided" | "ambient" => id == Lambert,
+        _ => true,
+    }
+}
+
+impl ModelParams {
+    /// Check `raw` for model `id`. Returns the parameters and warnings about parameters the model
+    /// does not use.
+    pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
+        let mut warnings = Vec::new();
+        let given: [(&str, bool); 19] = [
+            ("kd", raw.kd.is_some()),
+            ("ks", raw.ks.is_some()),
+            ("exponent", raw.exponent.is_some()),
+            ("spacing", raw.spacing.is_some()),
+            ("height", raw.height.is_some()),
+            ("elevation_deg", raw.elevation_deg.is_some()),
+            ("map_scale", raw.map_scale.is_some()),
+            ("fibre_azimuth_deg", raw.fibre_azimuth_deg.is_some()),
+            ("substrate_albedo", raw.substrate_albedo.is_some()),
+            ("alpha_x", raw.alpha_x.is_some()),
+            ("alpha_y", raw.alpha_y.is_some()),
+            ("rho_d", raw.rho_d.is_some()),
+            ("rho_s", raw.rho_s.is_some()),
+            ("topology_map", raw.topology_map.is_some()),
+            ("quadrature_order", raw.quadrature_order.is_some()),
+            ("histogram_bins", raw.histogram_bins.is_some()),
+            ("two_sided", raw.two_sided.is_some()),
+            ("ambient", raw.ambient.is_some()),
+            ("model", false),
+        ];
+        for (name, present) in given {
+            if present && !uses(id, name) {
+                warnings.push(format!("parameter `{name}` is not used by model `{id}`"));
+            }
+        }
+
+        let spacing = check_range("spacing", raw.spacing.unwrap_or(2.0), 2.0, 20.0)?;
+        let h_max = max_height(spacing);
+        let psi_deg = check_range("fibre_azimuth_deg", raw.fibre_azimuth_deg.unwrap_or(0.0), -90.0, 90.0)?;
+        let exponent = check_range("exponent", raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
+        let quadrature_order = raw.quadrature_order.unwrap_or(DEFAULT_QUADRATURE_ORDER);
+        if !(1..=1024).contains(&quadrature_order) {
+            bail!("parameter `quadrature_order` = {quadrature_order} is out of range [1, 1024]");
+        }
+        let histogram_bins = raw.histogram_bins.unwrap_or(DEFAULT_HISTOGRAM_BINS);
+        if !(1..=65536).contains(&histogram_bins) {
+            bail!("parameter `histogram_bins` = {histogram_bins} is out of range [1, 65536]");
+        }
+
+        let height = match (raw.height, raw.elevation_deg) {
+            (Some(_), Some(_)) => bail!("give either `height` or `elevation_deg`, not both"),
+            (Some(h), None) => check_range("height", h, 0.0, h_max * (1.0 + 1e-9))?.min(h_max),
+            (None, Some(e)) => {
+                let e_max = max_elevation(spacing).to_degrees();
+                let e = check_range("elevation_deg", e, 0.0, e_max * (1.0 + 1e-9))?.min(e_max);
+                spacing * e.to_radians().sin()
+            }
+            (None, None) => 0.0,
+        };
+        let map_scale = check_range("map_scale", raw.map_scale.unwrap_or(0.0), 0.0, h_max)?;
+        let map = match &raw.topology_map {
+            Some(path) if uses(id, "topology_map") => Some(Arc::new(TopologyMap::load(path)?)),
+            _ => None,
+        };
+
+        let (albedos, alpha_x, alpha_y) = if id == ModelId::Ward {
+            let ax = raw.alpha_x.ok_or_else(|| anyhow!("model `ward` needs `alpha_x`"))?;
+            let ay = raw.alpha_y.ok_or_else(|| anyhow!("model `ward` needs `alpha_y`"))?;
+            check_range("alpha_x", ax, 1e-3, 1.0)?;
+            check_range("alpha_y", ay, 1e-3, 1.0)?;
+            if ax <= 1e-3 || ay <= 1e-3 {
+                bail!("parameters `alpha_x`, `alpha_y` must lie in (0.001, 1]");
+            }
+            let rho_d = raw.rho_d.unwrap_or(Albedo::Grey(0.0));
+            let rho_s = raw.rho_s.ok_or_else(|| anyhow!("model `ward` needs `rho_s`"))?;
+            check_albedo("rho_d", &rho_d)?;
+            check_albedo("rho_s", &rho_s)?;
+            let a = Albedos {
+                diffuse: rho_d.channels(),
+                specular: rho_s.channels(),
+                substrate: [0.0; 3],
+                rgb: rho_d.is_rgb() || rho_s.is_rgb(),
+            };
+            (a, ax, ay)
+        } else {
+            let kd = raw.kd.ok_or_else(|| anyhow!("model `{id}` needs `kd` (fibre diffuse albedo)"))?;
+            check_albedo("kd", &kd)?;
+            let ks = raw.ks.unwrap_or(Albedo::Grey(0.0));
+            check_albedo("ks", &ks)?;
+            let sub = raw.substrate_albedo.unwrap_or(kd);
+            check_albedo("substrate_albedo", &sub)?;
+            let uses_spec = uses(id, "ks");
+            let ks_c = if uses_spec { ks.channels() } else { [0.0; 3] };
+            let sub_c = if uses(id, "substrate_albedo") { sub.channels() } else { [0.0; 3] };
+            let a = Albedos {
+                diffuse: kd.channels(),
+                specular: ks_c,
+                substrate: sub_c,
+                rgb: kd.is_rgb() || (uses_spec && ks.is_rgb()) || (uses(id, "substrate_albedo") && sub.is_rgb()),
+            };
+            (a, 1.0, 1.0)
+        };
+        let ambient = check_range("ambient", raw.ambient.unwrap_or(0.0), 0.0, 1.0)?;
+
+        Ok((
+            Self {
+                albedos,
+                exponent,
+                spacing,
+                fibre_azimuth: psi_deg.to_radians(),
+                topology: Topology { height, map_scale, map },
+                alpha_x,
+                alpha_y,
+                quadrature_order,
+                histogram_bins,
+                preview: Preview { two_sided: raw.two_sided.unwrap_or(false), ambient },
+            },
+            warnings,
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<RawParams> {
+        toml::from_str(text).map_err(|e| anyhow!("{e}"))
+    }
+
+    #[test]
+    fn unknown_key_is_named() {
+        let err = parse("kd = 0.5\nspacng = 3").unwrap_err().to_string();
+        assert!(err.contains("spacng"), "{err}");
+    }
+
+    #[test]
+    fn out_of_range_is_named() {
+        let raw = parse("kd = 0.5\nspacing = 1.5").unwrap();
+        let err = ModelParams::from_raw(&raw, ModelId::PoulinFournier).unwrap_err().to_string();
+        assert!(err.contains("spacing") && err.contains("1.5"), "{err}");
+        let raw = parse("kd = [0.5, 1.2, 0.1]").unwrap();
+        let err = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap_err().to_string();
+        assert!(err.contains("kd"), "{err}");
+    }
+
+    #[test]
+    fn elevation_and_height_agree() {
+        let raw = parse("kd = 0.5\nelevation_deg = 60").unwrap();
+        let (p, _) = ModelParams::from_raw(&raw, ModelId::VaryingTopology).unwrap();
+        assert!((p.topology.height - 3f64.sqrt()).abs() < 1e-12);
+        let raw = parse("kd = 0.5\nelevation_deg = 61").unwrap();
+        assert!(ModelParams::from_raw(&raw, ModelId::VaryingTopology).is_err());
+    }
+
+    #[test]
+    fn unused_parameters_warn() {
+        let raw = parse("kd = 0.5\nalpha_x = 0.2").unwrap();
+        let (_, w) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
+        assert!(w.iter().any(|s| s.contains("alpha_x")));
+    }
+}

@@ -1,0 +1,124 @@
+//! `varying-topology` (seeds 001/002): MODEL.md §2 with the elevation phi from the topology,
+//! closed-form diffuse over the exact visible-and-lit arcs, and N-point Gauss–Legendre for the
+//! specular lobe.
+//!
+//! f(l, v) = [ sum over the period's 2 fibres of int_{vis & lit} f_fib (n.l)(n.v) dth
+//!             + int_{vis & lit substrate} f_sub (N.l)(N.v) dx ] / (P (N.l)(N.v))
+//!
+//! With n.l = |l_p| cos(th - alpha_l) the |l_p||v_p| factors cancel against (N.l)(N.v), leaving
+//! cos(alpha_l) cos(alpha_v) in the denominator. Using cos(th - a) cos(th - b) =
+//! 1/2 [cos(a - b) + cos(2 th - a - b)] and r.v = 2 (n.l)(n.v) - l.v, each specular node costs
+//! one cosine and one power. The specular rule runs over the part of each arc where
+//! r.v > exp(ln(1e-15)/e) of its peak: outside that, (r.v)^e < 1e-15 of the peak value.
+
+use super::cross_section::{diffuse_kernel, Fibre, Pattern, SectionPair};
+use super::quadrature::GaussLegendre;
+use super::topology::elevation_from_height;
+use super::{Basis, DirectionPair, ModelId, ShadingModel};
+use std::f64::consts::{FRAC_1_PI, PI};
+
+/// Closed-form diffuse + Gauss–Legendre specular over one pattern.
+#[derive(Clone, Debug)]
+pub struct GaussSection {
+    rule: GaussLegendre,
+    exponent: f64,
+    /// Phong normalisation (e + 2) / (2 pi).
+    norm: f64,
+    /// Fraction of the peak of r.v where the specular window ends.
+    lobe_floor: f64,
+}
+
+impl GaussSection {
+    pub fn new(exponent: f64, order: usize) -> Self {
+        Self {
+            rule: GaussLegendre::new(order),
+            exponent,
+            norm: (exponent + 2.0) / (2.0 * PI),
+            lobe_floor: (1e-15f64.ln() / exponent).exp(),
+        }
+    }
+
+    pub fn order(&self) -> usize {
+        self.rule.order()
+    }
+
+    pub fn basis(&self, pattern: &Pattern, sp: &SectionPair) -> Basis {
+        let denom = pattern.period * sp.cos_alpha_product();
+        if !(denom > 0.0) {
+            return Basis::default();
+        }
+        let (al, av) = (sp.l.alpha, sp.v.alpha);
+        let cos_delta = (al - av).cos();
+        let sigma = al + av;
+        let k2 = 2.0 * sp.l.len * sp.v.len;
+        let window = sp.lobe_window(self.lobe_floor);
+        let (mut diffuse, mut specular) = (0.0, 0.0);
+        for fibre in [Fibre::Even, Fibre::Odd] {
+            let arcs = sp.seen_and_lit(pattern, fibre);
+            for &(a, b) in arcs.as_slice() {
+                diffuse += diffuse_kernel(a, b, al, av);
+            }
+            if let Some((w0, w1)) = window {
+                for &(a, b) in arcs.clip(w0, w1).as_slice() {
+                    specular += self.rule.integrate(a, b, |th| {
+                        let cc = 0.5 * (cos_delta + (2.0 * th - sigma).cos());
+                        let rv = k2 * cc - sp.cos_lv;
+                        if rv > 0.0 {
+                            rv.powf(self.exponent) * cc
+                        } else {
+                            0.0
+                        }
+                    });
+                }
+            }
+        }
+        Basis {
+            diffuse: FRAC_1_PI * diffuse / denom,
+            specular: self.norm * specular / denom,
+            substrate: FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
+        }
+    }
+}
+
+/// The `varying-topology` rung: the mean over a discretised height distribution.
+#[derive(Clone, Debug)]
+pub struct VaryingTopology {
+    spacing: f64,
+    section: GaussSection,
+    /// (pattern, weight) per histogram node.
+    nodes: Vec<(Pattern, f64)>,
+}
+
+impl VaryingTopology {
+    /// `heights`: (H, weight) pairs from [`super::topology::Topology::discretise`].
+    pub fn new(spacing: f64, exponent: f64, order: usize, heights: Vec<(f64, f64)>) -> Self {
+        let nodes = heights
+            .into_iter()
+            .map(|(h, w)| (Pattern::new(spacing, elevation_from_height(h, spacing)), w))
+            .collect();
+        Self { spacing, section: GaussSection::new(exponent, order), nodes }
+    }
+
+    pub fn nodes(&self) -> usize {
+        self.nodes.len()
+    }
+}
+
+impl ShadingModel for VaryingTopology {
+    fn id(&self) -> ModelId {
+        ModelId::VaryingTopology
+    }
+
+    fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
+        let sp = SectionPair::new(&pair.l, &pair.v);
+        self.nodes
+            .iter()
+            .fold(Basis::default(), |acc, (p, w)| acc.add(self.section.basis(p, &sp).scaled(*w)))
+    }
+
+    fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
+        let sp = SectionPair::new(&pair.l, &pair.v);
+        let pattern = Pattern::new(self.spacing, elevation_from_height(height, self.spacing));
+        Some(self.section.basis(&pattern, &sp))
+    }
+}
