@@ -1,17 +1,18 @@
 use fibrefit::model::*;
-use fibrefit::model::topology::Topology;
 fn main() {
-    let th = 30f64.to_radians();
-    let l = frame::direction_from_angles(th, 90f64.to_radians());
     let fr = FibreFrame::from_azimuth(0.0);
-    let pairs = [DirectionPair::new(&fr, &Vec3::new(0.,0.,1.), &Vec3::new(0.,0.,1.)), DirectionPair::new(&fr, &l, &l)];
-    for (i,pair) in pairs.iter().enumerate() {
-        for phi in [0.0f64, 30.0, 60.0] {
-            let h = 2.0*phi.to_radians().sin();
-            let vt = varying_topology::VaryingTopology::new(2.0, 10.0, 16, vec![(h,1.0)]);
-            let rf = reference::Reference::new(2.0, 10.0, Topology{height:h, map_scale:0.0, map:None});
-            let b = vt.basis(pair); let r = rf.basis(pair);
-            println!("pair {i} phi {phi}: vt d={:.10} sub={:.6} spec={:.6} | ref d={:.10} spec={:.6}", b.diffuse, b.substrate, b.specular, r.diffuse, r.specular);
+    for (ax, ay) in [(0.05,0.1),(0.3,0.3),(1.0,1.0),(0.1,1.0)] {
+        let w = ward::Ward::new(ax, ay);
+        for thl in [0.0f64, 60.0, 85.0, 89.5] {
+            let l = frame::direction_from_angles(thl.to_radians(), 0.4);
+            let (nt, np) = (2000, 1000);
+            let mut sum = 0.0;
+            for i in 0..nt { let th = (i as f64 + 0.5) / nt as f64 * std::f64::consts::FRAC_PI_2;
+                for j in 0..np { let ph = 2.0*std::f64::consts::PI*(j as f64+0.5)/np as f64;
+                    let v = frame::direction_from_angles(th, ph);
+                    sum += w.basis(&DirectionPair::new(&fr, &l, &v)).specular * th.cos() * th.sin(); } }
+            sum *= (std::f64::consts::FRAC_PI_2 / nt as f64) * (2.0*std::f64::consts::PI/np as f64);
+            println!("ward ax {ax} ay {ay} theta_l {thl}: specular albedo {sum:.4}");
         }
     }
 }

@@ -1,0 +1,134 @@
+//! Shared helpers for the integration tests: direction sets and parameter sets.
+#![allow(dead_code)]
+
+use fibrefit::model::frame::{direction_from_angles, FibreFrame, Vec3};
+use fibrefit::model::topology::Topology;
+use fibrefit::model::{self, DirectionPair, ModelId, ShadingModel};
+
+/// Deterministic xorshift generator (tests need no `rand`).
+pub struct Rng(u64);
+impl Rng {
+    pub fn new(seed: u64) -> Self {
+        Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1)
+    }
+    pub fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+    /// Uniform direction on the upper hemisphere.
+    pub fn hemisphere(&mut self) -> Vec3 {
+        let z = self.uniform();
+        let r = (1.0 - z * z).sqrt();
+        let p = 2.0 * std::f64::consts::PI * self.uniform();
+        Vec3::new(r * p.cos(), r * p.sin(), z)
+    }
+}
+
+/// Local-frame pairs (T = x, B = y, N = z) covering the extremes the brief lists: l along T,
+/// l across T, N.l = 0, N.v = 0, l = v, mirror, grazing, plus random pairs.
+pub fn extreme_pairs() -> Vec<DirectionPair> {
+    let deg = |a: f64| a.to_radians();
+    let frame = FibreFrame::from_azimuth(0.0);
+    let mut dirs: Vec<Vec3> = vec![
+        Vec3::new(0.0, 0.0, 1.0),
+        Vec3::new(1.0, 0.0, 0.0),             // along T, at the horizon
+        Vec3::new(1.0, 0.0, 1e-9).normalize(), // along T, just above
+        Vec3::new(0.0, 1.0, 0.0),             // across T, at the horizon
+        Vec3::new(0.0, 1.0, 1e-9).normalize(), // across T, grazing
+        Vec3::new(0.0, -1.0, 1e-6).normalize(),
+        Vec3::new(0.6, 0.8, 0.0), // N.l = 0
+        direction_from_angles(deg(89.99), deg(45.0)),
+        direction_from_angles(deg(30.0), deg(90.0)),
+        direction_from_angles(deg(60.0), deg(-120.0)),
+        direction_from_angles(deg(45.0), deg(10.0)),
+        direction_from_angles(deg(80.0), deg(170.0)),
+    ];
+    let mut rng = Rng::new(7);
+    for _ in 0..12 {
+        dirs.push(rng.hemisphere());
+    }
+    let mut pairs = Vec::new();
+    for l in &dirs {
+        for v in &dirs {
+            pairs.push(DirectionPair::new(&frame, l, v));
+        }
+        // mirror of l about N
+        let m = Vec3::new(-l.x, -l.y, l.z);
+        pairs.push(DirectionPair::new(&frame, l, &m));
+    }
+    pairs
+}
+
+/// Random pairs above the horizon (not grazing closer than `min_cos`).
+pub fn random_pairs(n: usize, seed: u64, min_cos: f64) -> Vec<DirectionPair> {
+    let frame = FibreFrame::from_azimuth(0.0);
+    let mut rng = Rng::new(seed);
+    let mut out = Vec::new();
+    while out.len() < n {
+        let (l, v) = (rng.hemisphere(), rng.hemisphere());
+        if l.z > min_cos && v.z > min_cos {
+            out.push(DirectionPair::new(&frame, &l, &v));
+        }
+    }
+    out
+}
+
+/// A cross-section parameter set: (spacing, height H, exponent).
+#[derive(Clone, Copy, Debug)]
+pub struct Section {
+    pub spacing: f64,
+    pub height: f64,
+    pub exponent: f64,
+}
+
+pub fn sections() -> Vec<Section> {
+    let s = |spacing: f64, height: f64, exponent: f64| Section { spacing, height, exponent };
+    let hmax = |d: f64| (d * d - 1.0f64).sqrt();
+    vec![
+        s(2.0, 0.0, 1.0),
+        s(2.0, 0.9, 20.0),
+        s(2.0, hmax(2.0), 20.0), // elevation at its limit
+        s(2.5, 1.2, 100.0),
+        s(4.0, 0.0, 5.0), // gaps, substrate visible
+        s(4.0, hmax(4.0), 50.0),
+        s(20.0, 3.0, 1e4),
+    ]
+}
+
+pub fn vt(s: &Section, order: usize) -> Box<dyn ShadingModel> {
+    Box::new(model::varying_topology::VaryingTopology::new(s.spacing, s.exponent, order, vec![(s.height, 1.0)]))
+}
+
+pub fn reference(s: &Section) -> Box<dyn ShadingModel> {
+    Box::new(model::reference::Reference::new(
+        s.spacing,
+        s.exponent,
+        Topology { height: s.height, map_scale: 0.0, map: None },
+    ))
+}
+
+/// Every rung, built at the given section.
+pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
+    ModelId::ALL
+        .iter()
+        .map(|&id| -> Box<dyn ShadingModel> {
+            match id {
+                ModelId::Lambert => Box::new(model::lambert::Lambert),
+                ModelId::MaxNormal => Box::new(model::max_normal::MaxNormal::new(s.exponent)),
+                ModelId::HastDiffuse => Box::new(model::hast_diffuse::HastDiffuse),
+                ModelId::PoulinFournier => {
+                    Box::new(model::poulin_fournier::PoulinFournier::new(s.spacing, s.exponent, 16))
+                }
+                ModelId::VaryingTopology => vt(s, 16),
+                ModelId::Reference => reference(s),
+                ModelId::Ward => Box::new(model::ward::Ward::new(0.05, 0.4)),
+            }
+        })
+        .collect()
+}
+
+pub fn rel_diff(a: f64, b: f64) -> f64 {
+    (a - b).abs() / a.abs().max(b.abs()).max(1e-300)
+}
