@@ -1,5 +1,8 @@
 //! fibrefit: fit fibre reflectance models to goniometric and image measurements.
 //!
-//! The crate flows one way: [`load`] -> [`model`] -> fit -> [`export`].
+//! Data flows one way: [`load`] -> [`model`] -> fit -> [`export`]; [`cli`] drives it.
 
+pub mod cli;
+pub mod export;
+pub mod load;
 pub mod model;

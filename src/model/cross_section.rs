@@ -83,6 +83,50 @@ impl Arcs {
     }
 }
 
+/// floor(x) without a libm call (baseline x86-64 has no rounding instruction, and this is on the
+/// hot path). Exact: beyond 2^52 every f64 is an integer.
+#[inline]
+fn floor(x: f64) -> f64 {
+    if x.abs() < 4.5e15 {
+        let t = x as i64 as f64;
+        if t > x {
+            t - 1.0
+        } else {
+            t
+        }
+    } else {
+        x
+    }
+}
+
+#[inline]
+fn ceil(x: f64) -> f64 {
+    -floor(-x)
+}
+
+/// x mod p in [0, p) for p > 0, without a libm call.
+#[inline]
+fn wrap(x: f64, p: f64) -> f64 {
+    let r = x - p * floor(x / p);
+    if r >= p || r < 0.0 {
+        0.0
+    } else {
+        r
+    }
+}
+
+/// asin with the interval ends ±1 (the common case) answered without a libm call.
+#[inline]
+fn asin_end(s: f64) -> f64 {
+    if s <= -1.0 {
+        -std::f64::consts::FRAC_PI_2
+    } else if s >= 1.0 {
+        std::f64::consts::FRAC_PI_2
+    } else {
+        s.asin()
+    }
+}
+
 /// Sort intervals and return the complement of their union within (lo, hi).
 fn complement_within(shadows: &mut [(f64, f64)], lo: f64, hi: f64) -> Arcs {
     shadows.sort_unstable_by(|p, q| p.0.total_cmp(&q.0));
@@ -115,7 +159,8 @@ pub struct Projected {
 impl Projected {
     /// Requires w.N > 0 (so the projection is non-zero).
     pub fn new(w: &Local) -> Self {
-        let len = w.projected_len();
+        // |w_p| of a unit vector: sqrt is exact enough here and far cheaper than hypot
+        let len = (w.b * w.b + w.n * w.n).sqrt();
         Self { alpha: w.alpha(), sin: w.b / len, cos: w.n / len, len }
     }
 }
@@ -169,6 +214,7 @@ impl Pattern {
     pub fn unoccluded_arcs(&self, fibre: Fibre, dir: &Projected) -> Arcs {
         let (sa, ca) = (dir.sin, dir.cos);
         let ds = 2.0 * self.step * ca; // > 0 above the horizon
+        let inv_ds = 1.0 / ds;
         let da = 2.0 * self.step * sa;
         let mut shadows = [(0.0, 0.0); 4];
         let mut n = 0;
@@ -177,13 +223,13 @@ impl Pattern {
             let a0 = x0 * sa + y0 * ca;
             // Members whose shadow can reach (-1, 1): |s_m| < 2 (boundary members cast empty
             // shadows, so including them is harmless).
-            let mut lo = ((-2.0 - s0) / ds).ceil();
-            let mut hi = ((2.0 - s0) / ds).floor();
+            let mut lo = ceil((-2.0 - s0) * inv_ds);
+            let mut hi = floor((2.0 - s0) * inv_ds);
             // ... and that lie ahead along the ray: a_m = a0 + m da > 0.
             if da > 0.0 {
-                lo = lo.max((-a0 / da).floor() + 1.0);
+                lo = lo.max(floor(-a0 / da) + 1.0);
             } else if da < 0.0 {
-                hi = hi.min((-a0 / da).ceil() - 1.0);
+                hi = hi.min(ceil(-a0 / da) - 1.0);
             } else if a0 <= 0.0 {
                 continue;
             }
@@ -208,7 +254,7 @@ impl Pattern {
         let gaps = complement_within(&mut shadows[..n], -1.0, 1.0);
         let mut arcs = Arcs::default();
         for &(a, b) in gaps.as_slice() {
-            arcs.push(dir.alpha + a.asin(), dir.alpha + b.clamp(-1.0, 1.0).asin());
+            arcs.push(dir.alpha + asin_end(a), dir.alpha + asin_end(b));
         }
         arcs
     }
@@ -229,7 +275,7 @@ impl Pattern {
             }
             let tan = dir.sin / dir.cos;
             for (cx, cy) in [(0.0, 0.0), (self.step, self.rise)] {
-                let start = (cx - (1.0 + cy) * tan - half).rem_euclid(p);
+                let start = wrap(cx - (1.0 + cy) * tan - half, p);
                 let end = start + 2.0 * half;
                 if end <= p {
                     pieces[n] = (start, end);
@@ -346,6 +392,17 @@ pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64) -> f64 {
 mod tests {
     use super::*;
     use crate::model::quadrature::adaptive_gk15;
+
+    #[test]
+    fn floor_ceil_wrap_match_std() {
+        for x in [-3.5, -3.0, -0.2, -0.0, 0.0, 0.7, 2.0, 2.9999999, 1e17, -1e17, 4.4e15 + 0.5] {
+            assert_eq!(floor(x), x.floor(), "{x}");
+            assert_eq!(ceil(x), x.ceil(), "{x}");
+        }
+        for (x, p) in [(-0.5, 4.0), (9.0, 4.0), (3.999999, 4.0), (-8.0, 4.0), (1e6 + 0.25, 2.0)] {
+            assert!((wrap(x, p) - f64::rem_euclid(x, p)).abs() < 1e-9, "{x} {p}");
+        }
+    }
 
     #[test]
     fn diffuse_kernel_matches_quadrature_on_long_and_short_arcs() {

@@ -69,7 +69,7 @@ impl Local {
     }
     /// Length of the projection onto the cross-section (B, N) plane: sqrt(1 - (w.T)^2).
     pub fn projected_len(&self) -> f64 {
-        self.b.hypot(self.n)
+        (self.b * self.b + self.n * self.n).sqrt()
     }
     /// Angle of the projection in the cross-section plane, from N towards B (MODEL.md §1).
     pub fn alpha(&self) -> f64 {

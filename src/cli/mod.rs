@@ -1,0 +1,72 @@
+//! Command line: parse, validate into real objects, run. Errors carry their whole context and
+//! map to exit code 2 in `main`.
+
+pub mod eval;
+pub mod progress;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+use std::ffi::OsString;
+
+#[derive(Debug, Parser)]
+#[command(
+    name = "fibrefit",
+    version,
+    about = "Fit fibre reflectance models to goniometric and image measurements",
+    long_about = "Fit fibre reflectance models to goniometric and image measurements.\n\n\
+        Conventions (MODEL.md): swatch normal N = +z; angles in degrees in files, theta from N, \
+        phi from the swatch x axis towards y; BRDF f in 1/sr; shaded intensity I = f (N.l)."
+)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Evaluate a model's BRDF and intensity at given light/view directions.
+    Eval(eval::EvalArgs),
+}
+
+/// Parse `args` and run. Returns the process exit code (help and version print and return 0).
+pub fn run<I, T>(args: I) -> Result<()>
+where
+    I: IntoIterator<Item = T>,
+    T: Into<OsString> + Clone,
+{
+    let cli = match Cli::try_parse_from(args) {
+        Ok(cli) => cli,
+        Err(e) => {
+            let code = e.exit_code();
+            e.print().ok();
+            if code == 0 {
+                return Ok(());
+            }
+            return Err(UsageError.into());
+        }
+    };
+    match cli.command {
+        Command::Eval(args) => eval::run(&args),
+    }
+}
+
+/// A usage error already printed by clap.
+#[derive(Debug)]
+pub struct UsageError;
+
+impl std::fmt::Display for UsageError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("invalid command line")
+    }
+}
+
+impl std::error::Error for UsageError {}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn clap_definition_is_consistent() {
+        use clap::CommandFactory;
+        super::Cli::command().debug_assert();
+    }
+}

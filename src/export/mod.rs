@@ -1,0 +1,5 @@
+//! Writers: every output goes through [`atomic::AtomicFile`], so a failed run never leaves a
+//! half-written file or clobbers an existing one.
+
+pub mod atomic;
+pub mod eval_table;

@@ -1,0 +1,3 @@
+//! Loaders: files in, validated samples out. No model code here.
+
+pub mod queries;
