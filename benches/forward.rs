@@ -20,24 +20,30 @@ fn pairs(n: usize) -> Vec<DirectionPair> {
     };
     (0..n)
         .map(|_| {
-            let l = direction_from_angles(u().acos(), 6.283 * u());
-            let v = direction_from_angles(u().acos(), 6.283 * u());
+            let l = direction_from_angles(u().acos(), std::f64::consts::TAU * u());
+            let v = direction_from_angles(u().acos(), std::f64::consts::TAU * u());
             DirectionPair::new(&fr, &l, &v)
         })
         .collect()
 }
 
 fn eval_all(m: &dyn ShadingModel, ps: &[DirectionPair]) -> f64 {
-    ps.iter().map(|p| {
-        let b = m.basis(black_box(p));
-        b.diffuse + b.specular + b.substrate
-    }).sum()
+    ps.iter()
+        .map(|p| {
+            let b = m.basis(black_box(p));
+            b.diffuse + b.specular + b.substrate
+        })
+        .sum()
 }
 
 fn rungs(c: &mut Criterion) {
     let ps = pairs(4096);
     let (d, h, e) = (2.2, 1.0, 60.0);
-    let topo = Topology { height: h, map_scale: 0.0, map: None };
+    let topo = Topology {
+        height: h,
+        map_scale: 0.0,
+        map: None,
+    };
     let mut g = c.benchmark_group("rung");
     g.throughput(Throughput::Elements(ps.len() as u64));
     let models: Vec<(String, Box<dyn ShadingModel>)> = vec![
@@ -45,13 +51,42 @@ fn rungs(c: &mut Criterion) {
         ("max-normal".into(), Box::new(max_normal::MaxNormal::new(e))),
         ("hast-diffuse".into(), Box::new(hast_diffuse::HastDiffuse)),
         ("ward".into(), Box::new(ward::Ward::new(0.1, 0.3))),
-        ("poulin-fournier/N16".into(), Box::new(poulin_fournier::PoulinFournier::new(d, e, 16))),
-        ("varying-topology/N4".into(), Box::new(varying_topology::VaryingTopology::new(d, e, 4, topo.discretise(d, 1)))),
-        ("varying-topology/N16".into(), Box::new(varying_topology::VaryingTopology::new(d, e, 16, topo.discretise(d, 1)))),
-        ("varying-topology/N64".into(), Box::new(varying_topology::VaryingTopology::new(d, e, 64, topo.discretise(d, 1)))),
+        (
+            "poulin-fournier/N16".into(),
+            Box::new(poulin_fournier::PoulinFournier::new(d, e, 16)),
+        ),
+        (
+            "varying-topology/N4".into(),
+            Box::new(varying_topology::VaryingTopology::new(
+                d,
+                e,
+                4,
+                topo.discretise(d, 1),
+            )),
+        ),
+        (
+            "varying-topology/N16".into(),
+            Box::new(varying_topology::VaryingTopology::new(
+                d,
+                e,
+                16,
+                topo.discretise(d, 1),
+            )),
+        ),
+        (
+            "varying-topology/N64".into(),
+            Box::new(varying_topology::VaryingTopology::new(
+                d,
+                e,
+                64,
+                topo.discretise(d, 1),
+            )),
+        ),
     ];
     for (name, m) in &models {
-        g.bench_function(BenchmarkId::from_parameter(name), |b| b.iter(|| eval_all(m.as_ref(), &ps)));
+        g.bench_function(BenchmarkId::from_parameter(name), |b| {
+            b.iter(|| eval_all(m.as_ref(), &ps))
+        });
     }
     g.finish();
 
@@ -60,9 +95,15 @@ fn rungs(c: &mut Criterion) {
     let few = &ps[..64];
     g.throughput(Throughput::Elements(few.len() as u64));
     g.sample_size(10);
-    let spread = Topology { height: h, map_scale: 0.25, map: None };
+    let spread = Topology {
+        height: h,
+        map_scale: 0.25,
+        map: None,
+    };
     let vt16 = varying_topology::VaryingTopology::new(d, e, 16, spread.discretise(d, 16));
-    g.bench_function("varying-topology/N16/K16", |b| b.iter(|| eval_all(&vt16, few)));
+    g.bench_function("varying-topology/N16/K16", |b| {
+        b.iter(|| eval_all(&vt16, few))
+    });
     let reference = reference::Reference::new(d, e, topo);
     g.bench_function("reference", |b| b.iter(|| eval_all(&reference, few)));
     g.finish();
@@ -70,18 +111,28 @@ fn rungs(c: &mut Criterion) {
 
 fn parallel(c: &mut Criterion) {
     let ps = pairs(1 << 16);
-    let topo = Topology { height: 1.0, map_scale: 0.0, map: None };
+    let topo = Topology {
+        height: 1.0,
+        map_scale: 0.0,
+        map: None,
+    };
     let m = varying_topology::VaryingTopology::new(2.2, 60.0, 16, topo.discretise(2.2, 1));
     let mut g = c.benchmark_group("parallel");
     g.throughput(Throughput::Elements(ps.len() as u64));
     g.sample_size(20);
-    g.bench_function(format!("varying-topology/N16/{}-threads", rayon::current_num_threads()), |b| {
-        b.iter(|| {
-            ps.par_chunks(1024)
-                .map(|chunk| eval_all(&m, chunk))
-                .sum::<f64>()
-        })
-    });
+    g.bench_function(
+        format!(
+            "varying-topology/N16/{}-threads",
+            rayon::current_num_threads()
+        ),
+        |b| {
+            b.iter(|| {
+                ps.par_chunks(1024)
+                    .map(|chunk| eval_all(&m, chunk))
+                    .sum::<f64>()
+            })
+        },
+    );
     g.finish();
 }
 

@@ -20,8 +20,16 @@ struct Scene {
 fn blocked(p: (f64, f64), u: (f64, f64), own: Option<i64>, h: f64, rise: f64) -> bool {
     // fibres the ray can meet lie within the horizontal reach between y = -1 and the top
     let top = rise + 1.0;
-    let reach = if u.1 > 0.0 { (top - p.1).max(0.0) * (u.0 / u.1).abs() } else { f64::INFINITY };
-    let (lo, hi) = if u.0 >= 0.0 { (p.0 - 2.0, p.0 + reach + 2.0) } else { (p.0 - reach - 2.0, p.0 + 2.0) };
+    let reach = if u.1 > 0.0 {
+        (top - p.1).max(0.0) * (u.0 / u.1).abs()
+    } else {
+        f64::INFINITY
+    };
+    let (lo, hi) = if u.0 >= 0.0 {
+        (p.0 - 2.0, p.0 + reach + 2.0)
+    } else {
+        (p.0 - reach - 2.0, p.0 + 2.0)
+    };
     let (k0, k1) = ((lo / h).floor() as i64, (hi / h).ceil() as i64);
     for k in k0..=k1 {
         if Some(k) == own {
@@ -92,14 +100,24 @@ fn reference_agrees_with_dense_ray_sampling() {
     for s in sections().into_iter().filter(|s| s.exponent <= 100.0) {
         let reference = reference(&s);
         let phi = (s.height / s.spacing).asin();
-        let scene = Scene { kd: 0.6, ks: 0.3, ksub: 0.8, e: s.exponent, d: s.spacing, phi };
+        let scene = Scene {
+            kd: 0.6,
+            ks: 0.3,
+            ksub: 0.8,
+            e: s.exponent,
+            d: s.spacing,
+            phi,
+        };
         for pair in &pairs {
             let b = reference.basis(pair);
             let exact = 0.6 * b.diffuse + 0.3 * b.specular + 0.8 * b.substrate;
             let rays = sampled(&scene, pair, 40_000);
             let err = rel_diff(exact, rays);
             worst = worst.max(err);
-            assert!(err < 1e-3, "{s:?} {pair:?}: reference {exact} vs rays {rays} (rel {err:.2e})");
+            assert!(
+                err < 1e-3,
+                "{s:?} {pair:?}: reference {exact} vs rays {rays} (rel {err:.2e})"
+            );
         }
     }
     eprintln!("worst relative difference reference vs rays: {worst:.2e}");
@@ -108,9 +126,20 @@ fn reference_agrees_with_dense_ray_sampling() {
 #[test]
 fn grazing_light_across_the_fibres_agrees_with_ray_sampling() {
     // Long shadows reach many fibres: the solver must use all of them, not only neighbours.
-    let s = Section { spacing: 3.0, height: 1.5, exponent: 10.0 };
+    let s = Section {
+        spacing: 3.0,
+        height: 1.5,
+        exponent: 10.0,
+    };
     let reference = reference(&s);
-    let scene = Scene { kd: 1.0, ks: 0.0, ksub: 1.0, e: 10.0, d: 3.0, phi: (0.5f64).asin() };
+    let scene = Scene {
+        kd: 1.0,
+        ks: 0.0,
+        ksub: 1.0,
+        e: 10.0,
+        d: 3.0,
+        phi: (0.5f64).asin(),
+    };
     for (lb, ln) in [(0.99, 0.141), (-0.995, 0.0999), (0.9, 0.3)] {
         let pair = DirectionPair::from_local([0.1, lb, ln], [0.0, -0.2, 1.0]);
         let b = reference.basis(&pair);

@@ -56,9 +56,16 @@ pub struct EvalArgs {
 
 pub fn run(args: &EvalArgs) -> Result<()> {
     let raw = RawParams::load(&args.params)?;
-    let id_text = args.model.clone().or_else(|| raw.model.clone()).ok_or_else(|| {
-        anyhow!("no model given: pass --model ID or set `model` in {}", args.params.display())
-    })?;
+    let id_text = args
+        .model
+        .clone()
+        .or_else(|| raw.model.clone())
+        .ok_or_else(|| {
+            anyhow!(
+                "no model given: pass --model ID or set `model` in {}",
+                args.params.display()
+            )
+        })?;
     let id: ModelId = id_text.parse().map_err(|e: String| anyhow!(e))?;
     let (params, warnings) =
         ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", args.params.display()))?;
@@ -74,7 +81,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             bail!("{}: a `height` column needs a model with a topology (varying-topology or reference), not `{id}`", args.queries.display());
         }
         let h_max = max_height(params.spacing);
-        if let Some(q) = queries.rows.iter().find(|q| q.height.is_some_and(|h| h > h_max * (1.0 + 1e-9))) {
+        if let Some(q) = queries
+            .rows
+            .iter()
+            .find(|q| q.height.is_some_and(|h| h > h_max * (1.0 + 1e-9)))
+        {
             bail!(
                 "{}: height {} exceeds H_max = sqrt(d^2 - 1) = {h_max} for spacing {}",
                 args.queries.display(),
@@ -91,7 +102,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 
     let frame = FibreFrame::from_azimuth(params.fibre_azimuth);
     let albedos = params.albedos;
-    let preview = (id == ModelId::Lambert && (params.preview.two_sided || params.preview.ambient > 0.0))
+    let preview = (id == ModelId::Lambert
+        && (params.preview.two_sided || params.preview.ambient > 0.0))
         .then_some(params.preview);
     let bar = super::progress::bar(queries.rows.len() as u64, "eval", args.quiet);
     let values: Vec<([f64; 3], [f64; 3])> = queries
@@ -119,8 +131,15 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         })
         .collect();
     bar.finish_and_clear();
-    if let Some(bad) = values.iter().position(|(b, i)| b.iter().chain(i).any(|x| !x.is_finite())) {
-        bail!("model `{id}` gave a non-finite value at query row {} ({})", bad + 1, queries.rows[bad].fields.join(","));
+    if let Some(bad) = values
+        .iter()
+        .position(|(b, i)| b.iter().chain(i).any(|x| !x.is_finite()))
+    {
+        bail!(
+            "model `{id}` gave a non-finite value at query row {} ({})",
+            bad + 1,
+            queries.rows[bad].fields.join(",")
+        );
     }
     let channels = albedos.channels();
     match out.as_mut() {

@@ -24,8 +24,17 @@ impl AtomicFile {
             .prefix(".fibrefit-")
             .suffix(".tmp")
             .tempfile_in(dir)
-            .with_context(|| format!("{}: cannot create output (directory {} not writable or missing)", path.display(), dir.display()))?;
-        Ok(Self { target: path.to_path_buf(), temp })
+            .with_context(|| {
+                format!(
+                    "{}: cannot create output (directory {} not writable or missing)",
+                    path.display(),
+                    dir.display()
+                )
+            })?;
+        Ok(Self {
+            target: path.to_path_buf(),
+            temp,
+        })
     }
 
     pub fn writer(&mut self) -> &mut impl Write {
@@ -35,9 +44,13 @@ impl AtomicFile {
     pub fn commit(mut self) -> Result<()> {
         self.temp.as_file_mut().flush()?;
         self.temp.as_file().sync_all().ok();
-        self.temp
-            .persist(&self.target)
-            .map_err(|e| anyhow::anyhow!("{}: cannot write output: {}", self.target.display(), e.error))?;
+        self.temp.persist(&self.target).map_err(|e| {
+            anyhow::anyhow!(
+                "{}: cannot write output: {}",
+                self.target.display(),
+                e.error
+            )
+        })?;
         Ok(())
     }
 }

@@ -7,7 +7,12 @@ use anyhow::Result;
 use std::io::Write;
 
 /// Per-row values: (brdf per channel, intensity per channel); `channels` is 1 or 3.
-pub fn write(out: &mut impl Write, queries: &Queries, values: &[([f64; 3], [f64; 3])], channels: usize) -> Result<()> {
+pub fn write(
+    out: &mut impl Write,
+    queries: &Queries,
+    values: &[([f64; 3], [f64; 3])],
+    channels: usize,
+) -> Result<()> {
     let mut w = csv::Writer::from_writer(out);
     let mut header = queries.header.clone();
     if channels == 1 {

@@ -26,13 +26,17 @@ pub struct Queries {
 const ANGLES: [&str; 4] = ["theta_i", "phi_i", "theta_o", "phi_o"];
 
 pub fn load(path: &Path) -> Result<Queries> {
-    let file = std::fs::File::open(path).with_context(|| format!("{}: cannot open query file", path.display()))?;
+    let file = std::fs::File::open(path)
+        .with_context(|| format!("{}: cannot open query file", path.display()))?;
     read(file, &path.display().to_string())
 }
 
 /// Parse queries from any reader; `name` labels errors (`name:line: ...`).
 pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
-    let mut reader = csv::ReaderBuilder::new().trim(csv::Trim::All).comment(Some(b'#')).from_reader(input);
+    let mut reader = csv::ReaderBuilder::new()
+        .trim(csv::Trim::All)
+        .comment(Some(b'#'))
+        .from_reader(input);
     let header: Vec<String> = reader
         .headers()
         .map_err(|e| anyhow!("{name}: cannot read the header: {e}"))?
@@ -134,17 +138,32 @@ mod tests {
 
     #[test]
     fn errors_name_line_and_column() {
-        let e = parse("theta_i,phi_i,theta_o,phi_o\n10,0,10,0\n10,x,10,0\n").unwrap_err().to_string();
-        assert!(e.contains("q.csv:3") && e.contains("phi_i") && e.contains("'x'"), "{e}");
-        let e = parse("theta_i,phi_i,theta_o,phi_o\n10,0,NaN,0\n").unwrap_err().to_string();
+        let e = parse("theta_i,phi_i,theta_o,phi_o\n10,0,10,0\n10,x,10,0\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("q.csv:3") && e.contains("phi_i") && e.contains("'x'"),
+            "{e}"
+        );
+        let e = parse("theta_i,phi_i,theta_o,phi_o\n10,0,NaN,0\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("q.csv:2") && e.contains("theta_o"), "{e}");
-        let e = parse("theta_i,phi_i,theta_o\n10,0,10\n").unwrap_err().to_string();
+        let e = parse("theta_i,phi_i,theta_o\n10,0,10\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("missing column `phi_o`"), "{e}");
-        let e = parse("theta_i,phi_i,theta_o,phi_o,theta_i\n").unwrap_err().to_string();
+        let e = parse("theta_i,phi_i,theta_o,phi_o,theta_i\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("twice"), "{e}");
-        let e = parse("theta_i,phi_i,theta_o,phi_o\n10,0,10\n").unwrap_err().to_string();
+        let e = parse("theta_i,phi_i,theta_o,phi_o\n10,0,10\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("q.csv:2") && e.contains("malformed"), "{e}");
-        let e = parse("theta_i,phi_i,theta_o,phi_o\n200,0,10,0\n").unwrap_err().to_string();
+        let e = parse("theta_i,phi_i,theta_o,phi_o\n200,0,10,0\n")
+            .unwrap_err()
+            .to_string();
         assert!(e.contains("outside [0, 180]"), "{e}");
     }
 }

@@ -28,7 +28,11 @@ impl FibreFrame {
         let (s, c) = psi.sin_cos();
         let t = Vec3::new(c, s, 0.0);
         let n = Vec3::new(0.0, 0.0, 1.0);
-        Self { t, b: n.cross(&t), n }
+        Self {
+            t,
+            b: n.cross(&t),
+            n,
+        }
     }
 
     /// Frame from an arbitrary tangent (projected into the swatch plane and normalised).
@@ -41,17 +45,29 @@ impl FibreFrame {
             return None;
         }
         let t = tp / len;
-        Some(Self { t, b: n.cross(&t), n })
+        Some(Self {
+            t,
+            b: n.cross(&t),
+            n,
+        })
     }
 
     /// The same fibres described by -T (and so -B). Every model must be invariant under this.
     pub fn flipped(&self) -> Self {
-        Self { t: -self.t, b: -self.b, n: self.n }
+        Self {
+            t: -self.t,
+            b: -self.b,
+            n: self.n,
+        }
     }
 
     /// Express a swatch-frame vector in (T, B, N) components.
     pub fn to_local(&self, w: &Vec3) -> Local {
-        Local { t: w.dot(&self.t), b: w.dot(&self.b), n: w.dot(&self.n) }
+        Local {
+            t: w.dot(&self.t),
+            b: w.dot(&self.b),
+            n: w.dot(&self.n),
+        }
     }
 }
 
@@ -86,16 +102,26 @@ pub struct DirectionPair {
 
 impl DirectionPair {
     pub fn new(frame: &FibreFrame, l: &Vec3, v: &Vec3) -> Self {
-        Self { l: frame.to_local(l), v: frame.to_local(v) }
+        Self {
+            l: frame.to_local(l),
+            v: frame.to_local(v),
+        }
     }
 
     /// Build directly from local components (normalised here).
     pub fn from_local(l: [f64; 3], v: [f64; 3]) -> Self {
         let norm = |a: [f64; 3]| {
             let n = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt();
-            Local { t: a[0] / n, b: a[1] / n, n: a[2] / n }
+            Local {
+                t: a[0] / n,
+                b: a[1] / n,
+                n: a[2] / n,
+            }
         };
-        Self { l: norm(l), v: norm(v) }
+        Self {
+            l: norm(l),
+            v: norm(v),
+        }
     }
 
     /// Both directions strictly above the swatch plane: only then is a BRDF non-zero.
@@ -104,13 +130,23 @@ impl DirectionPair {
     }
 
     pub fn swapped(&self) -> Self {
-        Self { l: self.v, v: self.l }
+        Self {
+            l: self.v,
+            v: self.l,
+        }
     }
 
     /// The pair seen with T -> -T (so B -> -B).
     pub fn flipped_tangent(&self) -> Self {
-        let f = |w: Local| Local { t: -w.t, b: -w.b, n: w.n };
-        Self { l: f(self.l), v: f(self.v) }
+        let f = |w: Local| Local {
+            t: -w.t,
+            b: -w.b,
+            n: w.n,
+        };
+        Self {
+            l: f(self.l),
+            v: f(self.v),
+        }
     }
 
     pub fn cos_lv(&self) -> f64 {

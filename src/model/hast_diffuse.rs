@@ -8,7 +8,9 @@
 //! over the lit part th in [alpha_l - pi/2, pi/2] (for alpha_l >= 0; mirror for < 0) gives
 //! |l_p| (1 + cos alpha_l), so
 //!
-//!     Phi = (|l_p| + N.l) / pi,    |l_p| = sqrt(1 - (l.t)^2),
+//! ```text
+//! Phi = (|l_p| + N.l) / pi,    |l_p| = sqrt(1 - (l.t)^2),
+//! ```
 //!
 //! finite everywhere and invariant under t -> -t. It equals eq. (10) wherever l.t > 0
 //! (checked in the tests), because there n_min = t x n_max and n_min.b = -cos alpha_l.
@@ -42,7 +44,10 @@ impl ShadingModel for HastDiffuse {
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
-        Basis { diffuse: FRAC_1_PI * phi(&pair.l) / pair.l.n, ..Basis::default() }
+        Basis {
+            diffuse: FRAC_1_PI * phi(&pair.l) / pair.l.n,
+            ..Basis::default()
+        }
     }
 }
 
@@ -63,7 +68,10 @@ mod tests {
                     }
                     let want = phi_eq10(&l, &fr.t, &fr.b);
                     let got = phi(&fr.to_local(&l));
-                    assert!((got - want).abs() < 1e-12, "psi {psi} th {th} ph {ph}: {got} vs {want}");
+                    assert!(
+                        (got - want).abs() < 1e-12,
+                        "psi {psi} th {th} ph {ph}: {got} vs {want}"
+                    );
                 }
             }
         }

@@ -16,7 +16,10 @@ impl ShadingModel for Lambert {
     }
 
     fn basis_above_horizon(&self, _pair: &DirectionPair) -> Basis {
-        Basis { diffuse: FRAC_1_PI, ..Basis::default() }
+        Basis {
+            diffuse: FRAC_1_PI,
+            ..Basis::default()
+        }
     }
 }
 
@@ -31,7 +34,11 @@ pub struct Preview {
 
 /// Preview intensity per unit albedo for light cosine `cos_l` = N.l.
 pub fn preview_intensity(preview: &Preview, cos_l: f64) -> f64 {
-    let c = if preview.two_sided { cos_l.abs() } else { cos_l.max(0.0) };
+    let c = if preview.two_sided {
+        cos_l.abs()
+    } else {
+        cos_l.max(0.0)
+    };
     FRAC_1_PI * (preview.ambient + c)
 }
 
@@ -51,8 +58,14 @@ mod tests {
     #[test]
     fn preview_variants() {
         let one = Preview::default();
-        let two = Preview { two_sided: true, ambient: 0.0 };
-        let amb = Preview { two_sided: false, ambient: 0.2 };
+        let two = Preview {
+            two_sided: true,
+            ambient: 0.0,
+        };
+        let amb = Preview {
+            two_sided: false,
+            ambient: 0.2,
+        };
         assert_eq!(preview_intensity(&one, -0.5), 0.0);
         assert!((preview_intensity(&two, -0.5) - 0.5 / std::f64::consts::PI).abs() < 1e-16);
         assert!((preview_intensity(&amb, -0.5) - 0.2 / std::f64::consts::PI).abs() < 1e-16);

@@ -62,7 +62,10 @@ impl ModelId {
     /// Models built on the fibre cross-section of MODEL.md §2 (reciprocal, with hiding and
     /// shadowing).
     pub fn is_cross_section(self) -> bool {
-        matches!(self, ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference)
+        matches!(
+            self,
+            ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference
+        )
     }
 
     /// Models whose elevation comes from the topology (height, map).
@@ -80,10 +83,17 @@ impl fmt::Display for ModelId {
 impl FromStr for ModelId {
     type Err = String;
     fn from_str(s: &str) -> Result<Self, Self::Err> {
-        ModelId::ALL.iter().copied().find(|m| m.as_str() == s).ok_or_else(|| {
-            let ids: Vec<&str> = ModelId::ALL.iter().map(|m| m.as_str()).collect();
-            format!("unknown model id '{s}'; expected one of: {}", ids.join(", "))
-        })
+        ModelId::ALL
+            .iter()
+            .copied()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                let ids: Vec<&str> = ModelId::ALL.iter().map(|m| m.as_str()).collect();
+                format!(
+                    "unknown model id '{s}'; expected one of: {}",
+                    ids.join(", ")
+                )
+            })
     }
 }
 
@@ -100,14 +110,10 @@ pub struct Basis {
 
 impl Basis {
     pub fn scaled(self, w: f64) -> Basis {
-        Basis { diffuse: self.diffuse * w, specular: self.specular * w, substrate: self.substrate * w }
-    }
-
-    pub fn add(self, o: Basis) -> Basis {
         Basis {
-            diffuse: self.diffuse + o.diffuse,
-            specular: self.specular + o.specular,
-            substrate: self.substrate + o.substrate,
+            diffuse: self.diffuse * w,
+            specular: self.specular * w,
+            substrate: self.substrate * w,
         }
     }
 
@@ -123,6 +129,17 @@ impl Basis {
     }
 }
 
+impl std::ops::Add for Basis {
+    type Output = Basis;
+    fn add(self, o: Basis) -> Basis {
+        Basis {
+            diffuse: self.diffuse + o.diffuse,
+            specular: self.specular + o.specular,
+            substrate: self.substrate + o.substrate,
+        }
+    }
+}
+
 /// Albedos of the three linear components, per channel (grey models repeat one value).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Albedos {
@@ -135,7 +152,12 @@ pub struct Albedos {
 
 impl Albedos {
     pub fn grey(diffuse: f64, specular: f64, substrate: f64) -> Self {
-        Self { diffuse: [diffuse; 3], specular: [specular; 3], substrate: [substrate; 3], rgb: false }
+        Self {
+            diffuse: [diffuse; 3],
+            specular: [specular; 3],
+            substrate: [substrate; 3],
+            rgb: false,
+        }
     }
 
     pub fn channels(&self) -> usize {
@@ -197,18 +219,22 @@ pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingMode
         ModelId::Lambert => Box::new(lambert::Lambert),
         ModelId::MaxNormal => Box::new(max_normal::MaxNormal::new(p.exponent)),
         ModelId::HastDiffuse => Box::new(hast_diffuse::HastDiffuse),
-        ModelId::PoulinFournier => {
-            Box::new(poulin_fournier::PoulinFournier::new(p.spacing, p.exponent, p.quadrature_order))
-        }
+        ModelId::PoulinFournier => Box::new(poulin_fournier::PoulinFournier::new(
+            p.spacing,
+            p.exponent,
+            p.quadrature_order,
+        )),
         ModelId::VaryingTopology => Box::new(varying_topology::VaryingTopology::new(
             p.spacing,
             p.exponent,
             p.quadrature_order,
             p.topology.discretise(p.spacing, p.histogram_bins),
         )),
-        ModelId::Reference => {
-            Box::new(reference::Reference::new(p.spacing, p.exponent, p.topology.clone()))
-        }
+        ModelId::Reference => Box::new(reference::Reference::new(
+            p.spacing,
+            p.exponent,
+            p.topology.clone(),
+        )),
         ModelId::Ward => Box::new(ward::Ward::new(p.alpha_x, p.alpha_y)),
     })
 }

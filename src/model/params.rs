@@ -68,11 +68,16 @@ impl RawParams {
     pub fn load(path: &Path) -> Result<Self> {
         let text = std::fs::read_to_string(path)
             .with_context(|| format!("{}: cannot read parameter file", path.display()))?;
-        let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
         let mut raw: RawParams = if ext == "json" {
             serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?
         } else {
-            toml::from_str(&text).map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?
+            toml::from_str(&text)
+                .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?
         };
         if let Some(map) = &raw.topology_map {
             if map.is_relative() {
@@ -125,7 +130,9 @@ fn uses(id: ModelId, name: &str) -> bool {
         "spacing" | "substrate_albedo" | "quadrature_order" => {
             matches!(id, PoulinFournier | VaryingTopology | Reference)
         }
-        "height" | "elevation_deg" | "map_scale" | "topology_map" => matches!(id, VaryingTopology | Reference),
+        "height" | "elevation_deg" | "map_scale" | "topology_map" => {
+            matches!(id, VaryingTopology | Reference)
+        }
         "histogram_bins" => id == VaryingTopology,
         "fibre_azimuth_deg" => id != Lambert,
         "alpha_x" | "alpha_y" | "rho_d" | "rho_s" => id == Ward,
@@ -168,7 +175,12 @@ impl ModelParams {
 
         let spacing = check_range("spacing", raw.spacing.unwrap_or(2.0), 2.0, 20.0)?;
         let h_max = max_height(spacing);
-        let psi_deg = check_range("fibre_azimuth_deg", raw.fibre_azimuth_deg.unwrap_or(0.0), -90.0, 90.0)?;
+        let psi_deg = check_range(
+            "fibre_azimuth_deg",
+            raw.fibre_azimuth_deg.unwrap_or(0.0),
+            -90.0,
+            90.0,
+        )?;
         let exponent = check_range("exponent", raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
         let quadrature_order = raw.quadrature_order.unwrap_or(DEFAULT_QUADRATURE_ORDER);
         if !(1..=1024).contains(&quadrature_order) {
@@ -196,15 +208,21 @@ impl ModelParams {
         };
 
         let (albedos, alpha_x, alpha_y) = if id == ModelId::Ward {
-            let ax = raw.alpha_x.ok_or_else(|| anyhow!("model `ward` needs `alpha_x`"))?;
-            let ay = raw.alpha_y.ok_or_else(|| anyhow!("model `ward` needs `alpha_y`"))?;
+            let ax = raw
+                .alpha_x
+                .ok_or_else(|| anyhow!("model `ward` needs `alpha_x`"))?;
+            let ay = raw
+                .alpha_y
+                .ok_or_else(|| anyhow!("model `ward` needs `alpha_y`"))?;
             check_range("alpha_x", ax, 1e-3, 1.0)?;
             check_range("alpha_y", ay, 1e-3, 1.0)?;
             if ax <= 1e-3 || ay <= 1e-3 {
                 bail!("parameters `alpha_x`, `alpha_y` must lie in (0.001, 1]");
             }
             let rho_d = raw.rho_d.unwrap_or(Albedo::Grey(0.0));
-            let rho_s = raw.rho_s.ok_or_else(|| anyhow!("model `ward` needs `rho_s`"))?;
+            let rho_s = raw
+                .rho_s
+                .ok_or_else(|| anyhow!("model `ward` needs `rho_s`"))?;
             check_albedo("rho_d", &rho_d)?;
             check_albedo("rho_s", &rho_s)?;
             let a = Albedos {
@@ -215,7 +233,9 @@ impl ModelParams {
             };
             (a, ax, ay)
         } else {
-            let kd = raw.kd.ok_or_else(|| anyhow!("model `{id}` needs `kd` (fibre diffuse albedo)"))?;
+            let kd = raw
+                .kd
+                .ok_or_else(|| anyhow!("model `{id}` needs `kd` (fibre diffuse albedo)"))?;
             check_albedo("kd", &kd)?;
             let ks = raw.ks.unwrap_or(Albedo::Grey(0.0));
             check_albedo("ks", &ks)?;
@@ -223,12 +243,18 @@ impl ModelParams {
             check_albedo("substrate_albedo", &sub)?;
             let uses_spec = uses(id, "ks");
             let ks_c = if uses_spec { ks.channels() } else { [0.0; 3] };
-            let sub_c = if uses(id, "substrate_albedo") { sub.channels() } else { [0.0; 3] };
+            let sub_c = if uses(id, "substrate_albedo") {
+                sub.channels()
+            } else {
+                [0.0; 3]
+            };
             let a = Albedos {
                 diffuse: kd.channels(),
                 specular: ks_c,
                 substrate: sub_c,
-                rgb: kd.is_rgb() || (uses_spec && ks.is_rgb()) || (uses(id, "substrate_albedo") && sub.is_rgb()),
+                rgb: kd.is_rgb()
+                    || (uses_spec && ks.is_rgb())
+                    || (uses(id, "substrate_albedo") && sub.is_rgb()),
             };
             (a, 1.0, 1.0)
         };
@@ -240,12 +266,19 @@ impl ModelParams {
                 exponent,
                 spacing,
                 fibre_azimuth: psi_deg.to_radians(),
-                topology: Topology { height, map_scale, map },
+                topology: Topology {
+                    height,
+                    map_scale,
+                    map,
+                },
                 alpha_x,
                 alpha_y,
                 quadrature_order,
                 histogram_bins,
-                preview: Preview { two_sided: raw.two_sided.unwrap_or(false), ambient },
+                preview: Preview {
+                    two_sided: raw.two_sided.unwrap_or(false),
+                    ambient,
+                },
             },
             warnings,
         ))
@@ -269,10 +302,14 @@ mod tests {
     #[test]
     fn out_of_range_is_named() {
         let raw = parse("kd = 0.5\nspacing = 1.5").unwrap();
-        let err = ModelParams::from_raw(&raw, ModelId::PoulinFournier).unwrap_err().to_string();
+        let err = ModelParams::from_raw(&raw, ModelId::PoulinFournier)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("spacing") && err.contains("1.5"), "{err}");
         let raw = parse("kd = [0.5, 1.2, 0.1]").unwrap();
-        let err = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap_err().to_string();
+        let err = ModelParams::from_raw(&raw, ModelId::Lambert)
+            .unwrap_err()
+            .to_string();
         assert!(err.contains("kd"), "{err}");
     }
 

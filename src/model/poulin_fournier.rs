@@ -14,7 +14,10 @@ pub struct PoulinFournier {
 
 impl PoulinFournier {
     pub fn new(spacing: f64, exponent: f64, order: usize) -> Self {
-        Self { pattern: Pattern::flat(spacing), section: GaussSection::new(exponent, order) }
+        Self {
+            pattern: Pattern::flat(spacing),
+            section: GaussSection::new(exponent, order),
+        }
     }
 }
 
@@ -24,6 +27,7 @@ impl ShadingModel for PoulinFournier {
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
-        self.section.basis(&self.pattern, &SectionPair::new(&pair.l, &pair.v))
+        self.section
+            .basis(&self.pattern, &SectionPair::new(&pair.l, &pair.v))
     }
 }

@@ -103,7 +103,11 @@ const WG: [f64; 4] = [
 ];
 
 /// One Gauss–Kronrod 15 panel of a vector integrand: (Kronrod estimate, |K15 - G7| per component).
-fn gk15<const N: usize>(a: f64, b: f64, f: &mut impl FnMut(f64) -> [f64; N]) -> ([f64; N], [f64; N]) {
+fn gk15<const N: usize>(
+    a: f64,
+    b: f64,
+    f: &mut impl FnMut(f64) -> [f64; N],
+) -> ([f64; N], [f64; N]) {
     let half = 0.5 * (b - a);
     let mid = 0.5 * (a + b);
     let fc = f(mid);
@@ -163,7 +167,12 @@ pub fn adaptive_gk15_vec<const N: usize>(
         if w[1] > w[0] {
             let (value, error) = gk15(w[0], w[1], &mut f);
             evaluations += 15;
-            panels.push(Panel { a: w[0], b: w[1], value, error });
+            panels.push(Panel {
+                a: w[0],
+                b: w[1],
+                value,
+                error,
+            });
         }
     }
     loop {
@@ -177,11 +186,17 @@ pub fn adaptive_gk15_vec<const N: usize>(
         }
         let mut tol = [0.0; N];
         for c in 0..N {
-            tol[c] = (rel_tol * value[c].abs()).max(abs_tol).max(f64::MIN_POSITIVE);
+            tol[c] = (rel_tol * value[c].abs())
+                .max(abs_tol)
+                .max(f64::MIN_POSITIVE);
         }
         let converged = (0..N).all(|c| error[c] <= tol[c]);
         if converged || panels.len() >= MAX_PANELS {
-            return Adaptive { value, error, evaluations };
+            return Adaptive {
+                value,
+                error,
+                evaluations,
+            };
         }
         let score = |p: &Panel<N>| (0..N).map(|c| p.error[c] / tol[c]).fold(0.0, f64::max);
         let worst = (0..panels.len())
@@ -197,13 +212,28 @@ pub fn adaptive_gk15_vec<const N: usize>(
         let (v1, e1) = gk15(a, m, &mut f);
         let (v2, e2) = gk15(m, b, &mut f);
         evaluations += 30;
-        panels[worst] = Panel { a, b: m, value: v1, error: e1 };
-        panels.push(Panel { a: m, b, value: v2, error: e2 });
+        panels[worst] = Panel {
+            a,
+            b: m,
+            value: v1,
+            error: e1,
+        };
+        panels.push(Panel {
+            a: m,
+            b,
+            value: v2,
+            error: e2,
+        });
     }
 }
 
 /// Scalar form of [`adaptive_gk15_vec`].
-pub fn adaptive_gk15(breaks: &[f64], rel_tol: f64, abs_tol: f64, mut f: impl FnMut(f64) -> f64) -> Adaptive<1> {
+pub fn adaptive_gk15(
+    breaks: &[f64],
+    rel_tol: f64,
+    abs_tol: f64,
+    mut f: impl FnMut(f64) -> f64,
+) -> Adaptive<1> {
     adaptive_gk15_vec(breaks, rel_tol, abs_tol, |x| [f(x)])
 }
 
@@ -230,9 +260,15 @@ mod tests {
         assert!((r.value[0] - 2.5).abs() < 1e-12, "{:?}", r.value);
         // sharp Gaussian peak: integral of exp(-x^2/(2 s^2)) over R = s sqrt(2 pi)
         let s = 1e-3;
-        let r = adaptive_gk15(&[-1.0, 0.0, 1.0], 1e-12, 0.0, |x: f64| (-x * x / (2.0 * s * s)).exp());
+        let r = adaptive_gk15(&[-1.0, 0.0, 1.0], 1e-12, 0.0, |x: f64| {
+            (-x * x / (2.0 * s * s)).exp()
+        });
         let want = s * (2.0 * std::f64::consts::PI).sqrt();
-        assert!((r.value[0] - want).abs() / want < 1e-11, "{:?} vs {want}", r.value);
+        assert!(
+            (r.value[0] - want).abs() / want < 1e-11,
+            "{:?} vs {want}",
+            r.value
+        );
         let r = adaptive_gk15(&[0.0, std::f64::consts::PI], 1e-13, 0.0, f64::sin);
         assert!((r.value[0] - 2.0).abs() < 1e-12);
     }

@@ -23,7 +23,11 @@ pub struct Reference {
 impl Reference {
     pub fn new(spacing: f64, exponent: f64, topology: Topology) -> Self {
         let law = topology.exact_law(spacing);
-        Self { spacing, exponent, law }
+        Self {
+            spacing,
+            exponent,
+            law,
+        }
     }
 
     fn pattern_at(&self, height: f64) -> Pattern {
@@ -56,7 +60,11 @@ impl Reference {
         let (mut diffuse, mut specular) = (0.0, 0.0);
         for fibre in [Fibre::Even, Fibre::Odd] {
             for &(a, b) in sp.seen_and_lit(pattern, fibre).as_slice() {
-                let mut breaks: Vec<f64> = lobe_breaks.iter().copied().filter(|&t| t > a && t < b).collect();
+                let mut breaks: Vec<f64> = lobe_breaks
+                    .iter()
+                    .copied()
+                    .filter(|&t| t > a && t < b)
+                    .collect();
                 breaks.extend([a, b]);
                 breaks.sort_unstable_by(f64::total_cmp);
                 let r = adaptive_gk15_vec(&breaks, REL_TOL, 1e-300, |th| {
@@ -90,7 +98,7 @@ impl ShadingModel for Reference {
         match &self.law {
             HeightLaw::Point(h) => self.pattern_basis(&self.pattern_at(*h), &sp),
             HeightLaw::Discrete(nodes) => nodes.iter().fold(Basis::default(), |acc, (h, w)| {
-                acc.add(self.pattern_basis(&self.pattern_at(*h), &sp).scaled(*w))
+                acc + (self.pattern_basis(&self.pattern_at(*h), &sp).scaled(*w))
             }),
             HeightLaw::Uniform { lo, hi, h_max } => {
                 let width = hi - lo;
@@ -99,17 +107,26 @@ impl ShadingModel for Reference {
                 let (a, b) = (lo.max(0.0), hi.min(*h_max));
                 let mut total = Basis::default();
                 if below > 0.0 {
-                    total = total.add(self.pattern_basis(&self.pattern_at(0.0), &sp).scaled(below));
+                    total = total + (self.pattern_basis(&self.pattern_at(0.0), &sp).scaled(below));
                 }
                 if above > 0.0 {
-                    total = total.add(self.pattern_basis(&self.pattern_at(*h_max), &sp).scaled(above));
+                    total = total
+                        + (self
+                            .pattern_basis(&self.pattern_at(*h_max), &sp)
+                            .scaled(above));
                 }
                 if b > a {
                     let r = adaptive_gk15_vec(&[a, b], 1e-10, 1e-300, |h| {
                         to_array(self.pattern_basis(&self.pattern_at(h), &sp))
                     });
                     let [d, s, u] = r.value;
-                    total = total.add(Basis { diffuse: d, specular: s, substrate: u }.scaled(1.0 / width));
+                    total = total
+                        + (Basis {
+                            diffuse: d,
+                            specular: s,
+                            substrate: u,
+                        }
+                        .scaled(1.0 / width));
                 }
                 total
             }
@@ -117,6 +134,9 @@ impl ShadingModel for Reference {
     }
 
     fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        Some(self.pattern_basis(&self.pattern_at(height), &SectionPair::new(&pair.l, &pair.v)))
+        Some(self.pattern_basis(
+            &self.pattern_at(height),
+            &SectionPair::new(&pair.l, &pair.v),
+        ))
     }
 }

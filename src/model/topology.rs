@@ -21,7 +21,10 @@ pub fn max_elevation(spacing: f64) -> f64 {
 
 /// phi = asin(H / d), clamped into [0, acos(1/d)].
 pub fn elevation_from_height(height: f64, spacing: f64) -> f64 {
-    (height / spacing).clamp(0.0, 1.0).asin().min(max_elevation(spacing))
+    (height / spacing)
+        .clamp(0.0, 1.0)
+        .asin()
+        .min(max_elevation(spacing))
 }
 
 /// H = d sin(phi).
@@ -60,11 +63,17 @@ pub struct TopologyMap {
 impl TopologyMap {
     /// Load an 8/16-bit grayscale PNG or a float EXR (channel `Y`, else `R`, else the only one).
     pub fn load(path: &Path) -> Result<Self> {
-        let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
+        let ext = path
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
         let (width, height, values) = match ext.as_deref() {
             Some("png") => load_png_gray(path)?,
             Some("exr") => load_exr_gray(path)?,
-            _ => bail!("{}: topology map must be a .png or .exr file", path.display()),
+            _ => bail!(
+                "{}: topology map must be a .png or .exr file",
+                path.display()
+            ),
         };
         for (i, v) in values.iter().enumerate() {
             if !(v.is_finite() && (0.0..=1.0).contains(v)) {
@@ -79,7 +88,12 @@ impl TopologyMap {
         if values.is_empty() {
             bail!("{}: topology map has no texels", path.display());
         }
-        Ok(Self { width, height, values, source: path.to_path_buf() })
+        Ok(Self {
+            width,
+            height,
+            values,
+            source: path.to_path_buf(),
+        })
     }
 
     /// Texel value at integer coordinates (clamped to the edge).
@@ -101,7 +115,10 @@ impl TopologyMap {
             count[i] += 1;
         }
         let n = self.values.len() as f64;
-        (0..k).filter(|&i| count[i] > 0).map(|i| (sum[i] / count[i] as f64, count[i] as f64 / n)).collect()
+        (0..k)
+            .filter(|&i| count[i] > 0)
+            .map(|i| (sum[i] / count[i] as f64, count[i] as f64 / n))
+            .collect()
     }
 
     /// The exact distribution of distinct values when there are at most `cap` of them,
@@ -135,16 +152,24 @@ fn load_png_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
         .with_context(|| format!("{}: cannot decode topology map", path.display()))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let values: Vec<f32> = match img {
-        image::DynamicImage::ImageLuma8(b) => b.into_raw().into_iter().map(|v| v as f32 / 255.0).collect(),
-        image::DynamicImage::ImageLumaA8(b) => {
-            b.into_raw().chunks_exact(2).map(|p| p[0] as f32 / 255.0).collect()
+        image::DynamicImage::ImageLuma8(b) => {
+            b.into_raw().into_iter().map(|v| v as f32 / 255.0).collect()
         }
-        image::DynamicImage::ImageLuma16(b) => {
-            b.into_raw().into_iter().map(|v| v as f32 / 65535.0).collect()
-        }
-        image::DynamicImage::ImageLumaA16(b) => {
-            b.into_raw().chunks_exact(2).map(|p| p[0] as f32 / 65535.0).collect()
-        }
+        image::DynamicImage::ImageLumaA8(b) => b
+            .into_raw()
+            .chunks_exact(2)
+            .map(|p| p[0] as f32 / 255.0)
+            .collect(),
+        image::DynamicImage::ImageLuma16(b) => b
+            .into_raw()
+            .into_iter()
+            .map(|v| v as f32 / 65535.0)
+            .collect(),
+        image::DynamicImage::ImageLumaA16(b) => b
+            .into_raw()
+            .chunks_exact(2)
+            .map(|p| p[0] as f32 / 65535.0)
+            .collect(),
         other => bail!(
             "{}: topology map must be a grayscale PNG (8 or 16 bit), found {:?}",
             path.display(),
@@ -163,7 +188,11 @@ fn load_exr_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     let pick = ["Y", "R"]
         .iter()
         .find_map(|want| channels.iter().find(|c| c.name.to_string() == *want))
-        .or(if channels.len() == 1 { channels.first() } else { None });
+        .or(if channels.len() == 1 {
+            channels.first()
+        } else {
+            None
+        });
     let Some(channel) = pick else {
         let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
         bail!(
@@ -186,7 +215,11 @@ pub struct Topology {
 
 impl Topology {
     pub fn flat() -> Self {
-        Self { height: 0.0, map_scale: 0.0, map: None }
+        Self {
+            height: 0.0,
+            map_scale: 0.0,
+            map: None,
+        }
     }
 
     /// Per-texel height H = clamp(H0 + s (2m - 1), 0, H_max).
@@ -199,10 +232,19 @@ impl Topology {
     pub fn discretise(&self, spacing: f64, bins: usize) -> Vec<(f64, f64)> {
         let k = bins.max(1);
         let nodes: Vec<(f64, f64)> = match &self.map {
-            Some(map) => map.histogram(k).into_iter().map(|(m, w)| (self.texel_height(m, spacing), w)).collect(),
+            Some(map) => map
+                .histogram(k)
+                .into_iter()
+                .map(|(m, w)| (self.texel_height(m, spacing), w))
+                .collect(),
             None if self.map_scale == 0.0 => vec![(self.texel_height(0.5, spacing), 1.0)],
             None => (0..k)
-                .map(|i| (self.texel_height((i as f64 + 0.5) / k as f64, spacing), 1.0 / k as f64))
+                .map(|i| {
+                    (
+                        self.texel_height((i as f64 + 0.5) / k as f64, spacing),
+                        1.0 / k as f64,
+                    )
+                })
                 .collect(),
         };
         merge_equal_heights(nodes)
@@ -213,7 +255,10 @@ impl Topology {
         let h_max = max_height(spacing);
         match &self.map {
             Some(map) => HeightLaw::Discrete(merge_equal_heights(
-                map.distinct_values(4096).into_iter().map(|(m, w)| (self.texel_height(m, spacing), w)).collect(),
+                map.distinct_values(4096)
+                    .into_iter()
+                    .map(|(m, w)| (self.texel_height(m, spacing), w))
+                    .collect(),
             )),
             None if self.map_scale == 0.0 => HeightLaw::Point(self.height.clamp(0.0, h_max)),
             None => HeightLaw::Uniform {
@@ -242,7 +287,11 @@ fn merge_equal_heights(mut nodes: Vec<(f64, f64)>) -> Vec<(f64, f64)> {
 pub enum HeightLaw {
     Point(f64),
     /// H uniform on [lo, hi], then clamped to [0, h_max] (point masses at the ends).
-    Uniform { lo: f64, hi: f64, h_max: f64 },
+    Uniform {
+        lo: f64,
+        hi: f64,
+        h_max: f64,
+    },
     Discrete(Vec<(f64, f64)>),
 }
 
@@ -260,7 +309,9 @@ mod tests {
             assert!((elevation_from_height(h, d) - phi).abs() < 1e-12);
         }
         // seed 001: H = 2 sin(theta), theta 0..60 deg, from shading value 0..1
-        assert!((height_from_elevation(elevation_from_shading(1.0, d), d) - 3f64.sqrt()).abs() < 1e-12);
+        assert!(
+            (height_from_elevation(elevation_from_shading(1.0, d), d) - 3f64.sqrt()).abs() < 1e-12
+        );
         assert_eq!(elevation_from_shading(0.0, d), 0.0);
     }
 
@@ -270,7 +321,10 @@ mod tests {
         let (r_major, r_minor) = (5.0, 3.0);
         assert!(torus_elevation(0.0, r_major, r_minor).abs() < 1e-12); // flat outside
         let inner = torus_elevation(std::f64::consts::PI, r_major, r_minor);
-        assert!(inner.abs() < 1e-7, "inner side flat again after two layers: {inner}");
+        assert!(
+            inner.abs() < 1e-7,
+            "inner side flat again after two layers: {inner}"
+        );
         // somewhere in between the fibres are climbing
         let mid = torus_elevation(1.2, r_major, r_minor);
         assert!(mid > 0.1 && mid <= 60f64.to_radians() + 1e-12);
@@ -278,7 +332,11 @@ mod tests {
 
     #[test]
     fn uniform_discretisation_clamps_and_keeps_weights() {
-        let t = Topology { height: 0.1, map_scale: 0.25, map: None };
+        let t = Topology {
+            height: 0.1,
+            map_scale: 0.25,
+            map: None,
+        };
         let nodes = t.discretise(2.0, 8);
         let total: f64 = nodes.iter().map(|n| n.1).sum();
         assert!((total - 1.0).abs() < 1e-15);
@@ -289,8 +347,15 @@ mod tests {
 
     #[test]
     fn map_histogram_preserves_the_mean() {
-        let values: Vec<f32> = (0..1000).map(|i| ((i * 37) % 1000) as f32 / 999.0).collect();
-        let map = TopologyMap { width: 100, height: 10, values: values.clone(), source: PathBuf::new() };
+        let values: Vec<f32> = (0..1000)
+            .map(|i| ((i * 37) % 1000) as f32 / 999.0)
+            .collect();
+        let map = TopologyMap {
+            width: 100,
+            height: 10,
+            values: values.clone(),
+            source: PathBuf::new(),
+        };
         let mean: f64 = values.iter().map(|&v| v as f64).sum::<f64>() / 1000.0;
         for k in [1, 4, 16, 64] {
             let h = map.histogram(k);

@@ -130,7 +130,11 @@ impl VaryingTopology {
             .into_iter()
             .map(|(h, w)| (Pattern::new(spacing, elevation_from_height(h, spacing)), w))
             .collect();
-        Self { spacing, section: GaussSection::new(exponent, order), nodes }
+        Self {
+            spacing,
+            section: GaussSection::new(exponent, order),
+            nodes,
+        }
     }
 
     pub fn nodes(&self) -> usize {
@@ -145,9 +149,9 @@ impl ShadingModel for VaryingTopology {
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
         let sp = SectionPair::new(&pair.l, &pair.v);
-        self.nodes
-            .iter()
-            .fold(Basis::default(), |acc, (p, w)| acc.add(self.section.basis(p, &sp).scaled(*w)))
+        self.nodes.iter().fold(Basis::default(), |acc, (p, w)| {
+            acc + (self.section.basis(p, &sp).scaled(*w))
+        })
     }
 
     fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {

@@ -33,9 +33,9 @@ pub fn extreme_pairs() -> Vec<DirectionPair> {
     let frame = FibreFrame::from_azimuth(0.0);
     let mut dirs: Vec<Vec3> = vec![
         Vec3::new(0.0, 0.0, 1.0),
-        Vec3::new(1.0, 0.0, 0.0),             // along T, at the horizon
+        Vec3::new(1.0, 0.0, 0.0),              // along T, at the horizon
         Vec3::new(1.0, 0.0, 1e-9).normalize(), // along T, just above
-        Vec3::new(0.0, 1.0, 0.0),             // across T, at the horizon
+        Vec3::new(0.0, 1.0, 0.0),              // across T, at the horizon
         Vec3::new(0.0, 1.0, 1e-9).normalize(), // across T, grazing
         Vec3::new(0.0, -1.0, 1e-6).normalize(),
         Vec3::new(0.6, 0.8, 0.0), // N.l = 0
@@ -84,7 +84,11 @@ pub struct Section {
 }
 
 pub fn sections() -> Vec<Section> {
-    let s = |spacing: f64, height: f64, exponent: f64| Section { spacing, height, exponent };
+    let s = |spacing: f64, height: f64, exponent: f64| Section {
+        spacing,
+        height,
+        exponent,
+    };
     let hmax = |d: f64| (d * d - 1.0f64).sqrt();
     vec![
         s(2.0, 0.0, 1.0),
@@ -98,14 +102,23 @@ pub fn sections() -> Vec<Section> {
 }
 
 pub fn vt(s: &Section, order: usize) -> Box<dyn ShadingModel> {
-    Box::new(model::varying_topology::VaryingTopology::new(s.spacing, s.exponent, order, vec![(s.height, 1.0)]))
+    Box::new(model::varying_topology::VaryingTopology::new(
+        s.spacing,
+        s.exponent,
+        order,
+        vec![(s.height, 1.0)],
+    ))
 }
 
 pub fn reference(s: &Section) -> Box<dyn ShadingModel> {
     Box::new(model::reference::Reference::new(
         s.spacing,
         s.exponent,
-        Topology { height: s.height, map_scale: 0.0, map: None },
+        Topology {
+            height: s.height,
+            map_scale: 0.0,
+            map: None,
+        },
     ))
 }
 
@@ -118,9 +131,9 @@ pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
                 ModelId::Lambert => Box::new(model::lambert::Lambert),
                 ModelId::MaxNormal => Box::new(model::max_normal::MaxNormal::new(s.exponent)),
                 ModelId::HastDiffuse => Box::new(model::hast_diffuse::HastDiffuse),
-                ModelId::PoulinFournier => {
-                    Box::new(model::poulin_fournier::PoulinFournier::new(s.spacing, s.exponent, 16))
-                }
+                ModelId::PoulinFournier => Box::new(model::poulin_fournier::PoulinFournier::new(
+                    s.spacing, s.exponent, 16,
+                )),
                 ModelId::VaryingTopology => vt(s, 16),
                 ModelId::Reference => reference(s),
                 ModelId::Ward => Box::new(model::ward::Ward::new(0.05, 0.4)),
