@@ -9,3 +9,5 @@ pub mod cli;
 pub mod export;
 pub mod load;
 pub mod model;
+pub mod progress;
+pub mod synth;

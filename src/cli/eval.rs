@@ -105,7 +105,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
     let preview = (id == ModelId::Lambert
         && (params.preview.two_sided || params.preview.ambient > 0.0))
         .then_some(params.preview);
-    let bar = super::progress::bar(queries.rows.len() as u64, "eval", args.quiet);
+    let bar = crate::progress::bar(queries.rows.len() as u64, "eval", args.quiet);
     let values: Vec<([f64; 3], [f64; 3])> = queries
         .rows
         .par_iter()

@@ -1,8 +1,10 @@
 //! Command line: parse, validate into real objects, run. Errors carry their whole context and
 //! map to exit code 2 in `main`.
 
+pub mod data;
 pub mod eval;
-pub mod progress;
+pub mod inspect;
+pub mod synth;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -26,6 +28,10 @@ pub struct Cli {
 pub enum Command {
     /// Evaluate a model's BRDF and intensity at given light/view directions.
     Eval(eval::EvalArgs),
+    /// Load measurements as `fit` would and summarise them (counts, ranges, coverage, drops).
+    Inspect(inspect::InspectArgs),
+    /// Render synthetic measurements (gonio CSV, image captures) from known parameters.
+    Synth(synth::SynthArgs),
 }
 
 /// Parse `args` and run. Returns the process exit code (help and version print and return 0).
@@ -47,6 +53,8 @@ where
     };
     match cli.command {
         Command::Eval(args) => eval::run(&args),
+        Command::Inspect(args) => inspect::run(&args),
+        Command::Synth(args) => synth::run(&args),
     }
 }
 

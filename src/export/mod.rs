@@ -3,3 +3,4 @@
 
 pub mod atomic;
 pub mod eval_table;
+pub mod images;

@@ -30,33 +30,52 @@ impl Albedo {
 }
 
 /// The parameter file as written by a user (every name of MODEL.md §5 plus the knobs).
-#[derive(Clone, Debug, Default, Deserialize)]
+#[derive(Clone, Debug, Default, Deserialize, serde::Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct RawParams {
     /// Model id; optional (the CLI's `--model` wins).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub model: Option<String>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub kd: Option<Albedo>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ks: Option<Albedo>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub exponent: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub spacing: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub height: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub elevation_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub map_scale: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub fibre_azimuth_deg: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub substrate_albedo: Option<Albedo>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub alpha_x: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub alpha_y: Option<f64>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub rho_d: Option<Albedo>,
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub rho_s: Option<Albedo>,
     /// Grayscale PNG/EXR topology map; relative paths are relative to the parameter file.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<PathBuf>,
     /// Specular Gauss–Legendre order N (default 16).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub quadrature_order: Option<usize>,
     /// Height histogram bins K (default 16).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub histogram_bins: Option<usize>,
     /// `lambert` preview: light both sides (seed 003).
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub two_sided: Option<bool>,
     /// `lambert` preview: ambient term (seed 003), irradiance-relative.
+    #[serde(skip_serializing_if = "Option::is_none")]
     pub ambient: Option<f64>,
 }
 

@@ -1,0 +1,46 @@
+//! Loading flags shared by every command that reads measurements.
+
+use crate::load::{capture::Subsample, gonio::GonioOptions, LoadOptions};
+use anyhow::{bail, Result};
+use clap::Args;
+
+#[derive(Debug, Args, Clone)]
+pub struct LoadArgs {
+    /// Goniometric CSV: skip bad rows (counted and reported) instead of stopping at the first
+    #[arg(long)]
+    pub skip_bad_rows: bool,
+    /// Goniometric CSV: the angles really are small degrees (do not stop on radian-looking data)
+    #[arg(long)]
+    pub small_angles_ok: bool,
+    /// Image captures: use every STRIDE-th pixel in x and y
+    #[arg(long, value_name = "STRIDE", default_value_t = 1)]
+    pub stride: usize,
+    /// Image captures: keep a seeded random fraction of the pixels, in (0, 1]
+    #[arg(long, value_name = "F", default_value_t = 1.0)]
+    pub fraction: f64,
+    /// Seed of the random pixel fraction
+    #[arg(long, value_name = "SEED", default_value_t = 0)]
+    pub subsample_seed: u64,
+}
+
+impl LoadArgs {
+    pub fn options(&self) -> Result<LoadOptions> {
+        if self.stride == 0 {
+            bail!("--stride must be at least 1");
+        }
+        if !(self.fraction > 0.0 && self.fraction <= 1.0) {
+            bail!("--fraction must lie in (0, 1], got {}", self.fraction);
+        }
+        Ok(LoadOptions {
+            gonio: GonioOptions {
+                skip_bad_rows: self.skip_bad_rows,
+                small_angles_ok: self.small_angles_ok,
+            },
+            subsample: Subsample {
+                stride: self.stride,
+                fraction: self.fraction,
+                seed: self.subsample_seed,
+            },
+        })
+    }
+}

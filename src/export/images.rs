@@ -1,0 +1,80 @@
+//! Writing images (used by `fibrefit synth` and reports): float EXR, 16-bit PNG.
+
+use crate::load::image_io::linear_to_srgb;
+use anyhow::{anyhow, Result};
+use exr::prelude::*;
+use std::path::Path;
+
+/// Write interleaved linear `data` (1 or 3 channels) as a float EXR (channels Y or R, G, B).
+pub fn write_exr(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[f32],
+) -> Result<()> {
+    let plane = |c: usize| -> Vec<f32> { data.iter().skip(c).step_by(channels).copied().collect() };
+    let list: Vec<AnyChannel<FlatSamples>> = if channels == 1 {
+        vec![AnyChannel::new("Y", FlatSamples::F32(plane(0)))]
+    } else {
+        ["R", "G", "B"]
+            .iter()
+            .enumerate()
+            .map(|(c, n)| AnyChannel::new(*n, FlatSamples::F32(plane(c))))
+            .collect()
+    };
+    let layer = Layer::new(
+        (width, height),
+        LayerAttributes::named("fibrefit"),
+        exr::prelude::Encoding::FAST_LOSSLESS,
+        AnyChannels::sort(list.into()),
+    );
+    Image::from_layer(layer)
+        .write()
+        .to_file(path)
+        .map_err(|e| anyhow!("{}: cannot write EXR: {e}", path.display()))
+}
+
+/// Write linear values in [0, 1] as a 16-bit PNG with the given encoding (values above 1 clip to
+/// the top code, i.e. saturate).
+pub fn write_png16(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[f32],
+    encoding: crate::load::image_io::Encoding,
+) -> Result<()> {
+    let codes: Vec<u16> = data
+        .iter()
+        .map(|&v| {
+            let v = v.clamp(0.0, 1.0);
+            let e = match encoding {
+                crate::load::image_io::Encoding::Linear => v,
+                crate::load::image_io::Encoding::Srgb => linear_to_srgb(v),
+            };
+            (e * 65535.0).round() as u16
+        })
+        .collect();
+    let (w, h) = (width as u32, height as u32);
+    let result = if channels == 1 {
+        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, codes).map(|b| b.save(path))
+    } else {
+        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, codes).map(|b| b.save(path))
+    };
+    result
+        .ok_or_else(|| anyhow!("{}: image buffer size mismatch", path.display()))?
+        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))
+}
+
+/// Write values in [0, 1] as a 16-bit grayscale PNG (topology maps, masks).
+pub fn write_gray16(path: &Path, width: usize, height: usize, values: &[f32]) -> Result<()> {
+    write_png16(
+        path,
+        width,
+        height,
+        1,
+        values,
+        crate::load::image_io::Encoding::Linear,
+    )
+}

@@ -1,0 +1,440 @@
+//! Image captures: a TOML description of a swatch and its images (example:
+//! `configs/capture_example.toml`). Every pixel of every image becomes a sample with its own
+//! light and view directions, fibre tangent and topology-map texel.
+//!
+//! Pixel (x, y) (column x, row y from the top) of a W x H image covers the swatch point
+//! p = (((x + 0.5)/W - 0.5) w, (0.5 - (y + 0.5)/H) h, 0) mm for a swatch of w x h mm centred on
+//! the origin: images are rectified to the swatch plane. The value of a pixel times `exposure` is
+//! the radiance towards the camera, in the units of the light's irradiance; the BRDF is
+//! radiance / (E cos theta_i) with E the irradiance perpendicular to the light: `irradiance` for
+//! a directional light, `intensity / r^2` (r in metres) for a point light.
+
+use super::image_io::{self, Encoding, LinearImage};
+use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
+use crate::model::frame::{direction_from_angles, Vec3};
+use crate::model::topology::TopologyMap;
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureFile {
+    pub swatch: Swatch,
+    pub images: Vec<ImageSpec>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Swatch {
+    /// Physical size (width along x, height along y), millimetres.
+    pub size_mm: [f64; 2],
+    /// Region of interest [x0, y0, x1, y1] in pixels (half-open); default: the whole image.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub roi: Option<[usize; 4]>,
+    /// Grayscale mask image: pixels with value 0 are left out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub mask: Option<PathBuf>,
+    /// Fibre azimuth psi, degrees, for the whole swatch.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fibre_azimuth_deg: Option<f64>,
+    /// Grayscale tangent map: psi = -90 + 180 m degrees per pixel.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub tangent_map: Option<PathBuf>,
+    /// Grayscale topology map (PNG 8/16-bit or EXR) registered to the image pixels.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology_map: Option<PathBuf>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ImageSpec {
+    pub file: PathBuf,
+    /// PNG only: `linear` or `srgb`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub encoding: Option<Encoding>,
+    /// Factor from pixel value to radiance (default 1).
+    #[serde(default = "one")]
+    pub exposure: f64,
+    /// EXR only: values at or above this are saturated (PNG: the top code always is).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub saturation: Option<f32>,
+    pub light: Light,
+    pub camera: Camera,
+}
+
+fn one() -> f64 {
+    1.0
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Light {
+    /// A distant light from (theta, phi) degrees with irradiance E perpendicular to it.
+    Directional {
+        theta_deg: f64,
+        phi_deg: f64,
+        irradiance: f64,
+    },
+    /// A point light at `position_mm` (swatch frame) with radiant intensity: E = intensity / r^2,
+    /// r in metres.
+    Point {
+        position_mm: [f64; 3],
+        intensity: f64,
+    },
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(tag = "type", rename_all = "kebab-case", deny_unknown_fields)]
+pub enum Camera {
+    /// A distant camera looking from (theta, phi) degrees.
+    Orthographic { theta_deg: f64, phi_deg: f64 },
+    /// A pinhole camera with its centre of projection at `position_mm` (swatch frame); the image
+    /// is rectified to the swatch plane, so only the pose matters per pixel.
+    Pinhole { position_mm: [f64; 3] },
+    /// Per-pixel unit view directions (swatch frame) in an EXR's R, G, B channels.
+    ViewMap { file: PathBuf },
+}
+
+/// Subsampling of capture pixels: every `stride`-th pixel in x and y, and/or a seeded random
+/// fraction.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Subsample {
+    pub stride: usize,
+    pub fraction: f64,
+    pub seed: u64,
+}
+
+impl Default for Subsample {
+    fn default() -> Self {
+        Self {
+            stride: 1,
+            fraction: 1.0,
+            seed: 0,
+        }
+    }
+}
+
+impl Subsample {
+    fn keeps(&self, image: usize, x: usize, y: usize) -> bool {
+        if x % self.stride != 0 || y % self.stride != 0 {
+            return false;
+        }
+        if self.fraction >= 1.0 {
+            return true;
+        }
+        let h = splitmix64(
+            self.seed ^ splitmix64(((image as u64) << 42) ^ ((y as u64) << 21) ^ x as u64),
+        );
+        ((h >> 11) as f64 / (1u64 << 53) as f64) < self.fraction
+    }
+}
+
+fn splitmix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+impl CaptureFile {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        toml::from_str(&text)
+            .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))
+    }
+}
+
+/// Swatch point (mm) under pixel (x, y) of a `w` x `h` image.
+pub fn pixel_position(size_mm: [f64; 2], w: usize, h: usize, x: usize, y: usize) -> Vec3 {
+    Vec3::new(
+        ((x as f64 + 0.5) / w as f64 - 0.5) * size_mm[0],
+        (0.5 - (y as f64 + 0.5) / h as f64) * size_mm[1],
+        0.0,
+    )
+}
+
+/// Direction and perpendicular irradiance of `light` at swatch point `p` (mm).
+pub fn light_at(light: &Light, p: &Vec3) -> (Vec3, f64) {
+    match light {
+        Light::Directional {
+            theta_deg,
+            phi_deg,
+            irradiance,
+        } => (
+            direction_from_angles(theta_deg.to_radians(), phi_deg.to_radians()),
+            *irradiance,
+        ),
+        Light::Point {
+            position_mm,
+            intensity,
+        } => {
+            let d = Vec3::from(*position_mm) - p;
+            let r_m = d.norm() / 1000.0;
+            (d.normalize(), intensity / (r_m * r_m))
+        }
+    }
+}
+
+/// View direction of a (non-map) camera at swatch point `p` (mm).
+pub fn view_at(camera: &Camera, p: &Vec3) -> Option<Vec3> {
+    match camera {
+        Camera::Orthographic { theta_deg, phi_deg } => Some(direction_from_angles(
+            theta_deg.to_radians(),
+            phi_deg.to_radians(),
+        )),
+        Camera::Pinhole { position_mm } => Some((Vec3::from(*position_mm) - p).normalize()),
+        Camera::ViewMap { .. } => None,
+    }
+}
+
+fn resolve(base: &Path, p: &Path) -> PathBuf {
+    if p.is_relative() {
+        base.join(p)
+    } else {
+        p.to_path_buf()
+    }
+}
+
+fn check_size(what: &str, path: &Path, got: (usize, usize), want: (usize, usize)) -> Result<()> {
+    if got != want {
+        bail!(
+            "{}: {what} is {}x{} pixels but the images are {}x{}; maps must be registered to the image pixels",
+            path.display(),
+            got.0,
+            got.1,
+            want.0,
+            want.1
+        );
+    }
+    Ok(())
+}
+
+pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
+    let desc = CaptureFile::load(path)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let name = path.display().to_string();
+    if desc.images.is_empty() {
+        bail!("{name}: no [[images]]");
+    }
+    let [w_mm, h_mm] = desc.swatch.size_mm;
+    if !(w_mm > 0.0 && h_mm > 0.0 && w_mm.is_finite() && h_mm.is_finite()) {
+        bail!("{name}: swatch.size_mm must be two positive lengths in millimetres");
+    }
+    if desc.swatch.fibre_azimuth_deg.is_some() && desc.swatch.tangent_map.is_some() {
+        bail!("{name}: give swatch.fibre_azimuth_deg or swatch.tangent_map, not both");
+    }
+    if let Some(psi) = desc.swatch.fibre_azimuth_deg {
+        if !(-90.0..=90.0).contains(&psi) {
+            bail!("{name}: swatch.fibre_azimuth_deg = {psi} is outside [-90, 90] degrees");
+        }
+    }
+    if subsample.stride == 0 || !(subsample.fraction > 0.0 && subsample.fraction <= 1.0) {
+        bail!("subsampling: stride must be >= 1 and fraction in (0, 1]");
+    }
+    let images: Vec<LinearImage> = desc
+        .images
+        .iter()
+        .map(|spec| {
+            if !(spec.exposure > 0.0 && spec.exposure.is_finite()) {
+                bail!(
+                    "{name}: image {}: exposure must be positive",
+                    spec.file.display()
+                );
+            }
+            image_io::read(&resolve(base, &spec.file), spec.encoding, spec.saturation)
+        })
+        .collect::<Result<_>>()?;
+    let (w, h) = (images[0].width, images[0].height);
+    let channels = images[0].channels;
+    for (spec, img) in desc.images.iter().zip(&images) {
+        check_size(
+            "image",
+            &resolve(base, &spec.file),
+            (img.width, img.height),
+            (w, h),
+        )?;
+        if img.channels != channels {
+            bail!(
+                "{}: has {} channels, the first image {channels}; all images must match",
+                spec.file.display(),
+                img.channels
+            );
+        }
+    }
+    let load_map = |p: &Option<PathBuf>, what: &str| -> Result<Option<TopologyMap>> {
+        match p {
+            Some(p) => {
+                let full = resolve(base, p);
+                let m = TopologyMap::load(&full)?;
+                check_size(what, &full, (m.width, m.height), (w, h))?;
+                Ok(Some(m))
+            }
+            None => Ok(None),
+        }
+    };
+    let topology = load_map(&desc.swatch.topology_map, "topology map")?;
+    let tangent = load_map(&desc.swatch.tangent_map, "tangent map")?;
+    let mask = load_map(&desc.swatch.mask, "mask")?;
+    let view_maps: Vec<Option<LinearImage>> = desc
+        .images
+        .iter()
+        .map(|spec| match &spec.camera {
+            Camera::ViewMap { file } => {
+                let full = resolve(base, file);
+                let m = image_io::read(&full, None, None)?;
+                check_size("view map", &full, (m.width, m.height), (w, h))?;
+                if m.channels != 3 {
+                    bail!(
+                        "{}: a view map needs R, G, B channels holding x, y, z",
+                        full.display()
+                    );
+                }
+                Ok(Some(m))
+            }
+            _ => Ok(None),
+        })
+        .collect::<Result<_>>()?;
+    let roi = desc.swatch.roi.unwrap_or([0, 0, w, h]);
+    if roi[0] >= roi[2] || roi[1] >= roi[3] || roi[2] > w || roi[3] > h {
+        bail!("{name}: swatch.roi = {roi:?} is not a rectangle inside the {w}x{h} image");
+    }
+
+    let mut samples = Vec::new();
+    let mut dropped = Dropped::default();
+    for (k, (spec, img)) in desc.images.iter().zip(&images).enumerate() {
+        for y in 0..h {
+            for x in 0..w {
+                let inside = x >= roi[0] && x < roi[2] && y >= roi[1] && y < roi[3];
+                if !inside || mask.as_ref().is_some_and(|m| m.texel(x, y) == 0.0) {
+                    dropped.masked += 1;
+                    continue;
+                }
+                if !subsample.keeps(k, x, y) {
+                    dropped.subsampled += 1;
+                    continue;
+                }
+                if img.saturated[y * w + x] {
+                    dropped.saturated += 1;
+                    continue;
+                }
+                let px = img.pixel(x, y);
+                if px.iter().any(|v| !v.is_finite()) {
+                    dropped.invalid += 1;
+                    continue;
+                }
+                let p = pixel_position(desc.swatch.size_mm, w, h, x, y);
+                let (l, e) = light_at(&spec.light, &p);
+                let v = match &view_maps[k] {
+                    Some(m) => {
+                        let d = m.pixel(x, y);
+                        let v = Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
+                        let n = v.norm();
+                        if !(n > 0.0) {
+                            dropped.invalid += 1;
+                            continue;
+                        }
+                        v / n
+                    }
+                    None => view_at(&spec.camera, &p).expect("non-map camera"),
+                };
+                if l.z <= 0.0 || v.z <= 0.0 || !(e > 0.0) {
+                    dropped.below_horizon += 1;
+                    continue;
+                }
+                let to_brdf = spec.exposure / (e * l.z);
+                let mut value = [0.0; 3];
+                for c in 0..3 {
+                    value[c] = px[c.min(channels - 1)] as f64 * to_brdf;
+                }
+                samples.push(Sample {
+                    l,
+                    v,
+                    fibre_azimuth: match (&tangent, desc.swatch.fibre_azimuth_deg) {
+                        (Some(t), _) => Some((-90.0 + 180.0 * t.texel(x, y)).to_radians()),
+                        (None, Some(psi)) => Some(psi.to_radians()),
+                        (None, None) => None,
+                    },
+                    map_value: topology.as_ref().map(|t| t.texel(x, y)),
+                    value,
+                    sigma: None,
+                    weight: 1.0,
+                    origin: Origin::Pixel {
+                        image: k as u32,
+                        x: x as u32,
+                        y: y as u32,
+                    },
+                });
+            }
+        }
+    }
+    if samples.is_empty() {
+        let d = &dropped;
+        bail!(
+            "{name}: no usable pixels: {} masked or outside the ROI, {} saturated, {} with light or view at or below the horizon, {} non-finite, {} subsampled away",
+            d.masked, d.saturated, d.below_horizon, d.invalid, d.subsampled
+        );
+    }
+    Ok(Samples {
+        samples,
+        channels,
+        kind: DataKind::Capture,
+        source: path.to_path_buf(),
+        dropped,
+        skipped_examples: vec![],
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pinhole_and_point_light_geometry_by_hand() {
+        // 100 x 50 mm swatch, 4 x 2 pixels: pixel (3, 0) covers x = (3.5/4 - 0.5) 100 = 37.5,
+        // y = (0.5 - 0.5/2) 50 = 12.5.
+        let p = pixel_position([100.0, 50.0], 4, 2, 3, 0);
+        assert_eq!(p, Vec3::new(37.5, 12.5, 0.0));
+        // camera at (37.5, -287.5, 400): offset (0, -300, 400), length 500 -> v = (0, -0.6, 0.8)
+        let v = view_at(
+            &Camera::Pinhole {
+                position_mm: [37.5, -287.5, 400.0],
+            },
+            &p,
+        )
+        .unwrap();
+        assert!((v - Vec3::new(0.0, -0.6, 0.8)).norm() < 1e-15);
+        // light at (37.5 + 300, 12.5, 400): offset (300, 0, 400), r = 0.5 m, E = 2 / 0.25 = 8
+        let (l, e) = light_at(
+            &Light::Point {
+                position_mm: [337.5, 12.5, 400.0],
+                intensity: 2.0,
+            },
+            &p,
+        );
+        assert!((l - Vec3::new(0.6, 0.0, 0.8)).norm() < 1e-15);
+        assert!((e - 8.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn subsampling_is_deterministic_and_near_the_fraction() {
+        let s = Subsample {
+            stride: 1,
+            fraction: 0.25,
+            seed: 7,
+        };
+        let kept = (0..200)
+            .flat_map(|y| (0..200).map(move |x| (x, y)))
+            .filter(|&(x, y)| s.keeps(0, x, y))
+            .count();
+        assert!((kept as f64 / 40000.0 - 0.25).abs() < 0.01, "{kept}");
+        assert_eq!(s.keeps(0, 5, 9), s.keeps(0, 5, 9));
+        let t = Subsample {
+            stride: 4,
+            fraction: 1.0,
+            seed: 0,
+        };
+        assert!(t.keeps(0, 8, 4) && !t.keeps(0, 8, 5));
+    }
+}

@@ -1,0 +1,591 @@
+//! Goniometric samples: CSV with a header (README, "Goniometric CSV").
+//!
+//! Angles `theta_i,phi_i,theta_o,phi_o` in degrees (MODEL.md §1). Values as `brdf` (or
+//! `brdf_r,brdf_g,brdf_b`), in 1/sr, or as `radiance` (or `radiance_r,radiance_g,radiance_b`)
+//! with the `irradiance` that produced it, measured perpendicular to the light: then
+//! f = radiance / (irradiance cos theta_i). Optional `sigma` (or `sigma_r,sigma_g,sigma_b`), the
+//! standard deviation of each value in the same units as the values, or `weight`.
+
+use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
+use crate::model::frame::direction_from_angles;
+use anyhow::{anyhow, bail, Context, Result};
+use std::path::Path;
+
+/// Options a user can set on loading.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct GonioOptions {
+    /// Skip rows with problems (and count them) instead of failing.
+    pub skip_bad_rows: bool,
+    /// The angles really are small degrees: do not stop on radian-looking data.
+    pub small_angles_ok: bool,
+}
+
+struct Layout {
+    angles: [usize; 4],
+    values: Vec<usize>,
+    irradiance: Option<usize>,
+    sigma: Vec<usize>,
+    weight: Option<usize>,
+}
+
+const ANGLES: [&str; 4] = ["theta_i", "phi_i", "theta_o", "phi_o"];
+
+fn layout(header: &[String], name: &str) -> Result<Layout> {
+    let find = |col: &str| header.iter().position(|h| h == col);
+    for (i, h) in header.iter().enumerate() {
+        if header[..i].contains(h) {
+            bail!("{name}:1: column `{h}` appears twice");
+        }
+        let known = ANGLES.contains(&h.as_str())
+            || matches!(
+                h.as_str(),
+                "brdf"
+                    | "brdf_r"
+                    | "brdf_g"
+                    | "brdf_b"
+                    | "radiance"
+                    | "radiance_r"
+                    | "radiance_g"
+                    | "radiance_b"
+                    | "irradiance"
+                    | "sigma"
+                    | "sigma_r"
+                    | "sigma_g"
+                    | "sigma_b"
+                    | "weight"
+            );
+        if !known {
+            bail!(
+                "{name}:1: unknown column `{h}`; expected theta_i, phi_i, theta_o, phi_o, then brdf \
+                 (or brdf_r, brdf_g, brdf_b) or radiance (or radiance_r, _g, _b) with irradiance, \
+                 and optionally sigma (or sigma_r, _g, _b) or weight"
+            );
+        }
+    }
+    let mut angles = [0; 4];
+    for (k, col) in ANGLES.iter().enumerate() {
+        angles[k] = find(col)
+            .ok_or_else(|| anyhow!("{name}:1: missing column `{col}` (angles in degrees)"))?;
+    }
+    let group = |base: &str| -> Result<Vec<usize>> {
+        let grey = find(base);
+        let rgb: Vec<Option<usize>> = ["r", "g", "b"]
+            .iter()
+            .map(|c| find(&format!("{base}_{c}")))
+            .collect();
+        let n_rgb = rgb.iter().filter(|x| x.is_some()).count();
+        match (grey, n_rgb) {
+            (Some(_), n) if n > 0 => {
+                bail!("{name}:1: give either `{base}` or `{base}_r,{base}_g,{base}_b`, not both")
+            }
+            (Some(g), _) => Ok(vec![g]),
+            (None, 3) => Ok(rgb.into_iter().flatten().collect()),
+            (None, 0) => Ok(vec![]),
+            (None, _) => {
+                bail!("{name}:1: `{base}_r`, `{base}_g` and `{base}_b` must all be present")
+            }
+        }
+    };
+    let brdf = group("brdf")?;
+    let radiance = group("radiance")?;
+    let irradiance = find("irradiance");
+    let values = match (brdf.is_empty(), radiance.is_empty()) {
+        (false, false) => bail!("{name}:1: give values either as brdf or as radiance, not both"),
+        (false, true) => {
+            if irradiance.is_some() {
+                bail!("{name}:1: column `irradiance` only goes with radiance values, not brdf");
+            }
+            brdf
+        }
+        (true, false) => {
+            if irradiance.is_none() {
+                bail!("{name}:1: radiance values need an `irradiance` column (irradiance perpendicular to the light)");
+            }
+            radiance
+        }
+        (true, true) => bail!(
+            "{name}:1: no value columns: expected `brdf` (or brdf_r, brdf_g, brdf_b) or `radiance` (or radiance_r, _g, _b) with `irradiance`"
+        ),
+    };
+    let sigma = group("sigma")?;
+    if !sigma.is_empty() && sigma.len() != values.len() {
+        bail!("{name}:1: sigma columns must match the value columns (grey or r, g, b)");
+    }
+    let weight = find("weight");
+    if weight.is_some() && !sigma.is_empty() {
+        bail!("{name}:1: give either sigma or weight, not both");
+    }
+    Ok(Layout {
+        angles,
+        values,
+        irradiance,
+        sigma,
+        weight,
+    })
+}
+
+fn field(record: &csv::ByteRecord, i: usize) -> &[u8] {
+    record.get(i).unwrap_or(b"")
+}
+
+fn number(record: &csv::ByteRecord, i: usize, col: &str) -> std::result::Result<f64, String> {
+    let raw = field(record, i).trim_ascii();
+    // Parse bytes directly (no UTF-8 pass): this is most of the load time of big files.
+    match fast_float2::parse::<f64, _>(raw) {
+        Ok(v) if v.is_finite() => Ok(v),
+        Ok(_) => Err(format!(
+            "column `{col}` is {}; values must be finite numbers",
+            String::from_utf8_lossy(raw)
+        )),
+        Err(_) => Err(format!(
+            "column `{col}`: '{}' is not a number",
+            String::from_utf8_lossy(raw)
+        )),
+    }
+}
+
+/// Negative values up to this many standard deviations are noise; beyond, an error.
+const NEGATIVE_SIGMAS: f64 = 4.0;
+/// Without sigmas, negatives down to this fraction of the largest value are noise.
+const NEGATIVE_FRACTION: f64 = 0.01;
+
+pub fn load(path: &Path, opts: GonioOptions) -> Result<Samples> {
+    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let mut s = parse(&bytes, &path.display().to_string(), opts)?;
+    s.source = path.to_path_buf();
+    Ok(s)
+}
+
+/// Parse from any reader; `name` labels errors as `name:line: problem`.
+pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Result<Samples> {
+    let mut bytes = Vec::new();
+    input
+        .read_to_end(&mut bytes)
+        .with_context(|| format!("{name}: cannot read"))?;
+    parse(&bytes, name, opts)
+}
+
+/// What one chunk of rows yields.
+#[derive(Default)]
+struct Chunk {
+    samples: Vec<Sample>,
+    negatives: Vec<(u64, f64, usize)>,
+    skipped: u64,
+    examples: Vec<String>,
+    error: Option<String>,
+}
+
+fn parse_chunk(
+    bytes: &[u8],
+    first_line: u64,
+    lay: &Layout,
+    header: &[String],
+    name: &str,
+    opts: GonioOptions,
+) -> Chunk {
+    // rows ~ bytes / bytes per line, so the sample vector is allocated once
+    let per_line = memchr::memchr(b'\n', bytes)
+        .map_or(bytes.len(), |p| p + 1)
+        .max(8);
+    let mut out = Chunk {
+        samples: Vec::with_capacity(bytes.len() / per_line + 16),
+        ..Chunk::default()
+    };
+    let mut reader = csv::ReaderBuilder::new()
+        .has_headers(false)
+        .comment(Some(b'#'))
+        .flexible(true)
+        .from_reader(bytes);
+    let mut record = csv::ByteRecord::new();
+    let note = |out: &mut Chunk, msg: String| -> bool {
+        if opts.skip_bad_rows {
+            out.skipped += 1;
+            if out.examples.len() < 5 {
+                out.examples.push(msg);
+            }
+            true
+        } else {
+            out.error = Some(msg);
+            false
+        }
+    };
+    loop {
+        match reader.read_byte_record(&mut record) {
+            Ok(false) => break,
+            Ok(true) => {
+                let line = first_line + record.position().map(|p| p.line()).unwrap_or(1) - 1;
+                match parse_row(&record, lay, header) {
+                    Ok((sample, neg)) => {
+                        if let Some((value, channel)) = neg {
+                            out.negatives.push((line, value, channel));
+                        }
+                        out.samples.push(Sample {
+                            origin: Origin::Line(line),
+                            ..sample
+                        });
+                    }
+                    Err(problem) => {
+                        if !note(&mut out, format!("{name}:{line}: {problem}")) {
+                            return out;
+                        }
+                    }
+                }
+            }
+            Err(e) => {
+                let line = first_line + e.position().map(|p| p.line()).unwrap_or(1) - 1;
+                if !note(&mut out, format!("{name}:{line}: malformed row: {e}")) {
+                    return out;
+                }
+            }
+        }
+    }
+    out
+}
+
+/// Chunks of whole lines for parallel parsing: (bytes, number of the chunk's first line).
+/// Only when no field can span lines (no quote characters); otherwise one chunk.
+fn split_lines(body: &[u8], first_line: u64) -> Vec<(&[u8], u64)> {
+    const MIN_CHUNK: usize = 1 << 20;
+    let parts = rayon::current_num_threads().max(1) * 4;
+    if body.len() < 2 * MIN_CHUNK || memchr::memchr(b'"', body).is_some() {
+        return vec![(body, first_line)];
+    }
+    let target = (body.len() / parts).max(MIN_CHUNK);
+    let mut chunks = Vec::new();
+    let (mut start, mut line) = (0usize, first_line);
+    while start < body.len() {
+        let mut end = (start + target).min(body.len());
+        if end < body.len() {
+            end = memchr::memchr(b'\n', &body[end - 1..]).map_or(body.len(), |p| end + p);
+        }
+        chunks.push((&body[start..end], line));
+        line += memchr::memchr_iter(b'\n', &body[start..end]).count() as u64;
+        start = end;
+    }
+    chunks
+}
+
+fn parse(bytes: &[u8], name: &str, opts: GonioOptions) -> Result<Samples> {
+    use rayon::prelude::*;
+    // The header: the first line that is not a comment.
+    let mut offset = 0usize;
+    let mut line = 1u64;
+    while bytes[offset..].starts_with(b"#") {
+        match bytes[offset..].iter().position(|&b| b == b'\n') {
+            Some(p) => {
+                offset += p + 1;
+                line += 1;
+            }
+            None => {
+                offset = bytes.len();
+            }
+        }
+    }
+    let header_end = bytes[offset..]
+        .iter()
+        .position(|&b| b == b'\n')
+        .map(|p| offset + p + 1)
+        .unwrap_or(bytes.len());
+    let header: Vec<String> = String::from_utf8_lossy(&bytes[offset..header_end])
+        .trim_end_matches(['\n', '\r'])
+        .split(',')
+        .map(|h| h.trim().trim_matches('"').to_owned())
+        .collect();
+    if header.len() == 1 && header[0].is_empty() {
+        bail!("{name}: empty file; expected a header line");
+    }
+    let lay = layout(&header, name).map_err(|e| {
+        anyhow!(e
+            .to_string()
+            .replacen(&format!("{name}:1:"), &format!("{name}:{line}:"), 1))
+    })?;
+    let channels = lay.values.len();
+    let chunks: Vec<Chunk> = split_lines(&bytes[header_end..], line + 1)
+        .into_par_iter()
+        .map(|(b, first)| parse_chunk(b, first, &lay, &header, name, opts))
+        .collect();
+    let mut samples = Vec::with_capacity(chunks.iter().map(|c| c.samples.len()).sum());
+    let mut dropped = Dropped::default();
+    let mut examples: Vec<String> = Vec::new();
+    let mut negatives = Vec::new();
+    for c in chunks {
+        if let Some(e) = c.error {
+            bail!(e);
+        }
+        samples.extend(c.samples);
+        negatives.extend(c.negatives);
+        dropped.skipped_rows += c.skipped;
+        examples.extend(c.examples);
+    }
+    examples.truncate(5);
+    if samples.is_empty() {
+        bail!("{name}: no usable rows after the header");
+    }
+    let largest = samples
+        .iter()
+        .flat_map(|s| s.value[..channels].iter().copied())
+        .fold(0.0, f64::max);
+    let mut bad_lines = Vec::new();
+    for (line, value, channel) in negatives {
+        if value < -NEGATIVE_FRACTION * largest {
+            let col = header[lay.values[channel]].as_str();
+            let msg = format!(
+                "{name}:{line}: column `{col}` = {value} is negative beyond noise (more than {} % of the largest value {largest}); give `sigma` if this is noise",
+                NEGATIVE_FRACTION * 100.0
+            );
+            if !opts.skip_bad_rows {
+                bail!(msg);
+            }
+            dropped.skipped_rows += 1;
+            if examples.len() < 5 {
+                examples.push(msg);
+            }
+            bad_lines.push(line);
+        }
+    }
+    if !bad_lines.is_empty() {
+        samples.retain(|s| !matches!(s.origin, Origin::Line(l) if bad_lines.contains(&l)));
+    }
+    if !opts.small_angles_ok {
+        check_not_radians(&samples, name)?;
+    }
+    Ok(Samples {
+        samples,
+        channels,
+        kind: DataKind::Gonio,
+        source: name.into(),
+        dropped,
+        skipped_examples: examples,
+    })
+}
+
+type Negative = Option<(f64, usize)>;
+
+fn parse_row(
+    record: &csv::ByteRecord,
+    lay: &Layout,
+    header: &[String],
+) -> std::result::Result<(Sample, Negative), String> {
+    if record.len() != header.len() {
+        return Err(format!(
+            "malformed row: {} fields, the header has {}",
+            record.len(),
+            header.len()
+        ));
+    }
+    let mut deg = [0.0; 4];
+    for k in 0..4 {
+        deg[k] = number(record, lay.angles[k], ANGLES[k])?;
+    }
+    for k in [0, 2] {
+        if deg[k] < 0.0 {
+            return Err(format!("column `{}` = {} is negative; theta is measured from the normal, in [0, 90) degrees", ANGLES[k], deg[k]));
+        }
+        if deg[k] >= 90.0 {
+            return Err(format!(
+                "column `{}` = {} is at or below the horizon; theta must be < 90 degrees",
+                ANGLES[k], deg[k]
+            ));
+        }
+    }
+    for k in [1, 3] {
+        if !(-360.0..=360.0).contains(&deg[k]) {
+            return Err(format!(
+                "column `{}` = {} is outside [-360, 360] degrees",
+                ANGLES[k], deg[k]
+            ));
+        }
+    }
+    let cos_i = deg[0].to_radians().cos();
+    let scale = match lay.irradiance {
+        Some(i) => {
+            let e = number(record, i, "irradiance")?;
+            if e <= 0.0 {
+                return Err(format!("column `irradiance` = {e} must be positive"));
+            }
+            1.0 / (e * cos_i)
+        }
+        None => 1.0,
+    };
+    let mut value = [0.0; 3];
+    for (c, &i) in lay.values.iter().enumerate() {
+        value[c] = number(record, i, &header[i])? * scale;
+    }
+    let channels = lay.values.len();
+    if channels == 1 {
+        value = [value[0]; 3];
+    }
+    let sigma = if lay.sigma.is_empty() {
+        None
+    } else {
+        let mut s = [0.0; 3];
+        for (c, &i) in lay.sigma.iter().enumerate() {
+            s[c] = number(record, i, &header[i])?;
+            if s[c] <= 0.0 {
+                return Err(format!(
+                    "column `{}` = {} must be positive",
+                    header[i], s[c]
+                ));
+            }
+            s[c] *= scale;
+        }
+        if channels == 1 {
+            s = [s[0]; 3];
+        }
+        Some(s)
+    };
+    let weight = match lay.weight {
+        Some(i) => {
+            let w = number(record, i, "weight")?;
+            if w < 0.0 {
+                return Err(format!("column `weight` = {w} is negative"));
+            }
+            w
+        }
+        None => 1.0,
+    };
+    let mut negative = None;
+    for c in 0..channels {
+        if value[c] < 0.0 {
+            match sigma {
+                Some(s) if value[c] < -NEGATIVE_SIGMAS * s[c] => {
+                    return Err(format!(
+                        "column `{}` = {} is negative beyond noise (more than {NEGATIVE_SIGMAS} sigma)",
+                        header[lay.values[c]],
+                        value[c]
+                    ));
+                }
+                Some(_) => {}
+                None => negative = Some((value[c], c)),
+            }
+        }
+    }
+    let sample = Sample {
+        l: direction_from_angles(deg[0].to_radians(), deg[1].to_radians()),
+        v: direction_from_angles(deg[2].to_radians(), deg[3].to_radians()),
+        fibre_azimuth: None,
+        map_value: None,
+        value,
+        sigma,
+        weight,
+        origin: Origin::Line(0),
+    };
+    Ok((sample, negative))
+}
+
+/// Stop on data whose angles all look like radians.
+fn check_not_radians(samples: &[Sample], name: &str) -> Result<()> {
+    const MIN_ROWS: usize = 8;
+    if samples.len() < MIN_ROWS {
+        return Ok(());
+    }
+    // theta <= pi/2 "degrees" for every direction, compared on cosines (no acos per row)
+    let min_cos = samples.iter().map(|s| s.l.z.min(s.v.z)).fold(1.0, f64::min);
+    let theta_max = min_cos.clamp(-1.0, 1.0).acos().to_degrees();
+    let phi_in_radian_range = samples
+        .iter()
+        .flat_map(|s| [s.l, s.v])
+        .filter(|w| w.z < 1.0 - 1e-12)
+        .all(|w| {
+            let phi = w.y.atan2(w.x).to_degrees();
+            (-std::f64::consts::PI..=std::f64::consts::TAU).contains(&phi)
+        });
+    if theta_max <= std::f64::consts::FRAC_PI_2 && phi_in_radian_range {
+        bail!(
+            "{name}: every theta is at most {theta_max:.3} degrees over {} rows: the angles look like radians. \
+             fibrefit reads degrees; convert the file, or pass --small-angles-ok if these really are degrees",
+            samples.len()
+        );
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(text: &str) -> Result<Samples> {
+        read(text.as_bytes(), "g.csv", GonioOptions::default())
+    }
+
+    #[test]
+    fn brdf_and_radiance_forms_agree() {
+        let a = parse("theta_i,phi_i,theta_o,phi_o,brdf\n60,0,10,90,0.2\n").unwrap();
+        // radiance = f E cos(theta_i) = 0.2 * 3 * 0.5
+        let b =
+            parse("theta_i,phi_i,theta_o,phi_o,radiance,irradiance\n60,0,10,90,0.3,3\n").unwrap();
+        assert!((a.samples[0].value[0] - b.samples[0].value[0]).abs() < 1e-15);
+        assert_eq!(a.channels, 1);
+    }
+
+    #[test]
+    fn rgb_with_sigma() {
+        let s = parse("theta_i,phi_i,theta_o,phi_o,brdf_r,brdf_g,brdf_b,sigma_r,sigma_g,sigma_b\n10,0,20,0,0.1,0.2,0.3,0.01,0.01,0.02\n").unwrap();
+        assert_eq!(s.channels, 3);
+        assert_eq!(s.samples[0].value, [0.1, 0.2, 0.3]);
+        assert_eq!(s.samples[0].sigma, Some([0.01, 0.01, 0.02]));
+    }
+
+    #[test]
+    fn radians_are_caught() {
+        let mut text = String::from("theta_i,phi_i,theta_o,phi_o,brdf\n");
+        for i in 0..20 {
+            text += &format!(
+                "{},{},{},{},0.1\n",
+                0.05 * i as f64,
+                0.3 * i as f64,
+                1.2,
+                3.0
+            );
+        }
+        let e = parse(&text).unwrap_err().to_string();
+        assert!(e.contains("look like radians"), "{e}");
+        assert!(read(
+            text.as_bytes(),
+            "g.csv",
+            GonioOptions {
+                small_angles_ok: true,
+                ..Default::default()
+            }
+        )
+        .is_ok());
+    }
+
+    #[test]
+    fn skipping_counts_bad_rows() {
+        let text = "theta_i,phi_i,theta_o,phi_o,brdf\n10,0,10,0,0.1\n10,0,95,0,0.1\n10,x,10,0,0.1\n10,0,10\n20,0,10,0,0.2\n";
+        let e = parse(text).unwrap_err().to_string();
+        assert!(e.contains("g.csv:3") && e.contains("horizon"), "{e}");
+        let s = read(
+            text.as_bytes(),
+            "g.csv",
+            GonioOptions {
+                skip_bad_rows: true,
+                ..Default::default()
+            },
+        )
+        .unwrap();
+        assert_eq!(s.samples.len(), 2);
+        assert_eq!(s.dropped.skipped_rows, 3);
+    }
+
+    #[test]
+    fn negative_beyond_noise() {
+        let e = parse("theta_i,phi_i,theta_o,phi_o,brdf\n10,0,10,0,0.5\n10,0,20,0,-0.2\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("g.csv:3") && e.contains("negative beyond noise"),
+            "{e}"
+        );
+        assert!(
+            parse("theta_i,phi_i,theta_o,phi_o,brdf\n10,0,10,0,0.5\n10,0,20,0,-0.001\n").is_ok()
+        );
+        let e = parse(
+            "theta_i,phi_i,theta_o,phi_o,brdf,sigma\n10,0,10,0,0.5,0.01\n10,0,20,0,-0.1,0.01\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("sigma"), "{e}");
+    }
+}

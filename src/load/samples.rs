@@ -1,0 +1,79 @@
+//! The one sample representation every loader produces and the model and fitter consume.
+
+use crate::model::frame::Vec3;
+use std::path::PathBuf;
+
+/// One measurement: a BRDF value (1/sr) at a light/view pair.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Sample {
+    /// Unit direction towards the light, swatch frame.
+    pub l: Vec3,
+    /// Unit direction towards the viewer, swatch frame.
+    pub v: Vec3,
+    /// Fibre azimuth psi (radians) at this sample when the data carries it (tangent map);
+    /// `None`: the parameter `fibre_azimuth_deg` applies.
+    pub fibre_azimuth: Option<f64>,
+    /// Topology map value m in [0, 1] of this pixel's texel; `None` for a spot that averages
+    /// over the map (goniometric samples).
+    pub map_value: Option<f64>,
+    /// BRDF per channel (grey data repeats channel 0), 1/sr.
+    pub value: [f64; 3],
+    /// Standard deviation of `value` per channel, when known.
+    pub sigma: Option<[f64; 3]>,
+    /// Relative weight in the fit (1 unless the file says otherwise).
+    pub weight: f64,
+    /// Where the sample came from: a CSV line, or (image index, x, y) of a capture.
+    pub origin: Origin,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Origin {
+    Line(u64),
+    Pixel { image: u32, x: u32, y: u32 },
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DataKind {
+    Gonio,
+    Capture,
+}
+
+/// Why samples were left out, counted.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Dropped {
+    /// Pixels at the sensor's saturation level.
+    pub saturated: u64,
+    /// Pixels outside the region of interest or the mask.
+    pub masked: u64,
+    /// Light or view at or below the swatch plane.
+    pub below_horizon: u64,
+    /// Non-finite pixel values.
+    pub invalid: u64,
+    /// Rows skipped on request (`--skip-bad-rows`).
+    pub skipped_rows: u64,
+    /// Pixels left out by subsampling.
+    pub subsampled: u64,
+}
+
+impl Dropped {
+    pub fn total(&self) -> u64 {
+        self.saturated
+            + self.masked
+            + self.below_horizon
+            + self.invalid
+            + self.skipped_rows
+            + self.subsampled
+    }
+}
+
+#[derive(Clone, Debug)]
+pub struct Samples {
+    pub samples: Vec<Sample>,
+    /// 1 (grey) or 3 (RGB).
+    pub channels: usize,
+    pub kind: DataKind,
+    pub source: PathBuf,
+    pub dropped: Dropped,
+    /// First problem of each kind met when rows were skipped (for the report).
+    pub skipped_examples: Vec<String>,
+}

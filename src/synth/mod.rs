@@ -1,0 +1,658 @@
+//! Synthetic measurements rendered from a chosen rung and known parameters: goniometric CSVs and
+//! image captures (EXR or 16-bit PNG + capture TOML + topology map), with seeded noise, and the
+//! truth written beside them. Everything fibrefit fits can be validated against these.
+//!
+//! Config (example: `configs/synth_silk.toml`):
+//! - `model`: rung id; `[params]`: parameter names of MODEL.md §5 (relative paths resolve against
+//!   the config file);
+//! - `[topology_map]`: a generated map (`width`, `height`, `seed`, `waves`) written as
+//!   `topology.png`; it becomes the params' `topology_map`;
+//! - `[gonio]`: `grid` (lists of `theta_i`, `phi_i`, `theta_o`, `phi_o` in degrees, all
+//!   combinations with both thetas < 90) or `random` (`count`, `seed`, `max_theta_deg`);
+//!   `values = "brdf"` (default) or `"radiance"` with `irradiance`;
+//! - `[capture]`: `width`, `height`, `size_mm`, `format = "exr" | "png"` (PNG: 16-bit with
+//!   `encoding`), optional `tangent` (psi varying linearly across x from `from_deg` to `to_deg`,
+//!   written as `tangent.png`), and `[[capture.images]]` with a `light` and a `camera` as in
+//!   capture files;
+//! - `[noise]`: `relative` (Gaussian, times the value), `floor` (additive Gaussian, 1/sr), `seed`.
+
+use crate::export::atomic::AtomicFile;
+use crate::export::images;
+use crate::load::capture::{self, Camera, CaptureFile, ImageSpec, Light, Swatch};
+use crate::load::image_io::Encoding;
+use crate::model::frame::{direction_from_angles, FibreFrame};
+use crate::model::params::{ModelParams, RawParams};
+use crate::model::topology::TopologyMap;
+use crate::model::{self, DirectionPair, ModelId, ShadingModel};
+use anyhow::{anyhow, bail, Context, Result};
+use rand::{Rng, SeedableRng};
+use rand_distr::{Distribution, StandardNormal};
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SynthConfig {
+    pub model: String,
+    pub params: RawParams,
+    pub topology_map: Option<MapSpec>,
+    pub gonio: Option<GonioSpec>,
+    pub capture: Option<CaptureSpec>,
+    #[serde(default)]
+    pub noise: NoiseSpec,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MapSpec {
+    pub width: usize,
+    pub height: usize,
+    #[serde(default)]
+    pub seed: u64,
+    /// Number of random plane waves summed (default 6).
+    #[serde(default = "default_waves")]
+    pub waves: usize,
+}
+
+fn default_waves() -> usize {
+    6
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GonioSpec {
+    pub grid: Option<Grid>,
+    pub random: Option<RandomDirections>,
+    #[serde(default = "default_values")]
+    pub values: String,
+    #[serde(default = "one")]
+    pub irradiance: f64,
+}
+
+fn default_values() -> String {
+    "brdf".into()
+}
+fn one() -> f64 {
+    1.0
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Grid {
+    pub theta_i: Vec<f64>,
+    pub phi_i: Vec<f64>,
+    pub theta_o: Vec<f64>,
+    pub phi_o: Vec<f64>,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RandomDirections {
+    pub count: usize,
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default = "default_max_theta")]
+    pub max_theta_deg: f64,
+}
+
+fn default_max_theta() -> f64 {
+    85.0
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CaptureSpec {
+    pub width: usize,
+    pub height: usize,
+    pub size_mm: [f64; 2],
+    #[serde(default = "default_format")]
+    pub format: String,
+    pub encoding: Option<Encoding>,
+    pub tangent: Option<TangentSpec>,
+    pub images: Vec<SynthImage>,
+}
+
+fn default_format() -> String {
+    "exr".into()
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TangentSpec {
+    pub from_deg: f64,
+    pub to_deg: f64,
+}
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SynthImage {
+    pub light: Light,
+    pub camera: Camera,
+}
+
+#[derive(Clone, Debug, Default, Deserialize, Serialize)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseSpec {
+    #[serde(default)]
+    pub relative: f64,
+    #[serde(default)]
+    pub floor: f64,
+    #[serde(default)]
+    pub seed: u64,
+}
+
+/// What `run` wrote.
+#[derive(Clone, Debug, Serialize)]
+pub struct SynthInfo {
+    pub tool: String,
+    pub model: String,
+    pub noise: NoiseSpec,
+    pub gonio_rows: usize,
+    pub images: usize,
+    pub files: Vec<String>,
+}
+
+impl SynthConfig {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let mut cfg: SynthConfig = toml::from_str(&text)
+            .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        if let Some(map) = &cfg.params.topology_map {
+            if map.is_relative() {
+                cfg.params.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
+            }
+        }
+        Ok(cfg)
+    }
+}
+
+/// A smooth map in [0, 1]: a seeded sum of plane waves, normalised.
+pub fn generate_map(spec: &MapSpec) -> Vec<f32> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(spec.seed);
+    let waves: Vec<(f64, f64, f64, f64)> = (0..spec.waves.max(1))
+        .map(|k| {
+            let angle = rng.random::<f64>() * std::f64::consts::TAU;
+            let wavelength = 6.0 + 30.0 * rng.random::<f64>();
+            let amplitude = 1.0 / (1.0 + k as f64 * 0.5);
+            (
+                angle,
+                wavelength,
+                rng.random::<f64>() * std::f64::consts::TAU,
+                amplitude,
+            )
+        })
+        .collect();
+    let raw: Vec<f64> = (0..spec.height)
+        .flat_map(|y| (0..spec.width).map(move |x| (x as f64, y as f64)))
+        .map(|(x, y)| {
+            waves
+                .iter()
+                .map(|&(a, wl, ph, amp)| {
+                    amp * ((x * a.cos() + y * a.sin()) * std::f64::consts::TAU / wl + ph).sin()
+                })
+                .sum()
+        })
+        .collect();
+    let (lo, hi) = raw
+        .iter()
+        .fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
+    // quantise to 16 bits so the PNG holds exactly these values
+    raw.iter()
+        .map(|v| (((v - lo) / (hi - lo).max(1e-300)) * 65535.0).round() as f32 / 65535.0)
+        .collect()
+}
+
+struct Noise {
+    spec: NoiseSpec,
+}
+
+impl Noise {
+    fn apply(&self, f: f64, rng: &mut impl Rng) -> f64 {
+        if self.spec.relative == 0.0 && self.spec.floor == 0.0 {
+            return f;
+        }
+        let a: f64 = StandardNormal.sample(rng);
+        let b: f64 = StandardNormal.sample(rng);
+        f * (1.0 + self.spec.relative * a) + self.spec.floor * b
+    }
+    fn sigma(&self, f: f64) -> f64 {
+        ((self.spec.relative * f).powi(2) + self.spec.floor.powi(2)).sqrt()
+    }
+    fn active(&self) -> bool {
+        self.spec.relative > 0.0 || self.spec.floor > 0.0
+    }
+}
+
+fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
+    let mut f = AtomicFile::create(path)?;
+    f.writer().write_all(bytes)?;
+    f.commit()
+}
+
+/// Render everything `config` asks for into `out_dir`. Returns what was written.
+pub fn run(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
+    let cfg = SynthConfig::load(config_path)?;
+    let id: ModelId = cfg
+        .model
+        .parse()
+        .map_err(|e: String| anyhow!("{}: {e}", config_path.display()))?;
+    if cfg.gonio.is_none() && cfg.capture.is_none() {
+        bail!(
+            "{}: nothing to render: add [gonio] and/or [capture]",
+            config_path.display()
+        );
+    }
+    if cfg.noise.relative < 0.0 || cfg.noise.floor < 0.0 {
+        bail!("{}: noise levels must be >= 0", config_path.display());
+    }
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("{}: cannot create output directory", out_dir.display()))?;
+    let mut raw = cfg.params.clone();
+    raw.model = Some(id.to_string());
+    let mut files = Vec::new();
+    if let Some(src) = raw.topology_map.clone() {
+        if cfg.topology_map.is_some() {
+            bail!(
+                "{}: give [topology_map] or params.topology_map, not both",
+                config_path.display()
+            );
+        }
+        // keep the capture self-contained: the map travels with the data
+        let ext = src
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("png")
+            .to_ascii_lowercase();
+        let name = format!("topology.{ext}");
+        let dest = out_dir.join(&name);
+        if std::fs::canonicalize(&src).ok() != std::fs::canonicalize(&dest).ok() {
+            let bytes = std::fs::read(&src)
+                .with_context(|| format!("{}: cannot read topology map", src.display()))?;
+            write_file(&dest, &bytes)?;
+        }
+        files.push(name);
+        raw.topology_map = Some(dest);
+    }
+    if let Some(spec) = &cfg.topology_map {
+        if raw.topology_map.is_some() {
+            bail!(
+                "{}: give [topology_map] or params.topology_map, not both",
+                config_path.display()
+            );
+        }
+        if let Some(c) = &cfg.capture {
+            if (c.width, c.height) != (spec.width, spec.height) {
+                bail!(
+                    "{}: [topology_map] must match the capture's {}x{} pixels",
+                    config_path.display(),
+                    c.width,
+                    c.height
+                );
+            }
+        }
+        let values = generate_map(spec);
+        let path = out_dir.join("topology.png");
+        images::write_gray16(&path, spec.width, spec.height, &values)?;
+        files.push("topology.png".into());
+        raw.topology_map = Some(path);
+    }
+    let (params, warnings) =
+        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", config_path.display()))?;
+    if !quiet {
+        for w in warnings {
+            eprintln!("warning: {}: {w}", config_path.display());
+        }
+    }
+    let shading = model::build(id, &params)?;
+    let noise = Noise {
+        spec: cfg.noise.clone(),
+    };
+
+    let mut gonio_rows = 0;
+    if let Some(g) = &cfg.gonio {
+        let text = render_gonio(g, shading.as_ref(), &params, &noise)?;
+        gonio_rows = text.lines().count() - 1;
+        write_file(&out_dir.join("gonio.csv"), text.as_bytes())?;
+        files.push("gonio.csv".into());
+    }
+    let mut n_images = 0;
+    if let Some(c) = &cfg.capture {
+        let written = render_capture(c, shading.as_ref(), &params, &noise, out_dir, quiet)?;
+        n_images = c.images.len();
+        files.extend(written);
+    }
+
+    // The truth, usable as `fibrefit eval --params truth.json`.
+    let mut truth = raw.clone();
+    if let Some(map) = &truth.topology_map {
+        truth.topology_map = Some(relative_to(map, out_dir));
+    }
+    write_file(
+        &out_dir.join("truth.json"),
+        serde_json::to_string_pretty(&truth)?.as_bytes(),
+    )?;
+    files.push("truth.json".into());
+    let info = SynthInfo {
+        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
+        model: id.to_string(),
+        noise: cfg.noise.clone(),
+        gonio_rows,
+        images: n_images,
+        files: files.clone(),
+    };
+    write_file(
+        &out_dir.join("synth_info.json"),
+        serde_json::to_string_pretty(&info)?.as_bytes(),
+    )?;
+    Ok(info)
+}
+
+fn relative_to(path: &Path, dir: &Path) -> PathBuf {
+    path.strip_prefix(dir)
+        .map(Path::to_path_buf)
+        .unwrap_or_else(|_| std::path::absolute(path).unwrap_or(path.to_path_buf()))
+}
+
+/// Directions as (theta_i, phi_i, theta_o, phi_o) in degrees.
+fn gonio_directions(g: &GonioSpec) -> Result<Vec<[f64; 4]>> {
+    match (&g.grid, &g.random) {
+        (Some(grid), None) => {
+            let mut out = Vec::new();
+            for &ti in &grid.theta_i {
+                for &pi in &grid.phi_i {
+                    for &to in &grid.theta_o {
+                        for &po in &grid.phi_o {
+                            if ti < 90.0 && to < 90.0 && ti >= 0.0 && to >= 0.0 {
+                                out.push([ti, pi, to, po]);
+                            }
+                        }
+                    }
+                }
+            }
+            Ok(out)
+        }
+        (None, Some(r)) => {
+            if !(r.max_theta_deg > 0.0 && r.max_theta_deg < 90.0) {
+                bail!("gonio.random.max_theta_deg must lie in (0, 90)");
+            }
+            let mut rng = rand::rngs::StdRng::seed_from_u64(r.seed);
+            let cos_max = r.max_theta_deg.to_radians().cos();
+            let mut dir = || {
+                // uniform in solid angle above theta_max, rounded to 1e-6 degrees so the CSV
+                // holds exactly the rendered directions
+                let z: f64 = cos_max + (1.0 - cos_max) * rng.random::<f64>();
+                let round = |x: f64| (x * 1e6).round() / 1e6;
+                (
+                    round(z.acos().to_degrees()),
+                    round(rng.random::<f64>() * 360.0),
+                )
+            };
+            Ok((0..r.count)
+                .map(|_| {
+                    let (a, b) = dir();
+                    let (c, d) = dir();
+                    [a, b, c, d]
+                })
+                .collect())
+        }
+        _ => bail!("[gonio] needs exactly one of `grid` or `random`"),
+    }
+}
+
+fn render_gonio(
+    g: &GonioSpec,
+    shading: &dyn ShadingModel,
+    p: &ModelParams,
+    noise: &Noise,
+) -> Result<String> {
+    let radiance = match g.values.as_str() {
+        "brdf" => false,
+        "radiance" => true,
+        other => bail!("gonio.values = '{other}': expected \"brdf\" or \"radiance\""),
+    };
+    if radiance && !(g.irradiance > 0.0) {
+        bail!("gonio.irradiance must be positive");
+    }
+    let dirs = gonio_directions(g)?;
+    if dirs.is_empty() {
+        bail!("[gonio] gives no directions above the horizon");
+    }
+    let frame = FibreFrame::from_azimuth(p.fibre_azimuth);
+    let channels = p.albedos.channels();
+    let values: Vec<[f64; 3]> = dirs
+        .par_iter()
+        .map(|d| {
+            let l = direction_from_angles(d[0].to_radians(), d[1].to_radians());
+            let v = direction_from_angles(d[2].to_radians(), d[3].to_radians());
+            let b = shading.basis(&DirectionPair::new(&frame, &l, &v));
+            [
+                b.brdf(&p.albedos, 0),
+                b.brdf(&p.albedos, 1),
+                b.brdf(&p.albedos, 2),
+            ]
+        })
+        .collect();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(noise.spec.seed);
+    let base = if radiance { "radiance" } else { "brdf" };
+    let names = |b: &str| -> Vec<String> {
+        if channels == 1 {
+            vec![b.to_string()]
+        } else {
+            ["r", "g", "b"].iter().map(|c| format!("{b}_{c}")).collect()
+        }
+    };
+    let mut header = vec![
+        "theta_i".to_string(),
+        "phi_i".into(),
+        "theta_o".into(),
+        "phi_o".into(),
+    ];
+    header.extend(names(base));
+    if radiance {
+        header.push("irradiance".into());
+    }
+    if noise.active() {
+        header.extend(names("sigma"));
+    }
+    let mut out = header.join(",") + "\n";
+    for (d, f) in dirs.iter().zip(&values) {
+        let to_file = if radiance {
+            g.irradiance * d[0].to_radians().cos()
+        } else {
+            1.0
+        };
+        let mut row: Vec<String> = d.iter().map(|x| x.to_string()).collect();
+        for &fc in &f[..channels] {
+            row.push((noise.apply(fc, &mut rng) * to_file).to_string());
+        }
+        if radiance {
+            row.push(g.irradiance.to_string());
+        }
+        if noise.active() {
+            for &fc in &f[..channels] {
+                row.push((noise.sigma(fc) * to_file).to_string());
+            }
+        }
+        out += &row.join(",");
+        out.push('\n');
+    }
+    Ok(out)
+}
+
+fn render_capture(
+    c: &CaptureSpec,
+    shading: &dyn ShadingModel,
+    p: &ModelParams,
+    noise: &Noise,
+    out_dir: &Path,
+    quiet: bool,
+) -> Result<Vec<String>> {
+    let (w, h) = (c.width, c.height);
+    if w == 0 || h == 0 || c.images.is_empty() {
+        bail!("[capture] needs width, height > 0 and at least one [[capture.images]]");
+    }
+    let png = match c.format.as_str() {
+        "exr" => false,
+        "png" => true,
+        other => bail!("capture.format = '{other}': expected \"exr\" or \"png\""),
+    };
+    let encoding = if png {
+        Some(c.encoding.unwrap_or(Encoding::Srgb))
+    } else {
+        None
+    };
+    let mut files = Vec::new();
+    let psi_of = |x: usize| -> f64 {
+        match &c.tangent {
+            Some(t) => {
+                // quantised exactly as the tangent map stores it
+                let m = ((x as f64 + 0.5) / w as f64 * 65535.0).round() / 65535.0;
+                let deg = t.from_deg + (t.to_deg - t.from_deg) * m;
+                deg.to_radians()
+            }
+            None => p.fibre_azimuth,
+        }
+    };
+    let tangent_file = if let Some(t) = &c.tangent {
+        if !(-90.0..=90.0).contains(&t.from_deg) || !(-90.0..=90.0).contains(&t.to_deg) {
+            bail!("capture.tangent: angles must lie in [-90, 90] degrees");
+        }
+        // stored as m with psi = -90 + 180 m
+        let values: Vec<f32> = (0..h)
+            .flat_map(|_| (0..w).map(|x| ((psi_of(x).to_degrees() + 90.0) / 180.0) as f32))
+            .collect();
+        images::write_gray16(&out_dir.join("tangent.png"), w, h, &values)?;
+        files.push("tangent.png".to_string());
+        Some(PathBuf::from("tangent.png"))
+    } else {
+        None
+    };
+    // Re-read the tangent map so pixels use exactly the stored angle.
+    let tangent_map = match &tangent_file {
+        Some(f) => Some(TopologyMap::load(&out_dir.join(f))?),
+        None => None,
+    };
+    let topo_map = p.topology.map.clone();
+    if let Some(m) = &topo_map {
+        if (m.width, m.height) != (w, h) {
+            bail!(
+                "the topology map is {}x{} but the capture is {w}x{h}; they must be registered",
+                m.width,
+                m.height
+            );
+        }
+    }
+    let channels = p.albedos.channels();
+    let bar = crate::progress::bar((c.images.len() * h) as u64, "rendering", quiet);
+    let mut specs = Vec::new();
+    for (k, img) in c.images.iter().enumerate() {
+        if matches!(img.camera, Camera::ViewMap { .. }) {
+            bail!("[[capture.images]] {k}: synth renders orthographic or pinhole cameras, not view maps");
+        }
+        // Per pixel: the BRDF per channel and E cos(theta_i), radiance = BRDF x that.
+        let pixels: Vec<([f64; 3], f64)> = (0..h)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                let row: Vec<([f64; 3], f64)> = (0..w)
+                    .map(|x| {
+                        let pos = capture::pixel_position(c.size_mm, w, h, x, y);
+                        let (l, e) = capture::light_at(&img.light, &pos);
+                        let v =
+                            capture::view_at(&img.camera, &pos).expect("checked: not a view map");
+                        let psi = match &tangent_map {
+                            Some(t) => (-90.0 + 180.0 * t.texel(x, y)).to_radians(),
+                            None => psi_of(x),
+                        };
+                        let pair = DirectionPair::new(&FibreFrame::from_azimuth(psi), &l, &v);
+                        let basis = match &topo_map {
+                            Some(m) if shading.id().has_topology() => shading
+                                .basis_at_height(
+                                    &pair,
+                                    p.topology.texel_height(m.texel(x, y), p.spacing),
+                                )
+                                .unwrap_or_default(),
+                            _ => shading.basis(&pair),
+                        };
+                        (
+                            [0, 1, 2].map(|ch| basis.brdf(&p.albedos, ch)),
+                            e * l.z.max(0.0),
+                        )
+                    })
+                    .collect();
+                bar.inc(1);
+                row
+            })
+            .collect();
+        // noise in BRDF units, per pixel and channel, from one seeded stream per image
+        let mut rng =
+            rand::rngs::StdRng::seed_from_u64(noise.spec.seed.wrapping_add(k as u64 * 7919));
+        let mut data: Vec<f32> = Vec::with_capacity(w * h * channels);
+        for (brdf, scale) in &pixels {
+            for &f in &brdf[..channels] {
+                data.push((noise.apply(f, &mut rng) * scale) as f32);
+            }
+        }
+        let exposure = if png {
+            let max = data.iter().copied().fold(0.0f32, f32::max).max(1e-30);
+            let exposure = (max / 0.8) as f64;
+            for v in data.iter_mut() {
+                *v = (*v as f64 / exposure) as f32;
+            }
+            exposure
+        } else {
+            1.0
+        };
+        let file = format!("img_{k:03}.{}", if png { "png" } else { "exr" });
+        let path = out_dir.join(&file);
+        if png {
+            images::write_png16(
+                &path,
+                w,
+                h,
+                channels,
+                &data,
+                encoding.expect("png has encoding"),
+            )?;
+        } else {
+            images::write_exr(&path, w, h, channels, &data)?;
+        }
+        files.push(file.clone());
+        specs.push(ImageSpec {
+            file: file.into(),
+            encoding,
+            exposure,
+            saturation: None,
+            light: img.light.clone(),
+            camera: img.camera.clone(),
+        });
+    }
+    bar.finish_and_clear();
+    let capture_file = CaptureFile {
+        swatch: Swatch {
+            size_mm: c.size_mm,
+            roi: None,
+            mask: None,
+            fibre_azimuth_deg: if tangent_file.is_none() {
+                Some(p.fibre_azimuth.to_degrees())
+            } else {
+                None
+            },
+            tangent_map: tangent_file,
+            topology_map: topo_map.as_ref().map(|m| relative_to(&m.source, out_dir)),
+        },
+        images: specs,
+    };
+    let text = format!(
+        "# Image capture rendered by fibrefit synth ({}). Format: README, \"Image captures\".\n{}",
+        shading.id(),
+        toml::to_string(&capture_file)?
+    );
+    write_file(&out_dir.join("capture.toml"), text.as_bytes())?;
+    files.push("capture.toml".into());
+    Ok(files)
+}
