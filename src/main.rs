@@ -3,6 +3,15 @@ use std::process::ExitCode;
 fn main() -> ExitCode {
     match fibrefit::cli::run(std::env::args_os()) {
         Ok(()) => ExitCode::SUCCESS,
+        // a reader that stops early (`| head`) is not an error
+        Err(e)
+            if e.chain().any(|c| {
+                c.downcast_ref::<std::io::Error>()
+                    .is_some_and(|io| io.kind() == std::io::ErrorKind::BrokenPipe)
+            }) =>
+        {
+            ExitCode::SUCCESS
+        }
         Err(e) => {
             if !e.is::<fibrefit::cli::UsageError>() {
                 eprintln!("error: {e:#}");

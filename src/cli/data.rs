@@ -12,24 +12,27 @@ pub struct LoadArgs {
     /// Goniometric CSV: the angles really are small degrees (do not stop on radian-looking data)
     #[arg(long)]
     pub small_angles_ok: bool,
-    /// Image captures: use every STRIDE-th pixel in x and y
-    #[arg(long, value_name = "STRIDE", default_value_t = 1)]
-    pub stride: usize,
-    /// Image captures: keep a seeded random fraction of the pixels, in (0, 1]
-    #[arg(long, value_name = "F", default_value_t = 1.0)]
-    pub fraction: f64,
+    /// Image captures: use every STRIDE-th pixel in x and y [default: 1, or the fit config's]
+    #[arg(long, value_name = "STRIDE")]
+    pub stride: Option<usize>,
+    /// Image captures: keep a seeded random fraction of the pixels, in (0, 1] [default: 1]
+    #[arg(long, value_name = "F")]
+    pub fraction: Option<f64>,
     /// Seed of the random pixel fraction
     #[arg(long, value_name = "SEED", default_value_t = 0)]
     pub subsample_seed: u64,
 }
 
 impl LoadArgs {
-    pub fn options(&self) -> Result<LoadOptions> {
-        if self.stride == 0 {
+    /// Loading options; `stride` and `fraction` fall back to the given defaults (a config's).
+    pub fn options_with(&self, stride: usize, fraction: f64) -> Result<LoadOptions> {
+        let stride = self.stride.unwrap_or(stride);
+        let fraction = self.fraction.unwrap_or(fraction);
+        if stride == 0 {
             bail!("--stride must be at least 1");
         }
-        if !(self.fraction > 0.0 && self.fraction <= 1.0) {
-            bail!("--fraction must lie in (0, 1], got {}", self.fraction);
+        if !(fraction > 0.0 && fraction <= 1.0) {
+            bail!("--fraction must lie in (0, 1], got {fraction}");
         }
         Ok(LoadOptions {
             gonio: GonioOptions {
@@ -37,10 +40,14 @@ impl LoadArgs {
                 small_angles_ok: self.small_angles_ok,
             },
             subsample: Subsample {
-                stride: self.stride,
-                fraction: self.fraction,
+                stride,
+                fraction,
                 seed: self.subsample_seed,
             },
         })
+    }
+
+    pub fn options(&self) -> Result<LoadOptions> {
+        self.options_with(1, 1.0)
     }
 }

@@ -3,6 +3,7 @@
 
 pub mod data;
 pub mod eval;
+pub mod fit;
 pub mod inspect;
 pub mod synth;
 
@@ -26,6 +27,8 @@ pub struct Cli {
 
 #[derive(Debug, Subcommand)]
 pub enum Command {
+    /// Fit a model to measurements and export renderer JSON (the main job).
+    Fit(fit::FitArgs),
     /// Evaluate a model's BRDF and intensity at given light/view directions.
     Eval(eval::EvalArgs),
     /// Load measurements as `fit` would and summarise them (counts, ranges, coverage, drops).
@@ -52,6 +55,7 @@ where
         }
     };
     match cli.command {
+        Command::Fit(args) => fit::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Inspect(args) => inspect::run(&args),
         Command::Synth(args) => synth::run(&args),

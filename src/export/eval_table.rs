@@ -25,14 +25,20 @@ pub fn write(
             header.push(format!("intensity_{c}"));
         }
     }
-    w.write_record(&header)?;
+    let io = |e: csv::Error| -> anyhow::Error {
+        match e.into_kind() {
+            csv::ErrorKind::Io(err) => err.into(),
+            other => anyhow::anyhow!("{other:?}"),
+        }
+    };
+    w.write_record(&header).map_err(io)?;
     let mut record: Vec<String> = Vec::with_capacity(header.len());
     for (q, (brdf, intensity)) in queries.rows.iter().zip(values) {
         record.clear();
         record.extend(q.fields.iter().cloned());
         record.extend(brdf[..channels].iter().map(|v| v.to_string()));
         record.extend(intensity[..channels].iter().map(|v| v.to_string()));
-        w.write_record(&record)?;
+        w.write_record(&record).map_err(io)?;
     }
     w.flush()?;
     Ok(())

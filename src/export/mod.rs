@@ -4,3 +4,5 @@
 pub mod atomic;
 pub mod eval_table;
 pub mod images;
+pub mod report;
+pub mod result_json;

@@ -93,7 +93,17 @@ impl RawParams {
             .unwrap_or("")
             .to_ascii_lowercase();
         let mut raw: RawParams = if ext == "json" {
-            serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?
+            let value: serde_json::Value =
+                serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+            if value
+                .get("schema")
+                .and_then(|s| s.as_str())
+                .is_some_and(|s| s.starts_with("fibrefit-result/"))
+            {
+                from_result_json(&value).map_err(|e| anyhow!("{}: {e}", path.display()))?
+            } else {
+                serde_json::from_value(value).map_err(|e| anyhow!("{}: {e}", path.display()))?
+            }
         } else {
             toml::from_str(&text)
                 .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?
@@ -105,6 +115,36 @@ impl RawParams {
         }
         Ok(raw)
     }
+}
+
+/// The parameters of a `fibrefit fit` result (schema `fibrefit-result/1`).
+fn from_result_json(v: &serde_json::Value) -> Result<RawParams> {
+    let params = v
+        .get("parameters")
+        .and_then(|p| p.as_object())
+        .ok_or_else(|| anyhow!("result file has no `parameters`"))?;
+    let mut flat = serde_json::Map::new();
+    flat.insert(
+        "model".into(),
+        v.get("model")
+            .cloned()
+            .ok_or_else(|| anyhow!("result file has no `model`"))?,
+    );
+    for (name, entry) in params {
+        let value = entry
+            .get("value")
+            .cloned()
+            .ok_or_else(|| anyhow!("parameter `{name}` has no value"))?;
+        flat.insert(name.clone(), value);
+    }
+    if let Some(k) = v.get("knobs") {
+        for key in ["quadrature_order", "histogram_bins", "topology_map"] {
+            if let Some(x) = k.get(key) {
+                flat.insert(key.into(), x.clone());
+            }
+        }
+    }
+    serde_json::from_value(serde_json::Value::Object(flat)).map_err(|e| anyhow!("{e}"))
 }
 
 /// Validated parameters in model units.

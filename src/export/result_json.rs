@@ -1,0 +1,211 @@
+//! The renderer JSON (schema `fibrefit-result/1`, documented in the README): the fitted model
+//! with its conventions, parameters and uncertainties, statistics, knobs, provenance, check
+//! values for renderer ports, and a Ward fallback.
+
+use crate::fit::config::FitConfig;
+use crate::fit::FitOutcome;
+use crate::model::frame::{direction_from_angles, FibreFrame};
+use crate::model::{DirectionPair, ShadingModel};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+pub const SCHEMA: &str = "fibrefit-result/1";
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ResultFile {
+    pub schema: String,
+    pub tool: String,
+    pub model: String,
+    pub conventions: Conventions,
+    pub parameters: BTreeMap<String, ParamOut>,
+    pub correlations: Vec<Correlation>,
+    pub statistics: serde_json::Value,
+    pub knobs: Knobs,
+    pub data: Provenance,
+    pub check_values: Vec<CheckValue>,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ward_fallback: Option<WardFallback>,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub model_selection: Vec<serde_json::Value>,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Conventions {
+    pub frame: String,
+    pub angles: String,
+    pub lengths: String,
+    pub brdf: String,
+    pub intensity: String,
+    pub albedos: String,
+}
+
+impl Default for Conventions {
+    fn default() -> Self {
+        Self {
+            frame: "swatch normal N = +z; fibre tangent T = (cos psi, sin psi, 0), psi = fibre_azimuth_deg; B = N x T; T and -T are the same fibres".into(),
+            angles: "degrees; theta from N, phi from the swatch x axis towards y; directions point away from the surface".into(),
+            lengths: "fibre radii (spacing, height, map_scale)".into(),
+            brdf: "f(l, v) in 1/sr; 0 when l or v is at or below the horizon".into(),
+            intensity: "I = f cos(theta_i): radiance per unit irradiance perpendicular to the light; a shader's colour per light is E * I (seed 003's Lambert c = pi * I)".into(),
+            albedos: "grey: one number; RGB: [r, g, b], linear".into(),
+        }
+    }
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct ParamOut {
+    /// A number, or [r, g, b].
+    pub value: serde_json::Value,
+    pub std_error: serde_json::Value,
+    pub min: f64,
+    pub max: f64,
+    pub fixed: bool,
+    pub at_bound: bool,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Correlation {
+    pub a: String,
+    pub b: String,
+    pub r: f64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Knobs {
+    pub metric: String,
+    pub quadrature_order: usize,
+    pub histogram_bins: usize,
+    pub stride: usize,
+    pub fraction: f64,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub topology_map: Option<String>,
+    pub separable: bool,
+    pub starts: usize,
+    pub seed: u64,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct Provenance {
+    pub file: String,
+    pub sha256: String,
+    pub kind: String,
+    pub samples: usize,
+    pub channels: usize,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct CheckValue {
+    pub theta_i: f64,
+    pub phi_i: f64,
+    pub theta_o: f64,
+    pub phi_o: f64,
+    /// BRDF per channel, 1/sr (one entry for grey).
+    pub brdf: Vec<f64>,
+}
+
+#[derive(Clone, Debug, Serialize, Deserialize)]
+pub struct WardFallback {
+    pub model: String,
+    pub parameters: BTreeMap<String, serde_json::Value>,
+    /// Over the dense direction set it was fitted on, against the fitted model: 1/sr.
+    pub rms_error: f64,
+    pub relative_rms_error: f64,
+    pub directions: usize,
+}
+
+/// Fixed direction pairs (degrees) for check values: in-plane, cross-plane, grazing, mirror.
+pub fn check_directions() -> Vec<[f64; 4]> {
+    let mut v = Vec::new();
+    for &(ti, pi, to, po) in &[
+        (0.0, 0.0, 0.0, 0.0),
+        (30.0, 90.0, 30.0, 90.0),
+        (30.0, 90.0, 30.0, 270.0),
+        (45.0, 0.0, 45.0, 180.0),
+        (45.0, 0.0, 45.0, 0.0),
+        (60.0, 45.0, 20.0, 225.0),
+        (60.0, 135.0, 60.0, 315.0),
+        (10.0, 200.0, 70.0, 20.0),
+        (75.0, 90.0, 75.0, 270.0),
+        (75.0, 0.0, 75.0, 180.0),
+        (85.0, 30.0, 10.0, 210.0),
+        (20.0, 300.0, 50.0, 120.0),
+        (40.0, 10.0, 40.0, 100.0),
+        (50.0, 250.0, 30.0, 250.0),
+        (65.0, 170.0, 35.0, 350.0),
+        (5.0, 0.0, 80.0, 90.0),
+        (35.0, 60.0, 55.0, 240.0),
+        (70.0, 330.0, 45.0, 150.0),
+        (25.0, 120.0, 65.0, 300.0),
+        (80.0, 270.0, 80.0, 90.0),
+    ] {
+        v.push([ti, pi, to, po]);
+    }
+    v
+}
+
+/// BRDF per channel of a fitted model at one direction pair (degrees), spot-averaged.
+pub fn brdf_at(
+    m: &dyn ShadingModel,
+    albedos: &crate::model::Albedos,
+    psi: f64,
+    d: [f64; 4],
+    channels: usize,
+) -> Vec<f64> {
+    let l = direction_from_angles(d[0].to_radians(), d[1].to_radians());
+    let v = direction_from_angles(d[2].to_radians(), d[3].to_radians());
+    let b = m.basis(&DirectionPair::new(&FibreFrame::from_azimuth(psi), &l, &v));
+    (0..channels).map(|c| b.brdf(albedos, c)).collect()
+}
+
+pub fn params_out(outcome: &FitOutcome) -> BTreeMap<String, ParamOut> {
+    let num = |v: &[f64]| -> serde_json::Value {
+        if v.len() == 1 {
+            serde_json::json!(v[0])
+        } else {
+            serde_json::json!(v)
+        }
+    };
+    let mut out = BTreeMap::new();
+    for r in &outcome.records {
+        let se: Vec<serde_json::Value> = r
+            .std_error
+            .iter()
+            .map(|e| e.map_or(serde_json::Value::Null, |x| serde_json::json!(x)))
+            .collect();
+        out.insert(
+            r.name.clone(),
+            ParamOut {
+                value: num(&r.value),
+                std_error: if se.len() == 1 {
+                    se[0].clone()
+                } else {
+                    serde_json::Value::Array(se)
+                },
+                min: r.min,
+                max: r.max,
+                fixed: r.fixed,
+                at_bound: r.at_bound.iter().any(|&b| b),
+            },
+        );
+    }
+    out
+}
+
+pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
+    Knobs {
+        metric: format!("{:?}", cfg.metric).to_lowercase(),
+        quadrature_order: cfg.knobs.quadrature_order,
+        histogram_bins: cfg.knobs.histogram_bins,
+        stride,
+        fraction,
+        topology_map: cfg
+            .knobs
+            .topology_map
+            .as_ref()
+            .map(|p| p.display().to_string()),
+        separable: cfg.optimizer.separable,
+        starts: cfg.starts,
+        seed: cfg.seed,
+    }
+}

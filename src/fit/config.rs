@@ -1,0 +1,234 @@
+//! The fit configuration (TOML; examples in `configs/`): rung, parameters with value/min/max/vary,
+//! residual metric, knobs, optimizer settings, starts and seed. Unknown keys, min > max and starts
+//! outside their bounds are errors that name the key.
+
+use crate::model::params::Albedo;
+use crate::model::ModelId;
+use anyhow::{anyhow, bail, Context, Result};
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Metric {
+    /// model - data (divided by sigma, or times sqrt(weight))
+    Linear,
+    /// ln(1 + model) - ln(1 + data): relative errors, for data spanning decades
+    Log,
+    /// (model - data) cos(theta_i): residuals in intensity, as a shader sees them
+    Cosine,
+}
+
+/// One parameter's entry: `value` (start), `min`, `max`, `vary`.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ParamEntry {
+    pub value: Option<Albedo>,
+    pub min: Option<f64>,
+    pub max: Option<f64>,
+    pub vary: Option<bool>,
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Knobs {
+    #[serde(default = "default_order")]
+    pub quadrature_order: usize,
+    #[serde(default = "default_bins")]
+    pub histogram_bins: usize,
+    /// Image captures: every `stride`-th pixel in x and y.
+    #[serde(default = "one_usize")]
+    pub stride: usize,
+    /// Image captures: seeded random fraction of pixels kept.
+    #[serde(default = "one_f64")]
+    pub fraction: f64,
+    /// Topology map for goniometric spots (the spot averages over its histogram); relative to
+    /// the config file. Image captures carry their own.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology_map: Option<PathBuf>,
+}
+
+impl Default for Knobs {
+    fn default() -> Self {
+        Self {
+            quadrature_order: 16,
+            histogram_bins: 16,
+            stride: 1,
+            fraction: 1.0,
+            topology_map: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Optimizer {
+    /// Levenberg–Marquardt iterations per start.
+    #[serde(default = "default_iterations")]
+    pub max_iterations: u64,
+    /// Stop when the relative decrease of the cost in an iteration is below this.
+    #[serde(default = "default_tolerance")]
+    pub tolerance: f64,
+    /// Candidates tried by the global stage (a seeded Latin-hypercube grid).
+    #[serde(default = "default_candidates")]
+    pub global_candidates: usize,
+    /// Samples (randomly chosen, seeded) the global stage and the start polishing use.
+    #[serde(default = "default_subsample")]
+    pub global_subsample: usize,
+    /// Solve the albedos exactly inside every step (separable least squares). Off: the albedos
+    /// are ordinary parameters of the Levenberg–Marquardt iteration.
+    #[serde(default = "yes")]
+    pub separable: bool,
+}
+
+impl Default for Optimizer {
+    fn default() -> Self {
+        Self {
+            max_iterations: default_iterations(),
+            tolerance: default_tolerance(),
+            global_candidates: default_candidates(),
+            global_subsample: default_subsample(),
+            separable: true,
+        }
+    }
+}
+
+fn default_order() -> usize {
+    16
+}
+fn default_bins() -> usize {
+    16
+}
+fn one_usize() -> usize {
+    1
+}
+fn one_f64() -> f64 {
+    1.0
+}
+fn default_iterations() -> u64 {
+    100
+}
+fn default_tolerance() -> f64 {
+    1e-9
+}
+fn default_candidates() -> usize {
+    48
+}
+fn default_subsample() -> usize {
+    600
+}
+fn yes() -> bool {
+    true
+}
+fn default_starts() -> usize {
+    3
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FitConfig {
+    pub model: String,
+    #[serde(default = "default_metric")]
+    pub metric: Metric,
+    /// Local polishing runs started from the best candidates of the global stage.
+    #[serde(default = "default_starts")]
+    pub starts: usize,
+    #[serde(default)]
+    pub seed: u64,
+    #[serde(default)]
+    pub knobs: Knobs,
+    #[serde(default)]
+    pub optimizer: Optimizer,
+    #[serde(default)]
+    pub parameters: BTreeMap<String, ParamEntry>,
+}
+
+fn default_metric() -> Metric {
+    Metric::Linear
+}
+
+impl FitConfig {
+    pub fn load(path: &Path) -> Result<Self> {
+        let text = std::fs::read_to_string(path)
+            .with_context(|| format!("{}: cannot read fit config", path.display()))?;
+        let mut cfg: FitConfig = toml::from_str(&text)
+            .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        if let Some(map) = &cfg.knobs.topology_map {
+            if map.is_relative() {
+                cfg.knobs.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
+            }
+        }
+        cfg.validate()
+            .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+        Ok(cfg)
+    }
+
+    pub fn model_id(&self) -> Result<ModelId> {
+        self.model
+            .parse()
+            .map_err(|e: String| anyhow!("`model`: {e}"))
+    }
+
+    /// Checks that need no data: names, bounds, starts, knob ranges.
+    pub fn validate(&self) -> Result<()> {
+        let id = self.model_id()?;
+        let allowed = super::parameters::names_for(id);
+        for (name, e) in &self.parameters {
+            if !allowed.contains(&name.as_str()) {
+                bail!(
+                    "parameters.{name}: not a parameter of `{id}`; its parameters are {}",
+                    allowed.join(", ")
+                );
+            }
+            if let (Some(lo), Some(hi)) = (e.min, e.max) {
+                if !(lo <= hi) {
+                    bail!("parameters.{name}: min = {lo} is greater than max = {hi}");
+                }
+            }
+            for (what, v) in [("min", e.min), ("max", e.max)] {
+                if let Some(v) = v {
+                    if !v.is_finite() {
+                        bail!("parameters.{name}.{what} = {v} is not finite");
+                    }
+                }
+            }
+            if let Some(v) = &e.value {
+                for x in v.channels() {
+                    if !x.is_finite() {
+                        bail!("parameters.{name}.value = {x} is not finite");
+                    }
+                    if e.min.is_some_and(|lo| x < lo) || e.max.is_some_and(|hi| x > hi) {
+                        bail!(
+                            "parameters.{name}.value = {x} is outside its bounds [{}, {}]",
+                            e.min.map_or("-inf".into(), |v| v.to_string()),
+                            e.max.map_or("inf".into(), |v| v.to_string())
+                        );
+                    }
+                }
+            }
+        }
+        if !(1..=256).contains(&self.knobs.quadrature_order) {
+            bail!(
+                "knobs.quadrature_order = {} must lie in [1, 256]",
+                self.knobs.quadrature_order
+            );
+        }
+        if !(1..=4096).contains(&self.knobs.histogram_bins) {
+            bail!(
+                "knobs.histogram_bins = {} must lie in [1, 4096]",
+                self.knobs.histogram_bins
+            );
+        }
+        if self.knobs.stride == 0 || !(self.knobs.fraction > 0.0 && self.knobs.fraction <= 1.0) {
+            bail!("knobs.stride must be >= 1 and knobs.fraction in (0, 1]");
+        }
+        if self.starts == 0 {
+            bail!("starts must be at least 1");
+        }
+        if !(self.optimizer.tolerance > 0.0) || self.optimizer.max_iterations == 0 {
+            bail!("optimizer.tolerance must be > 0 and optimizer.max_iterations >= 1");
+        }
+        Ok(())
+    }
+}

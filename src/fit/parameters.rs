@@ -1,0 +1,314 @@
+//! The fit's parameters: shape parameters (nonlinear: exponent, spacing, height, map scale, fibre
+//! azimuth, Ward roughness) and albedos (linear, per channel), each with a start, bounds and
+//! whether it varies. Exponent and Ward roughness are fitted in log space.
+
+use super::config::{FitConfig, ParamEntry};
+use crate::model::params::Albedo;
+use crate::model::topology::max_height;
+use crate::model::ModelId;
+use anyhow::{bail, Result};
+
+/// Names of the parameters each rung has (MODEL.md §5).
+pub fn names_for(id: ModelId) -> Vec<&'static str> {
+    use ModelId::*;
+    match id {
+        Lambert => vec!["kd"],
+        MaxNormal => vec!["kd", "ks", "exponent", "fibre_azimuth_deg"],
+        HastDiffuse => vec!["kd", "fibre_azimuth_deg"],
+        Ward => vec!["rho_d", "rho_s", "alpha_x", "alpha_y", "fibre_azimuth_deg"],
+        PoulinFournier => vec![
+            "kd",
+            "ks",
+            "substrate_albedo",
+            "exponent",
+            "spacing",
+            "fibre_azimuth_deg",
+        ],
+        VaryingTopology | Reference => {
+            vec![
+                "kd",
+                "ks",
+                "substrate_albedo",
+                "exponent",
+                "spacing",
+                "height",
+                "map_scale",
+                "fibre_azimuth_deg",
+            ]
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Shape {
+    Exponent,
+    Spacing,
+    Height,
+    MapScale,
+    Azimuth,
+    AlphaX,
+    AlphaY,
+}
+
+impl Shape {
+    pub fn name(self) -> &'static str {
+        match self {
+            Shape::Exponent => "exponent",
+            Shape::Spacing => "spacing",
+            Shape::Height => "height",
+            Shape::MapScale => "map_scale",
+            Shape::Azimuth => "fibre_azimuth_deg",
+            Shape::AlphaX => "alpha_x",
+            Shape::AlphaY => "alpha_y",
+        }
+    }
+
+    /// Fitted as ln(value)?
+    pub fn log_space(self) -> bool {
+        matches!(self, Shape::Exponent | Shape::AlphaX | Shape::AlphaY)
+    }
+
+    pub fn to_internal(self, v: f64) -> f64 {
+        if self.log_space() {
+            v.ln()
+        } else {
+            v
+        }
+    }
+
+    pub fn to_external(self, v: f64) -> f64 {
+        if self.log_space() {
+            v.exp()
+        } else {
+            v
+        }
+    }
+}
+
+/// The linear components, in basis order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Component {
+    Diffuse,
+    Specular,
+    Substrate,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct ShapeParam {
+    pub kind: Shape,
+    /// External units (degrees for the azimuth).
+    pub value: f64,
+    pub init: f64,
+    pub min: f64,
+    pub max: f64,
+    pub vary: bool,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub struct AlbedoParam {
+    pub component: Component,
+    pub name: &'static str,
+    /// Per channel (grey data uses channel 0).
+    pub value: [f64; 3],
+    pub init: [f64; 3],
+    pub min: f64,
+    pub max: f64,
+    pub vary: bool,
+}
+
+/// All parameters of one fit.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ParamSet {
+    pub rung: ModelId,
+    pub shapes: Vec<ShapeParam>,
+    pub albedos: Vec<AlbedoParam>,
+    /// No `substrate_albedo` listed: the substrate shares `kd` (the model default).
+    pub substrate_tied: bool,
+    pub channels: usize,
+}
+
+struct Default3 {
+    value: f64,
+    min: f64,
+    max: f64,
+    vary: bool,
+}
+
+fn defaults(name: &str, spacing_max: f64, spacing0: f64) -> Default3 {
+    let d = |value, min, max, vary| Default3 {
+        value,
+        min,
+        max,
+        vary,
+    };
+    match name {
+        "kd" => d(0.5, 0.0, 1.0, true),
+        "ks" => d(0.2, 0.0, 1.0, true),
+        "substrate_albedo" => d(0.5, 0.0, 1.0, true),
+        "rho_d" => d(0.3, 0.0, 1.0, true),
+        "rho_s" => d(0.2, 0.0, 1.0, true),
+        "exponent" => d(20.0, 1.0, 1e4, true),
+        "spacing" => d(2.0, 2.0, 20.0, false),
+        "height" => d(
+            0.5 * max_height(spacing0),
+            0.0,
+            max_height(spacing_max),
+            true,
+        ),
+        "map_scale" => d(0.0, 0.0, max_height(spacing_max), false),
+        "fibre_azimuth_deg" => d(0.0, -90.0, 90.0, false),
+        "alpha_x" | "alpha_y" => d(0.2, 0.0011, 1.0, true),
+        _ => unreachable!("names come from names_for"),
+    }
+}
+
+/// Hard limits of MODEL.md §5 that no config may widen.
+fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
+    match name {
+        "kd" | "ks" | "substrate_albedo" | "rho_d" | "rho_s" => (0.0, 1.0),
+        "exponent" => (1.0, 1e4),
+        "spacing" => (2.0, 20.0),
+        "height" | "map_scale" => (0.0, max_height(spacing_max)),
+        "fibre_azimuth_deg" => (-180.0, 180.0),
+        "alpha_x" | "alpha_y" => (1e-3, 1.0),
+        _ => (f64::NEG_INFINITY, f64::INFINITY),
+    }
+}
+
+impl ParamSet {
+    pub fn from_config(cfg: &FitConfig, channels: usize) -> Result<Self> {
+        let rung = cfg.model_id()?;
+        let empty = ParamEntry::default();
+        let entry = |name: &str| cfg.parameters.get(name).unwrap_or(&empty);
+        let spacing_entry = entry("spacing");
+        let spacing0 = spacing_entry.value.map(|v| v.channels()[0]).unwrap_or(2.0);
+        let spacing_max = if rung.is_cross_section() {
+            if spacing_entry
+                .vary
+                .unwrap_or(cfg.parameters.contains_key("spacing"))
+            {
+                spacing_entry.max.unwrap_or(20.0)
+            } else {
+                spacing0
+            }
+        } else {
+            2.0
+        };
+        let mut shapes = Vec::new();
+        let mut albedos = Vec::new();
+        for name in names_for(rung) {
+            let listed = cfg.parameters.contains_key(name);
+            let e = entry(name);
+            let def = defaults(name, spacing_max, spacing0);
+            let (hard_lo, hard_hi) = hard_limits(name, spacing_max);
+            let min = e.min.unwrap_or(def.min);
+            let max = e.max.unwrap_or(def.max);
+            if min < hard_lo - 1e-12 || max > hard_hi + 1e-12 {
+                bail!("parameters.{name}: bounds [{min}, {max}] exceed the model's range [{hard_lo}, {hard_hi}]");
+            }
+            let vary = e.vary.unwrap_or(listed || def.vary);
+            let value = e.value.unwrap_or(Albedo::Grey(def.value.clamp(min, max)));
+            let albedo_component = match name {
+                "kd" | "rho_d" => Some(Component::Diffuse),
+                "ks" | "rho_s" => Some(Component::Specular),
+                "substrate_albedo" => Some(Component::Substrate),
+                _ => None,
+            };
+            match albedo_component {
+                Some(component) => {
+                    if component == Component::Substrate && !listed {
+                        continue;
+                    }
+                    if value.is_rgb() && channels == 1 {
+                        bail!("parameters.{name}: an RGB value for grey data");
+                    }
+                    let v = value.channels();
+                    for x in v {
+                        if x < min || x > max {
+                            bail!("parameters.{name}.value = {x} is outside its bounds [{min}, {max}]");
+                        }
+                    }
+                    albedos.push(AlbedoParam {
+                        component,
+                        name,
+                        value: v,
+                        init: v,
+                        min,
+                        max,
+                        vary,
+                    });
+                }
+                None => {
+                    if value.is_rgb() {
+                        bail!("parameters.{name}: takes one number, not three");
+                    }
+                    let v = value.channels()[0];
+                    let kind = match name {
+                        "exponent" => Shape::Exponent,
+                        "spacing" => Shape::Spacing,
+                        "height" => Shape::Height,
+                        "map_scale" => Shape::MapScale,
+                        "fibre_azimuth_deg" => Shape::Azimuth,
+                        "alpha_x" => Shape::AlphaX,
+                        "alpha_y" => Shape::AlphaY,
+                        _ => unreachable!(),
+                    };
+                    if v < min || v > max {
+                        bail!("parameters.{name}.value = {v} is outside its bounds [{min}, {max}]");
+                    }
+                    shapes.push(ShapeParam {
+                        kind,
+                        value: v,
+                        init: v,
+                        min,
+                        max,
+                        vary: vary && min < max,
+                    });
+                }
+            }
+        }
+        let substrate_tied =
+            rung.is_cross_section() && !cfg.parameters.contains_key("substrate_albedo");
+        Ok(ParamSet {
+            rung,
+            shapes,
+            albedos,
+            substrate_tied,
+            channels,
+        })
+    }
+
+    pub fn shape(&self, kind: Shape) -> Option<&ShapeParam> {
+        self.shapes.iter().find(|s| s.kind == kind)
+    }
+
+    /// External value of a shape parameter, or the model default when the rung lacks it.
+    pub fn shape_value(&self, kind: Shape) -> f64 {
+        self.shape(kind).map(|s| s.value).unwrap_or(match kind {
+            Shape::Exponent => 1.0,
+            Shape::Spacing => 2.0,
+            Shape::Height | Shape::MapScale | Shape::Azimuth => 0.0,
+            Shape::AlphaX | Shape::AlphaY => 0.2,
+        })
+    }
+
+    /// Varying shape parameters, in order.
+    pub fn free_shapes(&self) -> Vec<usize> {
+        (0..self.shapes.len())
+            .filter(|&i| self.shapes[i].vary)
+            .collect()
+    }
+
+    /// (albedo index, channel) of every varying albedo channel.
+    pub fn free_albedos(&self) -> Vec<(usize, usize)> {
+        let mut out = Vec::new();
+        for (i, a) in self.albedos.iter().enumerate() {
+            if a.vary {
+                for c in 0..self.channels {
+                    out.push((i, c));
+                }
+            }
+        }
+        out
+    }
+}

@@ -1,0 +1,673 @@
+//! The least-squares problem argmin sees: residuals (`Operator`) and their Jacobian (`Jacobian`)
+//! as functions of the internal parameter vector theta.
+//!
+//! Separable mode (variable projection): theta holds only the shape parameters; for every theta
+//! the albedos are solved exactly (bounded linear least squares, one small system per channel),
+//! so the residual is that of the best albedos for the shape. The Jacobian is taken by forward
+//! differences of that reduced residual, columns in parallel. Full mode: theta also holds the
+//! albedo channels (needed for the `log` metric, which is not linear in them).
+
+use super::config::Metric;
+use super::parameters::{Component, ParamSet, Shape};
+use crate::load::samples::Sample;
+use crate::model::frame::FibreFrame;
+use crate::model::topology::{Topology, TopologyMap};
+use crate::model::{self, DirectionPair, ModelId, ShadingModel};
+use argmin::core::{Error as ArgminError, Jacobian, Operator};
+use nalgebra::{DMatrix, DVector};
+use rayon::prelude::*;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Arc;
+
+/// Model columns per sample: [diffuse (+ substrate when tied), specular, substrate].
+pub type Columns = [f64; 3];
+
+pub struct FitProblem<'a> {
+    pub samples: Vec<&'a Sample>,
+    pub template: ParamSet,
+    pub metric: Metric,
+    pub quadrature_order: usize,
+    pub histogram_bins: usize,
+    pub map: Option<Arc<TopologyMap>>,
+    pub separable: bool,
+    /// Residual scale per sample and channel: 1/sigma or sqrt(weight), times cos(theta_i) for
+    /// the cosine metric.
+    scale: Vec<[f64; 3]>,
+    free_shapes: Vec<usize>,
+    free_albedos: Vec<(usize, usize)>,
+    pub evaluations: AtomicUsize,
+}
+
+fn component_index(c: Component) -> usize {
+    match c {
+        Component::Diffuse => 0,
+        Component::Specular => 1,
+        Component::Substrate => 2,
+    }
+}
+
+impl<'a> FitProblem<'a> {
+    pub fn new(
+        samples: Vec<&'a Sample>,
+        template: ParamSet,
+        metric: Metric,
+        quadrature_order: usize,
+        histogram_bins: usize,
+        map: Option<Arc<TopologyMap>>,
+        separable: bool,
+    ) -> Self {
+        let separable = separable && metric != Metric::Log;
+        let scale = samples
+            .iter()
+            .map(|s| {
+                let mut k = [0.0; 3];
+                for (c, kc) in k.iter_mut().enumerate() {
+                    let base = match s.sigma {
+                        Some(sig) => 1.0 / sig[c],
+                        None => s.weight.sqrt(),
+                    };
+                    *kc = if metric == Metric::Cosine {
+                        base * s.l.z
+                    } else {
+                        base
+                    };
+                }
+                k
+            })
+            .collect();
+        let free_shapes = template.free_shapes();
+        let free_albedos = template.free_albedos();
+        Self {
+            samples,
+            template,
+            metric,
+            quadrature_order,
+            histogram_bins,
+            map,
+            separable,
+            scale,
+            free_shapes,
+            free_albedos,
+            evaluations: AtomicUsize::new(0),
+        }
+    }
+
+    pub fn channels(&self) -> usize {
+        self.template.channels
+    }
+
+    pub fn residual_count(&self) -> usize {
+        self.samples.len() * self.channels()
+    }
+
+    /// Number of entries of theta.
+    pub fn dim(&self) -> usize {
+        self.free_shapes.len()
+            + if self.separable {
+                0
+            } else {
+                self.free_albedos.len()
+            }
+    }
+
+    /// Internal bounds of theta.
+    pub fn bounds(&self) -> (DVector<f64>, DVector<f64>) {
+        let mut lo = Vec::new();
+        let mut hi = Vec::new();
+        for &i in &self.free_shapes {
+            let s = &self.template.shapes[i];
+            lo.push(s.kind.to_internal(s.min));
+            hi.push(s.kind.to_internal(s.max));
+        }
+        if !self.separable {
+            for &(i, _) in &self.free_albedos {
+                lo.push(self.template.albedos[i].min);
+                hi.push(self.template.albedos[i].max);
+            }
+        }
+        (DVector::from_vec(lo), DVector::from_vec(hi))
+    }
+
+    /// theta of a parameter set.
+    pub fn theta_of(&self, set: &ParamSet) -> DVector<f64> {
+        let mut v: Vec<f64> = self
+            .free_shapes
+            .iter()
+            .map(|&i| set.shapes[i].kind.to_internal(set.shapes[i].value))
+            .collect();
+        if !self.separable {
+            v.extend(
+                self.free_albedos
+                    .iter()
+                    .map(|&(i, c)| set.albedos[i].value[c]),
+            );
+        }
+        DVector::from_vec(v)
+    }
+
+    /// The parameter set at theta (albedos as in `base` when separable).
+    pub fn set_at(&self, theta: &DVector<f64>, base: &ParamSet) -> ParamSet {
+        let mut set = base.clone();
+        for (k, &i) in self.free_shapes.iter().enumerate() {
+            let s = &mut set.shapes[i];
+            s.value = s.kind.to_external(theta[k]).clamp(s.min, s.max);
+        }
+        if !self.separable {
+            let off = self.free_shapes.len();
+            for (k, &(i, c)) in self.free_albedos.iter().enumerate() {
+                set.albedos[i].value[c] = theta[off + k];
+            }
+        }
+        set
+    }
+
+    /// Names of theta's entries.
+    pub fn theta_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self
+            .free_shapes
+            .iter()
+            .map(|&i| {
+                let k = self.template.shapes[i].kind;
+                if k.log_space() {
+                    format!("ln({})", k.name())
+                } else {
+                    k.name().to_string()
+                }
+            })
+            .collect();
+        if !self.separable {
+            v.extend(
+                self.free_albedos
+                    .iter()
+                    .map(|&(i, c)| albedo_label(&self.template, i, c)),
+            );
+        }
+        v
+    }
+
+    /// Build the rung at the shape parameters of `set`.
+    pub fn model_for(&self, set: &ParamSet) -> Box<dyn ShadingModel> {
+        model_for(
+            set,
+            self.quadrature_order,
+            self.histogram_bins,
+            self.map.clone(),
+        )
+    }
+
+    /// Model columns of every sample at `set`'s shape parameters.
+    pub fn columns(&self, set: &ParamSet) -> Result<Vec<Columns>, anyhow::Error> {
+        self.evaluations.fetch_add(1, Ordering::Relaxed);
+        let m = self.model_for(set);
+        let psi = set.shape_value(Shape::Azimuth).to_radians();
+        let d = set.shape_value(Shape::Spacing);
+        let topology = Topology {
+            height: set.shape_value(Shape::Height),
+            map_scale: set.shape_value(Shape::MapScale),
+            map: None,
+        };
+        let has_topology = set.rung.has_topology();
+        let tied = set.substrate_tied;
+        let cols: Vec<Columns> = self
+            .samples
+            .par_iter()
+            .map(|s| {
+                let frame = FibreFrame::from_azimuth(s.fibre_azimuth.unwrap_or(psi));
+                let pair = DirectionPair::new(&frame, &s.l, &s.v);
+                let b = match s.map_value {
+                    Some(mv) if has_topology => m
+                        .basis_at_height(&pair, topology.texel_height(mv, d))
+                        .unwrap_or_default(),
+                    _ => m.basis(&pair),
+                };
+                if tied {
+                    [b.diffuse + b.substrate, b.specular, 0.0]
+                } else {
+                    [b.diffuse, b.specular, b.substrate]
+                }
+            })
+            .collect();
+        if let Some(i) = cols.iter().position(|c| c.iter().any(|x| !x.is_finite())) {
+            anyhow::bail!(
+                "the model gave a non-finite value for sample {} ({:?}) at {}",
+                i,
+                self.samples[i].origin,
+                describe(set)
+            );
+        }
+        Ok(cols)
+    }
+
+    /// Solve the albedos exactly for fixed columns (bounded linear least squares per channel).
+    pub fn solve_albedos(&self, cols: &[Columns], set: &mut ParamSet) {
+        let present: Vec<usize> = (0..set.albedos.len()).collect();
+        for c in 0..self.channels() {
+            let idx: Vec<usize> = present.clone();
+            let comp: Vec<usize> = idx
+                .iter()
+                .map(|&i| component_index(set.albedos[i].component))
+                .collect();
+            let m = idx.len();
+            // Gram matrix and right-hand side with fixed albedos moved to the data side
+            let mut g = [[0.0f64; 3]; 3];
+            let mut h = [0.0f64; 3];
+            for (s, (col, sc)) in self.samples.iter().zip(cols.iter().zip(&self.scale)) {
+                let w2 = sc[c] * sc[c];
+                let mut y = s.value[c];
+                for (k, &i) in idx.iter().enumerate() {
+                    if !set.albedos[i].vary {
+                        y -= set.albedos[i].value[c] * col[comp[k]];
+                    }
+                }
+                for a in 0..m {
+                    if !set.albedos[idx[a]].vary {
+                        continue;
+                    }
+                    h[a] += w2 * col[comp[a]] * y;
+                    for b in 0..m {
+                        if set.albedos[idx[b]].vary {
+                            g[a][b] += w2 * col[comp[a]] * col[comp[b]];
+                        }
+                    }
+                }
+            }
+            let free: Vec<usize> = (0..m).filter(|&a| set.albedos[idx[a]].vary).collect();
+            let bounds: Vec<(f64, f64)> = free
+                .iter()
+                .map(|&a| (set.albedos[idx[a]].min, set.albedos[idx[a]].max))
+                .collect();
+            let sol = bounded_small_lsq(&g, &h, &free, &bounds);
+            for (k, &a) in free.iter().enumerate() {
+                set.albedos[idx[a]].value[c] = sol[k];
+            }
+        }
+    }
+
+    /// Residual vector (sample-major, channel-minor) for columns and albedos.
+    pub fn residuals(&self, cols: &[Columns], set: &ParamSet) -> DVector<f64> {
+        let ch = self.channels();
+        let comps: Vec<(usize, [f64; 3])> = set
+            .albedos
+            .iter()
+            .map(|a| (component_index(a.component), a.value))
+            .collect();
+        let mut r = DVector::zeros(self.samples.len() * ch);
+        for (i, (s, (col, sc))) in self
+            .samples
+            .iter()
+            .zip(cols.iter().zip(&self.scale))
+            .enumerate()
+        {
+            for c in 0..ch {
+                let m: f64 = comps.iter().map(|(k, a)| a[c] * col[*k]).sum();
+                let y = s.value[c];
+                r[i * ch + c] = match self.metric {
+                    Metric::Linear | Metric::Cosine => sc[c] * (m - y),
+                    Metric::Log => {
+                        let k = match s.sigma {
+                            Some(sig) => (1.0 + y) / sig[c],
+                            None => s.weight.sqrt(),
+                        };
+                        k * ((1.0 + m.max(0.0)).ln() - (1.0 + y.max(-0.999_999)).ln())
+                    }
+                };
+            }
+        }
+        r
+    }
+
+    /// Model values (unweighted) per sample and channel.
+    pub fn model_values(&self, cols: &[Columns], set: &ParamSet) -> Vec<[f64; 3]> {
+        cols.iter()
+            .map(|col| {
+                let mut v = [0.0; 3];
+                for (c, vc) in v.iter_mut().enumerate().take(self.channels()) {
+                    *vc = set
+                        .albedos
+                        .iter()
+                        .map(|a| a.value[c] * col[component_index(a.component)])
+                        .sum();
+                }
+                v
+            })
+            .collect()
+    }
+
+    /// Residuals and the parameter set (albedos solved when separable) at theta.
+    pub fn evaluate(
+        &self,
+        theta: &DVector<f64>,
+        base: &ParamSet,
+    ) -> Result<(DVector<f64>, ParamSet), anyhow::Error> {
+        let mut set = self.set_at(theta, base);
+        let cols = self.columns(&set)?;
+        if self.separable {
+            self.solve_albedos(&cols, &mut set);
+        }
+        let r = self.residuals(&cols, &set);
+        if r.iter().any(|x| !x.is_finite()) {
+            anyhow::bail!("a residual is not finite at {}", describe(&set));
+        }
+        Ok((r, set))
+    }
+
+    /// Forward-difference step for entry k of theta, pointing into the bounds.
+    fn step(&self, theta: &DVector<f64>, k: usize, hi: &DVector<f64>) -> f64 {
+        let h = 1e-6 * theta[k].abs().max(1.0);
+        if theta[k] + h > hi[k] {
+            -h
+        } else {
+            h
+        }
+    }
+
+    /// The Jacobian of the full problem at `set` (shape columns at fixed albedos, albedo columns
+    /// analytic), for standard errors. Column order: free shapes, then free albedo channels.
+    pub fn full_jacobian(&self, set: &ParamSet) -> Result<DMatrix<f64>, anyhow::Error> {
+        let cols = self.columns(set)?;
+        let r0 = self.residuals(&cols, set);
+        let n = r0.len();
+        let ch = self.channels();
+        let (_, hi_all) = {
+            let mut lo = Vec::new();
+            let mut hi = Vec::new();
+            for &i in &self.free_shapes {
+                let s = &set.shapes[i];
+                lo.push(s.kind.to_internal(s.min));
+                hi.push(s.kind.to_internal(s.max));
+            }
+            (lo, DVector::from_vec(hi))
+        };
+        let theta: DVector<f64> = DVector::from_vec(
+            self.free_shapes
+                .iter()
+                .map(|&i| set.shapes[i].kind.to_internal(set.shapes[i].value))
+                .collect(),
+        );
+        // Central differences (one-sided at a bound): the geometry is piecewise smooth, and a
+        // one-sided step that lands across a kink would bias the standard errors.
+        let (lo_all, _) = self.bounds();
+        let shape_cols: Vec<DVector<f64>> = (0..self.free_shapes.len())
+            .into_par_iter()
+            .map(|k| {
+                let h = 1e-6 * theta[k].abs().max(1.0);
+                let at = |x: f64| -> Result<DVector<f64>, anyhow::Error> {
+                    let mut s2 = set.clone();
+                    let sh = &mut s2.shapes[self.free_shapes[k]];
+                    sh.value = sh.kind.to_external(x);
+                    let c2 = self.columns(&s2)?;
+                    Ok(self.residuals(&c2, &s2))
+                };
+                let up = theta[k] + h <= hi_all[k];
+                let down = theta[k] - h >= lo_all[k];
+                Ok(match (up, down) {
+                    (true, true) => (at(theta[k] + h)? - at(theta[k] - h)?) / (2.0 * h),
+                    (true, false) => (at(theta[k] + h)? - &r0) / h,
+                    _ => (&r0 - at(theta[k] - h)?) / h,
+                })
+            })
+            .collect::<Result<_, anyhow::Error>>()?;
+        let mut j = DMatrix::zeros(n, self.free_shapes.len() + self.free_albedos.len());
+        for (k, col) in shape_cols.iter().enumerate() {
+            j.set_column(k, col);
+        }
+        let off = self.free_shapes.len();
+        let values = self.model_values(&cols, set);
+        for (k, &(ai, c)) in self.free_albedos.iter().enumerate() {
+            let comp = component_index(set.albedos[ai].component);
+            for (i, (s, col)) in self.samples.iter().zip(&cols).enumerate() {
+                let sc = self.scale[i][c];
+                j[(i * ch + c, off + k)] = match self.metric {
+                    Metric::Linear | Metric::Cosine => sc * col[comp],
+                    Metric::Log => {
+                        let kk = match s.sigma {
+                            Some(sig) => (1.0 + s.value[c]) / sig[c],
+                            None => s.weight.sqrt(),
+                        };
+                        kk * col[comp] / (1.0 + values[i][c].max(0.0))
+                    }
+                };
+            }
+        }
+        Ok(j)
+    }
+
+    /// Labels of the full Jacobian's columns (external names).
+    pub fn full_names(&self) -> Vec<String> {
+        let mut v: Vec<String> = self
+            .free_shapes
+            .iter()
+            .map(|&i| self.template.shapes[i].kind.name().to_string())
+            .collect();
+        v.extend(
+            self.free_albedos
+                .iter()
+                .map(|&(i, c)| albedo_label(&self.template, i, c)),
+        );
+        v
+    }
+
+    pub fn free_shapes(&self) -> &[usize] {
+        &self.free_shapes
+    }
+
+    pub fn free_albedos(&self) -> &[(usize, usize)] {
+        &self.free_albedos
+    }
+}
+
+/// Build the rung at the shape parameters of `set` with the given knobs.
+pub fn model_for(
+    set: &ParamSet,
+    quadrature_order: usize,
+    histogram_bins: usize,
+    map: Option<Arc<TopologyMap>>,
+) -> Box<dyn ShadingModel> {
+    let d = set.shape_value(Shape::Spacing);
+    let e = set.shape_value(Shape::Exponent);
+    let topology = Topology {
+        height: set.shape_value(Shape::Height),
+        map_scale: set.shape_value(Shape::MapScale),
+        map,
+    };
+    match set.rung {
+        ModelId::Lambert => Box::new(model::lambert::Lambert),
+        ModelId::MaxNormal => Box::new(model::max_normal::MaxNormal::new(e)),
+        ModelId::HastDiffuse => Box::new(model::hast_diffuse::HastDiffuse),
+        ModelId::PoulinFournier => Box::new(model::poulin_fournier::PoulinFournier::new(
+            d,
+            e,
+            quadrature_order,
+        )),
+        ModelId::VaryingTopology => Box::new(model::varying_topology::VaryingTopology::new(
+            d,
+            e,
+            quadrature_order,
+            topology.discretise(d, histogram_bins),
+        )),
+        ModelId::Reference => Box::new(model::reference::Reference::new(d, e, topology)),
+        ModelId::Ward => Box::new(model::ward::Ward::new(
+            set.shape_value(Shape::AlphaX),
+            set.shape_value(Shape::AlphaY),
+        )),
+    }
+}
+
+/// The albedos of `set` as the model takes them (a tied substrate shares kd).
+pub fn albedos_of(set: &ParamSet) -> model::Albedos {
+    let mut a = model::Albedos::grey(0.0, 0.0, 0.0);
+    a.rgb = set.channels == 3;
+    for p in &set.albedos {
+        match p.component {
+            Component::Diffuse => {
+                a.diffuse = p.value;
+                if set.substrate_tied {
+                    a.substrate = p.value;
+                }
+            }
+            Component::Specular => a.specular = p.value,
+            Component::Substrate => a.substrate = p.value,
+        }
+    }
+    a
+}
+
+pub fn albedo_label(set: &ParamSet, i: usize, c: usize) -> String {
+    if set.channels == 1 {
+        set.albedos[i].name.to_string()
+    } else {
+        format!("{}[{}]", set.albedos[i].name, ["r", "g", "b"][c])
+    }
+}
+
+/// "name = value, ..." of a parameter set, for error messages.
+pub fn describe(set: &ParamSet) -> String {
+    let mut parts: Vec<String> = set
+        .shapes
+        .iter()
+        .map(|s| format!("{} = {}", s.kind.name(), s.value))
+        .collect();
+    for a in &set.albedos {
+        parts.push(format!("{} = {:?}", a.name, &a.value[..set.channels]));
+    }
+    parts.join(", ")
+}
+
+/// min over a of a^T G a - 2 a^T h with a_k in bounds, for the `free` indices (at most 3):
+/// every assignment of each variable to {free, lower, upper} is tried and the best feasible kept.
+fn bounded_small_lsq(
+    g: &[[f64; 3]; 3],
+    h: &[f64; 3],
+    free: &[usize],
+    bounds: &[(f64, f64)],
+) -> Vec<f64> {
+    let m = free.len();
+    if m == 0 {
+        return vec![];
+    }
+    let objective = |a: &[f64]| -> f64 {
+        let mut v = 0.0;
+        for i in 0..m {
+            v -= 2.0 * a[i] * h[free[i]];
+            for j in 0..m {
+                v += a[i] * a[j] * g[free[i]][free[j]];
+            }
+        }
+        v
+    };
+    let mut best: Option<(f64, Vec<f64>)> = None;
+    for code in 0..3usize.pow(m as u32) {
+        let mut state = [0usize; 3];
+        let mut x = code;
+        for s in state.iter_mut().take(m) {
+            *s = x % 3;
+            x /= 3;
+        }
+        let mut a = vec![0.0; m];
+        let open: Vec<usize> = (0..m).filter(|&i| state[i] == 0).collect();
+        for i in 0..m {
+            a[i] = match state[i] {
+                1 => bounds[i].0,
+                2 => bounds[i].1,
+                _ => 0.0,
+            };
+        }
+        if !open.is_empty() {
+            let k = open.len();
+            let mut mat = DMatrix::zeros(k, k);
+            let mut rhs = DVector::zeros(k);
+            for (p, &i) in open.iter().enumerate() {
+                rhs[p] = h[free[i]];
+                for (q, &j) in open.iter().enumerate() {
+                    mat[(p, q)] = g[free[i]][free[j]];
+                }
+                for j in 0..m {
+                    if state[j] != 0 {
+                        rhs[p] -= g[free[i]][free[j]] * a[j];
+                    }
+                }
+            }
+            let Some(sol) = mat.lu().solve(&rhs) else {
+                continue;
+            };
+            let mut feasible = true;
+            for (p, &i) in open.iter().enumerate() {
+                let v = sol[p];
+                if !v.is_finite() || v < bounds[i].0 - 1e-12 || v > bounds[i].1 + 1e-12 {
+                    feasible = false;
+                }
+                a[i] = v.clamp(bounds[i].0, bounds[i].1);
+            }
+            if !feasible {
+                continue;
+            }
+        }
+        let f = objective(&a);
+        if best.as_ref().is_none_or(|(bf, _)| f < *bf) {
+            best = Some((f, a));
+        }
+    }
+    best.map(|b| b.1)
+        .unwrap_or_else(|| bounds.iter().map(|b| b.0).collect())
+}
+
+/// argmin's view: theta -> residuals, with the template's fixed values.
+pub struct ArgminProblem<'p, 'a> {
+    pub inner: &'p FitProblem<'a>,
+    pub base: ParamSet,
+}
+
+impl Operator for ArgminProblem<'_, '_> {
+    type Param = DVector<f64>;
+    type Output = DVector<f64>;
+
+    fn apply(&self, theta: &Self::Param) -> Result<Self::Output, ArgminError> {
+        Ok(self.inner.evaluate(theta, &self.base)?.0)
+    }
+}
+
+impl Jacobian for ArgminProblem<'_, '_> {
+    type Param = DVector<f64>;
+    type Jacobian = DMatrix<f64>;
+
+    /// Forward differences of the (reduced) residual, columns in parallel.
+    fn jacobian(&self, theta: &Self::Param) -> Result<Self::Jacobian, ArgminError> {
+        let (r0, _) = self.inner.evaluate(theta, &self.base)?;
+        let (_, hi) = self.inner.bounds();
+        let cols: Vec<DVector<f64>> = (0..theta.len())
+            .into_par_iter()
+            .map(|k| {
+                let h = self.inner.step(theta, k, &hi);
+                let mut t = theta.clone();
+                t[k] += h;
+                let (r, _) = self.inner.evaluate(&t, &self.base)?;
+                Ok((r - &r0) / h)
+            })
+            .collect::<Result<_, anyhow::Error>>()?;
+        let mut j = DMatrix::zeros(r0.len(), theta.len());
+        for (k, c) in cols.iter().enumerate() {
+            j.set_column(k, c);
+        }
+        Ok(j)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bounded_lsq_matches_unconstrained_inside_and_clips_outside() {
+        // G = I, h = (0.3, 0.7): unconstrained a = h
+        let g = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let a = bounded_small_lsq(&g, &[0.3, 0.7, 0.0], &[0, 1], &[(0.0, 1.0), (0.0, 1.0)]);
+        assert!((a[0] - 0.3).abs() < 1e-15 && (a[1] - 0.7).abs() < 1e-15);
+        let a = bounded_small_lsq(&g, &[-0.3, 1.7, 0.0], &[0, 1], &[(0.0, 1.0), (0.0, 1.0)]);
+        assert_eq!(a, vec![0.0, 1.0]);
+        // correlated columns: optimum with one at its bound re-solves the other
+        let g = [[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]];
+        let a = bounded_small_lsq(&g, &[2.0, -1.0, 0.0], &[0, 1], &[(0.0, 1.0), (0.0, 1.0)]);
+        // with a1 = 0: 2 a0 = 2 -> a0 = 1
+        assert!((a[0] - 1.0).abs() < 1e-12 && a[1].abs() < 1e-12, "{a:?}");
+    }
+}

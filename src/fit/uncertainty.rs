@@ -1,0 +1,201 @@
+//! Standard errors, correlations and fit statistics at the solution.
+//!
+//! cov = s^2 (J^T J)^-1 with s^2 = chi^2 / (n - p), from the SVD of J over the parameters not at a
+//! bound; singular values below 1e-10 of the largest are dropped (pseudo-inverse) and the
+//! corresponding right singular vector is reported as a non-identifiable combination.
+
+use nalgebra::DMatrix;
+
+#[derive(Clone, Debug)]
+pub struct Covariance {
+    /// Standard error per column (None: at a bound, or not identifiable).
+    pub std_error: Vec<Option<f64>>,
+    /// (i, j, r) for |r| > 0.1, sorted by |r| descending.
+    pub correlations: Vec<(usize, usize, f64)>,
+    /// Human-readable warnings (non-identifiable combinations).
+    pub warnings: Vec<String>,
+}
+
+/// `j`: n x p Jacobian; `names`: its column labels; `at_bound[k]`: column k sits on a bound;
+/// `chi2`: sum of squared residuals; `n`: residual count.
+pub fn covariance(
+    j: &DMatrix<f64>,
+    names: &[String],
+    at_bound: &[bool],
+    chi2: f64,
+    n: usize,
+) -> Covariance {
+    let p_all = j.ncols();
+    let keep: Vec<usize> = (0..p_all).filter(|&k| !at_bound[k]).collect();
+    let mut std_error = vec![None; p_all];
+    let mut correlations = Vec::new();
+    let mut warnings = Vec::new();
+    if keep.is_empty() || n <= keep.len() {
+        if n <= keep.len() && !keep.is_empty() {
+            warnings.push(format!(
+                "{n} residuals for {} free parameters: no standard errors",
+                keep.len()
+            ));
+        }
+        return Covariance {
+            std_error,
+            correlations,
+            warnings,
+        };
+    }
+    let jk = j.select_columns(&keep);
+    // column scaling keeps the SVD threshold meaningful across units
+    let norms: Vec<f64> = (0..jk.ncols())
+        .map(|k| jk.column(k).norm().max(1e-300))
+        .collect();
+    let mut scaled = jk.clone();
+    for (k, nk) in norms.iter().enumerate() {
+        scaled.column_mut(k).scale_mut(1.0 / nk);
+    }
+    let svd = scaled.svd(false, true);
+    let v_t = svd.v_t.expect("requested V^T");
+    let s = &svd.singular_values;
+    let s_max = s.max();
+    let p = keep.len();
+    let s2 = chi2 / (n - p) as f64;
+    let mut cov = DMatrix::zeros(p, p);
+    for (i, &si) in s.iter().enumerate() {
+        let row = v_t.row(i);
+        if si > 1e-10 * s_max {
+            cov += row.transpose() * row / (si * si);
+        } else {
+            let mut terms: Vec<(f64, &str)> = (0..p)
+                .map(|k| (row[k], names[keep[k]].as_str()))
+                .filter(|(c, _)| c.abs() > 0.05)
+                .collect();
+            terms.sort_by(|a, b| b.0.abs().total_cmp(&a.0.abs()));
+            let combo: Vec<String> = terms
+                .iter()
+                .map(|(c, nm)| format!("{c:+.2} {nm}"))
+                .collect();
+            warnings.push(format!(
+                "rank-deficient Jacobian: the data do not determine {} (scaled units); pseudo-inverse used",
+                combo.join(" ")
+            ));
+        }
+    }
+    // undo the column scaling
+    for a in 0..p {
+        for b in 0..p {
+            cov[(a, b)] *= s2 / (norms[a] * norms[b]);
+        }
+    }
+    let deficient = !warnings.is_empty();
+    for a in 0..p {
+        let var = cov[(a, a)];
+        if var > 0.0 && var.is_finite() {
+            std_error[keep[a]] = Some(var.sqrt());
+        }
+    }
+    for a in 0..p {
+        for b in (a + 1)..p {
+            let d = (cov[(a, a)] * cov[(b, b)]).sqrt();
+            if d > 0.0 {
+                let r = cov[(a, b)] / d;
+                if r.abs() > 0.1 {
+                    correlations.push((keep[a], keep[b], r));
+                }
+            }
+        }
+    }
+    correlations.sort_by(|x, y| y.2.abs().total_cmp(&x.2.abs()));
+    let _ = deficient;
+    Covariance {
+        std_error,
+        correlations,
+        warnings,
+    }
+}
+
+/// Fit statistics in lmfit's definitions.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Statistics {
+    /// Residuals (samples x channels).
+    pub n: usize,
+    pub free_parameters: usize,
+    /// Sum of squared weighted residuals.
+    pub chi_square: f64,
+    /// chi^2 / (n - p); meaningful as a goodness of fit only when sigmas are given.
+    pub reduced_chi_square: f64,
+    pub sigmas_given: bool,
+    /// Unweighted root-mean-square of model - data, 1/sr.
+    pub rmse: f64,
+    /// RMSE / RMS(data).
+    pub relative_rmse: f64,
+    pub aic: f64,
+    pub bic: f64,
+}
+
+pub fn statistics(
+    chi2: f64,
+    n: usize,
+    p: usize,
+    sigmas_given: bool,
+    model: &[f64],
+    data: &[f64],
+) -> Statistics {
+    let nn = model.len().max(1) as f64;
+    let sq: f64 = model.iter().zip(data).map(|(m, y)| (m - y) * (m - y)).sum();
+    let rms_data = (data.iter().map(|y| y * y).sum::<f64>() / nn).sqrt();
+    let rmse = (sq / nn).sqrt();
+    let nf = n as f64;
+    let chi_n = (chi2 / nf).max(f64::MIN_POSITIVE);
+    Statistics {
+        n,
+        free_parameters: p,
+        chi_square: chi2,
+        reduced_chi_square: if n > p {
+            chi2 / (n - p) as f64
+        } else {
+            f64::NAN
+        },
+        sigmas_given,
+        rmse,
+        relative_rmse: rmse / rms_data.max(f64::MIN_POSITIVE),
+        aic: nf * chi_n.ln() + 2.0 * p as f64,
+        bic: nf * chi_n.ln() + nf.ln() * p as f64,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn straight_line_errors_match_the_textbook() {
+        // y = a + b x at x = 0..4 with residual scale 1: cov = s^2 (X^T X)^-1
+        let x = [0.0, 1.0, 2.0, 3.0, 4.0];
+        let j = DMatrix::from_fn(5, 2, |i, k| if k == 0 { 1.0 } else { x[i] });
+        let chi2 = 3.0; // n - p = 3 -> s^2 = 1
+        let c = covariance(&j, &["a".into(), "b".into()], &[false, false], chi2, 5);
+        // (X^T X)^-1 = [[0.6, -0.2], [-0.2, 0.1]]
+        assert!((c.std_error[0].unwrap() - 0.6f64.sqrt()).abs() < 1e-12);
+        assert!((c.std_error[1].unwrap() - 0.1f64.sqrt()).abs() < 1e-12);
+        let r = c.correlations[0].2;
+        assert!((r - (-0.2 / (0.06f64).sqrt())).abs() < 1e-12);
+    }
+
+    #[test]
+    fn duplicated_column_is_named_as_non_identifiable() {
+        let j = DMatrix::from_fn(6, 2, |i, _| i as f64 + 1.0);
+        let c = covariance(
+            &j,
+            &["spacing".into(), "height".into()],
+            &[false, false],
+            1.0,
+            6,
+        );
+        assert!(
+            c.warnings
+                .iter()
+                .any(|w| w.contains("spacing") && w.contains("height")),
+            "{:?}",
+            c.warnings
+        );
+    }
+}
