@@ -44,7 +44,7 @@ fn run_err(args: &[&str]) -> String {
 }
 
 #[test]
-fn shipped_main_job_runs() {
+fn shipped_params_evaluate_on_shipped_queries() {
     let params = root().join("configs/silk_params.toml");
     let queries = root().join("data_synthetic/queries_slices.csv");
     let text = run_ok(&[

@@ -7,6 +7,12 @@
 //! is retried. Bounds are honoured by projection, so a parameter whose optimum lies outside
 //! ends exactly on its bound.
 //!
+//! The Jacobian is refreshed from the problem only when needed: after an accepted step it gets a
+//! Broyden rank-1 update J += ((dr - J dx) dx^T) / (dx^T dx) (Broyden 1965; as in MINPACK's
+//! hybrid methods), and a fresh one is taken after a rejected step, after 4 updates, and before
+//! convergence is declared. Each finite-difference Jacobian costs one model evaluation per
+//! parameter; a Broyden update costs none.
+//!
 //! Reference: K. Levenberg (1944), D. W. Marquardt (1963), "An algorithm for least-squares
 //! estimation of nonlinear parameters", SIAM J. Appl. Math. 11(2); J. Nocedal & S. J. Wright,
 //! Numerical Optimization (2006), ch. 10.
@@ -29,7 +35,13 @@ pub struct BoundedLm {
     /// Set when no step in this iteration lowered the cost.
     stalled: bool,
     last_relative_decrease: f64,
+    /// Broyden updates since the last fresh Jacobian; None: take a fresh one next iteration.
+    updates: Option<usize>,
+    /// The last iteration's Jacobian was a fresh one.
+    fresh: bool,
 }
+
+const MAX_BROYDEN_UPDATES: usize = 4;
 
 impl BoundedLm {
     pub fn new(lo: DVector<f64>, hi: DVector<f64>, tolerance: f64) -> Self {
@@ -40,6 +52,8 @@ impl BoundedLm {
             tolerance,
             stalled: false,
             last_relative_decrease: f64::INFINITY,
+            updates: None,
+            fresh: false,
         }
     }
 
@@ -88,7 +102,14 @@ where
             .ok_or_else(|| anyhow::anyhow!("bounded LM: no residuals"))?
             .clone();
         let cost = state.get_cost();
-        let j = problem.jacobian(&x)?;
+        let (j, fresh) = match (self.updates, state.get_jacobian()) {
+            (Some(_), Some(j)) => (j.clone(), false),
+            _ => (problem.jacobian(&x)?, true),
+        };
+        self.fresh = fresh;
+        if fresh {
+            self.updates = Some(0);
+        }
         let jt = j.transpose();
         let a = &jt * &j;
         let g = &jt * &r;
@@ -97,20 +118,21 @@ where
         let pinned: Vec<bool> = (0..n)
             .map(|i| (x[i] <= self.lo[i] && g[i] > 0.0) || (x[i] >= self.hi[i] && g[i] < 0.0))
             .collect();
+        let diag_max = a.diagonal().amax();
         for _ in 0..12 {
             let mut m = a.clone();
             let mut rhs = -&g;
             for i in 0..n {
-                let d = a[(i, i)].max(1e-12 * (1.0 + a.diagonal().amax()));
+                let d = a[(i, i)].max(1e-12 * (1.0 + diag_max));
                 m[(i, i)] += self.lambda * d;
-                if pinned[i] {
-                    for k in 0..n {
-                        m[(i, k)] = 0.0;
-                        m[(k, i)] = 0.0;
-                    }
-                    m[(i, i)] = 1.0;
-                    rhs[i] = 0.0;
+            }
+            for i in (0..n).filter(|&i| pinned[i]) {
+                for k in 0..n {
+                    m[(i, k)] = 0.0;
+                    m[(k, i)] = 0.0;
                 }
+                m[(i, i)] = 1.0;
+                rhs[i] = 0.0;
             }
             let Some(delta) = m.cholesky().map(|c| c.solve(&rhs)) else {
                 self.lambda *= 10.0;
@@ -123,17 +145,34 @@ where
                 self.lambda = (self.lambda / 3.0).max(1e-10);
                 self.stalled = false;
                 self.last_relative_decrease = (cost - cost_new) / cost.max(f64::MIN_POSITIVE);
-                let kv = argmin::kv!("lambda" => self.lambda; "cost" => cost_new;);
+                // Broyden rank-1 update with the step actually taken (after projection)
+                let dx = &x_new - &x;
+                let dxx = dx.norm_squared();
+                let mut j_next = j;
+                let n_up = self.updates.unwrap_or(0) + 1;
+                if dxx > 0.0 && n_up <= MAX_BROYDEN_UPDATES {
+                    let err = (&r_new - &r) - &j_next * &dx;
+                    j_next += err * dx.transpose() / dxx;
+                    self.updates = Some(n_up);
+                } else {
+                    self.updates = None;
+                }
+                let kv = argmin::kv!("lambda" => self.lambda; "cost" => cost_new; "fresh_jacobian" => fresh;);
                 return Ok((
                     state
                         .param(x_new)
                         .residuals(r_new)
                         .cost(cost_new)
-                        .jacobian(j),
+                        .jacobian(j_next),
                     Some(kv),
                 ));
             }
             self.lambda *= 4.0;
+            if !fresh {
+                // the updated Jacobian may be what failed: retry with a fresh one
+                self.updates = None;
+                return Ok((state.param(x).residuals(r).cost(cost).jacobian(j), None));
+            }
         }
         self.stalled = true;
         self.last_relative_decrease = 0.0;
@@ -145,7 +184,11 @@ where
             return TerminationStatus::Terminated(TerminationReason::SolverConverged);
         }
         if state.get_iter() > 0 && self.last_relative_decrease < self.tolerance {
-            return TerminationStatus::Terminated(TerminationReason::SolverConverged);
+            if self.fresh {
+                return TerminationStatus::Terminated(TerminationReason::SolverConverged);
+            }
+            // small progress on an updated Jacobian: confirm with a fresh one first
+            self.updates = None;
         }
         if state.get_cost() == 0.0 {
             return TerminationStatus::Terminated(TerminationReason::TargetCostReached);

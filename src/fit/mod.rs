@@ -82,10 +82,7 @@ fn run_lm(
 ) -> Result<(DVector<f64>, f64, u64)> {
     let (lo, hi) = problem.bounds();
     let solver = lm::BoundedLm::new(lo, hi, tolerance);
-    let op = ArgminProblem {
-        inner: problem,
-        base: base.clone(),
-    };
+    let op = ArgminProblem::new(problem, base.clone());
     let res = Executor::new(op, solver)
         .configure(|c| c.param(theta0).max_iters(max_iters))
         .add_observer(ProgressObserver(bar.clone()), ObserverMode::Always)
@@ -130,7 +127,37 @@ fn latin_hypercube(
 /// Fit `samples` as `cfg` says.
 pub fn fit(samples: &Samples, cfg: &FitConfig, quiet: bool) -> Result<FitOutcome> {
     let t0 = Instant::now();
-    let template = ParamSet::from_config(cfg, samples.channels)?;
+    let mut template = ParamSet::from_config(cfg, samples.channels)?;
+    let mut notes = Vec::new();
+    if samples.samples.iter().all(|s| s.fibre_azimuth.is_some()) {
+        if let Some(s) = template
+            .shapes
+            .iter_mut()
+            .find(|s| s.kind == parameters::Shape::Azimuth && s.vary)
+        {
+            s.vary = false;
+            // report the data's direction: axial mean (angles doubled, period 180 degrees)
+            let (sn, cs) = samples
+                .samples
+                .iter()
+                .filter_map(|x| x.fibre_azimuth)
+                .fold((0.0, 0.0), |(a, b), psi| {
+                    (a + (2.0 * psi).sin(), b + (2.0 * psi).cos())
+                });
+            let mean = 0.5 * sn.atan2(cs).to_degrees();
+            let uniform = samples
+                .samples
+                .iter()
+                .all(|x| x.fibre_azimuth == samples.samples[0].fibre_azimuth);
+            s.value = mean.clamp(s.min, s.max);
+            s.init = s.value;
+            notes.push(if uniform {
+                format!("`fibre_azimuth_deg` held at {mean:.4}: the data give the fibre direction")
+            } else {
+                format!("`fibre_azimuth_deg` held fixed: the data give the fibre direction per pixel (tangent map); {mean:.4} is their axial mean")
+            });
+        }
+    }
     let map = match &cfg.knobs.topology_map {
         Some(p) => Some(Arc::new(
             TopologyMap::load(p).context("knobs.topology_map")?,
@@ -235,9 +262,13 @@ pub fn fit(samples: &Samples, cfg: &FitConfig, quiet: bool) -> Result<FitOutcome
         th
     };
     bar.finish_and_clear();
-    let (r, set) = full.evaluate(&theta, &template)?;
-    let chi2 = r.norm_squared();
+    let mut set = full.set_at(&theta, &template);
     let cols = full.columns(&set)?;
+    if full.separable {
+        full.solve_albedos(&cols, &mut set);
+    }
+    let r = full.residuals(&cols, &set);
+    let chi2 = r.norm_squared();
     let fitted = full.model_values(&cols, &set);
     let ch = samples.channels;
     let mut model_flat = Vec::with_capacity(fitted.len() * ch);
@@ -264,10 +295,11 @@ pub fn fit(samples: &Samples, cfg: &FitConfig, quiet: bool) -> Result<FitOutcome
         at_bound
             .push(near(a.value[c], a.min, a.min, a.max) || near(a.value[c], a.max, a.min, a.max));
     }
-    let jac = full.full_jacobian(&set)?;
+    let jac = full.full_jacobian(&set, &cols)?;
     evaluations += full.evaluations.load(std::sync::atomic::Ordering::Relaxed);
     let cov = uncertainty::covariance(&jac, &names, &at_bound, chi2, n);
-    let mut warnings = cov.warnings.clone();
+    let mut warnings = notes;
+    warnings.extend(cov.warnings.iter().cloned());
 
     // per-parameter records in external units
     let mut records = Vec::new();

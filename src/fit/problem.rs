@@ -363,9 +363,12 @@ impl<'a> FitProblem<'a> {
 
     /// The Jacobian of the full problem at `set` (shape columns at fixed albedos, albedo columns
     /// analytic), for standard errors. Column order: free shapes, then free albedo channels.
-    pub fn full_jacobian(&self, set: &ParamSet) -> Result<DMatrix<f64>, anyhow::Error> {
-        let cols = self.columns(set)?;
-        let r0 = self.residuals(&cols, set);
+    pub fn full_jacobian(
+        &self,
+        set: &ParamSet,
+        cols: &[Columns],
+    ) -> Result<DMatrix<f64>, anyhow::Error> {
+        let r0 = self.residuals(cols, set);
         let n = r0.len();
         let ch = self.channels();
         let (_, hi_all) = {
@@ -384,27 +387,15 @@ impl<'a> FitProblem<'a> {
                 .map(|&i| set.shapes[i].kind.to_internal(set.shapes[i].value))
                 .collect(),
         );
-        // Central differences (one-sided at a bound): the geometry is piecewise smooth, and a
-        // one-sided step that lands across a kink would bias the standard errors.
-        let (lo_all, _) = self.bounds();
         let shape_cols: Vec<DVector<f64>> = (0..self.free_shapes.len())
             .into_par_iter()
             .map(|k| {
-                let h = 1e-6 * theta[k].abs().max(1.0);
-                let at = |x: f64| -> Result<DVector<f64>, anyhow::Error> {
-                    let mut s2 = set.clone();
-                    let sh = &mut s2.shapes[self.free_shapes[k]];
-                    sh.value = sh.kind.to_external(x);
-                    let c2 = self.columns(&s2)?;
-                    Ok(self.residuals(&c2, &s2))
-                };
-                let up = theta[k] + h <= hi_all[k];
-                let down = theta[k] - h >= lo_all[k];
-                Ok(match (up, down) {
-                    (true, true) => (at(theta[k] + h)? - at(theta[k] - h)?) / (2.0 * h),
-                    (true, false) => (at(theta[k] + h)? - &r0) / h,
-                    _ => (&r0 - at(theta[k] - h)?) / h,
-                })
+                let h = self.step(&theta, k, &hi_all);
+                let mut s2 = set.clone();
+                let sh = &mut s2.shapes[self.free_shapes[k]];
+                sh.value = sh.kind.to_external(theta[k] + h);
+                let c2 = self.columns(&s2)?;
+                Ok((self.residuals(&c2, &s2) - &r0) / h)
             })
             .collect::<Result<_, anyhow::Error>>()?;
         let mut j = DMatrix::zeros(n, self.free_shapes.len() + self.free_albedos.len());
@@ -412,10 +403,10 @@ impl<'a> FitProblem<'a> {
             j.set_column(k, col);
         }
         let off = self.free_shapes.len();
-        let values = self.model_values(&cols, set);
+        let values = self.model_values(cols, set);
         for (k, &(ai, c)) in self.free_albedos.iter().enumerate() {
             let comp = component_index(set.albedos[ai].component);
-            for (i, (s, col)) in self.samples.iter().zip(&cols).enumerate() {
+            for (i, (s, col)) in self.samples.iter().zip(cols).enumerate() {
                 let sc = self.scale[i][c];
                 j[(i * ch + c, off + k)] = match self.metric {
                     Metric::Linear | Metric::Cosine => sc * col[comp],
@@ -615,6 +606,29 @@ fn bounded_small_lsq(
 pub struct ArgminProblem<'p, 'a> {
     pub inner: &'p FitProblem<'a>,
     pub base: ParamSet,
+    /// The last (theta, residuals), so the Jacobian does not evaluate the base point again.
+    last: std::sync::Mutex<Option<(DVector<f64>, DVector<f64>)>>,
+}
+
+impl<'p, 'a> ArgminProblem<'p, 'a> {
+    pub fn new(inner: &'p FitProblem<'a>, base: ParamSet) -> Self {
+        Self {
+            inner,
+            base,
+            last: std::sync::Mutex::new(None),
+        }
+    }
+
+    fn residuals_at(&self, theta: &DVector<f64>) -> Result<DVector<f64>, anyhow::Error> {
+        if let Some((t, r)) = self.last.lock().expect("not poisoned").as_ref() {
+            if t == theta {
+                return Ok(r.clone());
+            }
+        }
+        let r = self.inner.evaluate(theta, &self.base)?.0;
+        *self.last.lock().expect("not poisoned") = Some((theta.clone(), r.clone()));
+        Ok(r)
+    }
 }
 
 impl Operator for ArgminProblem<'_, '_> {
@@ -622,7 +636,7 @@ impl Operator for ArgminProblem<'_, '_> {
     type Output = DVector<f64>;
 
     fn apply(&self, theta: &Self::Param) -> Result<Self::Output, ArgminError> {
-        Ok(self.inner.evaluate(theta, &self.base)?.0)
+        self.residuals_at(theta)
     }
 }
 
@@ -632,7 +646,7 @@ impl Jacobian for ArgminProblem<'_, '_> {
 
     /// Forward differences of the (reduced) residual, columns in parallel.
     fn jacobian(&self, theta: &Self::Param) -> Result<Self::Jacobian, ArgminError> {
-        let (r0, _) = self.inner.evaluate(theta, &self.base)?;
+        let r0 = self.residuals_at(theta)?;
         let (_, hi) = self.inner.bounds();
         let cols: Vec<DVector<f64>> = (0..theta.len())
             .into_par_iter()
