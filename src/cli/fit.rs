@@ -31,6 +31,10 @@ pub struct FitArgs {
     /// Fit configuration (TOML)
     #[arg(long, value_name = "FILE")]
     pub config: PathBuf,
+    /// Rung id, or `auto`: choose the cheapest rung that the held-out data do not reject
+    /// [default: the config's `model`]
+    #[arg(long, value_name = "ID|auto")]
+    pub model: Option<String>,
     /// Result JSON for renderers (and `fibrefit eval --params`)
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -132,14 +136,29 @@ fn ward_fallback(
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
-    let cfg = FitConfig::load(&args.config)?;
-    let id = cfg.model_id()?;
+    let mut cfg = FitConfig::load(&args.config)?;
+    if let Some(m) = &args.model {
+        cfg.model = m.clone();
+        cfg.validate()
+            .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
+    }
     // Create the output first: a bad path fails before the work.
     let mut out = AtomicFile::create(&args.out)?;
     let opts = args
         .load
         .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
     let samples = load_data(&args.data, &opts)?;
+    let selection = if cfg.model == "auto" {
+        let s = crate::fit::selection::select(&samples, &cfg)?;
+        cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow::anyhow!(e))?);
+        if !args.quiet && !args.json {
+            eprintln!("{}", crate::fit::selection::table(&s));
+        }
+        Some(s)
+    } else {
+        None
+    };
+    let id = cfg.model_id()?;
     let outcome = fit::fit(&samples, &cfg, args.quiet || args.json)
         .with_context(|| format!("fitting {} to {}", id, args.data.display()))?;
     let channels = samples.channels;
@@ -204,10 +223,21 @@ pub fn run(args: &FitArgs) -> Result<()> {
         },
         check_values,
         ward_fallback: ward,
-        model_selection: vec![],
+        model_selection: selection
+            .as_ref()
+            .map(|s| {
+                s.candidates
+                    .iter()
+                    .map(|c| serde_json::to_value(c).unwrap_or_default())
+                    .collect()
+            })
+            .unwrap_or_default(),
         warnings: outcome.warnings.clone(),
     };
-    let report_text = report::text(&outcome, id.as_str(), &args.data.display().to_string());
+    let mut report_text = report::text(&outcome, id.as_str(), &args.data.display().to_string());
+    if let Some(s) = &selection {
+        report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
+    }
     if let Some(dir) = &args.report {
         std::fs::create_dir_all(dir)
             .with_context(|| format!("{}: cannot create report directory", dir.display()))?;

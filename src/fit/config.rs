@@ -142,6 +142,84 @@ pub struct FitConfig {
     pub optimizer: Optimizer,
     #[serde(default)]
     pub parameters: BTreeMap<String, ParamEntry>,
+    /// Switch model components on and off, so a scene pays only for what it needs.
+    #[serde(default)]
+    pub components: Components,
+    /// `--model auto`: how rungs are compared.
+    #[serde(default)]
+    pub selection: Selection,
+}
+
+/// Model components (applied on top of `[parameters]`).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Components {
+    /// false: ks fixed at 0 (no specular lobe).
+    #[serde(default = "yes")]
+    pub specular: bool,
+    /// false: ignore `knobs.topology_map` (spots see a uniform height spread).
+    #[serde(default = "yes")]
+    pub topology_map: bool,
+    /// "tied" (shares kd, the default unless `substrate_albedo` is listed), "free", or "off"
+    /// (albedo 0).
+    #[serde(default)]
+    pub substrate: Option<String>,
+    /// false: spacing fixed at 2 (touching fibres).
+    #[serde(default)]
+    pub spacing_free: Option<bool>,
+}
+
+impl Default for Components {
+    fn default() -> Self {
+        Self {
+            specular: true,
+            topology_map: true,
+            substrate: None,
+            spacing_free: None,
+        }
+    }
+}
+
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Selection {
+    /// Rungs tried by `--model auto`, cheapest first.
+    #[serde(default = "default_rungs")]
+    pub rungs: Vec<String>,
+    /// Fraction of samples held out (seeded split).
+    #[serde(default = "default_holdout")]
+    pub holdout: f64,
+    /// Relative tolerance on the held-out error; default: the data's relative noise level when
+    /// sigmas are given, else 0.05.
+    pub tolerance: Option<f64>,
+}
+
+impl Default for Selection {
+    fn default() -> Self {
+        Self {
+            rungs: default_rungs(),
+            holdout: default_holdout(),
+            tolerance: None,
+        }
+    }
+}
+
+fn default_rungs() -> Vec<String> {
+    [
+        "lambert",
+        "hast-diffuse",
+        "ward",
+        "max-normal",
+        "poulin-fournier",
+        "varying-topology",
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect()
+}
+
+fn default_holdout() -> f64 {
+    0.2
 }
 
 fn default_metric() -> Metric {
@@ -172,6 +250,22 @@ impl FitConfig {
 
     /// Checks that need no data: names, bounds, starts, knob ranges.
     pub fn validate(&self) -> Result<()> {
+        if self.model == "auto" {
+            return self.for_rung(ModelId::Lambert).validate_rung();
+        }
+        self.validate_rung()
+    }
+
+    /// This config with `model` set to `id`, keeping only the parameters that rung has.
+    pub fn for_rung(&self, id: ModelId) -> FitConfig {
+        let mut c = self.clone();
+        c.model = id.to_string();
+        let allowed = super::parameters::names_for(id);
+        c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
+        c
+    }
+
+    fn validate_rung(&self) -> Result<()> {
         let id = self.model_id()?;
         let allowed = super::parameters::names_for(id);
         for (name, e) in &self.parameters {
@@ -222,6 +316,21 @@ impl FitConfig {
         }
         if self.knobs.stride == 0 || !(self.knobs.fraction > 0.0 && self.knobs.fraction <= 1.0) {
             bail!("knobs.stride must be >= 1 and knobs.fraction in (0, 1]");
+        }
+        if let Some(sub) = &self.components.substrate {
+            if !["tied", "free", "off"].contains(&sub.as_str()) {
+                bail!("components.substrate = '{sub}': expected \"tied\", \"free\" or \"off\"");
+            }
+        }
+        if !(self.selection.holdout > 0.0 && self.selection.holdout < 1.0) {
+            bail!(
+                "selection.holdout = {} must lie in (0, 1)",
+                self.selection.holdout
+            );
+        }
+        for r in &self.selection.rungs {
+            r.parse::<ModelId>()
+                .map_err(|e| anyhow!("selection.rungs: {e}"))?;
         }
         if self.starts == 0 {
             bail!("starts must be at least 1");

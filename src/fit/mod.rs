@@ -10,6 +10,7 @@ pub mod config;
 pub mod lm;
 pub mod parameters;
 pub mod problem;
+pub mod selection;
 pub mod uncertainty;
 
 use crate::load::samples::Samples;

@@ -178,6 +178,55 @@ fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
 impl ParamSet {
     pub fn from_config(cfg: &FitConfig, channels: usize) -> Result<Self> {
         let rung = cfg.model_id()?;
+        // components switch parameters on and off on top of [parameters]
+        let mut listed_params = cfg.parameters.clone();
+        let comp = &cfg.components;
+        if !comp.specular && names_for(rung).contains(&"ks") {
+            listed_params.insert(
+                "ks".into(),
+                ParamEntry {
+                    value: Some(Albedo::Grey(0.0)),
+                    vary: Some(false),
+                    ..Default::default()
+                },
+            );
+        }
+        if comp.spacing_free == Some(false) && names_for(rung).contains(&"spacing") {
+            listed_params.insert(
+                "spacing".into(),
+                ParamEntry {
+                    value: Some(Albedo::Grey(2.0)),
+                    vary: Some(false),
+                    ..Default::default()
+                },
+            );
+        }
+        if comp.spacing_free == Some(true) && names_for(rung).contains(&"spacing") {
+            listed_params.entry("spacing".into()).or_default().vary = Some(true);
+        }
+        match comp.substrate.as_deref() {
+            Some("off") if names_for(rung).contains(&"substrate_albedo") => {
+                listed_params.insert(
+                    "substrate_albedo".into(),
+                    ParamEntry {
+                        value: Some(Albedo::Grey(0.0)),
+                        vary: Some(false),
+                        ..Default::default()
+                    },
+                );
+            }
+            Some("free") if names_for(rung).contains(&"substrate_albedo") => {
+                listed_params.entry("substrate_albedo".into()).or_default();
+            }
+            Some("tied") => {
+                listed_params.remove("substrate_albedo");
+            }
+            _ => {}
+        }
+        let cfg = &FitConfig {
+            parameters: listed_params,
+            ..cfg.clone()
+        };
         let empty = ParamEntry::default();
         let entry = |name: &str| cfg.parameters.get(name).unwrap_or(&empty);
         let spacing_entry = entry("spacing");

@@ -1,0 +1,218 @@
+//! `--model auto`: fit the rungs cheapest first on a training split, measure each on the
+//! held-out split, and choose the cheapest whose held-out error is within a tolerance of the
+//! best: with sigmas, within the data's relative noise level (RMS sigma / RMS data) of the best
+//! relative RMSE; without sigmas, within 5 % of the best RMSE; `selection.tolerance` overrides
+//! (relative to the best RMSE).
+
+use super::config::FitConfig;
+use super::problem::FitProblem;
+use super::{fit, FitOutcome};
+use crate::load::samples::Samples;
+use crate::model::ModelId;
+use anyhow::{bail, Result};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use std::time::Instant;
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Candidate {
+    pub rung: String,
+    pub free_parameters: usize,
+    /// Unweighted RMSE of model - data on the held-out samples, 1/sr.
+    pub heldout_rmse: f64,
+    pub heldout_relative_rmse: f64,
+    /// Cost of one model evaluation (one sample, all heights), single thread, ns.
+    pub ns_per_eval: f64,
+    pub fit_seconds: f64,
+    pub chosen: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SelectionOutcome {
+    pub candidates: Vec<Candidate>,
+    pub chosen: String,
+    pub rule: String,
+    pub train_samples: usize,
+    pub heldout_samples: usize,
+}
+
+fn subset(s: &Samples, idx: &[usize]) -> Samples {
+    Samples {
+        samples: idx.iter().map(|&i| s.samples[i].clone()).collect(),
+        ..s.clone()
+    }
+}
+
+/// Held-out RMSE and relative RMSE of a fitted outcome, and the single-thread cost per sample.
+fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64)> {
+    let p = FitProblem::new(
+        test.samples.iter().collect(),
+        o.set.clone(),
+        cfg.metric,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        o.map.clone(),
+        cfg.optimizer.separable,
+    );
+    let cols = p.columns(&o.set)?;
+    let values = p.model_values(&cols, &o.set);
+    let ch = test.channels;
+    let (mut se, mut sy, mut n) = (0.0, 0.0, 0.0);
+    for (m, s) in values.iter().zip(&test.samples) {
+        for c in 0..ch {
+            se += (m[c] - s.value[c]).powi(2);
+            sy += s.value[c].powi(2);
+            n += 1.0;
+        }
+    }
+    // single-thread cost of the model on up to 500 held-out samples
+    let model = p.model_for(&o.set);
+    let frame = crate::model::frame::FibreFrame::from_azimuth(0.0);
+    let k = test.samples.len().min(500);
+    let t = Instant::now();
+    let mut acc = 0.0;
+    for s in &test.samples[..k] {
+        let b = model.basis(&crate::model::DirectionPair::new(&frame, &s.l, &s.v));
+        acc += b.diffuse + b.specular + b.substrate;
+    }
+    std::hint::black_box(acc);
+    let ns = t.elapsed().as_nanos() as f64 / k.max(1) as f64;
+    Ok(((se / n).sqrt(), (se / sy).sqrt(), ns))
+}
+
+pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
+    let n = samples.samples.len();
+    if n < 10 {
+        bail!("--model auto needs at least 10 samples to hold some out; got {n}");
+    }
+    let mut idx: Vec<usize> = (0..n).collect();
+    idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x5e1ec7));
+    let n_test = ((n as f64 * cfg.selection.holdout).ceil() as usize).clamp(1, n - 1);
+    let (test_idx, train_idx) = idx.split_at(n_test);
+    let train = subset(samples, train_idx);
+    let test = subset(samples, test_idx);
+    let sigmas = test.samples.iter().all(|s| s.sigma.is_some());
+    let ch = samples.channels;
+    let noise_rel = if sigmas {
+        let (s2, y2): (f64, f64) = test.samples.iter().fold((0.0, 0.0), |(a, b), s| {
+            let sg = s.sigma.expect("checked");
+            (
+                a + (0..ch).map(|c| sg[c] * sg[c]).sum::<f64>(),
+                b + (0..ch).map(|c| s.value[c].powi(2)).sum::<f64>(),
+            )
+        });
+        (s2 / y2).sqrt()
+    } else {
+        0.0
+    };
+    let mut candidates = Vec::new();
+    let mut fits: Vec<Option<(f64, f64)>> = Vec::new();
+    for name in &cfg.selection.rungs {
+        let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let rc = cfg.for_rung(id);
+        let t = Instant::now();
+        let result = fit(&train, &rc, true).and_then(|o| {
+            let (rmse, rel, ns) = heldout(&o, &rc, &test)?;
+            Ok((o.statistics.free_parameters, rmse, rel, ns))
+        });
+        match result {
+            Ok((p, rmse, rel, ns)) => {
+                candidates.push(Candidate {
+                    rung: name.clone(),
+                    free_parameters: p,
+                    heldout_rmse: rmse,
+                    heldout_relative_rmse: rel,
+                    ns_per_eval: ns,
+                    fit_seconds: t.elapsed().as_secs_f64(),
+                    chosen: false,
+                    error: None,
+                });
+                fits.push(Some((rmse, rel)));
+            }
+            Err(e) => {
+                candidates.push(Candidate {
+                    rung: name.clone(),
+                    free_parameters: 0,
+                    heldout_rmse: f64::NAN,
+                    heldout_relative_rmse: f64::NAN,
+                    ns_per_eval: f64::NAN,
+                    fit_seconds: t.elapsed().as_secs_f64(),
+                    chosen: false,
+                    error: Some(format!("{e:#}")),
+                });
+                fits.push(None);
+            }
+        }
+    }
+    let Some((best_rmse, best_rel)) = fits
+        .iter()
+        .flatten()
+        .copied()
+        .min_by(|a, b| a.0.total_cmp(&b.0))
+    else {
+        bail!("--model auto: no rung could be fitted");
+    };
+    let (rule, accept): (String, Box<dyn Fn(f64, f64) -> bool>) = match cfg.selection.tolerance {
+        Some(t) => (
+            format!("held-out RMSE within {:.1} % of the best", 100.0 * t),
+            Box::new(move |rmse, _| rmse <= best_rmse * (1.0 + t)),
+        ),
+        None if sigmas => (
+            format!(
+                "held-out relative RMSE within the noise level ({:.2} %) of the best ({:.2} %)",
+                100.0 * noise_rel,
+                100.0 * best_rel
+            ),
+            Box::new(move |_, rel| rel <= best_rel + noise_rel),
+        ),
+        None => (
+            "held-out RMSE within 5 % of the best (no sigmas given)".to_string(),
+            Box::new(move |rmse, _| rmse <= best_rmse * 1.05),
+        ),
+    };
+    let chosen = fits
+        .iter()
+        .position(|f| f.is_some_and(|(rmse, rel)| accept(rmse, rel)))
+        .expect("the best rung is acceptable");
+    candidates[chosen].chosen = true;
+    Ok(SelectionOutcome {
+        chosen: candidates[chosen].rung.clone(),
+        candidates,
+        rule,
+        train_samples: train.samples.len(),
+        heldout_samples: test.samples.len(),
+    })
+}
+
+/// The selection table in markdown.
+pub fn table(s: &SelectionOutcome) -> String {
+    let mut t = format!(
+        "Model selection ({}; {} training / {} held-out samples)\n\n| rung | free parameters | held-out RMSE [1/sr] | held-out relative RMSE | ns per evaluation | fit time [s] | chosen |\n|---|---|---|---|---|---|---|\n",
+        s.rule, s.train_samples, s.heldout_samples
+    );
+    for c in &s.candidates {
+        match &c.error {
+            Some(e) => {
+                t += &format!(
+                    "| {} | - | failed: {e} | | | {:.2} | |\n",
+                    c.rung, c.fit_seconds
+                )
+            }
+            None => {
+                t += &format!(
+                    "| {} | {} | {:.4e} | {:.2} % | {:.0} | {:.2} | {} |\n",
+                    c.rung,
+                    c.free_parameters,
+                    c.heldout_rmse,
+                    100.0 * c.heldout_relative_rmse,
+                    c.ns_per_eval,
+                    c.fit_seconds,
+                    if c.chosen { "**yes**" } else { "" }
+                )
+            }
+        }
+    }
+    t
+}
