@@ -5,6 +5,7 @@
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must take the safe branch.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
 
+pub mod bench;
 pub mod cli;
 pub mod export;
 pub mod fit;

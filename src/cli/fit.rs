@@ -14,7 +14,6 @@ use anyhow::{Context, Result};
 use clap::Args;
 use rand::{Rng, SeedableRng};
 use sha2::{Digest, Sha256};
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Args)]
@@ -239,14 +238,14 @@ pub fn run(args: &FitArgs) -> Result<()> {
         report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
     }
     if let Some(dir) = &args.report {
-        std::fs::create_dir_all(dir)
-            .with_context(|| format!("{}: cannot create report directory", dir.display()))?;
-        let mut f = AtomicFile::create(&dir.join("report.md"))?;
-        writeln!(
-            f.writer(),
-            "# fibrefit fit report\n\n```text\n{report_text}```"
-        )?;
-        f.commit()?;
+        report::write_dir(
+            dir,
+            &outcome,
+            &samples,
+            &report_text,
+            outcome.set.shape_value(Shape::Azimuth),
+        )
+        .with_context(|| format!("{}: writing the report", dir.display()))?;
     }
     serde_json::to_writer_pretty(out.writer(), &result)?;
     out.commit()?;

@@ -1,6 +1,7 @@
 //! Command line: parse, validate into real objects, run. Errors carry their whole context and
 //! map to exit code 2 in `main`.
 
+pub mod bench;
 pub mod data;
 pub mod eval;
 pub mod fit;
@@ -33,6 +34,8 @@ pub enum Command {
     Eval(eval::EvalArgs),
     /// Load measurements as `fit` would and summarise them (counts, ranges, coverage, drops).
     Inspect(inspect::InspectArgs),
+    /// Measure the speed-accuracy trade of every rung and knob; write tables and plots.
+    Bench(bench::BenchArgs),
     /// Render synthetic measurements (gonio CSV, image captures) from known parameters.
     Synth(synth::SynthArgs),
 }
@@ -59,6 +62,7 @@ where
         Command::Eval(args) => eval::run(&args),
         Command::Inspect(args) => inspect::run(&args),
         Command::Synth(args) => synth::run(&args),
+        Command::Bench(args) => bench::run(&args),
     }
 }
 

@@ -4,5 +4,7 @@
 pub mod atomic;
 pub mod eval_table;
 pub mod images;
+pub mod plots;
 pub mod report;
 pub mod result_json;
+pub mod speed_report;

@@ -91,3 +91,124 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
     }
     t
 }
+
+/// Write `dir/report.md` with the fit report and its pictures: measured vs fitted along the
+/// in-plane (across the fibres) and cross-plane (along the fibres) slices, a histogram of the
+/// relative residuals, and for image captures a residual map per image.
+pub fn write_dir(
+    dir: &std::path::Path,
+    outcome: &FitOutcome,
+    samples: &crate::load::samples::Samples,
+    report_text: &str,
+    psi_deg: f64,
+) -> anyhow::Result<()> {
+    use super::plots::{self, Series};
+    use crate::load::samples::Origin;
+    use crate::model::frame::FibreFrame;
+    std::fs::create_dir_all(dir)?;
+    let mut md = format!("# fibrefit fit report\n\n```text\n{report_text}```\n\n");
+    let ch = samples.channels;
+    // slices: samples whose light and view lie (within 0.1 in direction cosine) in a plane
+    for (name, file, across) in [
+        (
+            "In-plane slice (light and view across the fibres, in the B-N plane)",
+            "slice_across.png",
+            true,
+        ),
+        (
+            "Cross-plane slice (light and view along the fibres, in the T-N plane)",
+            "slice_along.png",
+            false,
+        ),
+    ] {
+        let (mut measured, mut fitted) = (Vec::new(), Vec::new());
+        for (s, m) in samples.samples.iter().zip(&outcome.fitted) {
+            let frame = FibreFrame::from_azimuth(s.fibre_azimuth.unwrap_or(psi_deg.to_radians()));
+            let (l, v) = (frame.to_local(&s.l), frame.to_local(&s.v));
+            let off = if across {
+                l.t.abs().max(v.t.abs())
+            } else {
+                l.b.abs().max(v.b.abs())
+            };
+            if off < 0.1 {
+                let x = if across {
+                    v.b.atan2(v.n)
+                } else {
+                    v.t.atan2(v.n)
+                }
+                .to_degrees();
+                let y_data: f64 = s.value[..ch].iter().sum::<f64>() / ch as f64;
+                let y_fit: f64 = m[..ch].iter().sum::<f64>() / ch as f64;
+                measured.push((x, y_data));
+                fitted.push((x, y_fit));
+            }
+        }
+        if measured.len() >= 3 {
+            plots::xy(
+                &dir.join(file),
+                name,
+                "signed view angle in the plane [deg]",
+                "BRDF [1/sr] (channel mean)",
+                &[
+                    Series {
+                        name: "measured".into(),
+                        points: measured.clone(),
+                        line: false,
+                    },
+                    Series {
+                        name: "fitted".into(),
+                        points: fitted,
+                        line: false,
+                    },
+                ],
+                false,
+                false,
+            )?;
+            md += &format!(
+                "## {name}\n\n{} samples.\n\n![{name}]({file})\n\n",
+                measured.len()
+            );
+        } else {
+            md += &format!("## {name}\n\nFewer than 3 samples lie in this plane; no plot.\n\n");
+        }
+    }
+    let rel: Vec<f64> = samples
+        .samples
+        .iter()
+        .zip(&outcome.fitted)
+        .flat_map(|(s, m)| (0..ch).map(move |c| (m[c] - s.value[c]) / s.value[c].abs().max(1e-12)))
+        .collect();
+    plots::histogram(
+        &dir.join("residuals.png"),
+        "Relative residuals (fitted - measured) / measured",
+        "relative residual",
+        &rel,
+        60,
+    )?;
+    md += "## Residuals\n\n![residual histogram](residuals.png)\n\n";
+    // residual maps for captures
+    let mut images: std::collections::BTreeMap<u32, Vec<(u32, u32, f64)>> = Default::default();
+    for (s, m) in samples.samples.iter().zip(&outcome.fitted) {
+        if let Origin::Pixel { image, x, y } = s.origin {
+            let r = (0..ch)
+                .map(|c| (m[c] - s.value[c]) / s.value[c].abs().max(1e-12))
+                .sum::<f64>()
+                / ch as f64;
+            images.entry(image).or_default().push((x, y, r));
+        }
+    }
+    for (k, px) in images {
+        let w = px.iter().map(|p| p.0).max().unwrap_or(0) as usize + 1;
+        let h = px.iter().map(|p| p.1).max().unwrap_or(0) as usize + 1;
+        let mut values = vec![None; w * h];
+        for (x, y, r) in px {
+            values[y as usize * w + x as usize] = Some(r);
+        }
+        let file = format!("residual_map_{k:03}.png");
+        plots::residual_map(&dir.join(&file), w, h, &values)?;
+        md += &format!("### Image {k}: relative residual per pixel (red: fitted above measured, blue: below, grey: not used)\n\n![residual map {k}]({file})\n\n");
+    }
+    let mut f = super::atomic::AtomicFile::create(&dir.join("report.md"))?;
+    std::io::Write::write_all(f.writer(), md.as_bytes())?;
+    f.commit()
+}

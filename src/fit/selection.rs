@@ -61,9 +61,9 @@ fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64,
     let ch = test.channels;
     let (mut se, mut sy, mut n) = (0.0, 0.0, 0.0);
     for (m, s) in values.iter().zip(&test.samples) {
-        for c in 0..ch {
-            se += (m[c] - s.value[c]).powi(2);
-            sy += s.value[c].powi(2);
+        for (mc, yc) in m[..ch].iter().zip(&s.value[..ch]) {
+            se += (mc - yc).powi(2);
+            sy += yc.powi(2);
             n += 1.0;
         }
     }
