@@ -5,11 +5,11 @@ use crate::export::atomic::AtomicFile;
 use crate::export::{report, result_json as rj};
 use crate::fit::config::FitConfig;
 use crate::fit::problem::{albedos_of, model_for};
-use crate::fit::{self, parameters::Shape, FitOutcome};
+use crate::fit::{self, parameters::Shape};
 use crate::load::load_data;
 use crate::load::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::direction_from_angles;
-use crate::model::ModelId;
+use crate::model::{Albedos, ModelId, ShadingModel};
 use anyhow::{Context, Result};
 use clap::Args;
 use rand::{Rng, SeedableRng};
@@ -58,23 +58,18 @@ fn sha256_of(path: &Path) -> Result<String> {
         .collect())
 }
 
-/// The Ward lobe fitted to the fitted model's own BRDF over a dense direction set.
+/// The Ward lobe fitted to the fitted model `m` (with its albedos and fibre azimuth `psi`,
+/// degrees) over a dense direction set.
 fn ward_fallback(
-    outcome: &FitOutcome,
+    m: &dyn ShadingModel,
+    albedos: &Albedos,
+    psi: f64,
     cfg: &FitConfig,
     channels: usize,
 ) -> Result<Option<rj::WardFallback>> {
     if cfg.model_id()? == ModelId::Ward {
         return Ok(None);
     }
-    let m = model_for(
-        &outcome.set,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
-        outcome.map.clone(),
-    );
-    let albedos = albedos_of(&outcome.set);
-    let psi = outcome.set.shape_value(Shape::Azimuth);
     let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x5741_5244);
     let cos_max = 80f64.to_radians().cos();
     let mut dir = || {
@@ -86,13 +81,7 @@ fn ward_fallback(
         .map(|k| {
             let (ti, pi) = dir();
             let (to, po) = dir();
-            let f = rj::brdf_at(
-                m.as_ref(),
-                &albedos,
-                psi.to_radians(),
-                [ti, pi, to, po],
-                channels,
-            );
+            let f = rj::brdf_at(m, albedos, psi.to_radians(), [ti, pi, to, po], channels);
             let mut value = [f[0]; 3];
             value[..channels].copy_from_slice(&f);
             Sample {
@@ -179,7 +168,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
             brdf: rj::brdf_at(m.as_ref(), &albedos, psi, d, channels),
         })
         .collect();
-    let ward = ward_fallback(&outcome, &cfg, channels).context("fitting the Ward fallback")?;
+    let ward = ward_fallback(m.as_ref(), &albedos, psi.to_degrees(), &cfg, channels)
+        .context("fitting the Ward fallback")?;
     let mut knobs = rj::knobs(&cfg, opts.subsample.stride, opts.subsample.fraction);
     if let Some(mp) = &outcome.map {
         knobs.topology_map = Some(
