@@ -346,3 +346,39 @@ fn help_states_units_and_defaults() {
         .unwrap();
     assert_eq!(out.status.code(), Some(2));
 }
+
+#[test]
+fn lambert_preview_variants_of_seed_003() {
+    let dir = tempfile::tempdir().unwrap();
+    // light from below (theta_i 120) and from above (theta_i 60)
+    let q = write(
+        dir.path(),
+        "q.csv",
+        "theta_i,phi_i,theta_o,phi_o\n120,0,0,0\n60,0,0,0\n",
+    );
+    let run = |params: &str| -> Vec<Vec<f64>> {
+        let p = write(dir.path(), "p.toml", params);
+        let text = run_ok(&[
+            "eval",
+            "-q",
+            "--model",
+            "lambert",
+            "--params",
+            p.to_str().unwrap(),
+            "--queries",
+            q.to_str().unwrap(),
+        ]);
+        text.lines()
+            .skip(1)
+            .map(|l| l.split(',').map(|x| x.parse().unwrap()).collect())
+            .collect()
+    };
+    let pi = std::f64::consts::PI;
+    let one = run("kd = 0.8\n");
+    assert_eq!(one[0][5], 0.0); // one-sided: dark from below
+    let two = run("kd = 0.8\ntwo_sided = true\n");
+    assert!((two[0][5] - 0.8 * 0.5 / pi).abs() < 1e-12); // |n.l| = 0.5
+    let amb = run("kd = 0.8\nambient = 0.1\n");
+    assert!((amb[0][5] - 0.8 * 0.1 / pi).abs() < 1e-12);
+    assert!((amb[1][5] - 0.8 * (0.1 + 0.5) / pi).abs() < 1e-12);
+}

@@ -685,3 +685,47 @@ mod tests {
         assert!((a[0] - 1.0).abs() < 1e-12 && a[1].abs() < 1e-12, "{a:?}");
     }
 }
+
+#[cfg(test)]
+mod nan_tests {
+    use super::*;
+    use crate::fit::config::FitConfig;
+    use crate::load::samples::Origin;
+    use crate::model::frame::direction_from_angles;
+
+    #[test]
+    fn a_nan_residual_is_an_error_naming_the_parameters() {
+        let s = Sample {
+            l: direction_from_angles(0.3, 0.0),
+            v: direction_from_angles(0.5, 2.0),
+            fibre_azimuth: None,
+            map_value: None,
+            value: [f64::NAN; 3],
+            sigma: None,
+            weight: 1.0,
+            origin: Origin::Line(7),
+        };
+        let cfg: FitConfig = toml::from_str(
+            "model = \"poulin-fournier\"\n[parameters]\nexponent = { value = 12 }\n",
+        )
+        .unwrap();
+        let set = ParamSet::from_config(&cfg, 1).unwrap();
+        let p = FitProblem::new(vec![&s], set.clone(), Metric::Linear, 16, 16, None, false);
+        let theta = p.theta_of(&set);
+        let err = p.evaluate(&theta, &set).unwrap_err().to_string();
+        assert!(
+            err.contains("not finite") && err.contains("exponent = 12"),
+            "{err}"
+        );
+        // and through the whole fit: an error, not a result
+        let data = crate::load::samples::Samples {
+            samples: vec![s.clone(); 12],
+            channels: 1,
+            kind: crate::load::samples::DataKind::Gonio,
+            source: "nan".into(),
+            dropped: Default::default(),
+            skipped_examples: vec![],
+        };
+        assert!(crate::fit::fit(&data, &cfg, true).is_err());
+    }
+}
