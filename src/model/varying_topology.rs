@@ -47,15 +47,34 @@ impl GaussSection {
         self.rule.order()
     }
 
+    /// What the specular lobe needs from a light/view pair: the same for every height, so a
+    /// histogram computes it once per pair.
+    pub fn lobe(&self, sp: &SectionPair) -> Lobe {
+        Lobe {
+            cos_delta: (sp.l.alpha - sp.v.alpha).cos(),
+            sigma: sp.l.alpha + sp.v.alpha,
+            k2: 2.0 * sp.l.len * sp.v.len,
+            window: sp.lobe_window(self.lobe_floor),
+        }
+    }
+
     pub fn basis(&self, pattern: &Pattern, sp: &SectionPair) -> Basis {
+        self.basis_with(pattern, sp, &self.lobe(sp))
+    }
+
+    /// [`GaussSection::basis`] with the pair's lobe already computed.
+    pub fn basis_with(&self, pattern: &Pattern, sp: &SectionPair, lobe: &Lobe) -> Basis {
         let denom = pattern.period * sp.cos_alpha_product();
         if !(denom > 0.0) {
             return Basis::default();
         }
         let (al, av) = (sp.l.alpha, sp.v.alpha);
-        let cos_delta = (al - av).cos();
-        let sigma = al + av;
-        let k2 = 2.0 * sp.l.len * sp.v.len;
+        let Lobe {
+            cos_delta,
+            sigma,
+            k2,
+            window,
+        } = *lobe;
         // At H = 0 the odd row is the even row moved by one step: both fibres have the same
         // arcs, so one fibre is computed and counted twice.
         let fibres: &[(Fibre, f64)] = if pattern.rise == 0.0 {
@@ -63,7 +82,6 @@ impl GaussSection {
         } else {
             &[(Fibre::Even, 1.0), (Fibre::Odd, 1.0)]
         };
-        let window = sp.lobe_window(self.lobe_floor);
         let (mut diffuse, mut specular) = (0.0, 0.0);
         for &(fibre, count) in fibres {
             let arcs = sp.seen_and_lit(pattern, fibre);
@@ -93,6 +111,15 @@ impl GaussSection {
             substrate: FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
         }
     }
+}
+
+/// Per-pair quantities of the specular lobe (see [`GaussSection::lobe`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Lobe {
+    cos_delta: f64,
+    sigma: f64,
+    k2: f64,
+    window: Option<(f64, f64)>,
 }
 
 /// The `varying-topology` rung: the mean over a discretised height distribution.
@@ -130,8 +157,9 @@ impl ShadingModel for VaryingTopology {
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
         let sp = SectionPair::new(&pair.l, &pair.v);
+        let lobe = self.section.lobe(&sp);
         self.nodes.iter().fold(Basis::default(), |acc, (p, w)| {
-            acc + (self.section.basis(p, &sp).scaled(*w))
+            acc + self.section.basis_with(p, &sp, &lobe).scaled(*w)
         })
     }
 
