@@ -240,45 +240,39 @@ impl<'a> FitProblem<'a> {
 
     /// Solve the albedos exactly for fixed columns (bounded linear least squares per channel).
     pub fn solve_albedos(&self, cols: &[Columns], set: &mut ParamSet) {
-        let present: Vec<usize> = (0..set.albedos.len()).collect();
+        let m = set.albedos.len();
+        let comp: Vec<usize> = set
+            .albedos
+            .iter()
+            .map(|a| component_index(a.component))
+            .collect();
+        let free: Vec<usize> = (0..m).filter(|&a| set.albedos[a].vary).collect();
+        let bounds: Vec<(f64, f64)> = free
+            .iter()
+            .map(|&a| (set.albedos[a].min, set.albedos[a].max))
+            .collect();
         for c in 0..self.channels() {
-            let idx: Vec<usize> = present.clone();
-            let comp: Vec<usize> = idx
-                .iter()
-                .map(|&i| component_index(set.albedos[i].component))
-                .collect();
-            let m = idx.len();
             // Gram matrix and right-hand side with fixed albedos moved to the data side
             let mut g = [[0.0f64; 3]; 3];
             let mut h = [0.0f64; 3];
             for (s, (col, sc)) in self.samples.iter().zip(cols.iter().zip(&self.scale)) {
                 let w2 = sc[c] * sc[c];
                 let mut y = s.value[c];
-                for (k, &i) in idx.iter().enumerate() {
-                    if !set.albedos[i].vary {
-                        y -= set.albedos[i].value[c] * col[comp[k]];
+                for (k, alb) in set.albedos.iter().enumerate() {
+                    if !alb.vary {
+                        y -= alb.value[c] * col[comp[k]];
                     }
                 }
-                for a in 0..m {
-                    if !set.albedos[idx[a]].vary {
-                        continue;
-                    }
+                for &a in &free {
                     h[a] += w2 * col[comp[a]] * y;
-                    for b in 0..m {
-                        if set.albedos[idx[b]].vary {
-                            g[a][b] += w2 * col[comp[a]] * col[comp[b]];
-                        }
+                    for &b in &free {
+                        g[a][b] += w2 * col[comp[a]] * col[comp[b]];
                     }
                 }
             }
-            let free: Vec<usize> = (0..m).filter(|&a| set.albedos[idx[a]].vary).collect();
-            let bounds: Vec<(f64, f64)> = free
-                .iter()
-                .map(|&a| (set.albedos[idx[a]].min, set.albedos[idx[a]].max))
-                .collect();
             let sol = bounded_small_lsq(&g, &h, &free, &bounds);
             for (k, &a) in free.iter().enumerate() {
-                set.albedos[idx[a]].value[c] = sol[k];
+                set.albedos[a].value[c] = sol[k];
             }
         }
     }
@@ -371,16 +365,8 @@ impl<'a> FitProblem<'a> {
         let r0 = self.residuals(cols, set);
         let n = r0.len();
         let ch = self.channels();
-        let (_, hi_all) = {
-            let mut lo = Vec::new();
-            let mut hi = Vec::new();
-            for &i in &self.free_shapes {
-                let s = &set.shapes[i];
-                lo.push(s.kind.to_internal(s.min));
-                hi.push(s.kind.to_internal(s.max));
-            }
-            (lo, DVector::from_vec(hi))
-        };
+        // shape entries come first in theta's bounds
+        let (_, hi_all) = self.bounds();
         let theta: DVector<f64> = DVector::from_vec(
             self.free_shapes
                 .iter()

@@ -85,7 +85,6 @@ pub fn covariance(
             cov[(a, b)] *= s2 / (norms[a] * norms[b]);
         }
     }
-    let deficient = !warnings.is_empty();
     for a in 0..p {
         let var = cov[(a, a)];
         if var > 0.0 && var.is_finite() {
@@ -104,7 +103,6 @@ pub fn covariance(
         }
     }
     correlations.sort_by(|x, y| y.2.abs().total_cmp(&x.2.abs()));
-    let _ = deficient;
     Covariance {
         std_error,
         correlations,

@@ -205,7 +205,7 @@ impl ModelParams {
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
         let mut warnings = Vec::new();
-        let given: [(&str, bool); 19] = [
+        let given: [(&str, bool); 18] = [
             ("kd", raw.kd.is_some()),
             ("ks", raw.ks.is_some()),
             ("exponent", raw.exponent.is_some()),
@@ -224,7 +224,6 @@ impl ModelParams {
             ("histogram_bins", raw.histogram_bins.is_some()),
             ("two_sided", raw.two_sided.is_some()),
             ("ambient", raw.ambient.is_some()),
-            ("model", false),
         ];
         for (name, present) in given {
             if present && !uses(id, name) {
