@@ -126,6 +126,8 @@ fn bad_configs_exit_2_name_the_key_and_leave_the_output_alone() {
         ("model = \"phong\"\n", "unknown model id 'phong'"),
         ("model = \"poulin-fournier\"\n[parameters]\nspacing = { value = 3, max = 30 }\n", "exceed the model's range"),
         ("model = \"poulin-fournier\"\n[knobs]\nhistogram_bins = 0\n", "knobs.histogram_bins"),
+        ("model = \"auto\"\n[parameters]\nheigth = { value = 0.5 }\n", "parameters.heigth: not a parameter of any rung"),
+        ("model = \"auto\"\n[parameters]\nexponent = { value = 5, min = 10 }\n", "parameters.exponent.value = 5 is outside its bounds"),
     ];
     for (k, (text, needle)) in cases.iter().enumerate() {
         let cfg = write(dir.path(), &format!("c{k}.toml"), text);

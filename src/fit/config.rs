@@ -250,10 +250,36 @@ impl FitConfig {
 
     /// Checks that need no data: names, bounds, starts, knob ranges.
     pub fn validate(&self) -> Result<()> {
-        if self.model == "auto" {
-            return self.for_rung(ModelId::Lambert).validate_rung();
+        if self.model != "auto" {
+            return self.validate_rung();
         }
-        self.validate_rung()
+        // `auto`: each rung sees only its own parameters, so check the names against all rungs
+        // here, or a misspelt one would be dropped silently
+        let rungs: Vec<ModelId> = self
+            .selection
+            .rungs
+            .iter()
+            .map(|r| {
+                r.parse()
+                    .map_err(|e: String| anyhow!("selection.rungs: {e}"))
+            })
+            .collect::<Result<_>>()?;
+        for name in self.parameters.keys() {
+            if !rungs
+                .iter()
+                .any(|&r| super::parameters::names_for(r).contains(&name.as_str()))
+            {
+                let ids: Vec<&str> = rungs.iter().map(|r| r.as_str()).collect();
+                bail!(
+                    "parameters.{name}: not a parameter of any rung in selection.rungs ({})",
+                    ids.join(", ")
+                );
+            }
+        }
+        for &r in &rungs {
+            self.for_rung(r).validate_rung()?;
+        }
+        Ok(())
     }
 
     /// This config with `model` set to `id`, keeping only the parameters that rung has.
