@@ -8,6 +8,7 @@ pub mod cross_section;
 pub mod frame;
 pub mod hast_diffuse;
 pub mod lambert;
+pub mod lobe_quadrature;
 pub mod max_normal;
 pub mod params;
 pub mod poulin_fournier;

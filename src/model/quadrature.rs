@@ -47,6 +47,11 @@ impl GaussLegendre {
         self.nodes.len()
     }
 
+    /// Nodes and weights on [-1, 1].
+    pub fn nodes_and_weights(&self) -> (&[f64], &[f64]) {
+        (&self.nodes, &self.weights)
+    }
+
     /// Integral of `f` over [a, b].
     #[inline]
     pub fn integrate(&self, a: f64, b: f64, mut f: impl FnMut(f64) -> f64) -> f64 {

@@ -17,6 +17,7 @@
 //! period have identical arcs, so one is computed and counted twice.
 
 use super::cross_section::{diffuse_kernel, Fibre, Pattern, SectionPair};
+use super::lobe_quadrature::{LobeRule, LobeShape};
 use super::quadrature::GaussLegendre;
 use super::topology::elevation_from_height;
 use super::{Basis, DirectionPair, ModelId, ShadingModel};
@@ -25,7 +26,8 @@ use std::f64::consts::{FRAC_1_PI, PI};
 /// Closed-form diffuse + Gauss–Legendre specular over one pattern.
 #[derive(Clone, Debug)]
 pub struct GaussSection {
-    rule: GaussLegendre,
+    order: usize,
+    lobe_rule: LobeRule,
     exponent: f64,
     /// Phong normalisation (e + 2) / (2 pi).
     norm: f64,
@@ -36,7 +38,8 @@ pub struct GaussSection {
 impl GaussSection {
     pub fn new(exponent: f64, order: usize) -> Self {
         Self {
-            rule: GaussLegendre::new(order),
+            order,
+            lobe_rule: LobeRule::new(&GaussLegendre::new(order)),
             exponent,
             norm: (exponent + 2.0) / (2.0 * PI),
             lobe_floor: (1e-15f64.ln() / exponent).exp(),
@@ -44,7 +47,7 @@ impl GaussSection {
     }
 
     pub fn order(&self) -> usize {
-        self.rule.order()
+        self.order
     }
 
     /// What the specular lobe needs from a light/view pair: the same for every height, so a
@@ -82,6 +85,13 @@ impl GaussSection {
         } else {
             &[(Fibre::Even, 1.0), (Fibre::Odd, 1.0)]
         };
+        let shape = LobeShape {
+            cos_delta,
+            sigma,
+            k2,
+            cos_lv: sp.cos_lv,
+            exponent: self.exponent,
+        };
         let (mut diffuse, mut specular) = (0.0, 0.0);
         for &(fibre, count) in fibres {
             let arcs = sp.seen_and_lit(pattern, fibre);
@@ -89,20 +99,10 @@ impl GaussSection {
                 diffuse += count * diffuse_kernel(a, b, al, av);
             }
             if let Some((w0, w1)) = window {
-                for &(a, b) in arcs.clip(w0, w1).as_slice() {
-                    specular += count
-                        * self.rule.integrate(a, b, |th| {
-                            let cc = 0.5 * (cos_delta + (2.0 * th - sigma).cos());
-                            let rv = k2 * cc - sp.cos_lv;
-                            if rv > 0.0 {
-                                // exp(e ln x) instead of powf: glibc's pow takes a slow exact
-                                // path, and with x in (0, 1] the relative error is ~ e |ln x| ulp.
-                                (self.exponent * rv.ln()).exp() * cc
-                            } else {
-                                0.0
-                            }
-                        });
-                }
+                specular += count
+                    * self
+                        .lobe_rule
+                        .integral(arcs.clip(w0, w1).as_slice(), &shape);
             }
         }
         Basis {
