@@ -313,12 +313,21 @@ mod tests {
         let arcs = [(-0.9, 0.1), (0.2, 1.2)];
         let lobe = LobeRule::new(&rule);
         let got = lobe.integral(&arcs, &s);
-        // the baseline path, which this machine may not take through the dispatch
+        // both paths, whichever the dispatch takes on this machine
         let plain = lobe.integral_with::<Plain>(&arcs, &s);
         assert!(
             (plain - got).abs() < 1e-14 * got,
             "N {order}: {plain} vs {got}"
         );
+        #[cfg(target_arch = "x86_64")]
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: checked just above.
+            let fused = unsafe { lobe.integral_avx2_fma(&arcs, &s) };
+            assert!(
+                (fused - got).abs() < 1e-14 * got,
+                "N {order}: {fused} vs {got}"
+            );
+        }
         let want: f64 = arcs
             .iter()
             .map(|&(a, b)| {
