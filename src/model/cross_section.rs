@@ -17,6 +17,7 @@
 //! shadows overlap, so a whole row is one interval however many fibres it holds (grazing light).
 //! This handles ALL occluders in O(1), with no neighbour window.
 
+use super::elementary;
 use super::frame::Local;
 
 /// Upper bound on disjoint arcs: <= 3 shadow intervals leave <= 4 gaps; the intersection of two
@@ -126,7 +127,7 @@ fn asin_end(s: f64) -> f64 {
     } else if s >= 1.0 {
         std::f64::consts::FRAC_PI_2
     } else {
-        s.asin()
+        elementary::asin(s)
     }
 }
 
@@ -202,7 +203,8 @@ impl Projected {
         // |w_p| of a unit vector: sqrt is exact enough here and far cheaper than hypot
         let len = (w.b * w.b + w.n * w.n).sqrt();
         Self {
-            alpha: w.alpha(),
+            // = w.alpha(), inline: atan2 with w.n > 0
+            alpha: elementary::atan2_right_half(w.b, w.n),
             sin: w.b / len,
             cos: w.n / len,
             len,
@@ -370,20 +372,25 @@ impl SectionPair {
         self.l.cos * self.v.cos
     }
 
+    /// cos(alpha_l - alpha_v), from the projections' sines and cosines.
+    #[inline]
+    pub fn cos_delta(&self) -> f64 {
+        self.l.cos * self.v.cos + self.l.sin * self.v.sin
+    }
+
     /// r . v as a function of th: K [cos(dl - dv) + cos(2 th - al - av)] - l.v with
     /// K = |l_p||v_p| (r = 2 (n.l) n - l).
     #[inline]
     pub fn mirror_cosine(&self, th: f64) -> f64 {
         let k = self.l.len * self.v.len;
-        k * ((self.l.alpha - self.v.alpha).cos() + (2.0 * th - self.l.alpha - self.v.alpha).cos())
-            - self.cos_lv
+        k * (self.cos_delta() + (2.0 * th - self.l.alpha - self.v.alpha).cos()) - self.cos_lv
     }
 
     /// The th-window (centred on the peak at (al + av)/2) where r.v > `fraction` of its peak
     /// value; `None` when r.v never exceeds it on the front arcs.
     pub fn lobe_window(&self, fraction: f64) -> Option<(f64, f64)> {
         let k = self.l.len * self.v.len;
-        let cos_delta = (self.l.alpha - self.v.alpha).cos();
+        let cos_delta = self.cos_delta();
         let peak = k * (cos_delta + 1.0) - self.cos_lv;
         if !(peak > 0.0) || !(k > 0.0) {
             return None;
@@ -399,7 +406,7 @@ impl SectionPair {
         if c >= 1.0 {
             return None;
         }
-        let half = 0.5 * c.acos();
+        let half = 0.5 * elementary::acos(c);
         Some((centre - half, centre + half))
     }
 
@@ -426,7 +433,7 @@ impl SectionPair {
 pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64) -> f64 {
     let d = t1 - t0;
     if d > 0.5 {
-        0.5 * (d * (a - b).cos() + (t0 + t1 - a - b).cos() * d.sin())
+        0.5 * (d * elementary::cos(a - b) + elementary::cos(t0 + t1 - a - b) * elementary::sin(d))
     } else {
         let m = 0.5 * (t0 + t1);
         let d2 = d * d;
@@ -438,7 +445,9 @@ pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64) -> f64 {
                     - d2 * (1.0 / 5040.0
                         - d2 * (1.0 / 362_880.0
                             - d2 * (1.0 / 39_916_800.0 - d2 / 6_227_020_800.0)))));
-        (d * (m - a).cos() * (m - b).cos() - 0.5 * (2.0 * m - a - b).cos() * d_minus_sin).max(0.0)
+        (d * elementary::cos(m - a) * elementary::cos(m - b)
+            - 0.5 * elementary::cos(2.0 * m - a - b) * d_minus_sin)
+            .max(0.0)
     }
 }
 

@@ -5,6 +5,7 @@
 //! can solve those exactly (separable least squares).
 
 pub mod cross_section;
+pub mod elementary;
 pub mod frame;
 pub mod hast_diffuse;
 pub mod lambert;

@@ -54,7 +54,7 @@ impl GaussSection {
     /// histogram computes it once per pair.
     pub fn lobe(&self, sp: &SectionPair) -> Lobe {
         Lobe {
-            cos_delta: (sp.l.alpha - sp.v.alpha).cos(),
+            cos_delta: sp.cos_delta(),
             sigma: sp.l.alpha + sp.v.alpha,
             k2: 2.0 * sp.l.len * sp.v.len,
             window: sp.lobe_window(self.lobe_floor),

@@ -1,0 +1,239 @@
+//! Inline elementary functions for the forward model's hot path.
+//!
+//! libm's functions are opaque calls with general-purpose argument handling; on the cross-section
+//! path (two atan2, a few asin, an acos and the diffuse kernel's sines and cosines per pair) they
+//! were a quarter of the instructions of a `varying-topology` evaluation. These versions cover
+//! only the argument ranges the model produces, inline into their callers, and are tested below
+//! against std to a few ulp, so results do not move beyond rounding.
+//!
+//! - `atan`: fdlibm's s_atan.c (four reduction intervals, an 11-term odd polynomial).
+//! - `asin`, `acos`, `atan2` (first and fourth quadrant): through `atan`, with 1 - x^2 formed
+//!   as (1 - x)(1 + x) so no accuracy is lost near +-1.
+//! - `sin_cos`: Cody–Waite reduction by pi/2 in three parts and Taylor kernels on [-pi/4, pi/4]
+//!   (relative accuracy, also near the zeros).
+
+use std::f64::consts::{FRAC_PI_2, PI};
+
+/// atan(x) for finite x, within ~1 ulp (fdlibm).
+#[inline]
+pub fn atan(x: f64) -> f64 {
+    const ATAN_HI: [f64; 4] = [
+        4.636_476_090_008_061e-1,
+        std::f64::consts::FRAC_PI_4,
+        9.827_937_232_473_29e-1,
+        FRAC_PI_2,
+    ];
+    const ATAN_LO: [f64; 4] = [
+        2.269_877_745_296_168_7e-17,
+        3.061_616_997_868_383e-17,
+        1.390_331_103_123_099_8e-17,
+        6.123_233_995_736_766e-17,
+    ];
+    const AT: [f64; 11] = [
+        3.333_333_333_333_293e-1,
+        -1.999_999_999_987_648_3e-1,
+        1.428_571_427_250_346_6e-1,
+        -1.111_111_040_546_235_6e-1,
+        9.090_887_133_436_507e-2,
+        -7.691_876_205_044_83e-2,
+        6.661_073_137_387_531e-2,
+        -5.833_570_133_790_573_5e-2,
+        4.976_877_994_615_932_4e-2,
+        -3.653_157_274_421_691_6e-2,
+        1.628_582_011_536_578_2e-2,
+    ];
+    let ax = x.abs();
+    let (t, id) = if ax < 0.4375 {
+        (ax, usize::MAX)
+    } else if ax < 0.6875 {
+        ((2.0 * ax - 1.0) / (2.0 + ax), 0)
+    } else if ax < 1.1875 {
+        ((ax - 1.0) / (ax + 1.0), 1)
+    } else if ax < 2.4375 {
+        ((ax - 1.5) / (1.0 + 1.5 * ax), 2)
+    } else {
+        (-1.0 / ax, 3)
+    };
+    let z = t * t;
+    let w = z * z;
+    let s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))));
+    let s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))));
+    let r = if id == usize::MAX {
+        t - t * (s1 + s2)
+    } else {
+        ATAN_HI[id] - ((t * (s1 + s2) - ATAN_LO[id]) - t)
+    };
+    r.copysign(x)
+}
+
+/// atan2(y, x) for x > 0 (a direction above the horizon): in (-pi/2, pi/2).
+#[inline]
+pub fn atan2_right_half(y: f64, x: f64) -> f64 {
+    debug_assert!(x > 0.0);
+    atan(y / x)
+}
+
+/// asin(s) for s in [-1, 1].
+#[inline]
+pub fn asin(s: f64) -> f64 {
+    if s.abs() >= 1.0 {
+        return FRAC_PI_2.copysign(s);
+    }
+    let c = ((1.0 - s) * (1.0 + s)).sqrt();
+    atan(s / c)
+}
+
+/// acos(c) for c in [-1, 1].
+#[inline]
+pub fn acos(c: f64) -> f64 {
+    if c <= -1.0 {
+        return PI;
+    }
+    // acos c = 2 atan(sqrt((1 - c) / (1 + c)))
+    2.0 * atan(((1.0 - c) / (1.0 + c)).sqrt())
+}
+
+/// (sin x, cos x) for |x| < 1e5, within ~1 ulp also near the zeros.
+#[inline]
+pub fn sin_cos(x: f64) -> (f64, f64) {
+    // pi/2 in three parts with 32 significant bits in the first two: n * part is exact for
+    // |n| < 2^20.
+    const P1: f64 = 1.570_796_326_734_125_6;
+    const P2: f64 = 6.077_100_506_303_966e-11;
+    const P3: f64 = 2.022_266_248_795_950_6e-21;
+    const MAGIC: f64 = 6_755_399_441_055_744.0;
+    let t = x * std::f64::consts::FRAC_2_PI + MAGIC;
+    let n = t - MAGIC;
+    let r = ((x - n * P1) - n * P2) - n * P3;
+    let q = t.to_bits() & 3;
+    let z = r * r;
+    // Taylor kernels on |r| <= pi/4 (+ rounding): truncation < 1e-19 relative.
+    let s = r + r
+        * z
+        * (-1.0 / 6.0
+            + z * (1.0 / 120.0
+                + z * (-1.0 / 5_040.0
+                    + z * (1.0 / 362_880.0
+                        + z * (-1.0 / 39_916_800.0
+                            + z * (1.0 / 6_227_020_800.0
+                                + z * (-1.0 / 1_307_674_368_000.0
+                                    + z * (1.0 / 355_687_428_096_000.0))))))));
+    let c = 1.0
+        + z * (-0.5
+            + z * (1.0 / 24.0
+                + z * (-1.0 / 720.0
+                    + z * (1.0 / 40_320.0
+                        + z * (-1.0 / 3_628_800.0
+                            + z * (1.0 / 479_001_600.0
+                                + z * (-1.0 / 87_178_291_200.0
+                                    + z * (1.0 / 20_922_789_888_000.0))))))));
+    match q {
+        0 => (s, c),
+        1 => (c, -s),
+        2 => (-s, -c),
+        _ => (-c, s),
+    }
+}
+
+#[inline]
+pub fn cos(x: f64) -> f64 {
+    sin_cos(x).1
+}
+
+#[inline]
+pub fn sin(x: f64) -> f64 {
+    sin_cos(x).0
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn ulps(got: f64, want: f64) -> f64 {
+        if got == want {
+            return 0.0;
+        }
+        let scale = want.abs().max(f64::MIN_POSITIVE);
+        (got - want).abs() / scale / f64::EPSILON
+    }
+
+    fn grid(lo: f64, hi: f64, n: usize) -> impl Iterator<Item = f64> {
+        (0..=n).map(move |i| lo + (hi - lo) * (i as f64 / n as f64))
+    }
+
+    #[test]
+    fn atan_and_atan2_within_two_ulp() {
+        let xs = grid(-3.0, 3.0, 300_000)
+            .chain(grid(-1e-6, 1e-6, 10_000))
+            .chain((0..4000).map(|i| 10f64.powf(-300.0 + 0.16 * i as f64)))
+            .chain([0.4375, 0.6875, 1.1875, 2.4375, 1e300, -1e300]);
+        for x in xs {
+            assert!(
+                ulps(atan(x), x.atan()) <= 1.0,
+                "atan({x}): {} vs {}",
+                atan(x),
+                x.atan()
+            );
+            assert!(ulps(atan(-x), (-x).atan()) <= 1.0, "atan({})", -x);
+        }
+        for a in grid(-FRAC_PI_2 * (1.0 - 1e-9), FRAC_PI_2 * (1.0 - 1e-9), 200_000) {
+            let (y, x) = (a.sin(), a.cos());
+            let (got, want) = (atan2_right_half(y, x), y.atan2(x));
+            assert!(ulps(got, want) <= 2.0, "atan2({y}, {x}): {got} vs {want}");
+        }
+        assert_eq!(atan(0.0), 0.0);
+        assert_eq!(atan2_right_half(0.0, 1.0), 0.0);
+    }
+
+    #[test]
+    fn asin_acos_within_three_ulp_up_to_the_ends() {
+        let xs = grid(-1.0, 1.0, 400_000)
+            .chain(grid(1.0 - 1e-9, 1.0, 10_000))
+            .chain(grid(-1.0, -1.0 + 1e-9, 10_000))
+            .chain((0..2000).map(|i| 10f64.powf(-300.0 + 0.15 * i as f64)));
+        for x in xs {
+            assert!(
+                ulps(asin(x), x.asin()) <= 3.0,
+                "asin({x}): {} vs {}",
+                asin(x),
+                x.asin()
+            );
+            assert!(
+                ulps(acos(x), x.acos()) <= 3.0,
+                "acos({x}): {} vs {}",
+                acos(x),
+                x.acos()
+            );
+        }
+        assert_eq!(asin(1.0), FRAC_PI_2);
+        assert_eq!(asin(-1.0), -FRAC_PI_2);
+        assert_eq!(acos(1.0), 0.0);
+        assert_eq!(acos(-1.0), PI);
+    }
+
+    #[test]
+    fn sin_cos_within_two_ulp_including_near_zeros() {
+        let mut xs: Vec<f64> = grid(-30.0, 30.0, 600_000).collect();
+        for k in -8..=8 {
+            let z = k as f64 * FRAC_PI_2;
+            xs.extend(grid(z - 1e-7, z + 1e-7, 2_000));
+        }
+        xs.extend((0..2000).map(|i| 10f64.powf(-300.0 + 0.15 * i as f64)));
+        for x in xs {
+            let (s, c) = sin_cos(x);
+            // near a zero, measure against the argument's own rounding: |error| <= 2 ulp of 1
+            // times |x| (pi's representation error is below that)
+            let tol = |v: f64| 2.0f64.max(1e-16 * x.abs() / v.abs().max(1e-300) / f64::EPSILON);
+            assert!(
+                ulps(s, x.sin()) <= tol(x.sin()),
+                "sin({x}): {s} vs {}",
+                x.sin()
+            );
+            assert!(
+                ulps(c, x.cos()) <= tol(x.cos()),
+                "cos({x}): {c} vs {}",
+                x.cos()
+            );
+        }
+    }
+}
