@@ -45,14 +45,24 @@ const LN2_LO: f64 = 1.9082149292705877e-10;
 /// 1.5 * 2^52: adding it rounds |x| < 2^51 to the nearest integer, which sits in the low bits.
 const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
 
-/// Horner evaluation of sum c[k] x^k (c in increasing powers).
+/// Estrin evaluation of sum c[k] x^k for K = 7, 12 or 14 (c in increasing powers): pairs of
+/// terms combined with x, then pairs of pairs with x^2, and so on, written out so the lane loop
+/// still vectorises. The dependency chain is ~log2(K) multiply-adds deep instead of K for Horner,
+/// and the lobe loop is bound by that latency, not by throughput.
 #[inline(always)]
-fn horner<M: MulAdd, const K: usize>(x: f64, c: &[f64; K]) -> f64 {
-    let mut acc = c[K - 1];
-    for k in (0..K - 1).rev() {
-        acc = M::mul_add(acc, x, c[k]);
+fn estrin<M: MulAdd, const K: usize>(x: f64, c: &[f64; K]) -> f64 {
+    let at = |k: usize| if k < K { c[k] } else { 0.0 };
+    let x2 = x * x;
+    let x4 = x2 * x2;
+    let x8 = x4 * x4;
+    let p = |k: usize| M::mul_add(at(k + 1), x, at(k));
+    let q = |k: usize| M::mul_add(p(k + 2), x2, p(k));
+    let lo = M::mul_add(q(4), x4, q(0));
+    if K <= 8 {
+        return lo;
     }
-    acc
+    let hi = M::mul_add(q(12), x4, q(8));
+    M::mul_add(hi, x8, lo)
 }
 
 /// cos(u) for |u| < 1e6, absolute error ~1e-16.
@@ -81,7 +91,7 @@ fn cos<M: MulAdd>(u: f64) -> f64 {
         1.0 / 2_432_902_008_176_640_000.0,
         -1.0 / 1_124_000_727_777_607_680_000.0,
     ];
-    let c = horner::<M, 12>(r * r, &C);
+    let c = estrin::<M, 12>(r * r, &C);
     // odd n flips the sign
     let sign = (t.to_bits() & 1) << 63;
     f64::from_bits(c.to_bits() ^ sign)
@@ -112,7 +122,7 @@ fn ln<M: MulAdd>(x: f64) -> f64 {
     let f = m - 1.0;
     let s = f / (2.0 + f);
     let z = s * s;
-    let r = z * horner::<M, 7>(z, &LG);
+    let r = z * estrin::<M, 7>(z, &LG);
     let hfsq = 0.5 * f * f;
     M::mul_add(
         k,
@@ -145,7 +155,7 @@ fn exp<M: MulAdd>(x: f64) -> f64 {
         1.0 / 479_001_600.0,
         1.0 / 6_227_020_800.0,
     ];
-    let p = horner::<M, 14>(r, &C);
+    let p = estrin::<M, 14>(r, &C);
     // 2^n from the rounded integer in t's low bits (n in [-1022, 1023] here).
     let scale = f64::from_bits(
         (t.to_bits()
