@@ -202,11 +202,12 @@ impl Projected {
     pub fn new(w: &Local) -> Self {
         // |w_p| of a unit vector: sqrt is exact enough here and far cheaper than hypot
         let len = (w.b * w.b + w.n * w.n).sqrt();
+        let inv_len = 1.0 / len;
         Self {
             // = w.alpha(), inline: atan2 with w.n > 0
             alpha: elementary::atan2_right_half(w.b, w.n),
-            sin: w.b / len,
-            cos: w.n / len,
+            sin: w.b * inv_len,
+            cos: w.n * inv_len,
             len,
         }
     }
