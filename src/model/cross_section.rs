@@ -257,63 +257,35 @@ impl Pattern {
     /// Unoccluded front arc of `fibre` towards direction `dir`: the set of th (radians, same
     /// convention as the normal n(th)) whose ray along `dir` escapes every other fibre.
     pub fn unoccluded_arcs(&self, fibre: Fibre, dir: &Projected) -> Arcs {
+        self.occlusion(dir).unoccluded_arcs(fibre)
+    }
+
+    /// What occlusion along `dir` needs from this pattern, shared by both fibres.
+    #[inline]
+    pub fn occlusion(&self, dir: &Projected) -> Occlusion {
         let (sa, ca) = (dir.sin, dir.cos);
         let ds = 2.0 * self.step * ca; // row step in s, > 0 above the horizon
         let da = 2.0 * self.step * sa; // row step along the ray
-                                       // At most one shadow from the own row and two from the other row (see below).
-        let mut shadows = [(0.0, 0.0); 3];
-        let mut n = 0;
-        // Own row: member m != 0 sits at s = m ds, a = m da, so the members ahead are those with
-        // sign(m) = sign(da). The nearest shadows (ds - 1, ds + 1) (or its mirror); when ds < 2
-        // the farther ones continue the run past s = +-1, and when ds >= 2 none reaches (-1, 1).
-        if ds < 2.0 {
-            if da > 0.0 {
-                shadows[n] = (ds - 1.0, 1.0);
-                n += 1;
-            } else if da < 0.0 {
-                shadows[n] = (-1.0, 1.0 - ds);
-                n += 1;
-            }
-        }
-        // Other row: offset (h, +-H) from this fibre's axis, members m at s0 + m ds, a0 + m da.
-        let y0 = match fibre {
-            Fibre::Even => self.rise,
-            Fibre::Odd => -self.rise,
-        };
-        let s0 = self.step * ca - y0 * sa;
-        let a0 = self.step * sa + y0 * ca;
-        let inv_ds = 1.0 / ds;
-        // Members whose shadow can reach (-1, 1): |s_m| < 2 (boundary members cast empty
-        // shadows, so including them is harmless) ...
-        let mut lo = ceil((-2.0 - s0) * inv_ds);
-        let mut hi = floor((2.0 - s0) * inv_ds);
-        // ... and that lie ahead along the ray: a0 + m da > 0.
-        let ahead = if da > 0.0 {
-            lo = lo.max(floor(-a0 / da) + 1.0);
-            true
-        } else if da < 0.0 {
-            hi = hi.min(ceil(-a0 / da) - 1.0);
-            true
+                                       // Own row: member m != 0 sits at s = m ds, a = m da, so the members ahead are those with
+                                       // sign(m) = sign(da). The nearest shadows (ds - 1, ds + 1) (or its mirror); when ds < 2
+                                       // the farther ones continue the run past s = +-1, and when ds >= 2 none reaches (-1, 1).
+        let own_row = if ds < 2.0 && da > 0.0 {
+            Some((ds - 1.0, 1.0))
+        } else if ds < 2.0 && da < 0.0 {
+            Some((-1.0, 1.0 - ds))
         } else {
-            a0 > 0.0
+            None
         };
-        if ahead && lo <= hi {
-            if ds <= 2.0 {
-                // consecutive shadows overlap: the run is one interval
-                shadows[n] = (s0 + lo * ds - 1.0, s0 + hi * ds + 1.0);
-                n += 1;
-            } else {
-                // ds > 2 leaves at most two members inside the window of width 4
-                let s = s0 + lo * ds;
-                shadows[n] = (s - 1.0, s + 1.0);
-                n += 1;
-                if hi > lo {
-                    shadows[n] = (s + ds - 1.0, s + ds + 1.0);
-                    n += 1;
-                }
-            }
+        Occlusion {
+            dir: *dir,
+            step: self.step,
+            rise: self.rise,
+            ds,
+            da,
+            inv_ds: 1.0 / ds,
+            inv_da: if da != 0.0 { 1.0 / da } else { 0.0 },
+            own_row,
         }
-        complement_asin(&mut shadows[..n], dir.alpha)
     }
 
     /// Fraction of the substrate strip of one period that is seen along `v` and lit along `l`.
@@ -346,6 +318,74 @@ impl Pattern {
         }
         let open = complement_within(&mut pieces[..n], 0.0, p);
         open.total_length() / p
+    }
+}
+
+/// One direction's occlusion geometry in one pattern (see [`Pattern::occlusion`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Occlusion {
+    dir: Projected,
+    step: f64,
+    rise: f64,
+    ds: f64,
+    da: f64,
+    inv_ds: f64,
+    inv_da: f64,
+    /// The own row's shadow in s, if it reaches (-1, 1).
+    own_row: Option<(f64, f64)>,
+}
+
+impl Occlusion {
+    /// See [`Pattern::unoccluded_arcs`].
+    #[inline]
+    pub fn unoccluded_arcs(&self, fibre: Fibre) -> Arcs {
+        let (sa, ca) = (self.dir.sin, self.dir.cos);
+        let (ds, da) = (self.ds, self.da);
+        // At most one shadow from the own row and two from the other row.
+        let mut shadows = [(0.0, 0.0); 3];
+        let mut n = 0;
+        if let Some(own) = self.own_row {
+            shadows[0] = own;
+            n = 1;
+        }
+        // Other row: offset (h, +-H) from this fibre's axis, members m at s0 + m ds, a0 + m da.
+        let y0 = match fibre {
+            Fibre::Even => self.rise,
+            Fibre::Odd => -self.rise,
+        };
+        let s0 = self.step * ca - y0 * sa;
+        let a0 = self.step * sa + y0 * ca;
+        // Members whose shadow can reach (-1, 1): |s_m| < 2 (boundary members cast empty
+        // shadows, so including them is harmless) ...
+        let mut lo = ceil((-2.0 - s0) * self.inv_ds);
+        let mut hi = floor((2.0 - s0) * self.inv_ds);
+        // ... and that lie ahead along the ray: a0 + m da > 0.
+        let ahead = if da > 0.0 {
+            lo = lo.max(floor(-a0 * self.inv_da) + 1.0);
+            true
+        } else if da < 0.0 {
+            hi = hi.min(ceil(-a0 * self.inv_da) - 1.0);
+            true
+        } else {
+            a0 > 0.0
+        };
+        if ahead && lo <= hi {
+            if ds <= 2.0 {
+                // consecutive shadows overlap: the run is one interval
+                shadows[n] = (s0 + lo * ds - 1.0, s0 + hi * ds + 1.0);
+                n += 1;
+            } else {
+                // ds > 2 leaves at most two members inside the window of width 4
+                let s = s0 + lo * ds;
+                shadows[n] = (s - 1.0, s + 1.0);
+                n += 1;
+                if hi > lo {
+                    shadows[n] = (s + ds - 1.0, s + ds + 1.0);
+                    n += 1;
+                }
+            }
+        }
+        complement_asin(&mut shadows[..n], self.dir.alpha)
     }
 }
 
@@ -413,12 +453,22 @@ impl SectionPair {
 
     /// The arcs of `fibre` that are both visible and lit.
     pub fn seen_and_lit(&self, pattern: &Pattern, fibre: Fibre) -> Arcs {
-        let vis = pattern.unoccluded_arcs(fibre, &self.v);
+        Self::seen_and_lit_with(
+            &pattern.occlusion(&self.v),
+            &pattern.occlusion(&self.l),
+            fibre,
+        )
+    }
+
+    /// [`SectionPair::seen_and_lit`] with the view's and the light's occlusion computed once for
+    /// both fibres.
+    #[inline]
+    pub fn seen_and_lit_with(view: &Occlusion, light: &Occlusion, fibre: Fibre) -> Arcs {
+        let vis = view.unoccluded_arcs(fibre);
         if vis.len == 0 {
             return vis;
         }
-        let lit = pattern.unoccluded_arcs(fibre, &self.l);
-        vis.intersect(&lit)
+        vis.intersect(&light.unoccluded_arcs(fibre))
     }
 }
 
@@ -430,11 +480,12 @@ impl SectionPair {
 ///     I = D g(m) - 1/2 cos(2m - a - b) (D - sin D),
 /// the same identity regrouped, with D - sin D from its series: no cancellation in g, and the
 /// correction is O(D^3).
+/// `cos_ab` is cos(a - b), which the caller has from the directions' sines and cosines.
 #[inline]
-pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64) -> f64 {
+pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64, cos_ab: f64) -> f64 {
     let d = t1 - t0;
     if d > 0.5 {
-        0.5 * (d * elementary::cos(a - b) + elementary::cos(t0 + t1 - a - b) * elementary::sin(d))
+        0.5 * (d * cos_ab + elementary::cos(t0 + t1 - a - b) * elementary::sin(d))
     } else {
         let m = 0.5 * (t0 + t1);
         let d2 = d * d;
@@ -612,7 +663,7 @@ mod tests {
                 (t - a).cos() * (t - b).cos()
             })
             .value[0];
-            let got = diffuse_kernel(t0, t1, a, b);
+            let got = diffuse_kernel(t0, t1, a, b, (a - b).cos());
             assert!(
                 (got - want).abs() <= 1e-13 * want.abs().max(1e-300),
                 "{got} vs {want}"

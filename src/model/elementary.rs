@@ -70,8 +70,12 @@ pub fn atan2_right_half(y: f64, x: f64) -> f64 {
     let t = (a * ay + b * x) / (c * ay + d * x);
     let z = t * t;
     let w = z * z;
-    let s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))));
-    let s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))));
+    // fdlibm's odd/even split, each half by Estrin's scheme (shorter dependency chains; this
+    // sits on the latency path of every arc end)
+    let w2 = w * w;
+    let w4 = w2 * w2;
+    let s1 = z * ((AT[0] + w * AT[2]) + w2 * (AT[4] + w * AT[6]) + w4 * (AT[8] + w * AT[10]));
+    let s2 = w * ((AT[1] + w * AT[3]) + w2 * (AT[5] + w * AT[7]) + w4 * AT[9]);
     let r = ATAN_HI[id] - ((t * (s1 + s2) - ATAN_LO[id]) - t);
     r.copysign(y)
 }
@@ -110,26 +114,36 @@ pub fn sin_cos(x: f64) -> (f64, f64) {
     let r = ((x - n * P1) - n * P2) - n * P3;
     let q = t.to_bits() & 3;
     let z = r * r;
-    // Taylor kernels on |r| <= pi/4 (+ rounding): truncation < 1e-19 relative.
-    let s = r + r
-        * z
-        * (-1.0 / 6.0
-            + z * (1.0 / 120.0
-                + z * (-1.0 / 5_040.0
-                    + z * (1.0 / 362_880.0
-                        + z * (-1.0 / 39_916_800.0
-                            + z * (1.0 / 6_227_020_800.0
-                                + z * (-1.0 / 1_307_674_368_000.0
-                                    + z * (1.0 / 355_687_428_096_000.0))))))));
-    let c = 1.0
-        + z * (-0.5
-            + z * (1.0 / 24.0
-                + z * (-1.0 / 720.0
-                    + z * (1.0 / 40_320.0
-                        + z * (-1.0 / 3_628_800.0
-                            + z * (1.0 / 479_001_600.0
-                                + z * (-1.0 / 87_178_291_200.0
-                                    + z * (1.0 / 20_922_789_888_000.0))))))));
+    // Taylor kernels on |r| <= pi/4 (+ rounding), truncation < 1e-19 relative; the
+    // corrections by Estrin's scheme in z, z^2, z^4 (short dependency chains).
+    let z2 = z * z;
+    let z4 = z2 * z2;
+    const S: [f64; 8] = [
+        -1.0 / 6.0,
+        1.0 / 120.0,
+        -1.0 / 5_040.0,
+        1.0 / 362_880.0,
+        -1.0 / 39_916_800.0,
+        1.0 / 6_227_020_800.0,
+        -1.0 / 1_307_674_368_000.0,
+        1.0 / 355_687_428_096_000.0,
+    ];
+    const C: [f64; 8] = [
+        1.0 / 24.0,
+        -1.0 / 720.0,
+        1.0 / 40_320.0,
+        -1.0 / 3_628_800.0,
+        1.0 / 479_001_600.0,
+        -1.0 / 87_178_291_200.0,
+        1.0 / 20_922_789_888_000.0,
+        -1.0 / 6_402_373_705_728_000.0,
+    ];
+    let est = |k: &[f64; 8]| {
+        ((k[0] + z * k[1]) + z2 * (k[2] + z * k[3]))
+            + z4 * ((k[4] + z * k[5]) + z2 * (k[6] + z * k[7]))
+    };
+    let s = r + r * z * est(&S);
+    let c = 1.0 + z * (-0.5 + z * est(&C));
     // quadrant q: (sin, cos) = (s, c), (c, -s), (-s, -c), (-c, s), without branches
     let (sv, cv) = if q & 1 == 0 { (s, c) } else { (c, s) };
     let sin_sign = (q & 2) << 62;

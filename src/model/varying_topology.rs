@@ -93,10 +93,11 @@ impl GaussSection {
             exponent: self.exponent,
         };
         let (mut diffuse, mut specular) = (0.0, 0.0);
+        let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
         for &(fibre, count) in fibres {
-            let arcs = sp.seen_and_lit(pattern, fibre);
+            let arcs = SectionPair::seen_and_lit_with(&view, &light, fibre);
             for &(a, b) in arcs.as_slice() {
-                diffuse += count * diffuse_kernel(a, b, al, av);
+                diffuse += count * diffuse_kernel(a, b, al, av, cos_delta);
             }
             if let Some((w0, w1)) = window {
                 specular += count
