@@ -404,3 +404,32 @@ fn height_histogram_converges_to_the_exact_uniform_mean() {
     }
     assert!(prev < 2e-3, "K = 64 error {prev}");
 }
+
+#[test]
+fn batched_evaluation_equals_pair_by_pair_exactly() {
+    // basis_many integrates the lobe arcs of many pairs together; each pair's value must not
+    // depend on its neighbours, so the two paths agree to the last bit.
+    let mut pairs = extreme_pairs();
+    pairs.extend(random_pairs(300, 11, 0.0));
+    for s in sections() {
+        let spread = Topology {
+            height: s.height,
+            map_scale: 0.3,
+            map: None,
+        };
+        let mut rungs = all_rungs(&s);
+        rungs.push(Box::new(model::varying_topology::VaryingTopology::new(
+            s.spacing,
+            s.exponent,
+            16,
+            spread.discretise(s.spacing, 8),
+        )));
+        for m in rungs.iter().filter(|m| m.id() != ModelId::Reference) {
+            let mut many = vec![Basis::default(); pairs.len()];
+            m.basis_many(&pairs, &mut many);
+            for (pair, b) in pairs.iter().zip(&many) {
+                assert_eq!(*b, m.basis(pair), "{} {s:?} {pair:?}", m.id());
+            }
+        }
+    }
+}

@@ -172,7 +172,7 @@ fn exp<M: MulAdd>(x: f64) -> f64 {
 
 /// What one light/view pair's specular lobe needs at a node th:
 /// cc(th) = (cos(delta) + cos(2 th - sigma)) / 2 and r.v(th) = k2 cc(th) - l.v.
-#[derive(Clone, Copy, Debug)]
+#[derive(Clone, Copy, Debug, Default)]
 pub struct LobeShape {
     pub cos_delta: f64,
     pub sigma: f64,
@@ -207,9 +207,32 @@ impl LobeRule {
         Self { nodes, weights }
     }
 
-    /// The lobe integral over every arc: on each arc [a, b], the sum over the nodes (x_i, w_i)
-    /// mapped to [a, b] of w_i max(0, r.v)^e cc, times (b - a)/2.
+    /// The lobe integral over every arc (all with the same shape): on each arc [a, b], the sum
+    /// over the nodes (x_i, w_i) mapped to [a, b] of w_i max(0, r.v)^e cc, times (b - a)/2.
     pub fn integral(&self, arcs: &[(f64, f64)], shape: &LobeShape) -> f64 {
+        let mut total = 0.0;
+        for chunk in arcs.chunks(8) {
+            let mut jobs = [LobeArc::default(); 8];
+            for (job, &(a, b)) in jobs.iter_mut().zip(chunk) {
+                *job = LobeArc {
+                    a,
+                    b,
+                    shape: *shape,
+                };
+            }
+            let mut out = [0.0; 8];
+            self.integrals(&jobs[..chunk.len()], &mut out[..chunk.len()]);
+            total += out[..chunk.len()].iter().sum::<f64>();
+        }
+        total
+    }
+
+    /// `out[i]` = the lobe integral over `arcs[i]` (see [`LobeRule::integral`]). Arcs are taken
+    /// two at a time: the node loop is bound by the latency of its dependency chain (a cosine,
+    /// a logarithm with a division, an exponential), so a second independent arc in flight
+    /// costs little. Each arc's value does not depend on its neighbour.
+    pub fn integrals(&self, arcs: &[LobeArc], out: &mut [f64]) {
+        assert_eq!(arcs.len(), out.len());
         #[cfg(target_arch = "x86_64")]
         {
             if std::is_x86_feature_detected!("avx512f")
@@ -217,49 +240,99 @@ impl LobeRule {
                 && std::is_x86_feature_detected!("fma")
             {
                 // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.integral_avx512(arcs, shape) };
+                return unsafe { self.integrals_avx512(arcs, out) };
             }
             if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
                 // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.integral_avx2_fma(arcs, shape) };
+                return unsafe { self.integrals_avx2_fma(arcs, out) };
             }
         }
-        self.integral_with::<Plain>(arcs, shape)
+        self.integrals_with::<Plain>(arcs, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
-    fn integral_avx512(&self, arcs: &[(f64, f64)], shape: &LobeShape) -> f64 {
-        self.integral_with::<Fused>(arcs, shape)
+    fn integrals_avx512(&self, arcs: &[LobeArc], out: &mut [f64]) {
+        self.integrals_with::<Fused>(arcs, out)
     }
 
     #[cfg(target_arch = "x86_64")]
     #[target_feature(enable = "avx2,fma")]
-    fn integral_avx2_fma(&self, arcs: &[(f64, f64)], shape: &LobeShape) -> f64 {
-        self.integral_with::<Fused>(arcs, shape)
+    fn integrals_avx2_fma(&self, arcs: &[LobeArc], out: &mut [f64]) {
+        self.integrals_with::<Fused>(arcs, out)
     }
 
     #[inline(always)]
-    fn integral_with<M: MulAdd>(&self, arcs: &[(f64, f64)], s: &LobeShape) -> f64 {
-        let mut total = 0.0;
-        for &(a, b) in arcs {
-            let half = 0.5 * (b - a);
-            let two_mid_minus_sigma = (a + b) - s.sigma;
+    fn integrals_with<M: MulAdd>(&self, arcs: &[LobeArc], out: &mut [f64]) {
+        let mut pairs = arcs.chunks_exact(2);
+        let mut outs = out.chunks_exact_mut(2);
+        for (two, o) in (&mut pairs).zip(&mut outs) {
+            let (p, q) = (ArcNodes::new(&two[0]), ArcNodes::new(&two[1]));
+            let (mut acc_p, mut acc_q) = ([0.0; LANES], [0.0; LANES]);
+            for (xs, ws) in self.nodes.iter().zip(&self.weights) {
+                for j in 0..LANES {
+                    acc_p[j] += p.term::<M>(xs[j], ws[j]);
+                }
+                for j in 0..LANES {
+                    acc_q[j] += q.term::<M>(xs[j], ws[j]);
+                }
+            }
+            o[0] = p.half * acc_p.iter().sum::<f64>();
+            o[1] = q.half * acc_q.iter().sum::<f64>();
+        }
+        for (arc, o) in pairs.remainder().iter().zip(outs.into_remainder()) {
+            let p = ArcNodes::new(arc);
             let mut acc = [0.0; LANES];
             for (xs, ws) in self.nodes.iter().zip(&self.weights) {
                 for j in 0..LANES {
-                    // 2 th - sigma with th = mid + half x
-                    let u = M::mul_add(2.0 * half, xs[j], two_mid_minus_sigma);
-                    let cc = 0.5 * (s.cos_delta + cos::<M>(u));
-                    let rv = M::mul_add(s.k2, cc, -s.cos_lv);
-                    let ok = rv >= f64::MIN_POSITIVE;
-                    let p = exp::<M>(s.exponent * ln::<M>(if ok { rv } else { 1.0 }));
-                    acc[j] += if ok { ws[j] * p * cc } else { 0.0 };
+                    acc[j] += p.term::<M>(xs[j], ws[j]);
                 }
             }
-            total += half * acc.iter().sum::<f64>();
+            *o = p.half * acc.iter().sum::<f64>();
         }
-        total
+    }
+}
+
+/// One arc of a lobe integral with its pair's lobe shape.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct LobeArc {
+    pub a: f64,
+    pub b: f64,
+    pub shape: LobeShape,
+}
+
+/// An arc's node mapping: th = mid + half x.
+struct ArcNodes {
+    half: f64,
+    two_mid_minus_sigma: f64,
+    s: LobeShape,
+}
+
+impl ArcNodes {
+    #[inline(always)]
+    fn new(arc: &LobeArc) -> Self {
+        Self {
+            half: 0.5 * (arc.b - arc.a),
+            two_mid_minus_sigma: (arc.a + arc.b) - arc.shape.sigma,
+            s: arc.shape,
+        }
+    }
+
+    /// w max(0, r.v)^e cc at the node x.
+    #[inline(always)]
+    fn term<M: MulAdd>(&self, x: f64, w: f64) -> f64 {
+        let s = &self.s;
+        // 2 th - sigma with th = mid + half x
+        let u = M::mul_add(2.0 * self.half, x, self.two_mid_minus_sigma);
+        let cc = 0.5 * (s.cos_delta + cos::<M>(u));
+        let rv = M::mul_add(s.k2, cc, -s.cos_lv);
+        let ok = rv >= f64::MIN_POSITIVE;
+        let p = exp::<M>(s.exponent * ln::<M>(if ok { rv } else { 1.0 }));
+        if ok {
+            w * p * cc
+        } else {
+            0.0
+        }
     }
 }
 
@@ -334,11 +407,20 @@ mod tests {
             cos_lv: 0.1,
             exponent: 60.0,
         };
-        let arcs = [(-0.9, 0.1), (0.2, 1.2)];
+        let arcs = [(-0.9, 0.1), (0.2, 1.2), (1.25, 1.3)];
         let lobe = LobeRule::new(&rule);
         let got = lobe.integral(&arcs, &s);
         // both paths, whichever the dispatch takes on this machine
-        let plain = lobe.integral_with::<Plain>(&arcs, &s);
+        let jobs: Vec<LobeArc> = arcs
+            .iter()
+            .map(|&(a, b)| LobeArc { a, b, shape: s })
+            .collect();
+        let each = |f: &dyn Fn(&mut [f64])| {
+            let mut out = vec![0.0; jobs.len()];
+            f(&mut out);
+            out.iter().sum::<f64>()
+        };
+        let plain = each(&|out| lobe.integrals_with::<Plain>(&jobs, out));
         assert!(
             (plain - got).abs() < 1e-14 * got,
             "N {order}: {plain} vs {got}"
@@ -346,7 +428,7 @@ mod tests {
         #[cfg(target_arch = "x86_64")]
         if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
             // SAFETY: checked just above.
-            let fused = unsafe { lobe.integral_avx2_fma(&arcs, &s) };
+            let fused = each(&|out| unsafe { lobe.integrals_avx2_fma(&jobs, out) });
             assert!(
                 (fused - got).abs() < 1e-14 * got,
                 "N {order}: {fused} vs {got}"
@@ -358,7 +440,7 @@ mod tests {
             && std::is_x86_feature_detected!("fma")
         {
             // SAFETY: checked just above.
-            let wide = unsafe { lobe.integral_avx512(&arcs, &s) };
+            let wide = each(&|out| unsafe { lobe.integrals_avx512(&jobs, out) });
             assert!(
                 (wide - got).abs() < 1e-14 * got,
                 "N {order}: {wide} vs {got}"

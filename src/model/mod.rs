@@ -194,6 +194,16 @@ pub trait ShadingModel: Send + Sync {
         }
     }
 
+    /// [`ShadingModel::basis`] of every pair, into `out` (same length). Equal to calling
+    /// `basis` pair by pair; rungs that gain from seeing many pairs at once (the cross-section
+    /// rungs batch their specular quadrature) override it. Evaluate data through this.
+    fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
+        assert_eq!(pairs.len(), out.len());
+        for (p, o) in pairs.iter().zip(out.iter_mut()) {
+            *o = self.basis(p);
+        }
+    }
+
     /// The basis at one height (see [`ShadingModel::basis_at_height_above_horizon`]).
     fn basis_at_height(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
         if !self.id().has_topology() {

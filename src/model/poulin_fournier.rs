@@ -2,7 +2,7 @@
 //! (phi = 0), with hiding, shadowing, gaps (spacing d free) and the viewer. MODEL.md §2 evaluated
 //! like `varying-topology` at a single flat pattern.
 
-use super::cross_section::{Pattern, SectionPair};
+use super::cross_section::Pattern;
 use super::varying_topology::GaussSection;
 use super::{Basis, DirectionPair, ModelId, ShadingModel};
 
@@ -27,7 +27,12 @@ impl ShadingModel for PoulinFournier {
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
-        self.section
-            .basis(&self.pattern, &SectionPair::new(&pair.l, &pair.v))
+        let mut out = [Basis::default()];
+        self.basis_many(std::slice::from_ref(pair), &mut out);
+        out[0]
+    }
+
+    fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
+        self.section.bases(pairs, &[(self.pattern, 1.0)], out);
     }
 }

@@ -17,7 +17,7 @@
 //! period have identical arcs, so one is computed and counted twice.
 
 use super::cross_section::{diffuse_kernel, Fibre, Pattern, SectionPair};
-use super::lobe_quadrature::{LobeRule, LobeShape};
+use super::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
 use super::quadrature::GaussLegendre;
 use super::topology::elevation_from_height;
 use super::{Basis, DirectionPair, ModelId, ShadingModel};
@@ -61,12 +61,53 @@ impl GaussSection {
         }
     }
 
-    pub fn basis(&self, pattern: &Pattern, sp: &SectionPair) -> Basis {
-        self.basis_with(pattern, sp, &self.lobe(sp))
+    /// The bases of `pairs` (written to `out`) for the mean over `patterns` ((pattern, weight)
+    /// pairs). Diffuse and substrate are computed pair by pair; the specular lobe arcs of all
+    /// pairs and patterns are collected and integrated together afterwards, which lets the lobe
+    /// kernel keep two arcs in flight (see [`LobeRule::integrals`]). Each pair's result does not
+    /// depend on the other pairs in the batch.
+    pub fn bases(&self, pairs: &[DirectionPair], patterns: &[(Pattern, f64)], out: &mut [Basis]) {
+        assert_eq!(pairs.len(), out.len());
+        SCRATCH.with(|scratch| {
+            let mut scratch = scratch.borrow_mut();
+            let LobeScratch { arcs, dest, values } = &mut *scratch;
+            arcs.clear();
+            dest.clear();
+            for (i, (pair, o)) in pairs.iter().zip(out.iter_mut()).enumerate() {
+                *o = Basis::default();
+                if !pair.above_horizon() {
+                    continue;
+                }
+                let sp = SectionPair::new(&pair.l, &pair.v);
+                let lobe = self.lobe(&sp);
+                for (pattern, w) in patterns {
+                    let b = self.basis_deferred(pattern, &sp, &lobe, *w, &mut |arc, factor| {
+                        arcs.push(arc);
+                        dest.push((i, factor));
+                    });
+                    *o = *o + b;
+                }
+            }
+            values.clear();
+            values.resize(arcs.len(), 0.0);
+            self.lobe_rule.integrals(arcs, values);
+            for (&(i, factor), v) in dest.iter().zip(values.iter()) {
+                out[i].specular += factor * v;
+            }
+        })
     }
 
-    /// [`GaussSection::basis`] with the pair's lobe already computed.
-    pub fn basis_with(&self, pattern: &Pattern, sp: &SectionPair, lobe: &Lobe) -> Basis {
+    /// One pattern's basis times `weight`, with the specular part left out: each lobe arc goes
+    /// to `sink` with the factor that turns its integral into its share of `Basis::specular`.
+    #[inline]
+    fn basis_deferred(
+        &self,
+        pattern: &Pattern,
+        sp: &SectionPair,
+        lobe: &Lobe,
+        weight: f64,
+        sink: &mut impl FnMut(LobeArc, f64),
+    ) -> Basis {
         let denom = pattern.period * sp.cos_alpha_product();
         if !(denom > 0.0) {
             return Basis::default();
@@ -92,7 +133,7 @@ impl GaussSection {
             cos_lv: sp.cos_lv,
             exponent: self.exponent,
         };
-        let (mut diffuse, mut specular) = (0.0, 0.0);
+        let mut diffuse = 0.0;
         let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
         for &(fibre, count) in fibres {
             let arcs = SectionPair::seen_and_lit_with(&view, &light, fibre);
@@ -100,18 +141,31 @@ impl GaussSection {
                 diffuse += count * diffuse_kernel(a, b, al, av, cos_delta);
             }
             if let Some((w0, w1)) = window {
-                specular += count
-                    * self
-                        .lobe_rule
-                        .integral(arcs.clip(w0, w1).as_slice(), &shape);
+                let factor = weight * count * self.norm / denom;
+                for &(a, b) in arcs.clip(w0, w1).as_slice() {
+                    sink(LobeArc { a, b, shape }, factor);
+                }
             }
         }
         Basis {
-            diffuse: FRAC_1_PI * diffuse / denom,
-            specular: self.norm * specular / denom,
-            substrate: FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
+            diffuse: weight * FRAC_1_PI * diffuse / denom,
+            specular: 0.0,
+            substrate: weight * FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
         }
     }
+}
+
+/// Per-thread buffers of [`GaussSection::bases`], reused between calls (a single-pair call must
+/// not pay for an allocation).
+#[derive(Default)]
+struct LobeScratch {
+    arcs: Vec<LobeArc>,
+    dest: Vec<(usize, f64)>,
+    values: Vec<f64>,
+}
+
+thread_local! {
+    static SCRATCH: std::cell::RefCell<LobeScratch> = std::cell::RefCell::new(LobeScratch::default());
 }
 
 /// Per-pair quantities of the specular lobe (see [`GaussSection::lobe`]).
@@ -157,16 +211,21 @@ impl ShadingModel for VaryingTopology {
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
-        let sp = SectionPair::new(&pair.l, &pair.v);
-        let lobe = self.section.lobe(&sp);
-        self.nodes.iter().fold(Basis::default(), |acc, (p, w)| {
-            acc + self.section.basis_with(p, &sp, &lobe).scaled(*w)
-        })
+        let mut out = [Basis::default()];
+        self.section
+            .bases(std::slice::from_ref(pair), &self.nodes, &mut out);
+        out[0]
+    }
+
+    fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
+        self.section.bases(pairs, &self.nodes, out);
     }
 
     fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        let sp = SectionPair::new(&pair.l, &pair.v);
         let pattern = Pattern::new(self.spacing, elevation_from_height(height, self.spacing));
-        Some(self.section.basis(&pattern, &sp))
+        let mut out = [Basis::default()];
+        self.section
+            .bases(std::slice::from_ref(pair), &[(pattern, 1.0)], &mut out);
+        Some(out[0])
     }
 }
