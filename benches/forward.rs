@@ -1,5 +1,6 @@
 //! Cost of each rung, per evaluation of one (l, v) pair: `cargo bench --bench forward`.
-//! Parallel throughput of `varying-topology` (N = 16) on all cores is the `parallel` group.
+//! Parallel throughput of `varying-topology` (N = 16) on all cores is the `parallel` group: chunks
+//! of 1024 pairs through `basis_many` on rayon's pool, as the fitter evaluates its samples.
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
 use fibrefit::model::frame::{direction_from_angles, FibreFrame};
@@ -27,12 +28,22 @@ fn pairs(n: usize) -> Vec<DirectionPair> {
         .collect()
 }
 
+/// One pair at a time: the latency of a single evaluation.
 fn eval_all(m: &dyn ShadingModel, ps: &[DirectionPair]) -> f64 {
     ps.iter()
         .map(|p| {
             let b = m.basis(black_box(p));
             b.diffuse + b.specular + b.substrate
         })
+        .sum()
+}
+
+/// A batch through `basis_many`, as the fitter evaluates its samples.
+fn eval_batch(m: &dyn ShadingModel, ps: &[DirectionPair]) -> f64 {
+    let mut out = vec![Basis::default(); ps.len()];
+    m.basis_many(black_box(ps), &mut out);
+    out.iter()
+        .map(|b| b.diffuse + b.specular + b.substrate)
         .sum()
 }
 
@@ -88,6 +99,12 @@ fn rungs(c: &mut Criterion) {
             b.iter(|| eval_all(m.as_ref(), &ps))
         });
     }
+    // the same pairs as one batch (basis_many)
+    for (name, m) in models.iter().filter(|(n, _)| n.contains("N16")) {
+        g.bench_function(BenchmarkId::from_parameter(format!("{name}/batch")), |b| {
+            b.iter(|| eval_batch(m.as_ref(), &ps))
+        });
+    }
     g.finish();
 
     // Histogram bins multiply the cost; the reference is slow, so fewer pairs.
@@ -128,7 +145,7 @@ fn parallel(c: &mut Criterion) {
         |b| {
             b.iter(|| {
                 ps.par_chunks(1024)
-                    .map(|chunk| eval_all(&m, chunk))
+                    .map(|chunk| eval_batch(&m, chunk))
                     .sum::<f64>()
             })
         },

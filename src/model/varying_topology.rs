@@ -63,9 +63,9 @@ impl GaussSection {
 
     /// The bases of `pairs` (written to `out`) for the mean over `patterns` ((pattern, weight)
     /// pairs). Diffuse and substrate are computed pair by pair; the specular lobe arcs of all
-    /// pairs and patterns are collected and integrated together afterwards, which lets the lobe
-    /// kernel keep two arcs in flight (see [`LobeRule::integrals`]). Each pair's result does not
-    /// depend on the other pairs in the batch.
+    /// pairs and patterns are collected and integrated together afterwards, in one run of the
+    /// vector kernel (see [`LobeRule::integrals`]). Each pair's result does not depend on the
+    /// other pairs in the batch.
     pub fn bases(&self, pairs: &[DirectionPair], patterns: &[(Pattern, f64)], out: &mut [Basis]) {
         assert_eq!(pairs.len(), out.len());
         SCRATCH.with(|scratch| {
