@@ -12,7 +12,7 @@ use super::parameters::{Component, ParamSet, Shape};
 use crate::load::samples::Sample;
 use crate::model::frame::FibreFrame;
 use crate::model::topology::{Topology, TopologyMap};
-use crate::model::{self, DirectionPair, ModelId, ShadingModel};
+use crate::model::{self, Basis, DirectionPair, ModelId, ShadingModel};
 use argmin::core::{Error as ArgminError, Jacobian, Operator};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -208,23 +208,39 @@ impl<'a> FitProblem<'a> {
         };
         let has_topology = set.rung.has_topology();
         let tied = set.substrate_tied;
+        // Chunks of samples go through `basis_many` (the cross-section rungs batch their lobe
+        // quadrature); samples with a topology texel are evaluated at their own height.
         let cols: Vec<Columns> = self
             .samples
-            .par_iter()
-            .map(|s| {
-                let frame = FibreFrame::from_azimuth(s.fibre_azimuth.unwrap_or(psi));
-                let pair = DirectionPair::new(&frame, &s.l, &s.v);
-                let b = match s.map_value {
-                    Some(mv) if has_topology => m
-                        .basis_at_height(&pair, topology.texel_height(mv, d))
-                        .unwrap_or_default(),
-                    _ => m.basis(&pair),
-                };
-                if tied {
-                    [b.diffuse + b.substrate, b.specular, 0.0]
+            .par_chunks(512)
+            .flat_map_iter(|chunk| {
+                let pairs: Vec<DirectionPair> = chunk
+                    .iter()
+                    .map(|s| {
+                        let frame = FibreFrame::from_azimuth(s.fibre_azimuth.unwrap_or(psi));
+                        DirectionPair::new(&frame, &s.l, &s.v)
+                    })
+                    .collect();
+                let mut bases = vec![Basis::default(); chunk.len()];
+                if has_topology && chunk.iter().any(|s| s.map_value.is_some()) {
+                    for ((s, pair), b) in chunk.iter().zip(&pairs).zip(bases.iter_mut()) {
+                        *b = match s.map_value {
+                            Some(mv) if has_topology => m
+                                .basis_at_height(pair, topology.texel_height(mv, d))
+                                .unwrap_or_default(),
+                            _ => m.basis(pair),
+                        };
+                    }
                 } else {
-                    [b.diffuse, b.specular, b.substrate]
+                    m.basis_many(&pairs, &mut bases);
                 }
+                bases.into_iter().map(move |b| {
+                    if tied {
+                        [b.diffuse + b.substrate, b.specular, 0.0]
+                    } else {
+                        [b.diffuse, b.specular, b.substrate]
+                    }
+                })
             })
             .collect();
         if let Some(i) = cols.iter().position(|c| c.iter().any(|x| !x.is_finite())) {
