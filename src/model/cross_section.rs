@@ -110,8 +110,8 @@ fn ceil(x: f64) -> f64 {
 
 /// x mod p in [0, p) for p > 0, without a libm call.
 #[inline]
-fn wrap(x: f64, p: f64) -> f64 {
-    let r = x - p * floor(x / p);
+fn wrap(x: f64, p: f64, inv_p: f64) -> f64 {
+    let r = x - p * floor(x * inv_p);
     if r >= p || r < 0.0 {
         0.0
     } else {
@@ -195,6 +195,9 @@ pub struct Projected {
     pub cos: f64,
     /// |w_p| = sqrt(1 - (w.T)^2).
     pub len: f64,
+    /// tan(alpha) and 1/cos(alpha), for the substrate's shadows.
+    pub tan: f64,
+    pub sec: f64,
 }
 
 impl Projected {
@@ -203,13 +206,26 @@ impl Projected {
         // |w_p| of a unit vector: sqrt is exact enough here and far cheaper than hypot
         let len = (w.b * w.b + w.n * w.n).sqrt();
         let inv_len = 1.0 / len;
+        let inv_n = 1.0 / w.n;
         Self {
             // = w.alpha(), inline: atan2 with w.n > 0
             alpha: elementary::atan2_right_half(w.b, w.n),
             sin: w.b * inv_len,
             cos: w.n * inv_len,
             len,
+            tan: w.b * inv_n,
+            sec: len * inv_n,
         }
+    }
+
+    /// A unit direction in the cross-section plane at angle `alpha` from N.
+    pub fn in_plane(alpha: f64) -> Self {
+        let (sin, cos) = alpha.sin_cos();
+        Self::new(&Local {
+            t: 0.0,
+            b: sin,
+            n: cos,
+        })
     }
 }
 
@@ -235,6 +251,8 @@ pub struct Pattern {
     pub rise: f64,
     /// Period width P = 2 h.
     pub period: f64,
+    /// 1 / P.
+    pub inv_period: f64,
 }
 
 impl Pattern {
@@ -247,6 +265,7 @@ impl Pattern {
             step,
             rise: spacing * s,
             period: 2.0 * step,
+            inv_period: 1.0 / (2.0 * step),
         }
     }
 
@@ -298,13 +317,12 @@ impl Pattern {
         let mut pieces = [(0.0, 0.0); 8];
         let mut n = 0;
         for dir in [l, v] {
-            let half = 1.0 / dir.cos;
+            let half = dir.sec;
             if 2.0 * half >= p {
                 return 0.0;
             }
-            let tan = dir.sin / dir.cos;
             for (cx, cy) in [(0.0, 0.0), (self.step, self.rise)] {
-                let start = wrap(cx - (1.0 + cy) * tan - half, p);
+                let start = wrap(cx - (1.0 + cy) * dir.tan - half, p, self.inv_period);
                 let end = start + 2.0 * half;
                 if end <= p {
                     pieces[n] = (start, end);
@@ -317,7 +335,7 @@ impl Pattern {
             }
         }
         let open = complement_within(&mut pieces[..n], 0.0, p);
-        open.total_length() / p
+        open.total_length() * self.inv_period
     }
 }
 
@@ -583,12 +601,7 @@ mod tests {
                 1 => std::f64::consts::FRAC_PI_2 * (1.0 - 1e-9),
                 _ => (u() - 0.5) * std::f64::consts::PI * 0.999_999,
             };
-            let dir = Projected {
-                alpha,
-                sin: alpha.sin(),
-                cos: alpha.cos(),
-                len: 1.0,
-            };
+            let dir = Projected::in_plane(alpha);
             for fibre in [Fibre::Even, Fibre::Odd] {
                 let got = p.unoccluded_arcs(fibre, &dir);
                 let want = unoccluded_arcs_by_rows(&p, fibre, &dir);
@@ -643,7 +656,10 @@ mod tests {
             (-8.0, 4.0),
             (1e6 + 0.25, 2.0),
         ] {
-            assert!((wrap(x, p) - f64::rem_euclid(x, p)).abs() < 1e-9, "{x} {p}");
+            assert!(
+                (wrap(x, p, 1.0 / p) - f64::rem_euclid(x, p)).abs() < 1e-9,
+                "{x} {p}"
+            );
         }
     }
 
@@ -674,12 +690,7 @@ mod tests {
     #[test]
     fn vertical_light_on_touching_flat_fibres_sees_upper_halves() {
         let p = Pattern::flat(2.0);
-        let dir = Projected {
-            alpha: 0.0,
-            sin: 0.0,
-            cos: 1.0,
-            len: 1.0,
-        };
+        let dir = Projected::in_plane(0.0);
         let arcs = p.unoccluded_arcs(Fibre::Even, &dir);
         assert_eq!(arcs.as_slice().len(), 1);
         let (a, b) = arcs.as_slice()[0];
@@ -694,12 +705,7 @@ mod tests {
     fn gapped_fibres_show_substrate_from_above() {
         // d = 4, flat: fibres of width 2 every 4 radii, so half the substrate shows.
         let p = Pattern::flat(4.0);
-        let dir = Projected {
-            alpha: 0.0,
-            sin: 0.0,
-            cos: 1.0,
-            len: 1.0,
-        };
+        let dir = Projected::in_plane(0.0);
         assert!((p.substrate_fraction(&dir, &dir) - 0.5).abs() < 1e-15);
     }
 
@@ -707,12 +713,7 @@ mod tests {
     fn grazing_light_lights_only_a_sliver_and_stays_finite() {
         let p = Pattern::flat(2.0);
         let a: f64 = std::f64::consts::FRAC_PI_2 - 3e-8;
-        let dir = Projected {
-            alpha: a,
-            sin: a.sin(),
-            cos: a.cos(),
-            len: 1.0,
-        };
+        let dir = Projected::in_plane(a);
         let arcs = p.unoccluded_arcs(Fibre::Even, &dir);
         let len = arcs.total_length();
         assert!(len > 0.0 && len < 1e-3, "{len}");
