@@ -14,6 +14,7 @@
 //! dense samples), so the quadrature result is unchanged at the 1e-15 level and stays a smooth
 //! function of the parameters.
 
+use super::elementary::COS_TAYLOR;
 use super::quadrature::GaussLegendre;
 
 /// Multiply-add: fused where the CPU has FMA, plain otherwise (a software fma would be slow).
@@ -77,21 +78,7 @@ fn cos<M: MulAdd>(u: f64) -> f64 {
     let n = t - ROUND_MAGIC;
     let r = M::mul_add(-n, PI_C, M::mul_add(-n, PI_B, M::mul_add(-n, PI_A, u)));
     // Taylor series of cos to r^22: truncation < 1.5708^24 / 24! < 1e-19.
-    const C: [f64; 12] = [
-        1.0,
-        -1.0 / 2.0,
-        1.0 / 24.0,
-        -1.0 / 720.0,
-        1.0 / 40_320.0,
-        -1.0 / 3_628_800.0,
-        1.0 / 479_001_600.0,
-        -1.0 / 87_178_291_200.0,
-        1.0 / 20_922_789_888_000.0,
-        -1.0 / 6_402_373_705_728_000.0,
-        1.0 / 2_432_902_008_176_640_000.0,
-        -1.0 / 1_124_000_727_777_607_680_000.0,
-    ];
-    let c = estrin::<M, 12>(r * r, &C);
+    let c = estrin::<M, 12>(r * r, &COS_TAYLOR);
     // odd n flips the sign
     let sign = (t.to_bits() & 1) << 63;
     f64::from_bits(c.to_bits() ^ sign)
