@@ -119,7 +119,7 @@ fn wrap(x: f64, p: f64, inv_p: f64) -> f64 {
     }
 }
 
-/// asin with the interval ends ±1 (the common case) answered without a libm call.
+/// asin with the interval ends ±1 (the common case) answered without computing one.
 #[inline]
 fn asin_end(s: f64) -> f64 {
     if s <= -1.0 {
@@ -283,11 +283,12 @@ impl Pattern {
     #[inline]
     pub fn occlusion(&self, dir: &Projected) -> Occlusion {
         let (sa, ca) = (dir.sin, dir.cos);
-        let ds = 2.0 * self.step * ca; // row step in s, > 0 above the horizon
-        let da = 2.0 * self.step * sa; // row step along the ray
-                                       // Own row: member m != 0 sits at s = m ds, a = m da, so the members ahead are those with
-                                       // sign(m) = sign(da). The nearest shadows (ds - 1, ds + 1) (or its mirror); when ds < 2
-                                       // the farther ones continue the run past s = +-1, and when ds >= 2 none reaches (-1, 1).
+        // row steps in s (> 0 above the horizon) and along the ray
+        let ds = 2.0 * self.step * ca;
+        let da = 2.0 * self.step * sa;
+        // Own row: member m != 0 sits at s = m ds, a = m da, so the members ahead are those with
+        // sign(m) = sign(da). The nearest shadows (ds - 1, ds + 1) (or its mirror); when ds < 2
+        // the farther ones continue the run past s = +-1, and when ds >= 2 none reaches (-1, 1).
         let own_row = if ds < 2.0 && da > 0.0 {
             Some((ds - 1.0, 1.0))
         } else if ds < 2.0 && da < 0.0 {
