@@ -26,7 +26,6 @@ use std::f64::consts::{FRAC_1_PI, PI};
 /// Closed-form diffuse + Gauss–Legendre specular over one pattern.
 #[derive(Clone, Debug)]
 pub struct GaussSection {
-    order: usize,
     lobe_rule: LobeRule,
     exponent: f64,
     /// Phong normalisation (e + 2) / (2 pi).
@@ -38,16 +37,11 @@ pub struct GaussSection {
 impl GaussSection {
     pub fn new(exponent: f64, order: usize) -> Self {
         Self {
-            order,
             lobe_rule: LobeRule::new(&GaussLegendre::new(order)),
             exponent,
             norm: (exponent + 2.0) / (2.0 * PI),
             lobe_floor: (1e-15f64.ln() / exponent).exp(),
         }
-    }
-
-    pub fn order(&self) -> usize {
-        self.order
     }
 
     /// What the specular lobe needs from a light/view pair: the same for every height, so a
