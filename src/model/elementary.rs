@@ -15,6 +15,43 @@
 
 use std::f64::consts::FRAC_PI_2;
 
+// Per reduction (none, then fdlibm's four): atan of the breakpoint in two parts, and the
+// coefficients of t = (a |y| + b x) / (c |y| + d x).
+const ATAN_HI: [f64; 5] = [
+    0.0,
+    4.636_476_090_008_061e-1,
+    std::f64::consts::FRAC_PI_4,
+    9.827_937_232_473_29e-1,
+    FRAC_PI_2,
+];
+const ATAN_LO: [f64; 5] = [
+    0.0,
+    2.269_877_745_296_168_7e-17,
+    3.061_616_997_868_383e-17,
+    1.390_331_103_123_099_8e-17,
+    6.123_233_995_736_766e-17,
+];
+const ABCD: [[f64; 4]; 5] = [
+    [1.0, 0.0, 0.0, 1.0],
+    [2.0, -1.0, 1.0, 2.0],
+    [1.0, -1.0, 1.0, 1.0],
+    [1.0, -1.5, 1.5, 1.0],
+    [0.0, -1.0, 1.0, 0.0],
+];
+const AT: [f64; 11] = [
+    3.333_333_333_333_293e-1,
+    -1.999_999_999_987_648_3e-1,
+    1.428_571_427_250_346_6e-1,
+    -1.111_111_040_546_235_6e-1,
+    9.090_887_133_436_507e-2,
+    -7.691_876_205_044_83e-2,
+    6.661_073_137_387_531e-2,
+    -5.833_570_133_790_573_5e-2,
+    4.976_877_994_615_932_4e-2,
+    -3.653_157_274_421_691_6e-2,
+    1.628_582_011_536_578_2e-2,
+];
+
 /// atan2(y, x) for x >= 0 (not both zero): in [-pi/2, pi/2], within ~2 ulp.
 ///
 /// fdlibm's s_atan.c applied to y/x, with each of its reductions t = (a ax + b)/(c ax + d)
@@ -23,42 +60,6 @@ use std::f64::consts::FRAC_PI_2;
 /// factor two of each other, so it is exact (Sterbenz), as in fdlibm.
 #[inline]
 pub fn atan2_right_half(y: f64, x: f64) -> f64 {
-    // Per reduction (none, then fdlibm's four): atan of the breakpoint in two parts, and the
-    // coefficients of t = (a |y| + b x) / (c |y| + d x).
-    const ATAN_HI: [f64; 5] = [
-        0.0,
-        4.636_476_090_008_061e-1,
-        std::f64::consts::FRAC_PI_4,
-        9.827_937_232_473_29e-1,
-        FRAC_PI_2,
-    ];
-    const ATAN_LO: [f64; 5] = [
-        0.0,
-        2.269_877_745_296_168_7e-17,
-        3.061_616_997_868_383e-17,
-        1.390_331_103_123_099_8e-17,
-        6.123_233_995_736_766e-17,
-    ];
-    const ABCD: [[f64; 4]; 5] = [
-        [1.0, 0.0, 0.0, 1.0],
-        [2.0, -1.0, 1.0, 2.0],
-        [1.0, -1.0, 1.0, 1.0],
-        [1.0, -1.5, 1.5, 1.0],
-        [0.0, -1.0, 1.0, 0.0],
-    ];
-    const AT: [f64; 11] = [
-        3.333_333_333_333_293e-1,
-        -1.999_999_999_987_648_3e-1,
-        1.428_571_427_250_346_6e-1,
-        -1.111_111_040_546_235_6e-1,
-        9.090_887_133_436_507e-2,
-        -7.691_876_205_044_83e-2,
-        6.661_073_137_387_531e-2,
-        -5.833_570_133_790_573_5e-2,
-        4.976_877_994_615_932_4e-2,
-        -3.653_157_274_421_691_6e-2,
-        1.628_582_011_536_578_2e-2,
-    ];
     debug_assert!(x >= 0.0);
     let ay = y.abs();
     // the interval by counting, not by branching: the branches mispredict on varied inputs
@@ -68,6 +69,35 @@ pub fn atan2_right_half(y: f64, x: f64) -> f64 {
         + (ay >= 2.4375 * x) as usize;
     let [a, b, c, d] = ABCD[id];
     let t = (a * ay + b * x) / (c * ay + d * x);
+    let r = atan_reduced(t, ATAN_HI[id], ATAN_LO[id]);
+    r.copysign(y)
+}
+
+/// atan2_right_half with the reduction chosen by selects instead of a table index, for lane
+/// loops the compiler vectorises (a table lookup per lane would be a gather). Same result.
+#[inline(always)]
+pub fn atan2_right_half_lanes(y: f64, x: f64) -> f64 {
+    let ay = y.abs();
+    let mut k = [
+        ABCD[0][0], ABCD[0][1], ABCD[0][2], ABCD[0][3], ATAN_HI[0], ATAN_LO[0],
+    ];
+    for (id, bound) in [0.4375, 0.6875, 1.1875, 2.4375].into_iter().enumerate() {
+        let hit = ay >= bound * x;
+        let [a, b, c, d] = ABCD[id + 1];
+        for (kj, new) in k
+            .iter_mut()
+            .zip([a, b, c, d, ATAN_HI[id + 1], ATAN_LO[id + 1]])
+        {
+            *kj = if hit { new } else { *kj };
+        }
+    }
+    let t = (k[0] * ay + k[1] * x) / (k[2] * ay + k[3] * x);
+    atan_reduced(t, k[4], k[5]).copysign(y)
+}
+
+/// fdlibm's atan after the reduction: atan(t) + (hi + lo), with hi + lo = atan of the breakpoint.
+#[inline(always)]
+fn atan_reduced(t: f64, hi: f64, lo: f64) -> f64 {
     let z = t * t;
     let w = z * z;
     // fdlibm's odd/even split, each half by Estrin's scheme (shorter dependency chains; this
@@ -76,8 +106,7 @@ pub fn atan2_right_half(y: f64, x: f64) -> f64 {
     let w4 = w2 * w2;
     let s1 = z * ((AT[0] + w * AT[2]) + w2 * (AT[4] + w * AT[6]) + w4 * (AT[8] + w * AT[10]));
     let s2 = w * ((AT[1] + w * AT[3]) + w2 * (AT[5] + w * AT[7]) + w4 * AT[9]);
-    let r = ATAN_HI[id] - ((t * (s1 + s2) - ATAN_LO[id]) - t);
-    r.copysign(y)
+    hi - ((t * (s1 + s2) - lo) - t)
 }
 
 /// atan(x) for finite x.
@@ -210,6 +239,20 @@ mod tests {
         }
         assert_eq!(atan(0.0), 0.0);
         assert_eq!(atan2_right_half(0.0, 1.0), 0.0);
+    }
+
+    #[test]
+    fn lane_form_of_atan2_is_the_same_function() {
+        for a in grid(-FRAC_PI_2, FRAC_PI_2, 100_000) {
+            for r in [1e-300, 0.3, 1.0, 7.0] {
+                let (y, x) = (r * a.sin(), r * a.cos().max(0.0));
+                assert_eq!(
+                    atan2_right_half_lanes(y, x).to_bits(),
+                    atan2_right_half(y, x).to_bits(),
+                    "atan2({y}, {x})"
+                );
+            }
+        }
     }
 
     #[test]
