@@ -18,6 +18,7 @@
 
 use super::cross_section::{diffuse_kernel, Fibre, Pattern, Projected, SectionPair};
 use super::elementary;
+use super::frame::Local;
 use super::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
 use super::quadrature::GaussLegendre;
 use super::topology::elevation_from_height;
@@ -47,7 +48,6 @@ impl GaussSection {
 
     /// What the specular lobe needs from a light/view pair (the same for every height), one pair
     /// at a time: the definition [`GaussSection::prepare`] computes in lanes.
-    #[cfg(test)]
     fn lobe(&self, sp: &SectionPair) -> Lobe {
         Lobe {
             cos_delta: sp.cos_delta(),
@@ -104,8 +104,9 @@ impl GaussSection {
 
     /// [`SectionPair::new`] and [`GaussSection::lobe`] of every pair, eight pairs at a time in
     /// lanes the compiler vectorises (AVX2 when the CPU has it): one at a time, their two atan2,
-    /// acos, square roots and divisions per pair were latency-bound scalar code. Pairs below the
-    /// horizon get finite placeholders (the caller skips them).
+    /// acos, square roots and divisions per pair were latency-bound scalar code. A batch shorter
+    /// than eight (a single-pair `basis` call) goes the scalar way. Pairs below the horizon get
+    /// finite placeholders (the caller skips them).
     fn prepare(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
         #[cfg(target_arch = "x86_64")]
         {
@@ -127,14 +128,12 @@ impl GaussSection {
     fn prepare_lanes(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
         const L: usize = 8;
         out.clear();
-        for chunk in pairs.chunks(L) {
-            // components, lane j = pair j; a padded lane holds directions along N
-            let pad = |j: usize| j >= chunk.len();
-            let at = |j: usize| &chunk[j.min(chunk.len() - 1)];
-            let (mut lt, mut lb, mut ln) = ([0.0; L], [0.0; L], [1.0; L]);
-            let (mut vt, mut vb, mut vn) = ([0.0; L], [0.0; L], [1.0; L]);
-            for j in (0..L).filter(|&j| !pad(j)) {
-                let p = at(j);
+        let mut chunks = pairs.chunks_exact(L);
+        for chunk in &mut chunks {
+            // components, lane j = pair j
+            let (mut lt, mut lb, mut ln) = ([0.0; L], [0.0; L], [0.0; L]);
+            let (mut vt, mut vb, mut vn) = ([0.0; L], [0.0; L], [0.0; L]);
+            for (j, p) in chunk.iter().enumerate() {
                 (lt[j], lb[j], ln[j]) = (p.l.t, p.l.b, p.l.n);
                 (vt[j], vb[j], vn[j]) = (p.v.t, p.v.b, p.v.n);
             }
@@ -179,7 +178,7 @@ impl GaussSection {
                     ok as u8 as f64,
                 ];
             }
-            for j in 0..chunk.len() {
+            for j in 0..L {
                 let p = |a: [f64; 6]| Projected {
                     alpha: a[0],
                     sin: a[1],
@@ -204,6 +203,21 @@ impl GaussSection {
                     },
                 ));
             }
+        }
+        // a short batch or the tail: one pair at a time (the same values, bit for bit); pairs
+        // below the horizon get the values of a pair along N
+        const UP: Local = Local {
+            t: 0.0,
+            b: 0.0,
+            n: 1.0,
+        };
+        for pair in chunks.remainder() {
+            let sp = if pair.above_horizon() {
+                SectionPair::new(&pair.l, &pair.v)
+            } else {
+                SectionPair::new(&UP, &UP)
+            };
+            out.push((sp, self.lobe(&sp)));
         }
     }
 
