@@ -449,25 +449,15 @@ impl SectionPair {
     /// The th-window (centred on the peak at (al + av)/2) where r.v > `fraction` of its peak
     /// value; `None` when r.v never exceeds it on the front arcs.
     pub fn lobe_window(&self, fraction: f64) -> Option<(f64, f64)> {
-        let k = self.l.len * self.v.len;
-        let cos_delta = self.cos_delta();
-        let peak = k * (cos_delta + 1.0) - self.cos_lv;
-        if !(peak > 0.0) || !(k > 0.0) {
-            return None;
-        }
-        let c = (fraction * peak + self.cos_lv) / k - cos_delta;
+        let (half, some) = lobe_half_width(
+            self.l.len * self.v.len,
+            self.cos_delta(),
+            self.cos_lv,
+            fraction,
+            elementary::atan2_right_half,
+        );
         let centre = 0.5 * (self.l.alpha + self.v.alpha);
-        if c <= -1.0 {
-            return Some((
-                centre - std::f64::consts::FRAC_PI_2,
-                centre + std::f64::consts::FRAC_PI_2,
-            ));
-        }
-        if c >= 1.0 {
-            return None;
-        }
-        let half = 0.5 * elementary::acos(c);
-        Some((centre - half, centre + half))
+        some.then_some((centre - half, centre + half))
     }
 
     /// The arcs of `fibre` that are both visible and lit.
@@ -489,6 +479,26 @@ impl SectionPair {
         }
         vis.intersect(&light.unoccluded_arcs(fibre))
     }
+}
+
+/// Half-width of the lobe window of [`SectionPair::lobe_window`] and whether there is one, from
+/// k = |l_p||v_p|, cos(alpha_l - alpha_v) and l.v, without branches so lane loops can use it.
+/// `atan2` is [`elementary::atan2_right_half`] or its lane form (the same values).
+#[inline(always)]
+pub fn lobe_half_width(
+    k: f64,
+    cos_delta: f64,
+    cos_lv: f64,
+    fraction: f64,
+    atan2: impl Fn(f64, f64) -> f64,
+) -> (f64, bool) {
+    let peak = k * (cos_delta + 1.0) - cos_lv;
+    // the window is where cos(2 th - al - av) > c; all of the front arc when c <= -1
+    let c = (fraction * peak + cos_lv) / k - cos_delta;
+    let cc = c.clamp(-1.0, 1.0);
+    // acos(c) / 2 = atan2(sqrt(1 - c), sqrt(1 + c))
+    let half = atan2((1.0 - cc).sqrt(), (1.0 + cc).sqrt());
+    (half, (peak > 0.0) & (k > 0.0) & (c < 1.0))
 }
 
 /// Integral over [t0, t1] of cos(th - a) cos(th - b) dth, the diffuse kernel.

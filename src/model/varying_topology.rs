@@ -16,7 +16,9 @@
 //! a million-fold: the fit's standard errors depended on the start.) At H = 0 the two fibres of a
 //! period have identical arcs, so one is computed and counted twice.
 
-use super::cross_section::{diffuse_kernel, Fibre, Pattern, Projected, SectionPair};
+use super::cross_section::{
+    diffuse_kernel, lobe_half_width, Fibre, Pattern, Projected, SectionPair,
+};
 use super::elementary;
 use super::frame::Local;
 use super::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
@@ -156,27 +158,19 @@ impl GaussSection {
                     len * inv_n,
                 ];
             }
-            let mut lobe = [[0.0; 6]; L]; // cos_lv, cos_delta, sigma, k2, half, window ok
+            let mut lobe = [[0.0; 3]; L]; // cos_lv, half, window exists
             for j in 0..L {
                 let (l, v) = (proj[j], proj[j + L]);
                 let cos_lv = lt[j] * vt[j] + lb[j] * vb[j] + ln[j] * vn[j];
                 let cos_delta = l[2] * v[2] + l[1] * v[1];
-                // the window of SectionPair::lobe_window, by selects
-                let k = l[3] * v[3];
-                let peak = k * (cos_delta + 1.0) - cos_lv;
-                let c = (self.lobe_floor * peak + cos_lv) / k - cos_delta;
-                let cc = c.clamp(-1.0, 1.0);
-                // acos(c) / 2 = atan2(sqrt(1 - c), sqrt(1 + c))
-                let half = elementary::atan2_right_half_lanes((1.0 - cc).sqrt(), (1.0 + cc).sqrt());
-                let ok = (peak > 0.0) & (k > 0.0) & (c < 1.0);
-                lobe[j] = [
-                    cos_lv,
+                let (half, some) = lobe_half_width(
+                    l[3] * v[3],
                     cos_delta,
-                    l[0] + v[0],
-                    2.0 * k,
-                    half,
-                    ok as u8 as f64,
-                ];
+                    cos_lv,
+                    self.lobe_floor,
+                    elementary::atan2_right_half_lanes,
+                );
+                lobe[j] = [cos_lv, half, some as u8 as f64];
             }
             for j in 0..L {
                 let p = |a: [f64; 6]| Projected {
@@ -187,19 +181,21 @@ impl GaussSection {
                     tan: a[4],
                     sec: a[5],
                 };
-                let [cos_lv, cos_delta, sigma, k2, half, ok] = lobe[j];
+                let sp = SectionPair {
+                    l: p(proj[j]),
+                    v: p(proj[j + L]),
+                    cos_lv: lobe[j][0],
+                };
+                let (half, some) = (lobe[j][1], lobe[j][2] != 0.0);
+                let sigma = sp.l.alpha + sp.v.alpha;
                 let centre = 0.5 * sigma;
                 out.push((
-                    SectionPair {
-                        l: p(proj[j]),
-                        v: p(proj[j + L]),
-                        cos_lv,
-                    },
+                    sp,
                     Lobe {
-                        cos_delta,
+                        cos_delta: sp.cos_delta(),
                         sigma,
-                        k2,
-                        window: (ok != 0.0).then_some((centre - half, centre + half)),
+                        k2: 2.0 * sp.l.len * sp.v.len,
+                        window: some.then_some((centre - half, centre + half)),
                     },
                 ));
             }
