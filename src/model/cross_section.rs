@@ -586,13 +586,9 @@ mod tests {
 
     #[test]
     fn specialised_occlusion_matches_the_row_generic_form() {
-        let mut seed = 0x9E37_79B9_7F4A_7C15u64;
-        let mut u = move || {
-            seed ^= seed << 13;
-            seed ^= seed >> 7;
-            seed ^= seed << 17;
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(7);
+        let mut u = move || rng.random::<f64>();
         let mut compared = 0;
         for i in 0..20_000 {
             let d = if i % 5 == 0 {
