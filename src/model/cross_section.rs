@@ -63,17 +63,13 @@ impl Arcs {
     pub fn intersect(&self, other: &Arcs) -> Arcs {
         let mut out = Arcs::default();
         let (x, y) = (self.as_slice(), other.as_slice());
-        let (mut i, mut j) = (0, 0);
-        while i < x.len() && j < y.len() {
-            let lo = x[i].0.max(y[j].0);
-            let hi = x[i].1.min(y[j].1);
-            out.push(lo, hi);
-            if x[i].1 < y[j].1 {
-                i += 1;
-            } else {
-                j += 1;
-            }
-        }
+        for_each_intersection(
+            |i| x[i],
+            x.len(),
+            |j| y[j],
+            y.len(),
+            |lo, hi| out.push(lo, hi),
+        );
         out
     }
 
@@ -87,19 +83,64 @@ impl Arcs {
     }
 }
 
+/// Calls `f(lo, hi)` for each non-empty intersection of an interval of x with one of y, in
+/// order. x and y are sorted sequences of intervals (i -> (lo, hi)), with no overlaps inside each
+/// sequence; intervals that are empty are allowed and contribute nothing.
+#[inline]
+fn for_each_intersection(
+    x: impl Fn(usize) -> (f64, f64),
+    nx: usize,
+    y: impl Fn(usize) -> (f64, f64),
+    ny: usize,
+    mut f: impl FnMut(f64, f64),
+) {
+    let (mut i, mut j) = (0, 0);
+    while i < nx && j < ny {
+        let ((xa, xb), (ya, yb)) = (x(i), y(j));
+        let (lo, hi) = (xa.max(ya), xb.min(yb));
+        if hi > lo {
+            f(lo, hi);
+        }
+        if xb < yb {
+            i += 1;
+        } else {
+            j += 1;
+        }
+    }
+}
+
+/// The arcs seen along one direction and lit along the other, from both directions' gaps with
+/// their asin already taken ([`arcs_from_asin_gaps`]'s input): `f(lo, hi)` for each, in order.
+/// The same arcs as [`SectionPair::seen_and_lit_with`], without building the sets.
+#[inline]
+pub fn for_each_seen_and_lit(
+    view: &[f64],
+    alpha_v: f64,
+    light: &[f64],
+    alpha_l: f64,
+    f: impl FnMut(f64, f64),
+) {
+    for_each_intersection(
+        |i| (alpha_v + view[2 * i], alpha_v + view[2 * i + 1]),
+        view.len() / 2,
+        |j| (alpha_l + light[2 * j], alpha_l + light[2 * j + 1]),
+        light.len() / 2,
+        f,
+    )
+}
+
 /// floor(x) without a libm call (baseline x86-64 has no rounding instruction, and this is on the
-/// hot path). Exact: beyond 2^52 every f64 is an integer.
+/// hot path; `x as i64` would add Rust's saturation checks). Adding 1.5 * 2^52 rounds |x| < 2^51
+/// to the nearest integer; one step down where that rounded up. Larger |x| (never reached on the
+/// model's path) go to std.
 #[inline]
 fn floor(x: f64) -> f64 {
-    if x.abs() < 4.5e15 {
-        let t = x as i64 as f64;
-        if t > x {
-            t - 1.0
-        } else {
-            t
-        }
+    const MAGIC: f64 = 6_755_399_441_055_744.0;
+    if x.abs() < 2_251_799_813_685_248.0 {
+        let r = (x + MAGIC) - MAGIC;
+        r - (r > x) as u8 as f64
     } else {
-        x
+        x.floor()
     }
 }
 
@@ -119,20 +160,16 @@ fn wrap(x: f64, p: f64, inv_p: f64) -> f64 {
     }
 }
 
-/// asin with the interval ends ±1 (the common case) answered without computing one.
-#[inline]
-fn asin_end(s: f64) -> f64 {
-    if s <= -1.0 {
-        -std::f64::consts::FRAC_PI_2
-    } else if s >= 1.0 {
-        std::f64::consts::FRAC_PI_2
-    } else {
-        elementary::asin(s)
-    }
-}
+/// Gaps in s of at most three shadows: at most four intervals, as [lo0, hi0, lo1, hi1, ..].
+pub type Gaps = ([f64; 2 * MAX_GAPS], usize);
 
-/// The gaps that `shadows` (in s = sin(th - alpha)) leave in (-1, 1), as arcs of th.
-fn complement_asin(shadows: &mut [(f64, f64)], alpha: f64) -> Arcs {
+/// Three shadow intervals leave at most four gaps.
+pub const MAX_GAPS: usize = 4;
+
+/// The gaps that `shadows` (in s = sin(th - alpha)) leave in (-1, 1): sorted, non-empty, with
+/// ends in [-1, 1].
+#[inline]
+fn complement_s(shadows: &mut [(f64, f64)]) -> Gaps {
     // at most three: a sorting network
     if shadows.len() == 3 {
         sort2(shadows, 1, 2);
@@ -143,21 +180,33 @@ fn complement_asin(shadows: &mut [(f64, f64)], alpha: f64) -> Arcs {
     if shadows.len() == 3 {
         sort2(shadows, 1, 2);
     }
-    let mut out = Arcs::default();
+    let mut out = [0.0; 2 * MAX_GAPS];
+    let mut n = 0;
     let mut cursor = -1.0;
     for &(a, b) in shadows.iter() {
         if a > cursor {
-            out.push(alpha + asin_end(cursor), alpha + asin_end(a.min(1.0)));
+            (out[2 * n], out[2 * n + 1]) = (cursor, a.min(1.0));
+            n += 1;
         }
         cursor = f64::max(cursor, b);
         if cursor >= 1.0 {
-            return out;
+            return (out, n);
         }
     }
-    out.push(
-        alpha + asin_end(cursor),
-        alpha + std::f64::consts::FRAC_PI_2,
-    );
+    (out[2 * n], out[2 * n + 1]) = (cursor, 1.0);
+    (out, n + 1)
+}
+
+/// Arcs of th = alpha + asin(s) from gap ends already turned into asin(s) (`ends`, flattened
+/// pairs): the one definition shared by the scalar path ([`Occlusion::unoccluded_arcs`]) and
+/// the batched one, which computes the asin of a whole batch in lanes. Arcs that rounding made
+/// empty are dropped.
+#[inline]
+pub fn arcs_from_asin_gaps(ends: &[f64], alpha: f64) -> Arcs {
+    let mut out = Arcs::default();
+    for e in ends.chunks_exact(2) {
+        out.push(alpha + e[0], alpha + e[1]);
+    }
     out
 }
 
@@ -320,10 +369,11 @@ impl Pattern {
         } else {
             (arcs[2].0, wv, [arcs[0], arcs[1], arcs[3]])
         };
-        let mut x = others.map(|(s, w)| {
+        let cut = |(s, w): (f64, f64)| {
             let r = wrap(s - origin, p, self.inv_period);
             (r, (r + w).min(p))
-        });
+        };
+        let mut x = [cut(others[0]), cut(others[1]), cut(others[2])];
         sort2(&mut x, 1, 2);
         sort2(&mut x, 0, 1);
         sort2(&mut x, 1, 2);
@@ -356,6 +406,23 @@ impl Occlusion {
     /// See [`Pattern::unoccluded_arcs`].
     #[inline]
     pub fn unoccluded_arcs(&self, fibre: Fibre) -> Arcs {
+        let (mut ends, n) = self.gaps(fibre);
+        let ends = &mut ends[..2 * n];
+        for e in ends.iter_mut() {
+            *e = elementary::asin(*e);
+        }
+        arcs_from_asin_gaps(ends, self.dir.alpha)
+    }
+
+    /// The direction's angle alpha from N.
+    pub fn alpha(&self) -> f64 {
+        self.dir.alpha
+    }
+
+    /// The unoccluded front arc of `fibre` as gaps in s = sin(th - alpha) (see
+    /// [`Pattern::unoccluded_arcs`]); th = alpha + asin(s).
+    #[inline]
+    pub fn gaps(&self, fibre: Fibre) -> Gaps {
         let (sa, ca) = (self.dir.sin, self.dir.cos);
         let (ds, da) = (self.ds, self.da);
         // At most one shadow from the own row and two from the other row.
@@ -402,7 +469,7 @@ impl Occlusion {
                 }
             }
         }
-        complement_asin(&mut shadows[..n], self.dir.alpha)
+        complement_s(&mut shadows[..n])
     }
 }
 
@@ -730,6 +797,15 @@ mod tests {
             1e17,
             -1e17,
             4.4e15 + 0.5,
+            2_251_799_813_685_247.5,
+            -2_251_799_813_685_247.5,
+            2_251_799_813_685_248.5,
+            0.5,
+            -0.5,
+            1.5,
+            -2.5,
+            1e-300,
+            -1e-300,
         ] {
             assert_eq!(floor(x), x.floor(), "{x}");
             assert_eq!(ceil(x), x.ceil(), "{x}");

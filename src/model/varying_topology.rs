@@ -17,7 +17,7 @@
 //! period have identical arcs, so one is computed and counted twice.
 
 use super::cross_section::{
-    diffuse_kernel, lobe_half_width, Fibre, Pattern, Projected, SectionPair,
+    diffuse_kernel, for_each_seen_and_lit, lobe_half_width, Fibre, Pattern, Projected, SectionPair,
 };
 use super::elementary;
 use super::frame::Local;
@@ -60,40 +60,66 @@ impl GaussSection {
     }
 
     /// The bases of `pairs` (written to `out`) for the mean over `patterns` ((pattern, weight)
-    /// pairs). Diffuse and substrate are computed pair by pair; the specular lobe arcs of all
-    /// pairs and patterns are collected and integrated together afterwards, in one run of the
-    /// vector kernel (see [`LobeRule::integrals`]). Each pair's result does not depend on the
-    /// other pairs in the batch.
+    /// pairs), in three passes over the batch, so that the latency-bound scalar steps become
+    /// lane loops:
+    /// 1. per pair and pattern, the occlusion gaps of each fibre in s = sin(th - alpha);
+    /// 2. the asin of every gap end, in lanes ([`elementary::asin_in_place`]);
+    /// 3. per pair and pattern, the seen-and-lit arcs: diffuse in closed form and the substrate,
+    ///    while the specular lobe arcs of all pairs and patterns are collected and integrated
+    ///    together at the end, in one run of the vector kernel (see [`LobeRule::integrals`]).
+    ///
+    /// Each pair's result does not depend on the other pairs in the batch.
     pub fn bases(&self, pairs: &[DirectionPair], patterns: &[(Pattern, f64)], out: &mut [Basis]) {
         assert_eq!(pairs.len(), out.len());
         SCRATCH.with(|scratch| {
             let mut scratch = scratch.borrow_mut();
             let LobeScratch {
                 prepared,
+                visits,
+                ends,
                 arcs,
                 dest,
                 values,
             } = &mut *scratch;
             self.prepare(pairs, prepared);
-            arcs.clear();
-            dest.clear();
-            for (i, ((pair, o), (sp, lobe))) in pairs
-                .iter()
-                .zip(out.iter_mut())
-                .zip(prepared.iter())
-                .enumerate()
-            {
-                *o = Basis::default();
+            visits.clear();
+            ends.clear();
+            for (i, (pair, (sp, _))) in pairs.iter().zip(prepared.iter()).enumerate() {
                 if !pair.above_horizon() {
                     continue;
                 }
-                for (pattern, w) in patterns {
-                    let b = self.basis_deferred(pattern, sp, lobe, *w, &mut |arc, factor| {
-                        arcs.push(arc);
-                        dest.push((i, factor));
-                    });
-                    *o = *o + b;
+                for (k, (pattern, _)) in patterns.iter().enumerate() {
+                    if let Some(gaps) = Self::gaps(pattern, sp, ends) {
+                        visits.push(Visit {
+                            pair: i,
+                            pattern: k,
+                            gaps,
+                        });
+                    }
                 }
+            }
+            elementary::asin_in_place(ends);
+            out.fill(Basis::default());
+            arcs.clear();
+            dest.clear();
+            let mut at = 0;
+            for visit in visits.iter() {
+                let (sp, lobe) = &prepared[visit.pair];
+                let (pattern, weight) = &patterns[visit.pattern];
+                let (b, used) = self.visit_basis(
+                    pattern,
+                    sp,
+                    lobe,
+                    *weight,
+                    &visit.gaps,
+                    &ends[at..],
+                    &mut |arc, factor| {
+                        arcs.push(arc);
+                        dest.push((visit.pair, factor));
+                    },
+                );
+                at += used;
+                out[visit.pair] = out[visit.pair] + b;
             }
             values.clear();
             values.resize(arcs.len(), 0.0);
@@ -217,21 +243,55 @@ impl GaussSection {
         }
     }
 
-    /// One pattern's basis times `weight`, with the specular part left out: each lobe arc goes
-    /// to `sink` with the factor that turns its integral into its share of `Basis::specular`.
+    /// Pass 1 of [`GaussSection::bases`] for one pair and pattern: the gaps (in s) that the
+    /// pattern's occluders leave on each fibre, seen along v and lit along l, appended to `ends`
+    /// (per fibre: the view's, then the light's); their counts, or `None` when the pattern
+    /// contributes nothing.
     #[inline]
-    fn basis_deferred(
+    fn gaps(pattern: &Pattern, sp: &SectionPair, ends: &mut Vec<f64>) -> Option<FibreGaps> {
+        if !(pattern.period * sp.cos_alpha_product() > 0.0) {
+            return None;
+        }
+        let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
+        let mut counts = [[0; 2]; 2];
+        for (count, &(fibre, _)) in counts.iter_mut().zip(fibres(pattern)) {
+            // (a fixed-size copy, then the unused tail dropped: no memcpy call)
+            let (seen, n_seen) = view.gaps(fibre);
+            let at = ends.len();
+            ends.extend_from_slice(&seen);
+            ends.truncate(at + 2 * n_seen);
+            // nothing seen: the light's gaps are not needed
+            let n_lit = if n_seen > 0 {
+                let (lit, n_lit) = light.gaps(fibre);
+                let at = ends.len();
+                ends.extend_from_slice(&lit);
+                ends.truncate(at + 2 * n_lit);
+                n_lit
+            } else {
+                0
+            };
+            *count = [n_seen as u8, n_lit as u8];
+        }
+        Some(counts)
+    }
+
+    /// Pass 3 of [`GaussSection::bases`] for one pair and pattern: the basis times `weight`
+    /// from the gap ends' asin (`ends`, starting at this pattern's), with the specular part left
+    /// out: each lobe arc goes to `sink` with the factor that turns its integral into its share
+    /// of `Basis::specular`. Also returns how many ends it used.
+    #[allow(clippy::too_many_arguments)]
+    #[inline]
+    fn visit_basis(
         &self,
         pattern: &Pattern,
         sp: &SectionPair,
         lobe: &Lobe,
         weight: f64,
+        gaps: &FibreGaps,
+        ends: &[f64],
         sink: &mut impl FnMut(LobeArc, f64),
-    ) -> Basis {
+    ) -> (Basis, usize) {
         let denom = pattern.period * sp.cos_alpha_product();
-        if !(denom > 0.0) {
-            return Basis::default();
-        }
         let (al, av) = (sp.l.alpha, sp.v.alpha);
         let Lobe {
             cos_delta,
@@ -239,13 +299,6 @@ impl GaussSection {
             k2,
             window,
         } = *lobe;
-        // At H = 0 the odd row is the even row moved by one step: both fibres have the same
-        // arcs, so one fibre is computed and counted twice.
-        let fibres: &[(Fibre, f64)] = if pattern.rise == 0.0 {
-            &[(Fibre::Even, 2.0)]
-        } else {
-            &[(Fibre::Even, 1.0), (Fibre::Odd, 1.0)]
-        };
         let shape = LobeShape {
             cos_delta,
             sigma,
@@ -254,25 +307,51 @@ impl GaussSection {
             exponent: self.exponent,
         };
         let mut diffuse = 0.0;
-        let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
-        for &(fibre, count) in fibres {
-            let arcs = SectionPair::seen_and_lit_with(&view, &light, fibre);
-            for &(a, b) in arcs.as_slice() {
+        let mut at = 0;
+        for (&[n_seen, n_lit], &(_, count)) in gaps.iter().zip(fibres(pattern)) {
+            let seen = &ends[at..at + 2 * n_seen as usize];
+            at += seen.len();
+            let lit = &ends[at..at + 2 * n_lit as usize];
+            at += lit.len();
+            let factor = weight * count * self.norm / denom;
+            for_each_seen_and_lit(seen, av, lit, al, |a, b| {
                 diffuse += count * diffuse_kernel(a, b, al, av, cos_delta);
-            }
-            if let Some((w0, w1)) = window {
-                let factor = weight * count * self.norm / denom;
-                for &(a, b) in arcs.clip(w0, w1).as_slice() {
-                    sink(LobeArc { a, b, shape }, factor);
+                if let Some((w0, w1)) = window {
+                    let (a, b) = (a.max(w0), b.min(w1));
+                    if b > a {
+                        sink(LobeArc { a, b, shape }, factor);
+                    }
                 }
-            }
+            });
         }
-        Basis {
+        let basis = Basis {
             diffuse: weight * FRAC_1_PI * diffuse / denom,
             specular: 0.0,
             substrate: weight * FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
-        }
+        };
+        (basis, at)
     }
+}
+
+/// The fibres of a pattern's period with the number of times each is counted. At H = 0 the odd
+/// row is the even row moved by one step: both fibres have the same arcs, so one fibre is
+/// computed and counted twice.
+fn fibres(pattern: &Pattern) -> &'static [(Fibre, f64)] {
+    if pattern.rise == 0.0 {
+        &[(Fibre::Even, 2.0)]
+    } else {
+        &[(Fibre::Even, 1.0), (Fibre::Odd, 1.0)]
+    }
+}
+
+/// Per fibre of a pattern (see [`fibres`]): how many gaps it has seen along v and lit along l.
+type FibreGaps = [[u8; 2]; 2];
+
+/// One (pair, pattern) of a batch that contributes, with its gap counts.
+struct Visit {
+    pair: usize,
+    pattern: usize,
+    gaps: FibreGaps,
 }
 
 /// Per-thread buffers of [`GaussSection::bases`], reused between calls (a single-pair call must
@@ -280,6 +359,9 @@ impl GaussSection {
 #[derive(Default)]
 struct LobeScratch {
     prepared: Vec<(SectionPair, Lobe)>,
+    visits: Vec<Visit>,
+    /// Gap ends of all visits, in s, then their asin.
+    ends: Vec<f64>,
     arcs: Vec<LobeArc>,
     dest: Vec<(usize, f64)>,
     values: Vec<f64>,
