@@ -138,11 +138,22 @@ impl GaussSection {
     fn prepare(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
         #[cfg(target_arch = "x86_64")]
         {
+            if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq")
+            {
+                // SAFETY: the CPU has the features the function is compiled for.
+                return unsafe { self.prepare_avx512(pairs, out) };
+            }
             if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
                 // SAFETY: the CPU has the features the function is compiled for.
                 return unsafe { self.prepare_avx2(pairs, out) };
             }
         }
+        self.prepare_lanes(pairs, out)
+    }
+
+    #[cfg(target_arch = "x86_64")]
+    #[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
+    fn prepare_avx512(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
         self.prepare_lanes(pairs, out)
     }
 
