@@ -577,11 +577,44 @@ pub fn lobe_half_width(
 /// `cos_ab` is cos(a - b), which the caller has from the directions' sines and cosines.
 #[inline]
 pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64, cos_ab: f64) -> f64 {
-    let d = t1 - t0;
-    if d > 0.5 {
-        0.5 * (d * cos_ab + elementary::cos(t0 + t1 - a - b) * elementary::sin(d))
+    let arc = DiffuseArc {
+        t0,
+        t1,
+        a,
+        b,
+        cos_ab,
+    };
+    if arc.t1 - arc.t0 > 0.5 {
+        arc.long_form()
     } else {
-        let m = 0.5 * (t0 + t1);
+        arc.short_form()
+    }
+}
+
+/// The arguments of one [`diffuse_kernel`], for [`diffuse_kernels`].
+#[derive(Clone, Copy, Debug, Default)]
+pub struct DiffuseArc {
+    pub t0: f64,
+    pub t1: f64,
+    pub a: f64,
+    pub b: f64,
+    pub cos_ab: f64,
+}
+
+impl DiffuseArc {
+    #[inline(always)]
+    fn long_form(&self) -> f64 {
+        let d = self.t1 - self.t0;
+        // t0 + t1 - a - b = 2m - a - b exactly (2 (0.5 x) = x)
+        let u = self.t0 + self.t1 - self.a - self.b;
+        0.5 * (d * self.cos_ab + elementary::cos(u) * elementary::sin(d))
+    }
+
+    #[inline(always)]
+    fn short_form(&self) -> f64 {
+        let d = self.t1 - self.t0;
+        let u = self.t0 + self.t1 - self.a - self.b;
+        let m = 0.5 * (self.t0 + self.t1);
         let d2 = d * d;
         // D - sin D = D^3/6 - D^5/120 + ... (relative error < 1e-16 for D <= 0.5)
         let d_minus_sin = d
@@ -591,9 +624,74 @@ pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64, cos_ab: f64) -> f64 {
                     - d2 * (1.0 / 5040.0
                         - d2 * (1.0 / 362_880.0
                             - d2 * (1.0 / 39_916_800.0 - d2 / 6_227_020_800.0)))));
-        (d * elementary::cos(m - a) * elementary::cos(m - b)
-            - 0.5 * elementary::cos(2.0 * m - a - b) * d_minus_sin)
+        (d * elementary::cos(m - self.a) * elementary::cos(m - self.b)
+            - 0.5 * elementary::cos(u) * d_minus_sin)
             .max(0.0)
+    }
+}
+
+/// [`diffuse_kernel`] of every arc, bit for bit, written to `out`. Eight arcs at a time go
+/// through both forms in lanes and keep the right one (AVX-512 or AVX2 when the CPU has it):
+/// twice the trigonometry of the scalar kernel, but no branch to mispredict and eight arcs per
+/// instruction. The tail takes the scalar kernel.
+pub fn diffuse_kernels(arcs: &[DiffuseArc], out: &mut [f64]) {
+    assert_eq!(arcs.len(), out.len());
+    #[cfg(target_arch = "x86_64")]
+    {
+        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
+            // SAFETY: the CPU has the features the function is compiled for.
+            return unsafe { diffuse_kernels_avx512(arcs, out) };
+        }
+        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
+            // SAFETY: the CPU has the features the function is compiled for.
+            return unsafe { diffuse_kernels_avx2(arcs, out) };
+        }
+    }
+    diffuse_kernels_lanes(arcs, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
+fn diffuse_kernels_avx512(arcs: &[DiffuseArc], out: &mut [f64]) {
+    diffuse_kernels_lanes(arcs, out)
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+fn diffuse_kernels_avx2(arcs: &[DiffuseArc], out: &mut [f64]) {
+    diffuse_kernels_lanes(arcs, out)
+}
+
+#[inline(always)]
+fn diffuse_kernels_lanes(arcs: &[DiffuseArc], out: &mut [f64]) {
+    const L: usize = 8;
+    let mut chunks = arcs.chunks_exact(L);
+    let mut outs = out.chunks_exact_mut(L);
+    for (chunk, o) in (&mut chunks).zip(&mut outs) {
+        // transposed into lanes, so each form is straight-line code over eight arcs
+        let mut lanes = [[0.0; L]; 5];
+        for (j, arc) in chunk.iter().enumerate() {
+            for (lane, x) in lanes
+                .iter_mut()
+                .zip([arc.t0, arc.t1, arc.a, arc.b, arc.cos_ab])
+            {
+                lane[j] = x;
+            }
+        }
+        for (j, o) in o.iter_mut().enumerate() {
+            let arc = DiffuseArc {
+                t0: lanes[0][j],
+                t1: lanes[1][j],
+                a: lanes[2][j],
+                b: lanes[3][j],
+                cos_ab: lanes[4][j],
+            };
+            let (long, short) = (arc.long_form(), arc.short_form());
+            *o = if arc.t1 - arc.t0 > 0.5 { long } else { short };
+        }
+    }
+    for (arc, o) in chunks.remainder().iter().zip(outs.into_remainder()) {
+        *o = diffuse_kernel(arc.t0, arc.t1, arc.a, arc.b, arc.cos_ab);
     }
 }
 
@@ -845,6 +943,36 @@ mod tests {
                 (got - want).abs() <= 1e-13 * want.abs().max(1e-300),
                 "{got} vs {want}"
             );
+        }
+    }
+
+    #[test]
+    fn lane_diffuse_kernels_equal_the_scalar_kernel_bit_for_bit() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let mut arcs = vec![];
+        for i in 0..10_003 {
+            let t0 = rng.random_range(-3.1..3.1);
+            // long and short arcs, down to slivers
+            let d = match i % 3 {
+                0 => rng.random_range(0.0..3.0),
+                1 => rng.random_range(0.4..0.6),
+                _ => 10f64.powf(rng.random_range(-12.0..0.0)),
+            };
+            let (a, b) = (rng.random_range(-1.57..1.57), rng.random_range(-1.57..1.57));
+            arcs.push(DiffuseArc {
+                t0,
+                t1: t0 + d,
+                a,
+                b,
+                cos_ab: (a - b).cos(),
+            });
+        }
+        let mut out = vec![0.0; arcs.len()];
+        diffuse_kernels(&arcs, &mut out);
+        for (arc, got) in arcs.iter().zip(&out) {
+            let want = diffuse_kernel(arc.t0, arc.t1, arc.a, arc.b, arc.cos_ab);
+            assert_eq!(got.to_bits(), want.to_bits(), "{arc:?}");
         }
     }
 

@@ -17,7 +17,8 @@
 //! period have identical arcs, so one is computed and counted twice.
 
 use super::cross_section::{
-    diffuse_kernel, for_each_seen_and_lit, lobe_half_width, Fibre, Pattern, Projected, SectionPair,
+    diffuse_kernels, for_each_seen_and_lit, lobe_half_width, DiffuseArc, Fibre, Pattern, Projected,
+    SectionPair,
 };
 use super::elementary;
 use super::frame::Local;
@@ -77,6 +78,8 @@ impl GaussSection {
                 prepared,
                 visits,
                 ends,
+                diffuse_arcs,
+                diffuse_dest,
                 arcs,
                 dest,
                 values,
@@ -94,31 +97,55 @@ impl GaussSection {
                             pair: i,
                             pattern: k,
                             gaps,
+                            diffuse: 0.0,
+                            substrate: 0.0,
                         });
                     }
                 }
             }
             elementary::asin_in_place(ends);
-            out.fill(Basis::default());
+            diffuse_arcs.clear();
+            diffuse_dest.clear();
             arcs.clear();
             dest.clear();
             let mut at = 0;
-            for visit in visits.iter() {
+            for (v, visit) in visits.iter_mut().enumerate() {
                 let (sp, lobe) = &prepared[visit.pair];
                 let (pattern, weight) = &patterns[visit.pattern];
-                let (b, used) = self.visit_basis(
+                at += self.visit_arcs(
                     pattern,
                     sp,
                     lobe,
                     *weight,
                     &visit.gaps,
                     &ends[at..],
+                    &mut |arc, count| {
+                        diffuse_arcs.push(arc);
+                        diffuse_dest.push((v, count));
+                    },
                     &mut |arc, factor| {
                         arcs.push(arc);
                         dest.push((visit.pair, factor));
                     },
                 );
-                at += used;
+                visit.substrate = pattern.substrate_fraction(&sp.l, &sp.v);
+            }
+            values.clear();
+            values.resize(diffuse_arcs.len(), 0.0);
+            diffuse_kernels(diffuse_arcs, values);
+            for (&(v, count), k) in diffuse_dest.iter().zip(values.iter()) {
+                visits[v].diffuse += count * k;
+            }
+            out.fill(Basis::default());
+            for visit in visits.iter() {
+                let (sp, _) = &prepared[visit.pair];
+                let (pattern, weight) = &patterns[visit.pattern];
+                let denom = pattern.period * sp.cos_alpha_product();
+                let b = Basis {
+                    diffuse: weight * FRAC_1_PI * visit.diffuse / denom,
+                    specular: 0.0,
+                    substrate: weight * FRAC_1_PI * visit.substrate,
+                };
                 out[visit.pair] = out[visit.pair] + b;
             }
             values.clear();
@@ -286,13 +313,14 @@ impl GaussSection {
         Some(counts)
     }
 
-    /// Pass 3 of [`GaussSection::bases`] for one pair and pattern: the basis times `weight`
-    /// from the gap ends' asin (`ends`, starting at this pattern's), with the specular part left
-    /// out: each lobe arc goes to `sink` with the factor that turns its integral into its share
-    /// of `Basis::specular`. Also returns how many ends it used.
+    /// Pass 3 of [`GaussSection::bases`] for one pair and pattern: its seen-and-lit arcs from
+    /// the gap ends' asin (`ends`, starting at this pattern's). Each arc goes to `diffuse` with
+    /// its fibre's count, and its part inside the lobe window to `specular` with the factor that
+    /// turns its lobe integral into its share of `Basis::specular`. Returns how many ends it
+    /// used.
     #[allow(clippy::too_many_arguments)]
     #[inline]
-    fn visit_basis(
+    fn visit_arcs(
         &self,
         pattern: &Pattern,
         sp: &SectionPair,
@@ -300,8 +328,9 @@ impl GaussSection {
         weight: f64,
         gaps: &FibreGaps,
         ends: &[f64],
-        sink: &mut impl FnMut(LobeArc, f64),
-    ) -> (Basis, usize) {
+        diffuse: &mut impl FnMut(DiffuseArc, f64),
+        specular: &mut impl FnMut(LobeArc, f64),
+    ) -> usize {
         let denom = pattern.period * sp.cos_alpha_product();
         let (al, av) = (sp.l.alpha, sp.v.alpha);
         let Lobe {
@@ -317,7 +346,6 @@ impl GaussSection {
             cos_lv: sp.cos_lv,
             exponent: self.exponent,
         };
-        let mut diffuse = 0.0;
         let mut at = 0;
         for (&[n_seen, n_lit], &(_, count)) in gaps.iter().zip(fibres(pattern)) {
             let seen = &ends[at..at + 2 * n_seen as usize];
@@ -326,21 +354,23 @@ impl GaussSection {
             at += lit.len();
             let factor = weight * count * self.norm / denom;
             for_each_seen_and_lit(seen, av, lit, al, |a, b| {
-                diffuse += count * diffuse_kernel(a, b, al, av, cos_delta);
+                let arc = DiffuseArc {
+                    t0: a,
+                    t1: b,
+                    a: al,
+                    b: av,
+                    cos_ab: cos_delta,
+                };
+                diffuse(arc, count);
                 if let Some((w0, w1)) = window {
                     let (a, b) = (a.max(w0), b.min(w1));
                     if b > a {
-                        sink(LobeArc { a, b, shape }, factor);
+                        specular(LobeArc { a, b, shape }, factor);
                     }
                 }
             });
         }
-        let basis = Basis {
-            diffuse: weight * FRAC_1_PI * diffuse / denom,
-            specular: 0.0,
-            substrate: weight * FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
-        };
-        (basis, at)
+        at
     }
 }
 
@@ -363,6 +393,10 @@ struct Visit {
     pair: usize,
     pattern: usize,
     gaps: FibreGaps,
+    /// Sum over its seen-and-lit arcs of count * diffuse kernel (pass 4).
+    diffuse: f64,
+    /// Seen-and-lit fraction of the substrate (pass 3).
+    substrate: f64,
 }
 
 /// Per-thread buffers of [`GaussSection::bases`], reused between calls (a single-pair call must
@@ -373,6 +407,9 @@ struct LobeScratch {
     visits: Vec<Visit>,
     /// Gap ends of all visits, in s, then their asin.
     ends: Vec<f64>,
+    /// Seen-and-lit arcs for the diffuse kernel, with (visit, count).
+    diffuse_arcs: Vec<DiffuseArc>,
+    diffuse_dest: Vec<(usize, f64)>,
     arcs: Vec<LobeArc>,
     dest: Vec<(usize, f64)>,
     values: Vec<f64>,
