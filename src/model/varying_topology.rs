@@ -17,8 +17,8 @@
 //! period have identical arcs, so one is computed and counted twice.
 
 use super::cross_section::{
-    diffuse_kernels, for_each_seen_and_lit, lobe_half_width, DiffuseArc, Fibre, Pattern, Projected,
-    SectionPair,
+    compact_gaps, for_each_seen_and_lit, lobe_half_width, DiffuseArc, DiffuseArcs, Fibre,
+    FibreOcclusions, Pattern, Projected, SectionPair,
 };
 use super::elementary;
 use super::frame::Local;
@@ -77,7 +77,9 @@ impl GaussSection {
             let LobeScratch {
                 prepared,
                 visits,
+                problems,
                 ends,
+                gap_counts,
                 diffuse_arcs,
                 diffuse_dest,
                 arcs,
@@ -86,38 +88,56 @@ impl GaussSection {
             } = &mut *scratch;
             self.prepare(pairs, prepared);
             visits.clear();
-            ends.clear();
+            problems.clear();
             for (i, (pair, (sp, _))) in pairs.iter().zip(prepared.iter()).enumerate() {
                 if !pair.above_horizon() {
                     continue;
                 }
                 for (k, (pattern, _)) in patterns.iter().enumerate() {
-                    if let Some(gaps) = Self::gaps(pattern, sp, ends) {
-                        visits.push(Visit {
-                            pair: i,
-                            pattern: k,
-                            gaps,
-                            diffuse: 0.0,
-                            substrate: 0.0,
-                        });
+                    if !(pattern.period * sp.cos_alpha_product() > 0.0) {
+                        continue;
                     }
+                    let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
+                    for &(fibre, _) in fibres(pattern) {
+                        problems.push(view.of(fibre));
+                        problems.push(light.of(fibre));
+                    }
+                    visits.push(Visit {
+                        pair: i,
+                        pattern: k,
+                        diffuse: 0.0,
+                        substrate: 0.0,
+                    });
                 }
+            }
+            problems.solve();
+            ends.clear();
+            gap_counts.clear();
+            for p in 0..problems.len() {
+                let at = ends.len();
+                ends.resize(at + 8, 0.0);
+                let window: &mut [f64; 8] = (&mut ends[at..]).try_into().expect("8 ends");
+                let n = compact_gaps(&problems.slots(p), window);
+                ends.truncate(at + 2 * n);
+                gap_counts.push(n as u8);
             }
             elementary::asin_in_place(ends);
             diffuse_arcs.clear();
             diffuse_dest.clear();
             arcs.clear();
             dest.clear();
-            let mut at = 0;
+            let (mut at, mut problem) = (0, 0);
             for (v, visit) in visits.iter_mut().enumerate() {
                 let (sp, lobe) = &prepared[visit.pair];
                 let (pattern, weight) = &patterns[visit.pattern];
+                let counts = &gap_counts[problem..problem + 2 * fibres(pattern).len()];
+                problem += counts.len();
                 at += self.visit_arcs(
                     pattern,
                     sp,
                     lobe,
                     *weight,
-                    &visit.gaps,
+                    counts,
                     &ends[at..],
                     &mut |arc, count| {
                         diffuse_arcs.push(arc);
@@ -132,7 +152,7 @@ impl GaussSection {
             }
             values.clear();
             values.resize(diffuse_arcs.len(), 0.0);
-            diffuse_kernels(diffuse_arcs, values);
+            diffuse_arcs.kernels(values);
             for (&(v, count), k) in diffuse_dest.iter().zip(values.iter()) {
                 visits[v].diffuse += count * k;
             }
@@ -281,38 +301,6 @@ impl GaussSection {
         }
     }
 
-    /// Pass 1 of [`GaussSection::bases`] for one pair and pattern: the gaps (in s) that the
-    /// pattern's occluders leave on each fibre, seen along v and lit along l, appended to `ends`
-    /// (per fibre: the view's, then the light's); their counts, or `None` when the pattern
-    /// contributes nothing.
-    #[inline]
-    fn gaps(pattern: &Pattern, sp: &SectionPair, ends: &mut Vec<f64>) -> Option<FibreGaps> {
-        if !(pattern.period * sp.cos_alpha_product() > 0.0) {
-            return None;
-        }
-        let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
-        let mut counts = [[0; 2]; 2];
-        for (count, &(fibre, _)) in counts.iter_mut().zip(fibres(pattern)) {
-            // (a fixed-size copy, then the unused tail dropped: no memcpy call)
-            let (seen, n_seen) = view.gaps(fibre);
-            let at = ends.len();
-            ends.extend_from_slice(&seen);
-            ends.truncate(at + 2 * n_seen);
-            // nothing seen: the light's gaps are not needed
-            let n_lit = if n_seen > 0 {
-                let (lit, n_lit) = light.gaps(fibre);
-                let at = ends.len();
-                ends.extend_from_slice(&lit);
-                ends.truncate(at + 2 * n_lit);
-                n_lit
-            } else {
-                0
-            };
-            *count = [n_seen as u8, n_lit as u8];
-        }
-        Some(counts)
-    }
-
     /// Pass 3 of [`GaussSection::bases`] for one pair and pattern: its seen-and-lit arcs from
     /// the gap ends' asin (`ends`, starting at this pattern's). Each arc goes to `diffuse` with
     /// its fibre's count, and its part inside the lobe window to `specular` with the factor that
@@ -326,7 +314,7 @@ impl GaussSection {
         sp: &SectionPair,
         lobe: &Lobe,
         weight: f64,
-        gaps: &FibreGaps,
+        gap_counts: &[u8],
         ends: &[f64],
         diffuse: &mut impl FnMut(DiffuseArc, f64),
         specular: &mut impl FnMut(LobeArc, f64),
@@ -347,7 +335,8 @@ impl GaussSection {
             exponent: self.exponent,
         };
         let mut at = 0;
-        for (&[n_seen, n_lit], &(_, count)) in gaps.iter().zip(fibres(pattern)) {
+        for (counts, &(_, count)) in gap_counts.chunks_exact(2).zip(fibres(pattern)) {
+            let (n_seen, n_lit) = (counts[0], counts[1]);
             let seen = &ends[at..at + 2 * n_seen as usize];
             at += seen.len();
             let lit = &ends[at..at + 2 * n_lit as usize];
@@ -385,14 +374,10 @@ fn fibres(pattern: &Pattern) -> &'static [(Fibre, f64)] {
     }
 }
 
-/// Per fibre of a pattern (see [`fibres`]): how many gaps it has seen along v and lit along l.
-type FibreGaps = [[u8; 2]; 2];
-
 /// One (pair, pattern) of a batch that contributes, with its gap counts.
 struct Visit {
     pair: usize,
     pattern: usize,
-    gaps: FibreGaps,
     /// Sum over its seen-and-lit arcs of count * diffuse kernel (pass 4).
     diffuse: f64,
     /// Seen-and-lit fraction of the substrate (pass 3).
@@ -405,10 +390,13 @@ struct Visit {
 struct LobeScratch {
     prepared: Vec<(SectionPair, Lobe)>,
     visits: Vec<Visit>,
-    /// Gap ends of all visits, in s, then their asin.
+    /// Per visit and fibre: the fibre seen along v, then lit along l.
+    problems: FibreOcclusions,
+    /// The non-empty gaps' ends of all problems, in s, then their asin; how many per problem.
     ends: Vec<f64>,
+    gap_counts: Vec<u8>,
     /// Seen-and-lit arcs for the diffuse kernel, with (visit, count).
-    diffuse_arcs: Vec<DiffuseArc>,
+    diffuse_arcs: DiffuseArcs,
     diffuse_dest: Vec<(usize, f64)>,
     arcs: Vec<LobeArc>,
     dest: Vec<(usize, f64)>,
