@@ -15,30 +15,8 @@
 //! order (N >= 32 against `reference`, `reports/speed_accuracy.md`) rose from ~4e-16 to ~5e-15
 //! RMS relative (6e-14 at most), far below the error of any order one would choose.
 
-use super::elementary::COS_TAYLOR;
+use super::elementary::{estrin, Fused, MulAdd, Plain, COS_TAYLOR};
 use super::quadrature::GaussLegendre;
-
-/// Multiply-add: fused where the CPU has FMA, plain otherwise (a software fma would be slow).
-trait MulAdd {
-    fn mul_add(a: f64, b: f64, c: f64) -> f64;
-}
-
-struct Fused;
-struct Plain;
-
-impl MulAdd for Fused {
-    #[inline(always)]
-    fn mul_add(a: f64, b: f64, c: f64) -> f64 {
-        a.mul_add(b, c)
-    }
-}
-
-impl MulAdd for Plain {
-    #[inline(always)]
-    fn mul_add(a: f64, b: f64, c: f64) -> f64 {
-        a * b + c
-    }
-}
 
 /// ln 2 in two parts (fdlibm): LN2_HI has trailing zero bits, so k * LN2_HI is exact.
 const LN2_HI: f64 = 0.6931471803691238;
@@ -46,26 +24,6 @@ const LN2_LO: f64 = 1.9082149292705877e-10;
 
 /// 1.5 * 2^52: adding it rounds |x| < 2^51 to the nearest integer, which sits in the low bits.
 const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
-
-/// Estrin evaluation of sum c[k] x^k for K = 7, 12 or 14 (c in increasing powers): pairs of
-/// terms combined with x, then pairs of pairs with x^2, and so on, written out so the lane loop
-/// still vectorises. The dependency chain is ~log2(K) multiply-adds deep instead of K for Horner
-/// (measured ~3 % less time per evaluation than Horner).
-#[inline(always)]
-fn estrin<M: MulAdd, const K: usize>(x: f64, c: &[f64; K]) -> f64 {
-    let at = |k: usize| if k < K { c[k] } else { 0.0 };
-    let x2 = x * x;
-    let x4 = x2 * x2;
-    let x8 = x4 * x4;
-    let p = |k: usize| M::mul_add(at(k + 1), x, at(k));
-    let q = |k: usize| M::mul_add(p(k + 2), x2, p(k));
-    let lo = M::mul_add(q(4), x4, q(0));
-    if K <= 8 {
-        return lo;
-    }
-    let hi = M::mul_add(q(12), x4, q(8));
-    M::mul_add(hi, x8, lo)
-}
 
 /// cos(u) for |u| < 1e6, absolute error ~1e-16.
 #[inline(always)]
