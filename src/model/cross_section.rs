@@ -524,11 +524,11 @@ impl FibreOcclusions {
         self.sin.is_empty()
     }
 
-    pub fn push(&mut self, p: FibreOcclusion) {
-        self.sin.push(p.sin);
-        self.cos.push(p.cos);
-        self.step.push(p.step);
-        self.other_row.push(p.other_row);
+    pub fn extend(&mut self, ps: &[FibreOcclusion]) {
+        self.sin.extend(ps.iter().map(|p| p.sin));
+        self.cos.extend(ps.iter().map(|p| p.cos));
+        self.step.extend(ps.iter().map(|p| p.step));
+        self.other_row.extend(ps.iter().map(|p| p.other_row));
     }
 
     /// The gap slots of problem `i` (after [`FibreOcclusions::solve`]).
@@ -543,8 +543,10 @@ impl FibreOcclusions {
     pub fn solve(&mut self) {
         let n = self.len();
         for slot in self.slots.iter_mut() {
-            slot.clear();
-            slot.resize(n, 0.0);
+            // every entry below n is written; only growth needs filling
+            if slot.len() < n {
+                slot.resize(n, 0.0);
+            }
         }
         #[cfg(target_arch = "x86_64")]
         {

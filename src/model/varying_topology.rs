@@ -98,10 +98,10 @@ impl GaussSection {
                         continue;
                     }
                     let (view, light) = (pattern.occlusion(&sp.v), pattern.occlusion(&sp.l));
-                    for &(fibre, _) in fibres(pattern) {
-                        problems.push(view.of(fibre));
-                        problems.push(light.of(fibre));
-                    }
+                    // per fibre in the order of `fibres`: seen along v, lit along l
+                    let (even, odd) = (Fibre::Even, Fibre::Odd);
+                    let four = [view.of(even), light.of(even), view.of(odd), light.of(odd)];
+                    problems.extend(&four[..2 * fibres(pattern).len()]);
                     visits.push(Visit {
                         pair: i,
                         pattern: k,
@@ -150,10 +150,9 @@ impl GaussSection {
                 );
                 visit.substrate = pattern.substrate_fraction(&sp.l, &sp.v);
             }
-            values.clear();
-            values.resize(diffuse_arcs.len(), 0.0);
-            diffuse_arcs.kernels(values);
-            for (&(v, count), k) in diffuse_dest.iter().zip(values.iter()) {
+            let kernels = grown(values, diffuse_arcs.len());
+            diffuse_arcs.kernels(kernels);
+            for (&(v, count), k) in diffuse_dest.iter().zip(kernels.iter()) {
                 visits[v].diffuse += count * k;
             }
             out.fill(Basis::default());
@@ -168,10 +167,9 @@ impl GaussSection {
                 };
                 out[visit.pair] = out[visit.pair] + b;
             }
-            values.clear();
-            values.resize(arcs.len(), 0.0);
-            self.lobe_rule.integrals(arcs, values);
-            for (&(i, factor), v) in dest.iter().zip(values.iter()) {
+            let integrals = grown(values, arcs.len());
+            self.lobe_rule.integrals(arcs, integrals);
+            for (&(i, factor), v) in dest.iter().zip(integrals.iter()) {
                 out[i].specular += factor * v;
             }
         })
@@ -382,6 +380,15 @@ struct Visit {
     diffuse: f64,
     /// Seen-and-lit fraction of the substrate (pass 3).
     substrate: f64,
+}
+
+/// The first `n` entries of a buffer the caller overwrites entirely: grown (zero-filled) only
+/// when too short, so a batch does not pay for clearing it.
+fn grown(buf: &mut Vec<f64>, n: usize) -> &mut [f64] {
+    if buf.len() < n {
+        buf.resize(n, 0.0);
+    }
+    &mut buf[..n]
 }
 
 /// Per-thread buffers of [`GaussSection::bases`], reused between calls (a single-pair call must
