@@ -336,31 +336,65 @@ impl Pattern {
     /// union is that arc plus three intervals cut at P: three compare-exchanges sort them, and
     /// the gaps are summed in one sweep.
     pub fn substrate_fraction(&self, l: &Projected, v: &Projected) -> f64 {
-        let p = self.period;
-        let (wl, wv) = (2.0 * l.sec, 2.0 * v.sec);
-        if wl.max(wv) >= p {
-            return 0.0;
+        SubstrateProblem::new(self, l, v).fraction()
+    }
+}
+
+/// What [`Pattern::substrate_fraction`] depends on.
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SubstrateProblem {
+    /// tan and 1/cos of the light's and the view's angle alpha.
+    pub l_tan: f64,
+    pub l_sec: f64,
+    pub v_tan: f64,
+    pub v_sec: f64,
+    /// The pattern's h, H, P and 1/P.
+    pub step: f64,
+    pub rise: f64,
+    pub period: f64,
+    pub inv_period: f64,
+}
+
+impl SubstrateProblem {
+    pub fn new(pattern: &Pattern, l: &Projected, v: &Projected) -> Self {
+        Self {
+            l_tan: l.tan,
+            l_sec: l.sec,
+            v_tan: v.tan,
+            v_sec: v.sec,
+            step: pattern.step,
+            rise: pattern.rise,
+            period: pattern.period,
+            inv_period: pattern.inv_period,
         }
+    }
+
+    /// See [`Pattern::substrate_fraction`]; branch-free, so [`SubstrateProblems::fractions`] runs
+    /// it in lanes.
+    #[inline(always)]
+    pub fn fraction(&self) -> f64 {
+        let p = self.period;
+        let (wl, wv) = (2.0 * self.l_sec, 2.0 * self.v_sec);
         // arc starts before wrapping: the even row (0, 0) and the odd row (h, H)
-        let start = |dir: &Projected, cx: f64, cy: f64| cx - (1.0 + cy) * dir.tan - dir.sec;
+        let start = |tan: f64, sec: f64, cx: f64, cy: f64| cx - (1.0 + cy) * tan - sec;
         let (h, rise) = (self.step, self.rise);
         let arcs = [
-            (start(l, 0.0, 0.0), wl),
-            (start(l, h, rise), wl),
-            (start(v, 0.0, 0.0), wv),
-            (start(v, h, rise), wv),
+            (start(self.l_tan, self.l_sec, 0.0, 0.0), wl),
+            (start(self.l_tan, self.l_sec, h, rise), wl),
+            (start(self.v_tan, self.v_sec, 0.0, 0.0), wv),
+            (start(self.v_tan, self.v_sec, h, rise), wv),
         ];
         // the widest arc is the origin; the other three follow it
-        let (origin, width, others) = if wl >= wv {
-            (arcs[0].0, wl, [arcs[1], arcs[2], arcs[3]])
-        } else {
-            (arcs[2].0, wv, [arcs[0], arcs[1], arcs[3]])
-        };
+        let light_wider = wl >= wv;
+        let origin = if light_wider { arcs[0].0 } else { arcs[2].0 };
+        let width = if light_wider { wl } else { wv };
+        let first = if light_wider { arcs[1] } else { arcs[0] };
+        let second = if light_wider { arcs[2] } else { arcs[1] };
         let cut = |(s, w): (f64, f64)| {
             let r = wrap(s - origin, p, self.inv_period);
             (r, (r + w).min(p))
         };
-        let mut x = [cut(others[0]), cut(others[1]), cut(others[2])];
+        let mut x = [cut(first), cut(second), cut(arcs[3])];
         sort2(&mut x, 1, 2);
         sort2(&mut x, 0, 1);
         sort2(&mut x, 1, 2);
@@ -371,8 +405,26 @@ impl Pattern {
             cursor = cursor.max(b);
         }
         open += (p - cursor).max(0.0);
-        open * self.inv_period
+        // an arc as wide as the period covers the substrate
+        if wl.max(wv) >= p {
+            0.0
+        } else {
+            open * self.inv_period
+        }
     }
+}
+
+/// [`SubstrateProblem::fraction`] of every problem, bit for bit, in lanes.
+pub fn substrate_fractions(problems: &[SubstrateProblem], out: &mut [f64]) {
+    assert_eq!(problems.len(), out.len());
+    super::lanes::on_widest_lanes(
+        #[inline(always)]
+        |_| {
+            for (p, o) in problems.iter().zip(out.iter_mut()) {
+                *o = p.fraction();
+            }
+        },
+    )
 }
 
 /// Occlusion along one direction in one pattern (see [`Pattern::occlusion`]).
@@ -548,31 +600,10 @@ impl FibreOcclusions {
                 slot.resize(n, 0.0);
             }
         }
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq")
-            {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.solve_avx512() };
-            }
-            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.solve_avx2() };
-            }
-        }
-        self.solve_lanes()
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
-    fn solve_avx512(&mut self) {
-        self.solve_lanes()
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn solve_avx2(&mut self) {
-        self.solve_lanes()
+        super::lanes::on_widest_lanes(
+            #[inline(always)]
+            |_| self.solve_lanes(),
+        )
     }
 
     #[inline(always)]
@@ -812,31 +843,10 @@ impl DiffuseArcs {
     /// scalar kernel, but no branch to mispredict and eight arcs per instruction.
     pub fn kernels(&self, out: &mut [f64]) {
         assert_eq!(self.len(), out.len());
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq")
-            {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.kernels_avx512(out) };
-            }
-            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.kernels_avx2(out) };
-            }
-        }
-        self.kernels_lanes(out)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
-    fn kernels_avx512(&self, out: &mut [f64]) {
-        self.kernels_lanes(out)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn kernels_avx2(&self, out: &mut [f64]) {
-        self.kernels_lanes(out)
+        super::lanes::on_widest_lanes(
+            #[inline(always)]
+            |_| self.kernels_lanes(out),
+        )
     }
 
     #[inline(always)]
@@ -916,6 +926,7 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(11);
         let mut u = move || rng.random::<f64>();
         let mut open = 0;
+        let mut problems = vec![];
         for i in 0..40_000 {
             let d = if i % 5 == 0 {
                 2.0
@@ -943,6 +954,13 @@ mod tests {
                 v.alpha
             );
             open += (want > 0.0) as usize;
+            problems.push(SubstrateProblem::new(&p, &l, &v));
+        }
+        // the lane pass gives the same bits
+        let mut lanes = vec![0.0; problems.len()];
+        substrate_fractions(&problems, &mut lanes);
+        for (p, got) in problems.iter().zip(&lanes) {
+            assert_eq!(got.to_bits(), p.fraction().to_bits(), "{p:?}");
         }
         // about a quarter of the cases see some substrate (the comparison is not all zeros)
         assert!(open > 8_000, "{open}");

@@ -201,37 +201,14 @@ pub fn asin(s: f64) -> f64 {
 /// the batched cross-section path collects its arc ends' sines and takes their asin here in
 /// one pass, instead of one latency-bound call per arc end.
 pub fn asin_in_place(xs: &mut [f64]) {
-    #[cfg(target_arch = "x86_64")]
-    {
-        if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq") {
-            // SAFETY: the CPU has the features the function is compiled for.
-            return unsafe { asin_in_place_avx512(xs) };
-        }
-        if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-            // SAFETY: the CPU has the features the function is compiled for.
-            return unsafe { asin_in_place_avx2(xs) };
-        }
-    }
-    asin_in_place_lanes(xs)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
-fn asin_in_place_avx512(xs: &mut [f64]) {
-    asin_in_place_lanes(xs)
-}
-
-#[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
-fn asin_in_place_avx2(xs: &mut [f64]) {
-    asin_in_place_lanes(xs)
-}
-
-#[inline(always)]
-fn asin_in_place_lanes(xs: &mut [f64]) {
-    for x in xs.iter_mut() {
-        *x = asin(*x);
-    }
+    super::lanes::on_widest_lanes(
+        #[inline(always)]
+        |_| {
+            for x in xs.iter_mut() {
+                *x = asin(*x);
+            }
+        },
+    )
 }
 
 /// acos(c) for c in [-1, 1].

@@ -9,6 +9,7 @@ pub mod elementary;
 pub mod frame;
 pub mod hast_diffuse;
 pub mod lambert;
+pub mod lanes;
 pub mod lobe_quadrature;
 pub mod max_normal;
 pub mod params;

@@ -17,8 +17,8 @@
 //! period have identical arcs, so one is computed and counted twice.
 
 use super::cross_section::{
-    compact_gaps, for_each_seen_and_lit, lobe_half_width, DiffuseArc, DiffuseArcs, Fibre,
-    FibreOcclusions, Pattern, Projected, SectionPair,
+    compact_gaps, for_each_seen_and_lit, lobe_half_width, substrate_fractions, DiffuseArc,
+    DiffuseArcs, Fibre, FibreOcclusions, Pattern, Projected, SectionPair, SubstrateProblem,
 };
 use super::elementary;
 use super::frame::Local;
@@ -78,6 +78,8 @@ impl GaussSection {
                 prepared,
                 visits,
                 problems,
+                substrates,
+                fractions,
                 ends,
                 gap_counts,
                 diffuse_arcs,
@@ -89,6 +91,7 @@ impl GaussSection {
             self.prepare(pairs, prepared);
             visits.clear();
             problems.clear();
+            substrates.clear();
             for (i, (pair, (sp, _))) in pairs.iter().zip(prepared.iter()).enumerate() {
                 if !pair.above_horizon() {
                     continue;
@@ -102,6 +105,7 @@ impl GaussSection {
                     let (even, odd) = (Fibre::Even, Fibre::Odd);
                     let four = [view.of(even), light.of(even), view.of(odd), light.of(odd)];
                     problems.extend(&four[..2 * fibres(pattern).len()]);
+                    substrates.push(SubstrateProblem::new(pattern, &sp.l, &sp.v));
                     visits.push(Visit {
                         pair: i,
                         pattern: k,
@@ -148,7 +152,11 @@ impl GaussSection {
                         dest.push((visit.pair, factor));
                     },
                 );
-                visit.substrate = pattern.substrate_fraction(&sp.l, &sp.v);
+            }
+            let fractions = grown(fractions, substrates.len());
+            substrate_fractions(substrates, fractions);
+            for (visit, f) in visits.iter_mut().zip(fractions.iter()) {
+                visit.substrate = *f;
             }
             let kernels = grown(values, diffuse_arcs.len());
             diffuse_arcs.kernels(kernels);
@@ -181,31 +189,10 @@ impl GaussSection {
     /// than eight (a single-pair `basis` call) goes the scalar way. Pairs below the horizon get
     /// finite placeholders (the caller skips them).
     fn prepare(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
-        #[cfg(target_arch = "x86_64")]
-        {
-            if std::is_x86_feature_detected!("avx512f") && std::is_x86_feature_detected!("avx512dq")
-            {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.prepare_avx512(pairs, out) };
-            }
-            if std::is_x86_feature_detected!("avx2") && std::is_x86_feature_detected!("fma") {
-                // SAFETY: the CPU has the features the function is compiled for.
-                return unsafe { self.prepare_avx2(pairs, out) };
-            }
-        }
-        self.prepare_lanes(pairs, out)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx512f,avx512dq,avx2,fma")]
-    fn prepare_avx512(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
-        self.prepare_lanes(pairs, out)
-    }
-
-    #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
-    fn prepare_avx2(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
-        self.prepare_lanes(pairs, out)
+        super::lanes::on_widest_lanes(
+            #[inline(always)]
+            |_| self.prepare_lanes(pairs, out),
+        )
     }
 
     #[inline(always)]
@@ -399,6 +386,9 @@ struct LobeScratch {
     visits: Vec<Visit>,
     /// Per visit and fibre: the fibre seen along v, then lit along l.
     problems: FibreOcclusions,
+    /// Per visit: the substrate's problem and seen-and-lit fraction.
+    substrates: Vec<SubstrateProblem>,
+    fractions: Vec<f64>,
     /// The non-empty gaps' ends of all problems, in s, then their asin; how many per problem.
     ends: Vec<f64>,
     gap_counts: Vec<u8>,
