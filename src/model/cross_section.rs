@@ -72,15 +72,6 @@ impl Arcs {
         );
         out
     }
-
-    /// Intersection with a single interval.
-    pub fn clip(&self, lo: f64, hi: f64) -> Arcs {
-        let mut out = Arcs::default();
-        for &(a, b) in self.as_slice() {
-            out.push(a.max(lo), b.min(hi));
-        }
-        out
-    }
 }
 
 /// Calls `f(lo, hi)` for each non-empty intersection of an interval of x with one of y, in
@@ -369,7 +360,7 @@ impl SubstrateProblem {
         }
     }
 
-    /// See [`Pattern::substrate_fraction`]; branch-free, so [`SubstrateProblems::fractions`] runs
+    /// See [`Pattern::substrate_fraction`]; branch-free, so [`substrate_fractions`] runs
     /// it in lanes.
     #[inline(always)]
     pub fn fraction(&self) -> f64 {
@@ -743,7 +734,11 @@ pub fn lobe_half_width(
 /// the same identity regrouped, with D - sin D from its series: no cancellation in g, and the
 /// correction is O(D^3).
 /// `cos_ab` is cos(a - b), which the caller has from the directions' sines and cosines.
-#[inline]
+///
+/// Both forms are computed and one kept (no branch), so [`DiffuseArcs::kernels`] runs it in
+/// lanes: twice the trigonometry of a branch, but no misprediction and eight arcs per
+/// instruction.
+#[inline(always)]
 pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64, cos_ab: f64) -> f64 {
     let arc = DiffuseArc {
         t0,
@@ -752,10 +747,11 @@ pub fn diffuse_kernel(t0: f64, t1: f64, a: f64, b: f64, cos_ab: f64) -> f64 {
         b,
         cos_ab,
     };
-    if arc.t1 - arc.t0 > 0.5 {
-        arc.long_form()
+    let (long, short) = (arc.long_form(), arc.short_form());
+    if t1 - t0 > 0.5 {
+        long
     } else {
-        arc.short_form()
+        short
     }
 }
 
@@ -838,9 +834,7 @@ impl DiffuseArcs {
         self.cos_ab.push(arc.cos_ab);
     }
 
-    /// [`diffuse_kernel`] of every arc, bit for bit, written to `out`: both forms in lanes and
-    /// the right one kept (AVX-512 or AVX2 when the CPU has it). Twice the trigonometry of the
-    /// scalar kernel, but no branch to mispredict and eight arcs per instruction.
+    /// [`diffuse_kernel`] of every arc, bit for bit, written to `out`, in lanes.
     pub fn kernels(&self, out: &mut [f64]) {
         assert_eq!(self.len(), out.len());
         super::lanes::on_widest_lanes(
@@ -860,15 +854,7 @@ impl DiffuseArcs {
             &self.cos_ab[..n],
         );
         for i in 0..n {
-            let arc = DiffuseArc {
-                t0: t0[i],
-                t1: t1[i],
-                a: a[i],
-                b: b[i],
-                cos_ab: cos_ab[i],
-            };
-            let (long, short) = (arc.long_form(), arc.short_form());
-            out[i] = if arc.t1 - arc.t0 > 0.5 { long } else { short };
+            out[i] = diffuse_kernel(t0[i], t1[i], a[i], b[i], cos_ab[i]);
         }
     }
 }

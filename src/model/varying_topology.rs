@@ -61,15 +61,22 @@ impl GaussSection {
     }
 
     /// The bases of `pairs` (written to `out`) for the mean over `patterns` ((pattern, weight)
-    /// pairs), in three passes over the batch, so that the latency-bound scalar steps become
-    /// lane loops:
-    /// 1. per pair and pattern, the occlusion gaps of each fibre in s = sin(th - alpha);
-    /// 2. the asin of every gap end, in lanes ([`elementary::asin_in_place`]);
-    /// 3. per pair and pattern, the seen-and-lit arcs: diffuse in closed form and the substrate,
-    ///    while the specular lobe arcs of all pairs and patterns are collected and integrated
-    ///    together at the end, in one run of the vector kernel (see [`LobeRule::integrals`]).
+    /// pairs). The work is split into passes over the whole batch so that everything with
+    /// data-dependent branches or long latency (divisions, square roots, polynomials) runs as
+    /// branch-free lane loops ([`super::lanes::on_widest_lanes`]); only the arc bookkeeping stays
+    /// scalar. Per (pair, pattern) "visit":
+    /// 1. each pair's projections and lobe window, in lanes (`GaussSection::prepare`);
+    /// 2. each fibre's occlusion problem seen along v and lit along l, solved in lanes
+    ///    ([`FibreOcclusions::solve`]: four gap slots in s = sin(th - alpha)), then compacted
+    ///    without branches;
+    /// 3. the asin of every gap end, in lanes ([`elementary::asin_in_place`]);
+    /// 4. per visit, scalar: the seen-and-lit arcs (merge of the two gap lists), each queued for
+    ///    the diffuse kernel and, clipped to the lobe window, for the lobe;
+    /// 5. the diffuse kernels ([`DiffuseArcs::kernels`]), the substrate fractions
+    ///    ([`substrate_fractions`]) and the lobe integrals ([`LobeRule::integrals`]), each in
+    ///    lanes, summed back per visit in the order of step 4.
     ///
-    /// Each pair's result does not depend on the other pairs in the batch.
+    /// Each pair's result does not depend on the other pairs in the batch, bit for bit (tested).
     pub fn bases(&self, pairs: &[DirectionPair], patterns: &[(Pattern, f64)], out: &mut [Basis]) {
         assert_eq!(pairs.len(), out.len());
         SCRATCH.with(|scratch| {
@@ -184,10 +191,10 @@ impl GaussSection {
     }
 
     /// [`SectionPair::new`] and [`GaussSection::lobe`] of every pair, eight pairs at a time in
-    /// lanes the compiler vectorises (AVX2 when the CPU has it): one at a time, their two atan2,
-    /// acos, square roots and divisions per pair were latency-bound scalar code. A batch shorter
-    /// than eight (a single-pair `basis` call) goes the scalar way. Pairs below the horizon get
-    /// finite placeholders (the caller skips them).
+    /// lanes ([`super::lanes::on_widest_lanes`]): one at a time, their two atan2, acos, square
+    /// roots and divisions per pair were latency-bound scalar code. A batch shorter than eight
+    /// (a single-pair `basis` call) goes the scalar way. Pairs below the horizon get finite
+    /// placeholders (the caller skips them).
     fn prepare(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
         super::lanes::on_widest_lanes(
             #[inline(always)]
@@ -404,7 +411,7 @@ thread_local! {
     static SCRATCH: std::cell::RefCell<LobeScratch> = std::cell::RefCell::new(LobeScratch::default());
 }
 
-/// Per-pair quantities of the specular lobe (see [`GaussSection::lobe`]).
+/// Per-pair quantities of the specular lobe (see `GaussSection::lobe`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lobe {
     cos_delta: f64,
