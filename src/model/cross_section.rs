@@ -882,6 +882,23 @@ mod tests {
         out
     }
 
+    /// The i-th pattern of a random test set: every fifth touching (d = 2), spacings up to
+    /// 2 + `spread` weighted towards 2, and every seventh at each elevation limit.
+    fn random_pattern(i: usize, spread: f64, u: &mut impl FnMut() -> f64) -> Pattern {
+        let d = if i % 5 == 0 {
+            2.0
+        } else {
+            2.0 + spread * u() * u()
+        };
+        let phi_max = (1.0 / d).acos();
+        let phi = match i % 7 {
+            0 => 0.0,
+            1 => phi_max,
+            _ => phi_max * u(),
+        };
+        Pattern::new(d, phi)
+    }
+
     /// The previous form of [`Pattern::substrate_fraction`]: each row's arc cut at the period
     /// boundary into up to two pieces, all pieces sorted, the gaps of their union summed.
     fn substrate_fraction_by_pieces(pat: &Pattern, l: &Projected, v: &Projected) -> f64 {
@@ -914,18 +931,8 @@ mod tests {
         let mut open = 0;
         let mut problems = vec![];
         for i in 0..40_000 {
-            let d = if i % 5 == 0 {
-                2.0
-            } else {
-                2.0 + 10.0 * u() * u()
-            };
-            let phi_max = (1.0 / d).acos();
-            let phi = match i % 7 {
-                0 => 0.0,
-                1 => phi_max,
-                _ => phi_max * u(),
-            };
-            let p = Pattern::new(d, phi);
+            let p = random_pattern(i, 10.0, &mut u);
+            let (d, phi) = (p.spacing, p.elevation);
             let mut angle = || match i % 13 {
                 0 => 0.0,
                 _ => (u() - 0.5) * std::f64::consts::PI * 0.999,
@@ -1006,18 +1013,8 @@ mod tests {
         let mut u = move || rng.random::<f64>();
         let mut compared = 0;
         for i in 0..20_000 {
-            let d = if i % 5 == 0 {
-                2.0
-            } else {
-                2.0 + 6.0 * u() * u()
-            };
-            let phi_max = (1.0 / d).acos();
-            let phi = match i % 7 {
-                0 => 0.0,
-                1 => phi_max,
-                _ => phi_max * u(),
-            };
-            let p = Pattern::new(d, phi);
+            let p = random_pattern(i, 6.0, &mut u);
+            let (d, phi) = (p.spacing, p.elevation);
             let alpha = match i % 11 {
                 0 => 0.0,
                 1 => std::f64::consts::FRAC_PI_2 * (1.0 - 1e-9),
