@@ -81,7 +81,7 @@ impl GaussSection {
         assert_eq!(pairs.len(), out.len());
         SCRATCH.with(|scratch| {
             let mut scratch = scratch.borrow_mut();
-            let LobeScratch {
+            let BatchScratch {
                 prepared,
                 visits,
                 problems,
@@ -293,7 +293,7 @@ impl GaussSection {
         }
     }
 
-    /// Pass 3 of [`GaussSection::bases`] for one pair and pattern: its seen-and-lit arcs from
+    /// Step 4 of [`GaussSection::bases`] for one visit: its seen-and-lit arcs from
     /// the gap ends' asin (`ends`, starting at this pattern's). Each arc goes to `diffuse` with
     /// its fibre's count, and its part inside the lobe window to `specular` with the factor that
     /// turns its lobe integral into its share of `Basis::specular`. Returns how many ends it
@@ -366,13 +366,14 @@ fn fibres(pattern: &Pattern) -> &'static [(Fibre, f64)] {
     }
 }
 
-/// One (pair, pattern) of a batch that contributes, with its gap counts.
+/// One (pair, pattern) of a batch that contributes (pair above the horizon, non-zero
+/// denominator).
 struct Visit {
     pair: usize,
     pattern: usize,
-    /// Sum over its seen-and-lit arcs of count * diffuse kernel (pass 4).
+    /// Sum over its seen-and-lit arcs of count * diffuse kernel (step 5).
     diffuse: f64,
-    /// Seen-and-lit fraction of the substrate (pass 3).
+    /// Seen-and-lit fraction of the substrate (step 5).
     substrate: f64,
 }
 
@@ -388,7 +389,7 @@ fn grown(buf: &mut Vec<f64>, n: usize) -> &mut [f64] {
 /// Per-thread buffers of [`GaussSection::bases`], reused between calls (a single-pair call must
 /// not pay for an allocation).
 #[derive(Default)]
-struct LobeScratch {
+struct BatchScratch {
     prepared: Vec<(SectionPair, Lobe)>,
     visits: Vec<Visit>,
     /// Per visit and fibre: the fibre seen along v, then lit along l.
@@ -408,7 +409,7 @@ struct LobeScratch {
 }
 
 thread_local! {
-    static SCRATCH: std::cell::RefCell<LobeScratch> = std::cell::RefCell::new(LobeScratch::default());
+    static SCRATCH: std::cell::RefCell<BatchScratch> = std::cell::RefCell::new(BatchScratch::default());
 }
 
 /// Per-pair quantities of the specular lobe (see `GaussSection::lobe`).
