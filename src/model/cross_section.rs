@@ -100,9 +100,10 @@ fn for_each_intersection(
     }
 }
 
-/// The arcs seen along one direction and lit along the other, from both directions' gaps with
-/// their asin already taken ([`arcs_from_asin_gaps`]'s input): `f(lo, hi)` for each, in order.
-/// The same arcs as [`SectionPair::seen_and_lit_with`], without building the sets.
+/// The arcs seen along one direction and lit along the other, from both directions' compacted
+/// gaps (flattened [lo, hi] pairs) with their asin already taken, so th = alpha + entry:
+/// `f(lo, hi)` for each, in order. The same arcs as [`SectionPair::seen_and_lit_with`], without
+/// building the sets.
 #[inline]
 pub fn for_each_seen_and_lit(
     view: &[f64],
@@ -190,19 +191,6 @@ pub fn compact_gaps(slots: &GapSlots, out: &mut [f64; 8]) -> usize {
         n += (hi > lo) as usize;
     }
     n
-}
-
-/// Arcs of th = alpha + asin(s) from gap ends already turned into asin(s) (`ends`, flattened
-/// pairs): the one definition shared by the scalar path ([`Occlusion::unoccluded_arcs`]) and
-/// the batched one, which computes the asin of a whole batch in lanes. Arcs that rounding made
-/// empty are dropped.
-#[inline]
-pub fn arcs_from_asin_gaps(ends: &[f64], alpha: f64) -> Arcs {
-    let mut out = Arcs::default();
-    for e in ends.chunks_exact(2) {
-        out.push(alpha + e[0], alpha + e[1]);
-    }
-    out
 }
 
 /// Compare-exchange by start, as selects (vectorisable).
@@ -432,11 +420,16 @@ impl Occlusion {
     pub fn unoccluded_arcs(&self, fibre: Fibre) -> Arcs {
         let mut ends = [0.0; 8];
         let n = compact_gaps(&self.of(fibre).gap_slots(), &mut ends);
-        let ends = &mut ends[..2 * n];
-        for e in ends.iter_mut() {
-            *e = elementary::asin(*e);
+        let mut arcs = Arcs::default();
+        for e in ends[..2 * n].chunks_exact(2) {
+            // arcs that rounding made empty are dropped by push
+            let alpha = self.dir.alpha;
+            arcs.push(
+                alpha + elementary::asin(e[0]),
+                alpha + elementary::asin(e[1]),
+            );
         }
-        arcs_from_asin_gaps(ends, self.dir.alpha)
+        arcs
     }
 
     /// The occlusion problem of one fibre.
