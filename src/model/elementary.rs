@@ -60,6 +60,9 @@ pub(crate) fn estrin<M: MulAdd, const K: usize>(x: f64, c: &[f64; K]) -> f64 {
     M::mul_add(hi, x8, lo)
 }
 
+/// 1.5 * 2^52: adding it rounds |x| < 2^51 to the nearest integer, which sits in the low bits.
+pub(crate) const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
+
 // Per reduction (none, then fdlibm's four): atan of the breakpoint in two parts, and the
 // coefficients of t = (a |y| + b x) / (c |y| + d x).
 const ATAN_HI: [f64; 5] = [
@@ -243,9 +246,8 @@ pub fn sin_cos(x: f64) -> (f64, f64) {
     const P1: f64 = 1.570_796_326_734_125_6;
     const P2: f64 = 6.077_100_506_303_966e-11;
     const P3: f64 = 2.022_266_248_795_950_6e-21;
-    const MAGIC: f64 = 6_755_399_441_055_744.0;
-    let t = x * std::f64::consts::FRAC_2_PI + MAGIC;
-    let n = t - MAGIC;
+    let t = x * std::f64::consts::FRAC_2_PI + ROUND_MAGIC;
+    let n = t - ROUND_MAGIC;
     let r = ((x - n * P1) - n * P2) - n * P3;
     let q = t.to_bits() & 3;
     let z = r * r;

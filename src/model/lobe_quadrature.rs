@@ -15,15 +15,12 @@
 //! order (N >= 32 against `reference`, `reports/speed_accuracy.md`) rose from ~4e-16 to ~5e-15
 //! RMS relative (6e-14 at most), far below the error of any order one would choose.
 
-use super::elementary::{estrin, Fused, MulAdd, Plain, COS_TAYLOR};
+use super::elementary::{estrin, Fused, MulAdd, Plain, COS_TAYLOR, ROUND_MAGIC};
 use super::quadrature::GaussLegendre;
 
 /// ln 2 in two parts (fdlibm): LN2_HI has trailing zero bits, so k * LN2_HI is exact.
 const LN2_HI: f64 = 0.6931471803691238;
 const LN2_LO: f64 = 1.9082149292705877e-10;
-
-/// 1.5 * 2^52: adding it rounds |x| < 2^51 to the nearest integer, which sits in the low bits.
-const ROUND_MAGIC: f64 = 6_755_399_441_055_744.0;
 
 /// cos(u) for |u| < 1e6, absolute error ~1e-16.
 #[inline(always)]
