@@ -9,6 +9,8 @@
 //! and parameter error against the truth of a shipped capture at several subsampling fractions
 //! and quadrature orders.
 
+pub mod robustness;
+
 use crate::fit::config::FitConfig;
 use crate::load::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::load::{capture::Subsample, load_data, LoadOptions};

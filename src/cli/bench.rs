@@ -23,9 +23,68 @@ pub struct BenchArgs {
     /// No progress bar
     #[arg(long, short)]
     pub quiet: bool,
+    /// Instead: the fit robustness study (hard synthetic truths x noise seeds, random starts):
+    /// writes OUT/fit_robustness.md, .csv and .png
+    #[arg(long)]
+    pub robustness: bool,
+    /// Noise seeds per case of the robustness study
+    #[arg(long, value_name = "N", default_value_t = 20)]
+    pub seeds: u64,
+    /// Goniometric samples per dataset of the robustness study
+    #[arg(long, value_name = "N", default_value_t = 1000)]
+    pub samples: usize,
+    /// Only these cases of the robustness study (comma-separated names)
+    #[arg(long, value_name = "NAMES", value_delimiter = ',')]
+    pub cases: Vec<String>,
+}
+
+fn robustness(args: &BenchArgs) -> Result<()> {
+    use crate::bench::robustness::{self as study, StudySize, CASES};
+    let cases: Vec<study::Case> = CASES
+        .iter()
+        .filter(|c| args.cases.is_empty() || args.cases.iter().any(|n| n == c.name))
+        .copied()
+        .collect();
+    if cases.is_empty() {
+        let names: Vec<&str> = CASES.iter().map(|c| c.name).collect();
+        bail!("--cases: no such case; the cases are {}", names.join(", "));
+    }
+    let size = StudySize {
+        samples: args.samples,
+        seeds: args.seeds,
+    };
+    let t = Instant::now();
+    let bar = crate::progress::bar(cases.len() as u64 * args.seeds, "robustness", args.quiet);
+    let scratch = tempfile::tempdir()?;
+    let runs = study::run(&cases, size, scratch.path(), &bar)?;
+    bar.finish_and_clear();
+    let mut command = format!(
+        "fibrefit bench --robustness --seeds {} --samples {}",
+        args.seeds, args.samples
+    );
+    if !args.cases.is_empty() {
+        command += &format!(" --cases {}", args.cases.join(","));
+    }
+    crate::export::robustness_report::write(
+        &args.out,
+        &runs,
+        size,
+        &command,
+        t.elapsed().as_secs_f64(),
+    )?;
+    if !args.quiet {
+        for (name, n, ok, med, worst) in study::summary(&runs) {
+            eprintln!("{name:<12} {ok:>3}/{n:<3} median {med:.2} s, worst excess {worst:.2} sd");
+        }
+        eprintln!("wrote {}", args.out.join("fit_robustness.md").display());
+    }
+    Ok(())
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
+    if args.robustness {
+        return robustness(args);
+    }
     if !args.root.join("data_synthetic/silk/capture.toml").exists() {
         bail!(
             "{}: no data_synthetic/silk/capture.toml here; run from the repository root or pass --root",

@@ -7,4 +7,5 @@ pub mod images;
 pub mod plots;
 pub mod report;
 pub mod result_json;
+pub mod robustness_report;
 pub mod speed_report;
