@@ -133,6 +133,8 @@ pub struct Run {
     pub seconds: f64,
     pub evaluations: usize,
     pub warnings: usize,
+    /// The fitted shape parameters, "name value; ...".
+    pub fitted: String,
 }
 
 /// Directions, data rows and noise seeds of a study.
@@ -317,6 +319,13 @@ pub fn run(cases: &[Case], size: StudySize, scratch: &Path, bar: &ProgressBar) -
                 seconds,
                 evaluations: o.evaluations,
                 warnings: o.warnings.len(),
+                fitted: o
+                    .records
+                    .iter()
+                    .filter(|r| !r.fixed)
+                    .map(|r| format!("{} {:.4}", r.name, r.value[0]))
+                    .collect::<Vec<_>>()
+                    .join("; "),
             });
             bar.inc(1);
         }

@@ -5,14 +5,12 @@ use crate::export::atomic::AtomicFile;
 use crate::export::{report, result_json as rj};
 use crate::fit::config::FitConfig;
 use crate::fit::problem::{albedos_of, model_for};
-use crate::fit::{self, parameters::Shape};
+use crate::fit::{self, parameters::Shape, ward_fallback};
 use crate::load::load_data;
-use crate::load::samples::{DataKind, Dropped, Origin, Sample, Samples};
-use crate::model::frame::direction_from_angles;
-use crate::model::{Albedos, ModelId, ShadingModel};
+use crate::load::samples::DataKind;
+use crate::model::{brdf_at_degrees, ModelId};
 use anyhow::{Context, Result};
 use clap::Args;
-use rand::{Rng, SeedableRng};
 use sha2::{Digest, Sha256};
 use std::path::{Path, PathBuf};
 
@@ -58,71 +56,6 @@ fn sha256_of(path: &Path) -> Result<String> {
         .collect())
 }
 
-/// The Ward lobe fitted to the fitted model `m` (with its albedos and fibre azimuth `psi`,
-/// degrees) over a dense direction set.
-fn ward_fallback(
-    m: &dyn ShadingModel,
-    albedos: &Albedos,
-    psi: f64,
-    cfg: &FitConfig,
-    channels: usize,
-) -> Result<Option<rj::WardFallback>> {
-    if cfg.model_id()? == ModelId::Ward {
-        return Ok(None);
-    }
-    let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x5741_5244);
-    let cos_max = 80f64.to_radians().cos();
-    let mut dir = || {
-        let z: f64 = cos_max + (1.0 - cos_max) * rng.random::<f64>();
-        (z.acos().to_degrees(), rng.random::<f64>() * 360.0)
-    };
-    let count = 1500;
-    let samples: Vec<Sample> = (0..count)
-        .map(|k| {
-            let (ti, pi) = dir();
-            let (to, po) = dir();
-            let f = rj::brdf_at(m, albedos, psi.to_radians(), [ti, pi, to, po], channels);
-            let mut value = [f[0]; 3];
-            value[..channels].copy_from_slice(&f);
-            Sample {
-                l: direction_from_angles(ti.to_radians(), pi.to_radians()),
-                v: direction_from_angles(to.to_radians(), po.to_radians()),
-                fibre_azimuth: None,
-                map_value: None,
-                value,
-                sigma: None,
-                weight: 1.0,
-                origin: Origin::Line(k as u64 + 2),
-            }
-        })
-        .collect();
-    let data = Samples {
-        samples,
-        channels,
-        kind: DataKind::Gonio,
-        source: "fitted model".into(),
-        dropped: Dropped::default(),
-        skipped_examples: vec![],
-    };
-    let text = format!(
-        "model = \"ward\"\nstarts = 3\nseed = {}\n[parameters]\nfibre_azimuth_deg = {{ value = {psi}, vary = false }}\nalpha_x = {{ value = 0.2 }}\nalpha_y = {{ value = 0.2 }}\n",
-        cfg.seed
-    );
-    let ward_cfg: FitConfig = toml::from_str(&text)?;
-    let w = fit::fit(&data, &ward_cfg, true)?;
-    let mut parameters = std::collections::BTreeMap::new();
-    for (k, v) in rj::params_out(&w) {
-        parameters.insert(k, v.value);
-    }
-    Ok(Some(rj::WardFallback {
-        model: "ward".into(),
-        parameters,
-        rms_error: w.statistics.rmse,
-        relative_rms_error: w.statistics.relative_rmse,
-        directions: count,
-    }))
-}
-
 pub fn run(args: &FitArgs) -> Result<()> {
     let mut cfg = FitConfig::load(&args.config)?;
     if let Some(m) = &args.model {
@@ -165,11 +98,34 @@ pub fn run(args: &FitArgs) -> Result<()> {
             phi_i: d[1],
             theta_o: d[2],
             phi_o: d[3],
-            brdf: rj::brdf_at(m.as_ref(), &albedos, psi, d, channels),
+            brdf: brdf_at_degrees(m.as_ref(), &albedos, psi, d, channels),
         })
         .collect();
-    let ward = ward_fallback(m.as_ref(), &albedos, psi.to_degrees(), &cfg, channels)
-        .context("fitting the Ward fallback")?;
+    // an optional stage: its failure is a warning, never the loss of the fit
+    let mut warnings = outcome.warnings.clone();
+    let ward = if id == ModelId::Ward {
+        None
+    } else {
+        match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
+            Ok(w) => Some(rj::WardFallback {
+                model: "ward".into(),
+                parameters: w
+                    .parameters
+                    .into_iter()
+                    .map(|(k, v)| (k, rj::number_or_rgb(&v)))
+                    .collect(),
+                rms_error: w.rms_error,
+                relative_rms_error: w.relative_rms_error,
+                directions: w.directions,
+            }),
+            Err(e) => {
+                warnings.push(format!(
+                    "the Ward fallback could not be fitted, so the result has none: {e:#}"
+                ));
+                None
+            }
+        }
+    };
     let mut knobs = rj::knobs(&cfg, opts.subsample.stride, opts.subsample.fraction);
     if let Some(mp) = &outcome.map {
         knobs.topology_map = Some(
@@ -221,7 +177,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
                     .collect()
             })
             .unwrap_or_default(),
-        warnings: outcome.warnings.clone(),
+        quality: Some(serde_json::to_value(&outcome.quality)?),
+        warnings: warnings.clone(),
     };
     let mut report_text = report::text(&outcome, id.as_str(), &args.data.display().to_string());
     if let Some(s) = &selection {

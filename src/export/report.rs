@@ -25,6 +25,7 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
             "    sum of squares     = {:.6e}  (no sigmas: chi-square not defined)",
             s.chi_square
         );
+        let _ = writeln!(t, "    residual variance  = {:.6e}", s.reduced_chi_square);
     }
     let _ = writeln!(t, "    RMSE               = {:.6e} 1/sr", s.rmse);
     let _ = writeln!(
@@ -83,11 +84,58 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
             let _ = writeln!(t, "    [{}] cost {c:.6e}", vals.join(", "));
         }
     }
+    let _ = write!(t, "{}", quality_text(&outcome.quality));
     if !outcome.warnings.is_empty() {
         let _ = writeln!(t, "[[Warnings]]");
         for w in &outcome.warnings {
             let _ = writeln!(t, "    {w}");
         }
+    }
+    t
+}
+
+/// The [[Quality]] section: noise verdict, distinct minima, residual bins.
+pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
+    let mut t = String::new();
+    let _ = writeln!(t, "[[Quality]]");
+    let _ = writeln!(t, "    verdict            = {}", q.verdict);
+    let _ = writeln!(t, "    noise ({})  {}", q.noise.source, q.noise.note);
+    if q.minima.len() > 1 {
+        let _ = writeln!(
+            t,
+            "    distinct minima (free shape parameters, cost, cost above the best in residual variances):"
+        );
+        for m in &q.minima {
+            let ps: Vec<String> = m
+                .parameters
+                .iter()
+                .map(|(k, v)| format!("{k} {v:.4}"))
+                .collect();
+            let _ = writeln!(
+                t,
+                "      [{}] {:.6e} +{:.2}",
+                ps.join(", "),
+                m.cost,
+                m.delta
+            );
+        }
+    }
+    let _ = writeln!(
+        t,
+        "    residual bins (mean weighted residual model - data in residual sd, z = mean / standard error; * = systematic):"
+    );
+    for b in &q.residual_bins {
+        let _ = writeln!(
+            t,
+            "      {:<36} {:>4.0}-{:<4.0} n {:>6}  mean {:+.3}  z {:+6.1}{}",
+            b.axis,
+            b.lo_deg,
+            b.hi_deg,
+            b.n,
+            b.mean,
+            b.z,
+            if b.flagged { " *" } else { "" }
+        );
     }
     t
 }

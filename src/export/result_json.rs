@@ -4,8 +4,6 @@
 
 use crate::fit::config::FitConfig;
 use crate::fit::FitOutcome;
-use crate::model::frame::{direction_from_angles, FibreFrame};
-use crate::model::{DirectionPair, ShadingModel};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -27,6 +25,10 @@ pub struct ResultFile {
     pub ward_fallback: Option<WardFallback>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub model_selection: Vec<serde_json::Value>,
+    /// Fit quality: noise verdict, distinct minima, residual structure (absent in files written
+    /// before it existed).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub quality: Option<serde_json::Value>,
     pub warnings: Vec<String>,
 }
 
@@ -144,28 +146,16 @@ pub fn check_directions() -> Vec<[f64; 4]> {
     v
 }
 
-/// BRDF per channel of a fitted model at one direction pair (degrees), spot-averaged.
-pub fn brdf_at(
-    m: &dyn ShadingModel,
-    albedos: &crate::model::Albedos,
-    psi: f64,
-    d: [f64; 4],
-    channels: usize,
-) -> Vec<f64> {
-    let l = direction_from_angles(d[0].to_radians(), d[1].to_radians());
-    let v = direction_from_angles(d[2].to_radians(), d[3].to_radians());
-    let b = m.basis(&DirectionPair::new(&FibreFrame::from_azimuth(psi), &l, &v));
-    (0..channels).map(|c| b.brdf(albedos, c)).collect()
+/// One number, or [r, g, b].
+pub fn number_or_rgb(v: &[f64]) -> serde_json::Value {
+    if v.len() == 1 {
+        serde_json::json!(v[0])
+    } else {
+        serde_json::json!(v)
+    }
 }
 
 pub fn params_out(outcome: &FitOutcome) -> BTreeMap<String, ParamOut> {
-    let num = |v: &[f64]| -> serde_json::Value {
-        if v.len() == 1 {
-            serde_json::json!(v[0])
-        } else {
-            serde_json::json!(v)
-        }
-    };
     let mut out = BTreeMap::new();
     for r in &outcome.records {
         let se: Vec<serde_json::Value> = r
@@ -176,7 +166,7 @@ pub fn params_out(outcome: &FitOutcome) -> BTreeMap<String, ParamOut> {
         out.insert(
             r.name.clone(),
             ParamOut {
-                value: num(&r.value),
+                value: number_or_rgb(&r.value),
                 std_error: if se.len() == 1 {
                     se[0].clone()
                 } else {

@@ -70,9 +70,10 @@ pub struct Optimizer {
     /// Stop when the relative decrease of the cost in an iteration is below this.
     #[serde(default = "default_tolerance")]
     pub tolerance: f64,
-    /// Candidates tried by the global stage (a seeded Latin-hypercube grid).
-    #[serde(default = "default_candidates")]
-    pub global_candidates: usize,
+    /// Candidates costed by the global stage (a seeded Latin-hypercube design over the shape
+    /// parameters); default 32 + 24 per free shape parameter.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub global_candidates: Option<usize>,
     /// Samples (randomly chosen, seeded) the global stage and the start polishing use.
     #[serde(default = "default_subsample")]
     pub global_subsample: usize,
@@ -87,7 +88,7 @@ impl Default for Optimizer {
         Self {
             max_iterations: default_iterations(),
             tolerance: default_tolerance(),
-            global_candidates: default_candidates(),
+            global_candidates: None,
             global_subsample: default_subsample(),
             separable: true,
         }
@@ -112,9 +113,6 @@ fn default_iterations() -> u64 {
 fn default_tolerance() -> f64 {
     1e-9
 }
-fn default_candidates() -> usize {
-    48
-}
 fn default_subsample() -> usize {
     600
 }
@@ -122,7 +120,7 @@ fn yes() -> bool {
     true
 }
 fn default_starts() -> usize {
-    3
+    6
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -267,7 +265,7 @@ impl FitConfig {
         for name in self.parameters.keys() {
             if !rungs
                 .iter()
-                .any(|&r| super::parameters::names_for(r).contains(&name.as_str()))
+                .any(|&r| r.parameter_names().contains(&name.as_str()))
             {
                 let ids: Vec<&str> = rungs.iter().map(|r| r.as_str()).collect();
                 bail!(
@@ -286,14 +284,14 @@ impl FitConfig {
     pub fn for_rung(&self, id: ModelId) -> FitConfig {
         let mut c = self.clone();
         c.model = id.to_string();
-        let allowed = super::parameters::names_for(id);
+        let allowed = id.parameter_names();
         c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
         c
     }
 
     fn validate_rung(&self) -> Result<()> {
         let id = self.model_id()?;
-        let allowed = super::parameters::names_for(id);
+        let allowed = id.parameter_names();
         for (name, e) in &self.parameters {
             if !allowed.contains(&name.as_str()) {
                 bail!(

@@ -8,37 +8,6 @@ use crate::model::topology::max_height;
 use crate::model::ModelId;
 use anyhow::{bail, Result};
 
-/// Names of the parameters each rung has (MODEL.md §5).
-pub fn names_for(id: ModelId) -> Vec<&'static str> {
-    use ModelId::*;
-    match id {
-        Lambert => vec!["kd"],
-        MaxNormal => vec!["kd", "ks", "exponent", "fibre_azimuth_deg"],
-        HastDiffuse => vec!["kd", "fibre_azimuth_deg"],
-        Ward => vec!["rho_d", "rho_s", "alpha_x", "alpha_y", "fibre_azimuth_deg"],
-        PoulinFournier => vec![
-            "kd",
-            "ks",
-            "substrate_albedo",
-            "exponent",
-            "spacing",
-            "fibre_azimuth_deg",
-        ],
-        VaryingTopology | Reference => {
-            vec![
-                "kd",
-                "ks",
-                "substrate_albedo",
-                "exponent",
-                "spacing",
-                "height",
-                "map_scale",
-                "fibre_azimuth_deg",
-            ]
-        }
-    }
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum Shape {
     Exponent,
@@ -158,7 +127,7 @@ fn defaults(name: &str, spacing_max: f64, spacing0: f64) -> Default3 {
         "map_scale" => d(0.0, 0.0, max_height(spacing_max), false),
         "fibre_azimuth_deg" => d(0.0, -90.0, 90.0, false),
         "alpha_x" | "alpha_y" => d(0.2, 0.0011, 1.0, true),
-        _ => unreachable!("names come from names_for"),
+        _ => unreachable!("names come from ModelId::parameter_names"),
     }
 }
 
@@ -169,7 +138,7 @@ fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
         "exponent" => (1.0, 1e4),
         "spacing" => (2.0, 20.0),
         "height" | "map_scale" => (0.0, max_height(spacing_max)),
-        "fibre_azimuth_deg" => (-180.0, 180.0),
+        "fibre_azimuth_deg" => (-90.0, 90.0),
         "alpha_x" | "alpha_y" => (1e-3, 1.0),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
     }
@@ -181,7 +150,7 @@ impl ParamSet {
         // components switch parameters on and off on top of [parameters]
         let mut listed_params = cfg.parameters.clone();
         let comp = &cfg.components;
-        if !comp.specular && names_for(rung).contains(&"ks") {
+        if !comp.specular && rung.parameter_names().contains(&"ks") {
             listed_params.insert(
                 "ks".into(),
                 ParamEntry {
@@ -190,8 +159,10 @@ impl ParamSet {
                     ..Default::default()
                 },
             );
+            // without a lobe the exponent means nothing: fixed (at its start), not fitted
+            listed_params.entry("exponent".into()).or_default().vary = Some(false);
         }
-        if comp.spacing_free == Some(false) && names_for(rung).contains(&"spacing") {
+        if comp.spacing_free == Some(false) && rung.parameter_names().contains(&"spacing") {
             listed_params.insert(
                 "spacing".into(),
                 ParamEntry {
@@ -201,11 +172,11 @@ impl ParamSet {
                 },
             );
         }
-        if comp.spacing_free == Some(true) && names_for(rung).contains(&"spacing") {
+        if comp.spacing_free == Some(true) && rung.parameter_names().contains(&"spacing") {
             listed_params.entry("spacing".into()).or_default().vary = Some(true);
         }
         match comp.substrate.as_deref() {
-            Some("off") if names_for(rung).contains(&"substrate_albedo") => {
+            Some("off") if rung.parameter_names().contains(&"substrate_albedo") => {
                 listed_params.insert(
                     "substrate_albedo".into(),
                     ParamEntry {
@@ -215,7 +186,7 @@ impl ParamSet {
                     },
                 );
             }
-            Some("free") if names_for(rung).contains(&"substrate_albedo") => {
+            Some("free") if rung.parameter_names().contains(&"substrate_albedo") => {
                 listed_params.entry("substrate_albedo".into()).or_default();
             }
             Some("tied") => {
@@ -245,7 +216,7 @@ impl ParamSet {
         };
         let mut shapes = Vec::new();
         let mut albedos = Vec::new();
-        for name in names_for(rung) {
+        for name in rung.parameter_names() {
             let listed = cfg.parameters.contains_key(name);
             let e = entry(name);
             let def = defaults(name, spacing_max, spacing0);

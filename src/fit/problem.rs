@@ -8,7 +8,7 @@
 //! albedo channels (needed for the `log` metric, which is not linear in them).
 
 use super::config::Metric;
-use super::parameters::{Component, ParamSet, Shape};
+use super::parameters::{Component, ParamSet, Shape, ShapeParam};
 use crate::load::samples::Sample;
 use crate::model::frame::FibreFrame;
 use crate::model::topology::{Topology, TopologyMap};
@@ -92,6 +92,12 @@ impl<'a> FitProblem<'a> {
         }
     }
 
+    /// Residual scale per sample and channel (1/sigma or sqrt(weight), times cos(theta_i) for
+    /// the cosine metric).
+    pub fn scale(&self) -> &[[f64; 3]] {
+        &self.scale
+    }
+
     pub fn channels(&self) -> usize {
         self.template.channels
     }
@@ -110,14 +116,15 @@ impl<'a> FitProblem<'a> {
             }
     }
 
-    /// Internal bounds of theta.
+    /// Bounds of theta in the optimizer's coordinates (see [`Coordinate`]).
     pub fn bounds(&self) -> (DVector<f64>, DVector<f64>) {
         let mut lo = Vec::new();
         let mut hi = Vec::new();
         for &i in &self.free_shapes {
-            let s = &self.template.shapes[i];
-            lo.push(s.kind.to_internal(s.min));
-            hi.push(s.kind.to_internal(s.max));
+            let sh = &self.template.shapes[i];
+            let (a, b) = coordinate(sh).bounds(sh);
+            lo.push(a);
+            hi.push(b);
         }
         if !self.separable {
             for &(i, _) in &self.free_albedos {
@@ -128,12 +135,61 @@ impl<'a> FitProblem<'a> {
         (DVector::from_vec(lo), DVector::from_vec(hi))
     }
 
+    /// The finite box a space-filling design covers: the bounds, with a periodic azimuth's
+    /// one period [-90, 90).
+    pub fn design_box(&self) -> (DVector<f64>, DVector<f64>) {
+        let (mut lo, mut hi) = self.bounds();
+        for k in 0..lo.len() {
+            if !lo[k].is_finite() || !hi[k].is_finite() {
+                lo[k] = -90.0;
+                hi[k] = 90.0;
+            }
+        }
+        (lo, hi)
+    }
+
+    /// Period of each theta entry (Some(180) for a periodic azimuth), for distances between
+    /// candidates.
+    pub fn periods(&self) -> Vec<Option<f64>> {
+        let mut v: Vec<Option<f64>> = self
+            .free_shapes
+            .iter()
+            .map(|&i| match coordinate(&self.template.shapes[i]) {
+                Coordinate::Periodic => Some(180.0),
+                _ => None,
+            })
+            .collect();
+        if !self.separable {
+            v.extend(self.free_albedos.iter().map(|_| None));
+        }
+        v
+    }
+
+    /// Which theta entries describe the fibre geometry (spacing, height, map scale).
+    pub fn geometric(&self) -> Vec<bool> {
+        let mut v: Vec<bool> = self
+            .free_shapes
+            .iter()
+            .map(|&i| {
+                matches!(
+                    self.template.shapes[i].kind,
+                    Shape::Spacing | Shape::Height | Shape::MapScale
+                )
+            })
+            .collect();
+        if !self.separable {
+            v.extend(self.free_albedos.iter().map(|_| false));
+        }
+        v
+    }
+
     /// theta of a parameter set.
     pub fn theta_of(&self, set: &ParamSet) -> DVector<f64> {
+        let d = set.shape_value(Shape::Spacing);
         let mut v: Vec<f64> = self
             .free_shapes
             .iter()
-            .map(|&i| set.shapes[i].kind.to_internal(set.shapes[i].value))
+            .map(|&i| coordinate(&set.shapes[i]).from_value(&set.shapes[i], d))
             .collect();
         if !self.separable {
             v.extend(
@@ -145,12 +201,21 @@ impl<'a> FitProblem<'a> {
         DVector::from_vec(v)
     }
 
-    /// The parameter set at theta (albedos as in `base` when separable).
+    /// The parameter set at theta (albedos as in `base` when separable). Every theta inside the
+    /// bounds gives a valid set: heights and map scales within [min, min(max, H_max(d))] of the
+    /// spacing d at theta, the azimuth wrapped into [-90, 90).
     pub fn set_at(&self, theta: &DVector<f64>, base: &ParamSet) -> ParamSet {
         let mut set = base.clone();
-        for (k, &i) in self.free_shapes.iter().enumerate() {
-            let s = &mut set.shapes[i];
-            s.value = s.kind.to_external(theta[k]).clamp(s.min, s.max);
+        // spacing first: the height coordinates are relative to H_max(d)
+        for pass in [false, true] {
+            for (k, &i) in self.free_shapes.iter().enumerate() {
+                let c = coordinate(&set.shapes[i]);
+                if matches!(c, Coordinate::UnderMaxHeight) == pass {
+                    let d = set.shape_value(Shape::Spacing);
+                    let s = &mut set.shapes[i];
+                    s.value = c.to_value(s, theta[k], d);
+                }
+            }
         }
         if !self.separable {
             let off = self.free_shapes.len();
@@ -167,11 +232,12 @@ impl<'a> FitProblem<'a> {
             .free_shapes
             .iter()
             .map(|&i| {
-                let k = self.template.shapes[i].kind;
-                if k.log_space() {
-                    format!("ln({})", k.name())
-                } else {
-                    k.name().to_string()
+                let s = &self.template.shapes[i];
+                let n = s.kind.name();
+                match coordinate(s) {
+                    Coordinate::Log => format!("ln({n})"),
+                    Coordinate::UnderMaxHeight => format!("{n} (fraction of its range)"),
+                    _ => n.to_string(),
                 }
             })
             .collect();
@@ -381,21 +447,24 @@ impl<'a> FitProblem<'a> {
         let r0 = self.residuals(cols, set);
         let n = r0.len();
         let ch = self.channels();
-        // shape entries come first in theta's bounds
-        let (_, hi_all) = self.bounds();
-        let theta: DVector<f64> = DVector::from_vec(
-            self.free_shapes
-                .iter()
-                .map(|&i| set.shapes[i].kind.to_internal(set.shapes[i].value))
-                .collect(),
-        );
+        // derivatives in external units (ln for log-space parameters), stepping into the
+        // valid range
+        let d = set.shape_value(Shape::Spacing);
         let shape_cols: Vec<DVector<f64>> = (0..self.free_shapes.len())
             .into_par_iter()
             .map(|k| {
-                let h = self.step(&theta, k, &hi_all);
+                let sh = &set.shapes[self.free_shapes[k]];
+                let x = sh.kind.to_internal(sh.value);
+                let top = match coordinate(sh) {
+                    Coordinate::Periodic => f64::INFINITY,
+                    Coordinate::UnderMaxHeight => height_range(sh, d).1,
+                    _ => sh.kind.to_internal(sh.max),
+                };
+                let h = 1e-6 * x.abs().max(1.0);
+                let h = if x + h > top { -h } else { h };
                 let mut s2 = set.clone();
                 let sh = &mut s2.shapes[self.free_shapes[k]];
-                sh.value = sh.kind.to_external(theta[k] + h);
+                sh.value = sh.kind.to_external(x + h);
                 let c2 = self.columns(&s2)?;
                 Ok((self.residuals(&c2, &s2) - &r0) / h)
             })
@@ -446,6 +515,77 @@ impl<'a> FitProblem<'a> {
 
     pub fn free_albedos(&self) -> &[(usize, usize)] {
         &self.free_albedos
+    }
+}
+
+/// How a shape parameter appears to the optimizer, so that every point it can reach is a valid
+/// model: the exponent and Ward's roughness in log space; the fibre azimuth periodic (period 180
+/// degrees, unbounded, wrapped) when its bounds span the whole period; height and map scale as a
+/// fraction u in [0, 1] of [min, min(max, H_max(d))] at the current spacing d, so that they never
+/// exceed H_max(d) = sqrt(d^2 - 1); everything else linear within its bounds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Coordinate {
+    Linear,
+    Log,
+    Periodic,
+    UnderMaxHeight,
+}
+
+pub fn coordinate(s: &ShapeParam) -> Coordinate {
+    match s.kind {
+        _ if s.kind.log_space() => Coordinate::Log,
+        Shape::Azimuth if s.max - s.min >= 180.0 - 1e-9 => Coordinate::Periodic,
+        Shape::Height | Shape::MapScale => Coordinate::UnderMaxHeight,
+        _ => Coordinate::Linear,
+    }
+}
+
+/// [min, top] of a height-like parameter at spacing d: top = min(max, H_max(d)), never below min
+/// unless H_max(d) itself is.
+pub fn height_range(s: &ShapeParam, d: f64) -> (f64, f64) {
+    let h_max = crate::model::topology::max_height(d);
+    let top = s.max.min(h_max);
+    (s.min.min(top), top)
+}
+
+impl Coordinate {
+    /// Bounds of the coordinate of `s`.
+    pub fn bounds(self, s: &ShapeParam) -> (f64, f64) {
+        match self {
+            Coordinate::Linear => (s.min, s.max),
+            Coordinate::Log => (s.min.ln(), s.max.ln()),
+            Coordinate::Periodic => (f64::NEG_INFINITY, f64::INFINITY),
+            Coordinate::UnderMaxHeight => (0.0, 1.0),
+        }
+    }
+
+    /// The coordinate of `s`'s value at spacing d.
+    pub fn from_value(self, s: &ShapeParam, d: f64) -> f64 {
+        match self {
+            Coordinate::Linear | Coordinate::Periodic => s.value,
+            Coordinate::Log => s.value.ln(),
+            Coordinate::UnderMaxHeight => {
+                let (lo, top) = height_range(s, d);
+                if top > lo {
+                    ((s.value - lo) / (top - lo)).clamp(0.0, 1.0)
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+
+    /// The value of `s` at coordinate x and spacing d: always inside the valid range.
+    pub fn to_value(self, s: &ShapeParam, x: f64, d: f64) -> f64 {
+        match self {
+            Coordinate::Linear => x.clamp(s.min, s.max),
+            Coordinate::Log => x.exp().clamp(s.min, s.max),
+            Coordinate::Periodic => super::wrap_azimuth(x),
+            Coordinate::UnderMaxHeight => {
+                let (lo, top) = height_range(s, d);
+                (lo + x.clamp(0.0, 1.0) * (top - lo)).min(top)
+            }
+        }
     }
 }
 

@@ -110,15 +110,17 @@ pub fn covariance(
     }
 }
 
-/// Fit statistics in lmfit's definitions.
-#[derive(Clone, Debug, serde::Serialize)]
+/// Fit statistics in lmfit's definitions. With sigmas the weighted sum of squares is a
+/// chi-square; without, it is only a sum of squares, and the JSON names it so
+/// (`sum_of_squares`, `residual_variance` instead of `chi_square`, `reduced_chi_square`).
+#[derive(Clone, Debug)]
 pub struct Statistics {
     /// Residuals (samples x channels).
     pub n: usize,
     pub free_parameters: usize,
-    /// Sum of squared weighted residuals.
+    /// Sum of squared weighted residuals (a chi-square when sigmas are given).
     pub chi_square: f64,
-    /// chi^2 / (n - p); meaningful as a goodness of fit only when sigmas are given.
+    /// chi^2 / (n - p): the reduced chi-square with sigmas, the residual variance without.
     pub reduced_chi_square: f64,
     pub sigmas_given: bool,
     /// Unweighted root-mean-square of model - data, 1/sr.
@@ -127,6 +129,28 @@ pub struct Statistics {
     pub relative_rmse: f64,
     pub aic: f64,
     pub bic: f64,
+}
+
+impl serde::Serialize for Statistics {
+    fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
+        use serde::ser::SerializeMap;
+        let mut m = ser.serialize_map(Some(9))?;
+        m.serialize_entry("n", &self.n)?;
+        m.serialize_entry("free_parameters", &self.free_parameters)?;
+        let (sum, reduced) = if self.sigmas_given {
+            ("chi_square", "reduced_chi_square")
+        } else {
+            ("sum_of_squares", "residual_variance")
+        };
+        m.serialize_entry(sum, &self.chi_square)?;
+        m.serialize_entry(reduced, &self.reduced_chi_square)?;
+        m.serialize_entry("sigmas_given", &self.sigmas_given)?;
+        m.serialize_entry("rmse", &self.rmse)?;
+        m.serialize_entry("relative_rmse", &self.relative_rmse)?;
+        m.serialize_entry("aic", &self.aic)?;
+        m.serialize_entry("bic", &self.bic)?;
+        m.end()
+    }
 }
 
 pub fn statistics(

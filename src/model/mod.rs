@@ -71,6 +71,35 @@ impl ModelId {
         )
     }
 
+    /// Names of the parameters this rung has (MODEL.md §5), as fit configs list them.
+    pub fn parameter_names(self) -> Vec<&'static str> {
+        use ModelId::*;
+        match self {
+            Lambert => vec!["kd"],
+            MaxNormal => vec!["kd", "ks", "exponent", "fibre_azimuth_deg"],
+            HastDiffuse => vec!["kd", "fibre_azimuth_deg"],
+            Ward => vec!["rho_d", "rho_s", "alpha_x", "alpha_y", "fibre_azimuth_deg"],
+            PoulinFournier => vec![
+                "kd",
+                "ks",
+                "substrate_albedo",
+                "exponent",
+                "spacing",
+                "fibre_azimuth_deg",
+            ],
+            VaryingTopology | Reference => vec![
+                "kd",
+                "ks",
+                "substrate_albedo",
+                "exponent",
+                "spacing",
+                "height",
+                "map_scale",
+                "fibre_azimuth_deg",
+            ],
+        }
+    }
+
     /// Models whose elevation comes from the topology (height, map).
     pub fn has_topology(self) -> bool {
         matches!(self, ModelId::VaryingTopology | ModelId::Reference)
@@ -224,6 +253,25 @@ pub fn intensity(brdf: f64, pair: &DirectionPair) -> f64 {
     } else {
         0.0
     }
+}
+
+/// BRDF per channel of a model at one direction pair given in degrees (theta_i, phi_i, theta_o,
+/// phi_o), fibres at azimuth `psi` (radians); spot-averaged.
+pub fn brdf_at_degrees(
+    m: &dyn ShadingModel,
+    albedos: &Albedos,
+    psi: f64,
+    d: [f64; 4],
+    channels: usize,
+) -> Vec<f64> {
+    let l = frame::direction_from_angles(d[0].to_radians(), d[1].to_radians());
+    let v = frame::direction_from_angles(d[2].to_radians(), d[3].to_radians());
+    let b = m.basis(&DirectionPair::new(
+        &frame::FibreFrame::from_azimuth(psi),
+        &l,
+        &v,
+    ));
+    (0..channels).map(|c| b.brdf(albedos, c)).collect()
 }
 
 /// Build the model `id` from validated parameters.

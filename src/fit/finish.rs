@@ -1,0 +1,177 @@
+//! The last stage: at the best minimum, the albedos, residuals, standard errors, correlations,
+//! statistics and per-parameter records; the other distinct minima for the quality checks.
+
+use super::parameters::{ParamSet, Shape};
+use super::problem::{coordinate, height_range, Coordinate, FitProblem};
+use super::{quality, uncertainty, wrap_azimuth, FitOutcome, ParamRecord};
+use crate::load::samples::Samples;
+use anyhow::Result;
+
+/// Is `set`'s free shape `i` on a bound (its effective bound for heights; never for a periodic
+/// azimuth)?
+fn shape_at_bound(set: &ParamSet, i: usize) -> bool {
+    let s = &set.shapes[i];
+    let (lo, hi) = match coordinate(s) {
+        Coordinate::Periodic => return false,
+        Coordinate::UnderMaxHeight => height_range(s, set.shape_value(Shape::Spacing)),
+        _ => (s.min, s.max),
+    };
+    near(s.value, lo, s.min, s.max) || near(s.value, hi, s.min, s.max)
+}
+
+fn near(v: f64, b: f64, lo: f64, hi: f64) -> bool {
+    (v - b).abs() <= 1e-9 * (hi - lo).abs().max(1.0)
+}
+
+/// The outcome at `minima[0]` (parameter sets with shapes at the minimum, best first).
+pub fn finish(
+    full: &FitProblem,
+    samples: &Samples,
+    ch: usize,
+    minima: &[(ParamSet, f64)],
+    notes: Vec<String>,
+) -> Result<FitOutcome> {
+    let mut set = minima[0].0.clone();
+    let cols = full.columns(&set)?;
+    if full.separable {
+        full.solve_albedos(&cols, &mut set);
+    }
+    let r = full.residuals(&cols, &set);
+    let chi2 = r.norm_squared();
+    let fitted = full.model_values(&cols, &set);
+    let mut model_flat = Vec::with_capacity(fitted.len() * ch);
+    let mut data_flat = Vec::with_capacity(fitted.len() * ch);
+    for (m, s) in fitted.iter().zip(&samples.samples) {
+        model_flat.extend_from_slice(&m[..ch]);
+        data_flat.extend_from_slice(&s.value[..ch]);
+    }
+    let n = r.len();
+    let p = full.free_shapes().len() + full.free_albedos().len();
+    let sigmas = samples.samples.iter().all(|s| s.sigma.is_some());
+    let statistics = uncertainty::statistics(chi2, n, p, sigmas, &model_flat, &data_flat);
+
+    // standard errors over the full parameter vector
+    let names = full.full_names();
+    let mut at_bound: Vec<bool> = full
+        .free_shapes()
+        .iter()
+        .map(|&i| shape_at_bound(&set, i))
+        .collect();
+    for &(i, c) in full.free_albedos() {
+        let a = &set.albedos[i];
+        at_bound
+            .push(near(a.value[c], a.min, a.min, a.max) || near(a.value[c], a.max, a.min, a.max));
+    }
+    let jac = full.full_jacobian(&set, &cols)?;
+    let cov = uncertainty::covariance(&jac, &names, &at_bound, chi2, n);
+    let mut warnings = notes;
+    warnings.extend(cov.warnings.iter().cloned());
+
+    // per-parameter records in external units
+    let mut records = Vec::new();
+    let mut col = 0;
+    for s in set.shapes.iter() {
+        let (se, ab) = if s.vary {
+            let se = cov.std_error[col].map(|e| if s.kind.log_space() { e * s.value } else { e });
+            let ab = at_bound[col];
+            col += 1;
+            (se, ab)
+        } else {
+            (None, false)
+        };
+        let value = if s.kind == Shape::Azimuth {
+            wrap_azimuth(s.value)
+        } else {
+            s.value
+        };
+        records.push(ParamRecord {
+            name: s.kind.name().to_string(),
+            value: vec![value],
+            std_error: vec![se],
+            init: vec![s.init],
+            min: s.min,
+            max: s.max,
+            fixed: !s.vary,
+            at_bound: vec![ab],
+        });
+    }
+    for (i, a) in set.albedos.iter().enumerate() {
+        let mut se = vec![None; ch];
+        let mut ab = vec![false; ch];
+        if a.vary {
+            for c in 0..ch {
+                let k = full
+                    .free_albedos()
+                    .iter()
+                    .position(|&(ii, cc)| ii == i && cc == c)
+                    .expect("free albedo");
+                let colk = full.free_shapes().len() + k;
+                se[c] = cov.std_error[colk];
+                ab[c] = at_bound[colk];
+            }
+        }
+        records.push(ParamRecord {
+            name: a.name.to_string(),
+            value: a.value[..ch].to_vec(),
+            std_error: se,
+            init: a.init[..ch].to_vec(),
+            min: a.min,
+            max: a.max,
+            fixed: !a.vary,
+            at_bound: ab,
+        });
+    }
+    for r in &records {
+        if r.at_bound.iter().any(|&b| b) {
+            warnings.push(format!(
+                "`{}` ended at a bound of [{}, {}]: no standard error",
+                r.name, r.min, r.max
+            ));
+        }
+    }
+    let correlations = cov
+        .correlations
+        .iter()
+        .map(|&(a, b, r)| (names[a].clone(), names[b].clone(), r))
+        .collect();
+    let minima: Vec<(Vec<(String, f64)>, f64)> = minima
+        .iter()
+        .map(|(s, c)| {
+            (
+                s.shapes
+                    .iter()
+                    .filter(|x| x.vary)
+                    .map(|x| (x.kind.name().to_string(), x.value))
+                    .collect(),
+                *c,
+            )
+        })
+        .collect();
+    let quality = quality::assess(&quality::Inputs {
+        samples: &full.samples,
+        scale: full.scale(),
+        residuals: r.as_slice(),
+        channels: ch,
+        free_parameters: p,
+        sigmas_given: sigmas,
+        psi: set.shape_value(Shape::Azimuth).to_radians(),
+        minima: &minima,
+    });
+    warnings.extend(quality.warnings.iter().cloned());
+    Ok(FitOutcome {
+        quality,
+        set,
+        records,
+        correlations,
+        statistics,
+        warnings,
+        iterations: 0,
+        evaluations: full.evaluations.load(std::sync::atomic::Ordering::Relaxed),
+        starts: vec![],
+        minima,
+        channels: ch,
+        elapsed_seconds: 0.0,
+        fitted,
+        map: None,
+    })
+}

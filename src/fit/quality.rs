@@ -1,0 +1,363 @@
+//! Is the fit the best the data allow, and does it fit within the noise? The `quality` block of
+//! the result JSON and the report, and the warnings a user cannot miss.
+//!
+//! - Noise: with sigmas, the reduced chi-square against its expected spread sqrt(2 / (n - p));
+//!   without, the noise is estimated from the data where they allow it (goniometric: repeated
+//!   direction pairs, pooled variance; captures: second differences of the residuals between
+//!   neighbouring pixels of one image, which share light and view, var(r[x-1] - 2 r[x] + r[x+1])
+//!   = 6 sigma^2 for white noise, so smooth misfit does not count as noise) and compared with the
+//!   residual variance; otherwise it says that no estimate is possible.
+//! - Distinct minima: the other minima polished on all samples whose cost is within 4 residual
+//!   variances of the best (a likelihood-ratio test at about 95 % for one parameter): the data do
+//!   not decide between them.
+//! - Residual structure: the mean weighted residual in bins of the half-vector angle theta_h and of
+//!   the half vector's azimuth relative to the fibres (folded into [0, 90] deg: T and -T, and the
+//!   mirror across T, are the same); a bin whose mean is more than 4 standard errors from zero is
+//!   systematically off.
+
+use crate::load::samples::{Origin, Sample};
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+
+/// Bins further than this many standard errors from zero are flagged.
+pub const BIN_Z_LIMIT: f64 = 4.0;
+/// A reduced chi-square further than this many expected spreads from 1 is flagged.
+pub const CHI2_Z_LIMIT: f64 = 5.0;
+/// Minima within this many residual variances of the best are not decided by the data.
+pub const AMBIGUOUS_DELTA: f64 = 4.0;
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Quality {
+    /// "fits within the noise", "does not fit within the noise", or "noise unknown".
+    pub verdict: String,
+    pub noise: NoiseCheck,
+    /// Distinct minima on all samples, best first (the first is the fit).
+    pub minima: Vec<MinimumOut>,
+    /// True when another minimum's cost is within 4 residual variances of the best.
+    pub ambiguous: bool,
+    pub residual_bins: Vec<ResidualBin>,
+    pub warnings: Vec<String>,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct NoiseCheck {
+    /// "sigmas", "repeated directions", "neighbouring pixels" or "none".
+    pub source: String,
+    /// Residual variance over the noise variance (the reduced chi-square with sigmas).
+    pub ratio: Option<f64>,
+    /// Expected standard deviation of the ratio for a model that fits.
+    pub expected_spread: Option<f64>,
+    /// Estimated noise standard deviation, 1/sr (no sigmas), weighted like the residuals.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub noise_estimate: Option<f64>,
+    /// Degrees of freedom behind the estimate.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub estimate_dof: Option<usize>,
+    pub note: String,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct MinimumOut {
+    pub parameters: BTreeMap<String, f64>,
+    pub cost: f64,
+    /// (cost - best cost) / residual variance.
+    pub delta: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ResidualBin {
+    /// "half-vector angle" or "half-vector azimuth from the fibres".
+    pub axis: String,
+    pub lo_deg: f64,
+    pub hi_deg: f64,
+    pub n: usize,
+    /// Mean weighted residual (model - data), in units of the residual standard deviation.
+    pub mean: f64,
+    /// mean / its standard error.
+    pub z: f64,
+    pub flagged: bool,
+}
+
+/// Half-vector angle from N and azimuth from the fibres (folded into [0, 90]), degrees.
+pub fn half_vector_angles(s: &Sample, psi: f64) -> Option<(f64, f64)> {
+    let h = s.l + s.v;
+    let norm = h.norm();
+    if !(norm > 1e-12) {
+        return None;
+    }
+    let h = h / norm;
+    let theta = h.z.clamp(-1.0, 1.0).acos().to_degrees();
+    let phi = h.y.atan2(h.x) - s.fibre_azimuth.unwrap_or(psi);
+    let mut a = phi.to_degrees().rem_euclid(180.0);
+    if a > 90.0 {
+        a = 180.0 - a;
+    }
+    Some((theta, a))
+}
+
+fn bins(axis: &str, edges: &[f64], values: &[(f64, f64)], s_all: f64) -> Vec<ResidualBin> {
+    let mut out = Vec::new();
+    for w in edges.windows(2) {
+        let (lo, hi) = (w[0], w[1]);
+        let last = hi == *edges.last().expect("edges");
+        let rs: Vec<f64> = values
+            .iter()
+            .filter(|(x, _)| *x >= lo && (*x < hi || (last && *x <= hi)))
+            .map(|v| v.1)
+            .collect();
+        let n = rs.len();
+        if n == 0 {
+            continue;
+        }
+        let mean = rs.iter().sum::<f64>() / n as f64 / s_all;
+        let z = mean * (n as f64).sqrt();
+        out.push(ResidualBin {
+            axis: axis.into(),
+            lo_deg: lo,
+            hi_deg: hi,
+            n,
+            mean,
+            z,
+            flagged: n >= 10 && z.abs() > BIN_Z_LIMIT,
+        });
+    }
+    out
+}
+
+/// Pooled noise variance of repeated direction pairs (same l and v to 1e-9), weighted like the
+/// residuals, and its degrees of freedom.
+fn repeats_variance(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> Option<(f64, usize)> {
+    let key = |s: &Sample| {
+        let q = |x: f64| (x * 1e9).round() as i64;
+        [q(s.l.x), q(s.l.y), q(s.l.z), q(s.v.x), q(s.v.y), q(s.v.z)]
+    };
+    let mut groups: HashMap<[i64; 6], Vec<usize>> = HashMap::new();
+    for (i, s) in samples.iter().enumerate() {
+        groups.entry(key(s)).or_default().push(i);
+    }
+    let (mut ss, mut dof) = (0.0, 0usize);
+    for g in groups.values().filter(|g| g.len() > 1) {
+        for c in 0..ch {
+            let vals: Vec<f64> = g
+                .iter()
+                .map(|&i| samples[i].value[c] * scale[i][c])
+                .collect();
+            let mean = vals.iter().sum::<f64>() / vals.len() as f64;
+            ss += vals.iter().map(|v| (v - mean).powi(2)).sum::<f64>();
+            dof += vals.len() - 1;
+        }
+    }
+    (dof >= 5).then(|| (ss / dof as f64, dof))
+}
+
+/// Noise variance from second differences of the residuals along image rows (neighbouring
+/// pixels share light and view): mean((r[x-1] - 2 r[x] + r[x+1])^2) / 6.
+fn pixel_variance(samples: &[&Sample], residuals: &[f64], ch: usize) -> Option<(f64, usize)> {
+    let mut at: HashMap<(u32, u32, u32), usize> = HashMap::new();
+    for (i, s) in samples.iter().enumerate() {
+        if let Origin::Pixel { image, x, y } = s.origin {
+            at.insert((image, x, y), i);
+        }
+    }
+    let (mut ss, mut count) = (0.0, 0usize);
+    for (&(image, x, y), &i) in &at {
+        if x == 0 {
+            continue;
+        }
+        let (Some(&a), Some(&b)) = (at.get(&(image, x - 1, y)), at.get(&(image, x + 1, y))) else {
+            continue;
+        };
+        for c in 0..ch {
+            let d = residuals[a * ch + c] - 2.0 * residuals[i * ch + c] + residuals[b * ch + c];
+            ss += d * d;
+            count += 1;
+        }
+    }
+    (count >= 10).then(|| (ss / count as f64 / 6.0, count))
+}
+
+/// Everything the quality block needs from the fit.
+pub struct Inputs<'a> {
+    pub samples: &'a [&'a Sample],
+    /// Residual scale per sample and channel (1/sigma or sqrt(weight)).
+    pub scale: &'a [[f64; 3]],
+    /// Weighted residuals, sample-major.
+    pub residuals: &'a [f64],
+    pub channels: usize,
+    pub free_parameters: usize,
+    pub sigmas_given: bool,
+    /// Fibre azimuth of the fit, radians.
+    pub psi: f64,
+    /// Distinct minima (free shape values by name, cost), best first.
+    pub minima: &'a [(Vec<(String, f64)>, f64)],
+}
+
+pub fn assess(inp: &Inputs) -> Quality {
+    let n = inp.residuals.len();
+    let p = inp.free_parameters;
+    let dof = n.saturating_sub(p).max(1);
+    let cost: f64 = inp.residuals.iter().map(|r| r * r).sum();
+    let s2 = cost / dof as f64;
+    let mut warnings = Vec::new();
+
+    // noise
+    let spread = |k: usize| (2.0 / k as f64).sqrt();
+    let noise = if inp.sigmas_given {
+        NoiseCheck {
+            source: "sigmas".into(),
+            ratio: Some(s2),
+            expected_spread: Some(spread(dof)),
+            noise_estimate: None,
+            estimate_dof: None,
+            note: format!(
+                "reduced chi-square {s2:.4}; a model that fits gives 1 +/- {:.4}",
+                spread(dof)
+            ),
+        }
+    } else {
+        let pixels = pixel_variance(inp.samples, inp.residuals, inp.channels);
+        let repeats = repeats_variance(inp.samples, inp.scale, inp.channels);
+        match pixels
+            .map(|e| ("neighbouring pixels", e))
+            .or(repeats.map(|e| ("repeated directions", e)))
+        {
+            Some((source, (var, k))) if var > 0.0 => {
+                // the ratio of two variance estimates: spread from both
+                let spr = (2.0 / dof as f64 + 2.0 / k as f64).sqrt();
+                NoiseCheck {
+                    source: source.into(),
+                    ratio: Some(s2 / var),
+                    expected_spread: Some(spr),
+                    noise_estimate: Some(var.sqrt()),
+                    estimate_dof: Some(k),
+                    note: format!(
+                        "residual variance / noise variance estimated from {source} = {:.4}; a model that fits gives 1 +/- {spr:.4}",
+                        s2 / var
+                    ),
+                }
+            }
+            _ => NoiseCheck {
+                source: "none".into(),
+                ratio: None,
+                expected_spread: None,
+                noise_estimate: None,
+                estimate_dof: None,
+                note: "no sigmas, no repeated directions and no neighbouring pixels: the noise \
+                       cannot be estimated, so whether the model fits within it is unknown"
+                    .into(),
+            },
+        }
+    };
+    let verdict = match (noise.ratio, noise.expected_spread) {
+        (Some(r), Some(sp)) if (r - 1.0) > CHI2_Z_LIMIT * sp => {
+            warnings.push(format!(
+                "the model does not fit within the noise: {} (more than {CHI2_Z_LIMIT} spreads above)",
+                noise.note
+            ));
+            "does not fit within the noise"
+        }
+        (Some(r), Some(sp)) if (1.0 - r) > CHI2_Z_LIMIT * sp => {
+            warnings.push(format!(
+                "the residuals are smaller than the noise: {}; the sigmas may be overestimated, or \
+                 the model fits the noise",
+                noise.note
+            ));
+            "fits within the noise"
+        }
+        (Some(_), Some(_)) => "fits within the noise",
+        _ => {
+            warnings.push(noise.note.clone());
+            "noise unknown"
+        }
+    };
+
+    // distinct minima
+    let best = inp.minima.first().map_or(cost, |m| m.1);
+    let minima: Vec<MinimumOut> = inp
+        .minima
+        .iter()
+        .map(|(ps, c)| MinimumOut {
+            parameters: ps.iter().cloned().collect(),
+            cost: *c,
+            delta: (c - best) / s2.max(f64::MIN_POSITIVE),
+        })
+        .collect();
+    let close: Vec<&MinimumOut> = minima
+        .iter()
+        .skip(1)
+        .filter(|m| m.delta < AMBIGUOUS_DELTA)
+        .collect();
+    let ambiguous = !close.is_empty();
+    if ambiguous {
+        let list: Vec<String> = std::iter::once(&minima[0])
+            .chain(close.iter().copied())
+            .map(|m| {
+                let ps: Vec<String> = m
+                    .parameters
+                    .iter()
+                    .map(|(k, v)| format!("{k} {v:.4}"))
+                    .collect();
+                format!(
+                    "[{}] cost {:.6e} (+{:.2} residual variances)",
+                    ps.join(", "),
+                    m.cost,
+                    m.delta
+                )
+            })
+            .collect();
+        warnings.push(format!(
+            "the data do not decide between {} distinct minima: {}",
+            close.len() + 1,
+            list.join("; ")
+        ));
+    }
+
+    // residual structure
+    let s_all = s2.sqrt().max(f64::MIN_POSITIVE);
+    let mut theta_h = Vec::new();
+    let mut azim = Vec::new();
+    for (i, s) in inp.samples.iter().enumerate() {
+        if let Some((t, a)) = half_vector_angles(s, inp.psi) {
+            let r = (0..inp.channels)
+                .map(|c| inp.residuals[i * inp.channels + c])
+                .sum::<f64>()
+                / inp.channels as f64;
+            theta_h.push((t, r));
+            azim.push((a, r));
+        }
+    }
+    let edges_t: Vec<f64> = (0..=9).map(|k| 10.0 * k as f64).collect();
+    let edges_a: Vec<f64> = (0..=6).map(|k| 15.0 * k as f64).collect();
+    let mut residual_bins = bins("half-vector angle", &edges_t, &theta_h, s_all);
+    residual_bins.extend(bins(
+        "half-vector azimuth from the fibres",
+        &edges_a,
+        &azim,
+        s_all,
+    ));
+    let flagged: Vec<String> = residual_bins
+        .iter()
+        .filter(|b| b.flagged)
+        .map(|b| {
+            format!(
+                "{} {:.0}-{:.0} deg: mean {:+.2} sd ({:+.1} standard errors, {} samples)",
+                b.axis, b.lo_deg, b.hi_deg, b.mean, b.z, b.n
+            )
+        })
+        .collect();
+    if !flagged.is_empty() {
+        warnings.push(format!(
+            "systematic residuals (model - data) in {} bins: {}",
+            flagged.len(),
+            flagged.join("; ")
+        ));
+    }
+    Quality {
+        verdict: verdict.into(),
+        noise,
+        minima,
+        ambiguous,
+        residual_bins,
+        warnings,
+    }
+}
