@@ -80,7 +80,11 @@ pub fn run(args: &FitArgs) -> Result<()> {
         None
     };
     let id = cfg.model_id()?;
-    let outcome = fit::fit(&samples, &cfg, args.quiet || args.json)
+    let hints = selection
+        .as_ref()
+        .map(|s| s.hints.clone())
+        .unwrap_or_default();
+    let outcome = fit::fit_with_hints(&samples, &cfg, args.quiet || args.json, &hints)
         .with_context(|| format!("fitting {} to {}", id, args.data.display()))?;
     let channels = samples.channels;
     let m = model_for(
@@ -211,10 +215,35 @@ pub fn run(args: &FitArgs) -> Result<()> {
         print!("{report_text}");
         eprintln!("wrote {}", args.out.display());
     }
-    for w in &outcome.warnings {
-        if !args.quiet {
+    if !args.quiet {
+        for w in warnings
+            .iter()
+            .filter(|w| !outcome.quality.warnings.contains(w))
+        {
             eprintln!("warning: {w}");
         }
     }
+    // what the quality checks found is printed even with --quiet: it must not be missed
+    quality_banner(&outcome.quality);
     Ok(())
+}
+
+/// The quality warnings as a banner on stderr (bold red on a terminal).
+pub fn quality_banner(q: &fit::quality::Quality) {
+    use std::io::IsTerminal;
+    if q.warnings.is_empty() {
+        return;
+    }
+    let (on, off) = if std::io::stderr().is_terminal() {
+        ("\x1b[1;31m", "\x1b[0m")
+    } else {
+        ("", "")
+    };
+    let rule = "=".repeat(78);
+    eprintln!("{on}{rule}");
+    eprintln!("FIT QUALITY: {}", q.verdict.to_uppercase());
+    for w in &q.warnings {
+        eprintln!("WARNING: {w}");
+    }
+    eprintln!("{rule}{off}");
 }

@@ -6,6 +6,7 @@ pub mod data;
 pub mod eval;
 pub mod fit;
 pub mod inspect;
+pub mod score;
 pub mod synth;
 
 use anyhow::Result;
@@ -32,6 +33,8 @@ pub enum Command {
     Fit(fit::FitArgs),
     /// Evaluate a model's BRDF and intensity at given light/view directions.
     Eval(eval::EvalArgs),
+    /// Score a fitted result against measurements (held-out data, another capture).
+    Score(score::ScoreArgs),
     /// Load measurements as `fit` would and summarise them (counts, ranges, coverage, drops).
     Inspect(inspect::InspectArgs),
     /// Measure the speed-accuracy trade of every rung and knob; write tables and plots.
@@ -61,6 +64,7 @@ where
         Command::Fit(args) => fit::run(&args),
         Command::Eval(args) => eval::run(&args),
         Command::Inspect(args) => inspect::run(&args),
+        Command::Score(args) => score::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::Bench(args) => bench::run(&args),
     }

@@ -7,7 +7,7 @@ use crate::fit::FitOutcome;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-pub const SCHEMA: &str = "fibrefit-result/1";
+pub const SCHEMA: &str = crate::fit::RESULT_SCHEMA;
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ResultFile {

@@ -280,12 +280,28 @@ impl FitConfig {
         Ok(())
     }
 
-    /// This config with `model` set to `id`, keeping only the parameters that rung has.
+    /// This config with `model` set to `id`, keeping only the parameters that rung has. From an
+    /// `auto` config, every shape parameter of the rung the config does not list is free, over
+    /// its whole range (MODEL.md §5) from its default start: `exponent` [1, 1e4] from 20,
+    /// `spacing` [2, 20] from 2, `height` [0, H_max] from H_max(2)/2, `map_scale` [0, H_max]
+    /// from 0, `fibre_azimuth_deg` over its period from 0, `alpha_x`, `alpha_y` (0.001, 1] from
+    /// 0.2. `[components]` still fix what they switch off.
     pub fn for_rung(&self, id: ModelId) -> FitConfig {
         let mut c = self.clone();
         c.model = id.to_string();
         let allowed = id.parameter_names();
         c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
+        if self.model == "auto" {
+            for name in allowed {
+                let shape = !matches!(name, "kd" | "ks" | "substrate_albedo" | "rho_d" | "rho_s");
+                if shape {
+                    c.parameters.entry(name.to_string()).or_insert(ParamEntry {
+                        vary: Some(true),
+                        ..Default::default()
+                    });
+                }
+            }
+        }
         c
     }
 

@@ -16,6 +16,7 @@ pub mod parameters;
 pub mod polish;
 pub mod problem;
 pub mod quality;
+pub mod score;
 pub mod selection;
 pub mod setup;
 pub mod uncertainty;
@@ -32,6 +33,9 @@ use rand::seq::SliceRandom;
 use rand::SeedableRng;
 use std::sync::Arc;
 use std::time::Instant;
+
+/// Schema of the result JSON the fit is exported as (and `score` reads back).
+pub const RESULT_SCHEMA: &str = "fibrefit-result/1";
 
 /// One parameter after the fit, in external units.
 #[derive(Clone, Debug, serde::Serialize)]
@@ -80,7 +84,8 @@ pub fn fit(samples: &Samples, cfg: &FitConfig, quiet: bool) -> Result<FitOutcome
 }
 
 /// Fit with extra starts: each hint gives values of some shape parameters (e.g. the optimum of a
-/// simpler rung nested in this one); the rest keep the config's start.
+/// simpler rung nested in this one); height and map scale missing from a hint start at their
+/// minimum (a rung without them is this one without climbing), the rest at the config's start.
 pub fn fit_with_hints(
     samples: &Samples,
     cfg: &FitConfig,
@@ -124,9 +129,12 @@ pub fn fit_with_hints(
         let mut forced = vec![sub.theta_of(&template)];
         for h in hints {
             let mut set = template.clone();
-            for &(kind, v) in h {
-                if let Some(s) = set.shapes.iter_mut().find(|s| s.kind == kind && s.vary) {
-                    s.value = v.clamp(s.min, s.max);
+            for s in set.shapes.iter_mut().filter(|s| s.vary) {
+                match h.iter().find(|x| x.0 == s.kind) {
+                    Some(&(_, v)) => s.value = v.clamp(s.min, s.max),
+                    // a simpler rung is this one with no climbing and no spread of heights
+                    None if matches!(s.kind, Shape::Height | Shape::MapScale) => s.value = s.min,
+                    None => {}
                 }
             }
             forced.push(sub.theta_of(&set));

@@ -5,8 +5,9 @@
 //! (relative to the best RMSE).
 
 use super::config::FitConfig;
+use super::parameters::Shape;
 use super::problem::FitProblem;
-use super::{fit, FitOutcome};
+use super::{fit_with_hints, FitOutcome};
 use crate::load::samples::Samples;
 use crate::model::ModelId;
 use anyhow::{bail, Result};
@@ -36,6 +37,9 @@ pub struct SelectionOutcome {
     pub rule: String,
     pub train_samples: usize,
     pub heldout_samples: usize,
+    /// Shape values of every rung's training fit: extra starts for the final fit.
+    #[serde(skip)]
+    pub hints: Vec<Vec<(Shape, f64)>>,
 }
 
 fn subset(s: &Samples, idx: &[usize]) -> Samples {
@@ -109,13 +113,17 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
         0.0
     };
     let mut candidates = Vec::new();
+    let mut hints: Vec<Vec<(Shape, f64)>> = Vec::new();
     let mut fits: Vec<Option<(f64, f64)>> = Vec::new();
     for name in &cfg.selection.rungs {
         let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
         let rc = cfg.for_rung(id);
         let t = Instant::now();
-        let result = fit(&train, &rc, true).and_then(|o| {
+        // every simpler rung's optimum is a start: a rung nested in a richer one (poulin-fournier
+        // is varying-topology at height 0) then never ends worse than it on the training data
+        let result = fit_with_hints(&train, &rc, true, &hints).and_then(|o| {
             let (rmse, rel, ns) = heldout(&o, &rc, &test)?;
+            hints.push(o.set.shapes.iter().map(|s| (s.kind, s.value)).collect());
             Ok((o.statistics.free_parameters, rmse, rel, ns))
         });
         match result {
@@ -184,6 +192,7 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
         rule,
         train_samples: train.samples.len(),
         heldout_samples: test.samples.len(),
+        hints,
     })
 }
 

@@ -1,0 +1,42 @@
+//! `fibrefit score`: a fitted result against any dataset `fit` accepts.
+
+use super::data::LoadArgs;
+use crate::fit::score;
+use crate::load::load_data;
+use anyhow::Result;
+use clap::Args;
+use std::path::PathBuf;
+
+#[derive(Debug, Args)]
+#[command(after_help = "\
+Evaluates RESULT (a `fibrefit fit` JSON) exactly as the fit did (rung, knobs, topology map,
+residual metric) on DATA (goniometric CSV or capture TOML) and prints: residual and sample
+counts, chi-square and reduced chi-square when DATA has sigmas (else the sum of squares), RMSE
+in 1/sr and relative RMSE (RMSE / RMS data), per channel RMSE, relative RMSE and log error
+(RMS of ln(m + eps) - ln(y + eps), eps = 1e-3 x the channel's RMS value), and the mean residual in
+bins of the half-vector angle and of its azimuth from the fibres (* = systematic, > 4 standard
+errors). Scoring a fit's own training data reproduces its statistics; scoring held-out data is
+how a fit is checked. Writes nothing.")]
+pub struct ScoreArgs {
+    /// Result JSON written by `fibrefit fit`
+    pub result: PathBuf,
+    /// Goniometric CSV or capture TOML
+    pub data: PathBuf,
+    /// Print the score as JSON on stdout
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub load: LoadArgs,
+}
+
+pub fn run(args: &ScoreArgs) -> Result<()> {
+    let samples = load_data(&args.data, &args.load.options()?)?;
+    let result = score::read_result(&args.result, samples.channels)?;
+    let s = score::score(&result, &samples)?;
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&s)?);
+    } else {
+        print!("{}", score::text(&s));
+    }
+    Ok(())
+}

@@ -1,0 +1,281 @@
+//! Score a fitted result against any dataset `fit` accepts: how well does the fit describe data
+//! it may never have seen (a held-out set, another capture of the same swatch)?
+//!
+//! The result's model is evaluated exactly as the fit evaluated it (same rung, knobs, topology
+//! map, per-sample fibre directions and map values, residual metric), so scoring a fit's own
+//! training data reproduces the fit's statistics.
+//!
+//! Per channel: RMSE (1/sr), relative RMSE (RMSE / RMS data), and a log error, the RMS of
+//! ln(max(m, 0) + eps) - ln(max(y, 0) + eps) with eps = 1e-3 x the channel's RMS value (a floor
+//! relative to the data, so noise around zero does not dominate). Overall: chi-square and its
+//! reduced value when the data carry sigmas (else the weighted sum of squares), and the quality
+//! block's residual-structure bins.
+
+use super::config::{FitConfig, Knobs, Metric, ParamEntry};
+use super::parameters::{ParamSet, Shape};
+use super::problem::FitProblem;
+use super::quality;
+use super::uncertainty::{statistics, Statistics};
+use crate::load::samples::Samples;
+use crate::model::params::Albedo;
+use crate::model::topology::TopologyMap;
+use anyhow::{anyhow, bail, Context, Result};
+use serde::Serialize;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// A fitted result read back: the parameter set (nothing varies), its knobs and its free
+/// parameter count.
+pub struct FittedResult {
+    pub set: ParamSet,
+    pub metric: Metric,
+    pub knobs: Knobs,
+    pub free_parameters: usize,
+}
+
+/// Read a `fibrefit-result/1` JSON for data with `channels` channels.
+pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
+    let text = std::fs::read_to_string(path)
+        .with_context(|| format!("{}: cannot read result file", path.display()))?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let at = |what: &str| anyhow!("{}: {what}", path.display());
+    match v.get("schema").and_then(|s| s.as_str()) {
+        Some(super::RESULT_SCHEMA) => {}
+        Some(other) => bail!(
+            "{}: schema `{other}` is not one this fibrefit reads ({})",
+            path.display(),
+            super::RESULT_SCHEMA
+        ),
+        None => return Err(at("not a fibrefit result (no `schema`)")),
+    }
+    let model = v
+        .get("model")
+        .and_then(|m| m.as_str())
+        .ok_or_else(|| at("no `model`"))?;
+    let params = v
+        .get("parameters")
+        .and_then(|p| p.as_object())
+        .ok_or_else(|| at("no `parameters`"))?;
+    let mut entries = BTreeMap::new();
+    let mut free = 0;
+    let mut rgb = false;
+    for (name, e) in params {
+        let value: Albedo = serde_json::from_value(e.get("value").cloned().unwrap_or_default())
+            .map_err(|_| {
+                at(&format!(
+                    "parameters.{name}.value is not a number or [r, g, b]"
+                ))
+            })?;
+        rgb |= value.is_rgb();
+        let fixed = e.get("fixed").and_then(|f| f.as_bool()).unwrap_or(true);
+        if !fixed {
+            free += if value.is_rgb() { 3 } else { 1 };
+        }
+        // the fitted value only: the fit's bounds are checked against the fitted spacing
+        entries.insert(
+            name.clone(),
+            ParamEntry {
+                value: Some(value),
+                vary: Some(false),
+                ..Default::default()
+            },
+        );
+    }
+    if rgb && channels == 1 {
+        bail!("{}: an RGB result cannot score grey data", path.display());
+    }
+    let k = v.get("knobs");
+    let knob = |name: &str| k.and_then(|k| k.get(name));
+    let metric: Metric = match knob("metric") {
+        Some(m) => serde_json::from_value(m.clone())
+            .map_err(|_| at("knobs.metric is not linear, log or cosine"))?,
+        None => Metric::Linear,
+    };
+    let knobs = Knobs {
+        quadrature_order: knob("quadrature_order")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(16) as usize,
+        histogram_bins: knob("histogram_bins")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(16) as usize,
+        topology_map: knob("topology_map")
+            .and_then(|x| x.as_str())
+            .map(PathBuf::from),
+        ..Knobs::default()
+    };
+    let cfg = FitConfig {
+        model: model.to_string(),
+        metric,
+        starts: 1,
+        seed: 0,
+        knobs: knobs.clone(),
+        optimizer: Default::default(),
+        parameters: entries,
+        components: Default::default(),
+        selection: Default::default(),
+    };
+    cfg.validate()
+        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let set =
+        ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    Ok(FittedResult {
+        set,
+        metric,
+        knobs,
+        free_parameters: free,
+    })
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct ChannelScore {
+    pub channel: String,
+    pub rmse: f64,
+    pub relative_rmse: f64,
+    pub log_error: f64,
+}
+
+#[derive(Clone, Debug, Serialize)]
+pub struct Score {
+    pub model: String,
+    pub samples: usize,
+    pub statistics: Statistics,
+    pub channels: Vec<ChannelScore>,
+    pub residual_bins: Vec<quality::ResidualBin>,
+}
+
+/// Score `result` against `samples`.
+pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
+    let map = match &result.knobs.topology_map {
+        Some(p) => Some(Arc::new(
+            TopologyMap::load(p).context("the result's knobs.topology_map")?,
+        )),
+        None => None,
+    };
+    let ch = samples.channels;
+    let problem = FitProblem::new(
+        samples.samples.iter().collect(),
+        result.set.clone(),
+        result.metric,
+        result.knobs.quadrature_order,
+        result.knobs.histogram_bins,
+        map,
+        false,
+    );
+    let cols = problem.columns(&result.set)?;
+    let r = problem.residuals(&cols, &result.set);
+    let values = problem.model_values(&cols, &result.set);
+    let mut model_flat = Vec::with_capacity(values.len() * ch);
+    let mut data_flat = Vec::with_capacity(values.len() * ch);
+    for (m, s) in values.iter().zip(&samples.samples) {
+        model_flat.extend_from_slice(&m[..ch]);
+        data_flat.extend_from_slice(&s.value[..ch]);
+    }
+    let sigmas = samples.samples.iter().all(|s| s.sigma.is_some());
+    let stats = statistics(
+        r.norm_squared(),
+        r.len(),
+        result.free_parameters,
+        sigmas,
+        &model_flat,
+        &data_flat,
+    );
+    let names = if ch == 1 {
+        vec!["grey"]
+    } else {
+        vec!["r", "g", "b"]
+    };
+    let channels = (0..ch)
+        .map(|c| {
+            let pairs: Vec<(f64, f64)> = values
+                .iter()
+                .zip(&samples.samples)
+                .map(|(m, s)| (m[c], s.value[c]))
+                .collect();
+            let n = pairs.len().max(1) as f64;
+            let rms_y = (pairs.iter().map(|p| p.1 * p.1).sum::<f64>() / n).sqrt();
+            let rmse = (pairs.iter().map(|p| (p.0 - p.1).powi(2)).sum::<f64>() / n).sqrt();
+            let eps = (1e-3 * rms_y).max(f64::MIN_POSITIVE);
+            let log_error = (pairs
+                .iter()
+                .map(|p| ((p.0.max(0.0) + eps).ln() - (p.1.max(0.0) + eps).ln()).powi(2))
+                .sum::<f64>()
+                / n)
+                .sqrt();
+            ChannelScore {
+                channel: names[c].into(),
+                rmse,
+                relative_rmse: rmse / rms_y.max(f64::MIN_POSITIVE),
+                log_error,
+            }
+        })
+        .collect();
+    let q = quality::assess(&quality::Inputs {
+        samples: &problem.samples,
+        scale: problem.scale(),
+        residuals: r.as_slice(),
+        channels: ch,
+        free_parameters: result.free_parameters,
+        sigmas_given: sigmas,
+        psi: result.set.shape_value(Shape::Azimuth).to_radians(),
+        minima: &[],
+    });
+    Ok(Score {
+        model: result.set.rung.to_string(),
+        samples: samples.samples.len(),
+        statistics: stats,
+        channels,
+        residual_bins: q.residual_bins,
+    })
+}
+
+/// The score as text.
+pub fn text(s: &Score) -> String {
+    let st = &s.statistics;
+    let mut t = format!(
+        "[[Score]]\n    model              = {}\n    samples            = {}\n    residuals          = {}\n    free parameters    = {} (of the fit)\n",
+        s.model, s.samples, st.n, st.free_parameters
+    );
+    if st.sigmas_given {
+        t += &format!(
+            "    chi-square         = {:.6e}\n    reduced chi-square = {:.6}\n",
+            st.chi_square, st.reduced_chi_square
+        );
+    } else {
+        t += &format!(
+            "    sum of squares     = {:.6e}  (no sigmas: chi-square not defined)\n",
+            st.chi_square
+        );
+    }
+    t += &format!(
+        "    RMSE               = {:.6e} 1/sr\n    relative RMSE      = {:.4} %\n",
+        st.rmse,
+        100.0 * st.relative_rmse
+    );
+    t += "    per channel:        RMSE [1/sr]   relative RMSE   log error\n";
+    for c in &s.channels {
+        t += &format!(
+            "      {:<16} {:.6e}   {:>10.4} %   {:.6}\n",
+            c.channel,
+            c.rmse,
+            100.0 * c.relative_rmse,
+            c.log_error
+        );
+    }
+    t +=
+        "    residual bins (mean weighted residual model - data in residual sd; * = systematic):\n";
+    for b in &s.residual_bins {
+        t += &format!(
+            "      {:<36} {:>4.0}-{:<4.0} n {:>6}  mean {:+.3}  z {:+6.1}{}\n",
+            b.axis,
+            b.lo_deg,
+            b.hi_deg,
+            b.n,
+            b.mean,
+            b.z,
+            if b.flagged { " *" } else { "" }
+        );
+    }
+    t
+}
