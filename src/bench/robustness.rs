@@ -203,12 +203,13 @@ pub fn case_samples(case: &Case, map: Option<&Path>, n: usize, seed: u64) -> Res
     })
 }
 
-/// The default fit configuration of the study: spacing, height, exponent, azimuth (and the map
-/// scale with a map) free, from a random start inside the bounds.
+/// The default fit configuration of the study: spacing (over MODEL.md's whole range [2, 20]),
+/// height, exponent, azimuth (and the map scale with a map) free, from a random start inside the
+/// bounds.
 pub fn case_config(case: &Case, map: Option<&Path>, start_seed: u64) -> Result<FitConfig> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(0x57a7 + start_seed);
     let mut u = || rng.random::<f64>();
-    let d0 = 2.0 + 4.0 * u();
+    let d0 = 1.0 / (0.05 + 0.45 * u());
     let h0 = u() * crate::model::topology::max_height(d0);
     let e0 = (4000f64.ln() * u()).exp();
     let psi0 = -90.0 + 180.0 * u();
@@ -216,7 +217,7 @@ pub fn case_config(case: &Case, map: Option<&Path>, start_seed: u64) -> Result<F
     let mut text = format!(
         "model = \"varying-topology\"\nseed = {start_seed}\n[parameters]\n\
          kd = {{ value = 0.3 }}\n\
-         spacing = {{ value = {d0}, min = 2, max = 6 }}\n\
+         spacing = {{ value = {d0}, min = 2, max = 20 }}\n\
          height = {{ value = {h0} }}\n\
          fibre_azimuth_deg = {{ value = {psi0}, min = -90, max = 90 }}\n"
     );

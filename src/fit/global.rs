@@ -125,13 +125,20 @@ pub fn search(
     if geometric.iter().any(|&g| g) && geometric.iter().any(|&g| !g) {
         let best = cluster(found.clone(), &lo, &hi, &periods)[0].theta.clone();
         let n_geo = geometric.iter().filter(|&&g| g).count();
+        // a third of them on the face of touching fibres (the smallest spacing): the common
+        // case, and a face a box-filling design reaches only by chance
+        let spacing = sub.spacing_entry();
         let second: Vec<DVector<f64>> = latin_hypercube(&lo, &hi, 16 + 24 * n_geo, rng)
             .into_iter()
-            .map(|mut c| {
+            .enumerate()
+            .map(|(j, mut c)| {
                 for k in 0..c.len() {
                     if !geometric[k] {
                         c[k] = best[k];
                     }
+                }
+                if let Some(k) = spacing.filter(|_| j % 3 == 0) {
+                    c[k] = hi[k]; // 1/d at its top: d at its minimum
                 }
                 c
             })

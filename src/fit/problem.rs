@@ -165,6 +165,13 @@ impl<'a> FitProblem<'a> {
         v
     }
 
+    /// The theta entry of the spacing, if it is free.
+    pub fn spacing_entry(&self) -> Option<usize> {
+        self.free_shapes
+            .iter()
+            .position(|&i| self.template.shapes[i].kind == Shape::Spacing)
+    }
+
     /// Which theta entries describe the fibre geometry (spacing, height, map scale).
     pub fn geometric(&self) -> Vec<bool> {
         let mut v: Vec<bool> = self
@@ -236,6 +243,7 @@ impl<'a> FitProblem<'a> {
                 let n = s.kind.name();
                 match coordinate(s) {
                     Coordinate::Log => format!("ln({n})"),
+                    Coordinate::Reciprocal => format!("1/{n}"),
                     Coordinate::UnderMaxHeight => format!("{n} (fraction of its range)"),
                     _ => n.to_string(),
                 }
@@ -519,7 +527,9 @@ impl<'a> FitProblem<'a> {
 }
 
 /// How a shape parameter appears to the optimizer, so that every point it can reach is a valid
-/// model: the exponent and Ward's roughness in log space; the fibre azimuth periodic (period 180
+/// model: the exponent and Ward's roughness in log space; the spacing as its reciprocal 1/d (the
+/// optics change like the covered fraction 2/d, so a design uniform in 1/d samples touching and
+/// nearly touching fibres as densely as wide gaps); the fibre azimuth periodic (period 180
 /// degrees, unbounded, wrapped) when its bounds span the whole period; height and map scale as a
 /// fraction u in [0, 1] of [min, min(max, H_max(d))] at the current spacing d, so that they never
 /// exceed H_max(d) = sqrt(d^2 - 1); everything else linear within its bounds.
@@ -527,6 +537,7 @@ impl<'a> FitProblem<'a> {
 pub enum Coordinate {
     Linear,
     Log,
+    Reciprocal,
     Periodic,
     UnderMaxHeight,
 }
@@ -536,6 +547,7 @@ pub fn coordinate(s: &ShapeParam) -> Coordinate {
         _ if s.kind.log_space() => Coordinate::Log,
         Shape::Azimuth if s.max - s.min >= 180.0 - 1e-9 => Coordinate::Periodic,
         Shape::Height | Shape::MapScale => Coordinate::UnderMaxHeight,
+        Shape::Spacing => Coordinate::Reciprocal,
         _ => Coordinate::Linear,
     }
 }
@@ -554,6 +566,7 @@ impl Coordinate {
         match self {
             Coordinate::Linear => (s.min, s.max),
             Coordinate::Log => (s.min.ln(), s.max.ln()),
+            Coordinate::Reciprocal => (1.0 / s.max, 1.0 / s.min),
             Coordinate::Periodic => (f64::NEG_INFINITY, f64::INFINITY),
             Coordinate::UnderMaxHeight => (0.0, 1.0),
         }
@@ -564,6 +577,7 @@ impl Coordinate {
         match self {
             Coordinate::Linear | Coordinate::Periodic => s.value,
             Coordinate::Log => s.value.ln(),
+            Coordinate::Reciprocal => 1.0 / s.value,
             Coordinate::UnderMaxHeight => {
                 let (lo, top) = height_range(s, d);
                 if top > lo {
@@ -580,6 +594,7 @@ impl Coordinate {
         match self {
             Coordinate::Linear => x.clamp(s.min, s.max),
             Coordinate::Log => x.exp().clamp(s.min, s.max),
+            Coordinate::Reciprocal => (1.0 / x).clamp(s.min, s.max),
             Coordinate::Periodic => super::wrap_azimuth(x),
             Coordinate::UnderMaxHeight => {
                 let (lo, top) = height_range(s, d);
