@@ -19,8 +19,14 @@ use std::path::{Path, PathBuf};
 DATA is a goniometric CSV or an image capture TOML (see `fibrefit inspect --help`).
 The config (TOML) names the rung (`model`), each parameter's `value`, `min`, `max`, `vary`,
 the residual `metric` (linear | log | cosine), [knobs] (quadrature_order, histogram_bins,
-stride, fraction, topology_map), [optimizer] (max_iterations, tolerance, global_candidates,
-global_subsample, separable), `starts` and `seed`. Examples: configs/fit_*.toml.
+stride, fraction, topology_map), [optimizer] (max_iterations, tolerance, global_candidates
+[default 32 + 24 per free shape parameter], global_subsample [600], separable), `starts` [6]
+and `seed`. Examples: configs/fit_*.toml.
+The search covers the shape space (a space-filling design, the distinct best candidates
+polished, every competitive basin polished on all samples), so the fit is the global minimum;
+when it does not fit within the noise, when other minima are as good, or when residuals are
+systematic, a FIT QUALITY banner says so on stderr (even with --quiet). Check a fit on other
+data with `fibrefit score`.
 The result JSON (schema fibrefit-result/1) is written atomically: a failed fit writes nothing.")]
 pub struct FitArgs {
     /// Goniometric CSV or capture TOML
