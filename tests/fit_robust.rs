@@ -23,16 +23,7 @@ fn fibrefit() -> Command {
 }
 
 fn write_map(dir: &Path) -> PathBuf {
-    let map = dir.join("map.png");
-    let spec = fibrefit::synth::MapSpec {
-        width: 32,
-        height: 32,
-        seed: 11,
-        waves: 6,
-    };
-    fibrefit::export::images::write_gray16(&map, 32, 32, &fibrefit::synth::generate_map(&spec))
-        .unwrap();
-    map
+    fibrefit::bench::robustness::write_map(dir).unwrap()
 }
 
 /// The study's success criterion: chi-square within one spread of the truth's.

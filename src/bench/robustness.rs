@@ -284,17 +284,23 @@ fn truth_chi2(case: &Case, map: Option<&Path>, data: &Samples, cfg: &FitConfig) 
     Ok(p.residuals(&cols, &set).norm_squared())
 }
 
-/// Run the study: every case x `size.seeds` noise seeds (each with its own random start).
-/// `scratch` holds the generated topology map.
-pub fn run(cases: &[Case], size: StudySize, scratch: &Path, bar: &ProgressBar) -> Result<Vec<Run>> {
-    let map_path = scratch.join("robustness_map.png");
+/// Write the study's topology map (32 x 32, seed 11) into `dir`; its path.
+pub fn write_map(dir: &Path) -> Result<std::path::PathBuf> {
+    let path = dir.join("robustness_map.png");
     let spec = crate::synth::MapSpec {
         width: 32,
         height: 32,
         seed: 11,
         waves: 6,
     };
-    crate::export::images::write_gray16(&map_path, 32, 32, &crate::synth::generate_map(&spec))?;
+    crate::export::images::write_gray16(&path, 32, 32, &crate::synth::generate_map(&spec))?;
+    Ok(path)
+}
+
+/// Run the study: every case x `size.seeds` noise seeds (each with its own random start).
+/// `scratch` holds the generated topology map.
+pub fn run(cases: &[Case], size: StudySize, scratch: &Path, bar: &ProgressBar) -> Result<Vec<Run>> {
+    let map_path = write_map(scratch)?;
     let mut runs = Vec::new();
     for case in cases {
         let map = (case.map_scale > 0.0).then_some(map_path.as_path());

@@ -120,23 +120,7 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
             );
         }
     }
-    let _ = writeln!(
-        t,
-        "    residual bins (mean weighted residual model - data in residual sd, z = mean / standard error; * = systematic):"
-    );
-    for b in &q.residual_bins {
-        let _ = writeln!(
-            t,
-            "      {:<36} {:>4.0}-{:<4.0} n {:>6}  mean {:+.3}  z {:+6.1}{}",
-            b.axis,
-            b.lo_deg,
-            b.hi_deg,
-            b.n,
-            b.mean,
-            b.z,
-            if b.flagged { " *" } else { "" }
-        );
-    }
+    t += &crate::fit::quality::bins_text(&q.residual_bins);
     t
 }
 

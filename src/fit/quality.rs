@@ -361,3 +361,23 @@ pub fn assess(inp: &Inputs) -> Quality {
         warnings,
     }
 }
+
+/// The residual bins as indented text lines, with a heading.
+pub fn bins_text(bins: &[ResidualBin]) -> String {
+    let mut t = String::from(
+        "    residual bins (mean weighted residual model - data in residual sd, z = mean / standard error; * = systematic):\n",
+    );
+    for b in bins {
+        t += &format!(
+            "      {:<36} {:>4.0}-{:<4.0} n {:>6}  mean {:+.3}  z {:+6.1}{}\n",
+            b.axis,
+            b.lo_deg,
+            b.hi_deg,
+            b.n,
+            b.mean,
+            b.z,
+            if b.flagged { " *" } else { "" }
+        );
+    }
+    t
+}

@@ -263,19 +263,6 @@ pub fn text(s: &Score) -> String {
             c.log_error
         );
     }
-    t +=
-        "    residual bins (mean weighted residual model - data in residual sd; * = systematic):\n";
-    for b in &s.residual_bins {
-        t += &format!(
-            "      {:<36} {:>4.0}-{:<4.0} n {:>6}  mean {:+.3}  z {:+6.1}{}\n",
-            b.axis,
-            b.lo_deg,
-            b.hi_deg,
-            b.n,
-            b.mean,
-            b.z,
-            if b.flagged { " *" } else { "" }
-        );
-    }
+    t += &quality::bins_text(&s.residual_bins);
     t
 }
