@@ -381,3 +381,85 @@ pub fn bins_text(bins: &[ResidualBin]) -> String {
     }
     t
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::model::frame::{direction_from_angles, Vec3};
+    use rand::SeedableRng;
+    use rand_distr::{Distribution, StandardNormal};
+
+    fn sample(l: Vec3, v: Vec3, y: f64, origin: Origin) -> Sample {
+        Sample {
+            l,
+            v,
+            fibre_azimuth: None,
+            map_value: None,
+            value: [y; 3],
+            sigma: None,
+            weight: 1.0,
+            origin,
+        }
+    }
+
+    #[test]
+    fn noise_is_estimated_from_neighbouring_pixels_and_from_repeats() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let sigma = 0.1;
+        let l = direction_from_angles(0.4, 0.3);
+        let v = direction_from_angles(0.2, 2.0);
+        // pixels: residuals = a smooth misfit (a ramp, which second differences cancel) + noise
+        let mut samples = Vec::new();
+        let mut residuals = Vec::new();
+        for y in 0..40u32 {
+            for x in 0..40u32 {
+                samples.push(sample(l, v, 1.0, Origin::Pixel { image: 0, x, y }));
+                let z: f64 = StandardNormal.sample(&mut rng);
+                residuals.push(0.05 * x as f64 + sigma * z);
+            }
+        }
+        let refs: Vec<&Sample> = samples.iter().collect();
+        let (var, k) = pixel_variance(&refs, &residuals, 1).unwrap();
+        assert!(k > 1000);
+        assert!((var.sqrt() / sigma - 1.0).abs() < 0.05, "{}", var.sqrt());
+        // repeats: 200 directions measured 3 times each
+        let mut samples = Vec::new();
+        for k in 0..200 {
+            let l = direction_from_angles(0.01 * k as f64, 0.1);
+            let truth = 1.0 + k as f64 * 0.01;
+            for _ in 0..3 {
+                let z: f64 = StandardNormal.sample(&mut rng);
+                samples.push(sample(l, v, truth + sigma * z, Origin::Line(2)));
+            }
+        }
+        let refs: Vec<&Sample> = samples.iter().collect();
+        let scale = vec![[1.0; 3]; refs.len()];
+        let (var, dof) = repeats_variance(&refs, &scale, 1).unwrap();
+        assert_eq!(dof, 400);
+        assert!((var.sqrt() / sigma - 1.0).abs() < 0.08, "{}", var.sqrt());
+        // without either, the verdict says the noise is unknown
+        let single: Vec<Sample> = (0..50)
+            .map(|k| {
+                sample(
+                    direction_from_angles(0.01 * k as f64, 0.1),
+                    v,
+                    1.0,
+                    Origin::Line(2),
+                )
+            })
+            .collect();
+        let refs: Vec<&Sample> = single.iter().collect();
+        let q = assess(&Inputs {
+            samples: &refs,
+            scale: &vec![[1.0; 3]; 50],
+            residuals: &vec![0.01; 50],
+            channels: 1,
+            free_parameters: 1,
+            sigmas_given: false,
+            psi: 0.0,
+            minima: &[],
+        });
+        assert_eq!(q.verdict, "noise unknown");
+        assert!(q.warnings.iter().any(|w| w.contains("cannot be estimated")));
+    }
+}

@@ -33,7 +33,7 @@ pub fn covariance(
     if keep.is_empty() || n <= keep.len() {
         if n <= keep.len() && !keep.is_empty() {
             warnings.push(format!(
-                "{n} residuals for {} free parameters: no standard errors",
+                "{n} residuals for {p_all} free parameters ({} of them off their bounds): no standard errors",
                 keep.len()
             ));
         }
