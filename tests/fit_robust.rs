@@ -407,3 +407,39 @@ fn score_on_the_training_data_reproduces_the_fit() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("fibrefit-result/9"));
 }
+
+#[test]
+fn captures_without_sigmas_are_judged_against_the_pixel_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let fit_capture = |data: &str, config: &Path, stride: &str| -> serde_json::Value {
+        let out = dir.path().join("c.json");
+        let o = fibrefit()
+            .arg("fit")
+            .arg(root().join(data))
+            .arg("--config")
+            .arg(config)
+            .arg("--out")
+            .arg(&out)
+            .args(["--quiet", "--stride", stride])
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        let r: serde_json::Value =
+            serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
+        r["quality"].clone()
+    };
+    // the right rung on the brushed capture (every pixel): fits within the noise
+    let q = fit_capture(
+        "data_synthetic/brushed/capture.toml",
+        &root().join("configs/fit_brushed.toml"),
+        "1",
+    );
+    assert_eq!(q["noise"]["source"], "neighbouring pixels", "{q}");
+    assert_eq!(q["verdict"], "fits within the noise", "{q}");
+    // lambert on the climbing silk (every second pixel): far outside the noise
+    let lambert = dir.path().join("lambert.toml");
+    fs::write(&lambert, "model = \"lambert\"\n").unwrap();
+    let q = fit_capture("data_synthetic/silk/capture.toml", &lambert, "2");
+    assert_eq!(q["noise"]["source"], "neighbouring pixels", "{q}");
+    assert_eq!(q["verdict"], "does not fit within the noise", "{q}");
+}

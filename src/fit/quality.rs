@@ -150,27 +150,30 @@ fn repeats_variance(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> Optio
     (dof >= 5).then(|| (ss / dof as f64, dof))
 }
 
-/// Noise variance from second differences of the residuals along image rows (neighbouring
-/// pixels share light and view): mean((r[x-1] - 2 r[x] + r[x+1])^2) / 6.
+/// Noise variance from second differences of the residuals along image rows (pixels of one
+/// image share light and view, so their model values change smoothly):
+/// mean((r[x0] - 2 r[x1] + r[x2])^2) / 6 over consecutive kept pixels of a row with equal gaps
+/// x1 - x0 = x2 - x1 (neighbours, or every stride-th pixel of a subsampled capture).
 fn pixel_variance(samples: &[&Sample], residuals: &[f64], ch: usize) -> Option<(f64, usize)> {
-    let mut at: HashMap<(u32, u32, u32), usize> = HashMap::new();
+    let mut rows: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::new();
     for (i, s) in samples.iter().enumerate() {
         if let Origin::Pixel { image, x, y } = s.origin {
-            at.insert((image, x, y), i);
+            rows.entry((image, y)).or_default().push((x, i));
         }
     }
     let (mut ss, mut count) = (0.0, 0usize);
-    for (&(image, x, y), &i) in &at {
-        if x == 0 {
-            continue;
-        }
-        let (Some(&a), Some(&b)) = (at.get(&(image, x - 1, y)), at.get(&(image, x + 1, y))) else {
-            continue;
-        };
-        for c in 0..ch {
-            let d = residuals[a * ch + c] - 2.0 * residuals[i * ch + c] + residuals[b * ch + c];
-            ss += d * d;
-            count += 1;
+    for row in rows.values_mut() {
+        row.sort_unstable();
+        for w in row.windows(3) {
+            let ((x0, a), (x1, i), (x2, b)) = (w[0], w[1], w[2]);
+            if x1 - x0 != x2 - x1 || x1 - x0 > 8 {
+                continue;
+            }
+            for c in 0..ch {
+                let d = residuals[a * ch + c] - 2.0 * residuals[i * ch + c] + residuals[b * ch + c];
+                ss += d * d;
+                count += 1;
+            }
         }
     }
     (count >= 10).then(|| (ss / count as f64 / 6.0, count))
