@@ -87,8 +87,9 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             .find(|q| q.height.is_some_and(|h| h > h_max * (1.0 + 1e-9)))
         {
             bail!(
-                "{}: height {} exceeds H_max = sqrt(d^2 - 1) = {h_max} for spacing {}",
+                "{}:{}: column `height` = {} exceeds H_max = sqrt(d^2 - 1) = {h_max} for spacing {}",
                 args.queries.display(),
+                q.line,
                 q.height.unwrap_or_default(),
                 params.spacing
             );

@@ -342,15 +342,16 @@ impl FitConfig {
                 }
             }
         }
-        if !(1..=256).contains(&self.knobs.quadrature_order) {
+        use crate::model::params::{MAX_HISTOGRAM_BINS, MAX_QUADRATURE_ORDER};
+        if !(1..=MAX_QUADRATURE_ORDER).contains(&self.knobs.quadrature_order) {
             bail!(
-                "knobs.quadrature_order = {} must lie in [1, 256]",
+                "knobs.quadrature_order = {} must lie in [1, {MAX_QUADRATURE_ORDER}]",
                 self.knobs.quadrature_order
             );
         }
-        if !(1..=4096).contains(&self.knobs.histogram_bins) {
+        if !(1..=MAX_HISTOGRAM_BINS).contains(&self.knobs.histogram_bins) {
             bail!(
-                "knobs.histogram_bins = {} must lie in [1, 4096]",
+                "knobs.histogram_bins = {} must lie in [1, {MAX_HISTOGRAM_BINS}]",
                 self.knobs.histogram_bins
             );
         }

@@ -211,6 +211,105 @@ fn check_size(what: &str, path: &Path, got: (usize, usize), want: (usize, usize)
     Ok(())
 }
 
+/// Light, camera, exposure and saturation of image `k` (numbered from 1 in messages): every angle
+/// finite and in [0, 90) degrees from the normal, irradiance, intensity and exposure finite and
+/// positive, a saturation level only for EXR images and then finite and positive.
+fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result<()> {
+    let at = format!("{name}: [[images]] {} ({})", k + 1, spec.file.display());
+    let theta = |what: &str, t: f64| -> Result<()> {
+        if !(t.is_finite() && (0.0..90.0).contains(&t)) {
+            bail!("{at}: {what}.theta_deg = {t} must be a finite angle in [0, 90) degrees from the normal (90 is the horizon)");
+        }
+        Ok(())
+    };
+    let phi = |what: &str, p: f64| -> Result<()> {
+        if !(p.is_finite() && (-360.0..=360.0).contains(&p)) {
+            bail!("{at}: {what}.phi_deg = {p} must be a finite angle in [-360, 360] degrees");
+        }
+        Ok(())
+    };
+    let positive = |what: &str, v: f64| -> Result<()> {
+        if !(v.is_finite() && v > 0.0) {
+            bail!("{at}: {what} = {v} must be a finite positive number");
+        }
+        Ok(())
+    };
+    positive("exposure", spec.exposure)?;
+    match &spec.light {
+        Light::Directional {
+            theta_deg,
+            phi_deg,
+            irradiance,
+        } => {
+            theta("light", *theta_deg)?;
+            phi("light", *phi_deg)?;
+            positive("light.irradiance", *irradiance)?;
+        }
+        Light::Point {
+            position_mm,
+            intensity,
+        } => {
+            if position_mm.iter().any(|c| !c.is_finite()) {
+                bail!("{at}: light.position_mm = {position_mm:?} must be finite");
+            }
+            if !(position_mm[2] > 0.0) {
+                bail!("{at}: light.position_mm = {position_mm:?} must lie above the swatch (z > 0 mm)");
+            }
+            positive("light.intensity", *intensity)?;
+        }
+    }
+    match &spec.camera {
+        Camera::Orthographic { theta_deg, phi_deg } => {
+            theta("camera", *theta_deg)?;
+            phi("camera", *phi_deg)?;
+        }
+        Camera::Pinhole { position_mm } => {
+            if position_mm.iter().any(|c| !c.is_finite()) || !(position_mm[2] > 0.0) {
+                bail!("{at}: camera.position_mm = {position_mm:?} must be finite and above the swatch (z > 0 mm)");
+            }
+        }
+        Camera::ViewMap { .. } => {}
+    }
+    if let Some(sat) = spec.saturation {
+        let exr = spec
+            .file
+            .extension()
+            .and_then(|e| e.to_str())
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
+        if !exr {
+            bail!("{at}: `saturation` applies to EXR images only (8/16-bit PNGs saturate at their largest code)");
+        }
+        positive("saturation", sat as f64)?;
+    }
+    Ok(())
+}
+
+/// Negative pixel values beyond noise (below -1 % of the image's largest value) are an error, as
+/// in the CSV loader: a linear image of radiance cannot be negative.
+fn check_no_negatives(path: &Path, img: &LinearImage) -> Result<()> {
+    let largest = img
+        .data
+        .iter()
+        .copied()
+        .filter(|v| v.is_finite())
+        .fold(0.0f32, f32::max);
+    if let Some(i) = img
+        .data
+        .iter()
+        .position(|&v| v.is_finite() && v < -0.01 * largest)
+    {
+        let px = i / img.channels;
+        bail!(
+            "{}: pixel ({}, {}) has value {}, negative beyond noise (more than 1 % of the largest value {largest}); images must hold linear radiance",
+            path.display(),
+            px % img.width,
+            px / img.width,
+            img.data[i]
+        );
+    }
+    Ok(())
+}
+
 pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
     let desc = CaptureFile::load(path)?;
     let base = path.parent().unwrap_or(Path::new("."));
@@ -233,19 +332,17 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
     if subsample.stride == 0 || !(subsample.fraction > 0.0 && subsample.fraction <= 1.0) {
         bail!("subsampling: stride must be >= 1 and fraction in (0, 1]");
     }
+    for (k, spec) in desc.images.iter().enumerate() {
+        check_image_spec(&name, k, spec)?;
+    }
     let images: Vec<LinearImage> = desc
         .images
         .iter()
-        .map(|spec| {
-            if !(spec.exposure > 0.0 && spec.exposure.is_finite()) {
-                bail!(
-                    "{name}: image {}: exposure must be positive",
-                    spec.file.display()
-                );
-            }
-            image_io::read(&resolve(base, &spec.file), spec.encoding, spec.saturation)
-        })
+        .map(|spec| image_io::read(&resolve(base, &spec.file), spec.encoding, spec.saturation))
         .collect::<Result<_>>()?;
+    for (spec, img) in desc.images.iter().zip(&images) {
+        check_no_negatives(&resolve(base, &spec.file), img)?;
+    }
     let (w, h) = (images[0].width, images[0].height);
     let channels = images[0].channels;
     for (spec, img) in desc.images.iter().zip(&images) {
@@ -267,7 +364,7 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
         match p {
             Some(p) => {
                 let full = resolve(base, p);
-                let m = TopologyMap::load(&full)?;
+                let m = TopologyMap::load_as(&full, what)?;
                 check_size(what, &full, (m.width, m.height), (w, h))?;
                 Ok(Some(m))
             }

@@ -144,6 +144,11 @@ fn number(record: &csv::ByteRecord, i: usize, col: &str) -> std::result::Result<
     }
 }
 
+/// Values (BRDF, sigma, weight) beyond this magnitude are refused: their squares would overflow.
+const MAX_MAGNITUDE: f64 = 1e100;
+/// Sigmas below this are refused: their inverse squares would overflow.
+const MIN_SIGMA: f64 = 1e-100;
+
 /// Negative values up to this many standard deviations are noise; beyond, an error.
 const NEGATIVE_SIGMAS: f64 = 4.0;
 /// Without sigmas, negatives down to this fraction of the largest value are noise.
@@ -213,6 +218,11 @@ fn parse_chunk(
         match reader.read_byte_record(&mut record) {
             Ok(false) => break,
             Ok(true) => {
+                // blank lines and indented comments are not rows
+                let first = field(&record, 0).trim_ascii_start();
+                if first.starts_with(b"#") || (record.len() == 1 && first.is_empty()) {
+                    continue;
+                }
                 let line = first_line + record.position().map(|p| p.line()).unwrap_or(1) - 1;
                 match parse_row(&record, lay, header) {
                     Ok((sample, neg)) => {
@@ -267,10 +277,17 @@ fn split_lines(body: &[u8], first_line: u64) -> Vec<(&[u8], u64)> {
 
 fn parse(bytes: &[u8], name: &str, opts: GonioOptions) -> Result<Samples> {
     use rayon::prelude::*;
-    // The header: the first line that is not a comment.
+    // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column's name.
+    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    // The header: the first line that is not blank or a comment (indented or not).
     let mut offset = 0usize;
     let mut line = 1u64;
-    while bytes[offset..].starts_with(b"#") {
+    let skippable = |rest: &[u8]| {
+        let end = memchr::memchr(b'\n', rest).unwrap_or(rest.len());
+        let l = rest[..end].trim_ascii();
+        !rest.is_empty() && (l.is_empty() || l.starts_with(b"#"))
+    };
+    while skippable(&bytes[offset..]) {
         match bytes[offset..].iter().position(|&b| b == b'\n') {
             Some(p) => {
                 offset += p + 1;
@@ -320,6 +337,9 @@ fn parse(bytes: &[u8], name: &str, opts: GonioOptions) -> Result<Samples> {
     examples.truncate(5);
     if samples.is_empty() {
         bail!("{name}: no usable rows after the header");
+    }
+    if lay.weight.is_some() && samples.iter().all(|s| s.weight == 0.0) {
+        bail!("{name}: every row has weight 0: there is nothing to fit");
     }
     let largest = samples
         .iter()
@@ -410,6 +430,14 @@ fn parse_row(
     let mut value = [0.0; 3];
     for (c, &i) in lay.values.iter().enumerate() {
         value[c] = number(record, i, &header[i])? * scale;
+        if !(value[c].abs() <= MAX_MAGNITUDE) {
+            return Err(format!(
+                "column `{}` gives a BRDF of {:e} 1/sr, outside the range fibrefit computes with (|f| <= {MAX_MAGNITUDE:e}){}",
+                header[i],
+                value[c],
+                if lay.irradiance.is_some() { "; check the irradiance" } else { "" }
+            ));
+        }
     }
     let channels = lay.values.len();
     if channels == 1 {
@@ -428,6 +456,12 @@ fn parse_row(
                 ));
             }
             s[c] *= scale;
+            if !(s[c] >= MIN_SIGMA && s[c] <= MAX_MAGNITUDE) {
+                return Err(format!(
+                    "column `{}` gives a sigma of {:e} 1/sr, outside [{MIN_SIGMA:e}, {MAX_MAGNITUDE:e}]",
+                    header[i], s[c]
+                ));
+            }
         }
         if channels == 1 {
             s = [s[0]; 3];
@@ -437,8 +471,10 @@ fn parse_row(
     let weight = match lay.weight {
         Some(i) => {
             let w = number(record, i, "weight")?;
-            if w < 0.0 {
-                return Err(format!("column `weight` = {w} is negative"));
+            if !(0.0..=MAX_MAGNITUDE).contains(&w) {
+                return Err(format!(
+                    "column `weight` = {w} must lie in [0, {MAX_MAGNITUDE:e}]"
+                ));
             }
             w
         }
@@ -506,6 +542,22 @@ mod tests {
 
     fn parse(text: &str) -> Result<Samples> {
         read(text.as_bytes(), "g.csv", GonioOptions::default())
+    }
+
+    #[test]
+    fn byte_order_mark_blank_lines_and_indented_comments_are_not_data() {
+        let s = parse(
+            "\u{feff}\n  \n  # exported by a spreadsheet\ntheta_i,phi_i,theta_o,phi_o,brdf\n  # indented\n30,0,30,180,0.2\n\n   \n40,10,20,90,0.3\n",
+        )
+        .unwrap();
+        assert_eq!(s.samples.len(), 2);
+        assert_eq!(s.samples[0].origin, Origin::Line(6));
+        assert_eq!(s.samples[1].origin, Origin::Line(9));
+        // and an error after them still names the right line
+        let e = parse("\n# c\ntheta_i,phi_i,theta_o,phi_o,brdf\n30,0,30,x,0.2\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("g.csv:4") && e.contains("phi_o"), "{e}");
     }
 
     #[test]

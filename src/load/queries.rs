@@ -14,6 +14,8 @@ pub struct Query {
     pub phi_o: f64,
     pub height: Option<f64>,
     pub fields: Vec<String>,
+    /// Line of the file (1: the header).
+    pub line: u64,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -112,6 +114,7 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             phi_o: angles[3].to_radians(),
             height,
             fields: record.iter().map(str::to_owned).collect(),
+            line,
         });
     }
     if rows.is_empty() {

@@ -10,6 +10,13 @@ pub type Vec3 = Vector3<f64>;
 /// Unit direction from polar angle `theta` (from N) and azimuth `phi` (from x towards y), radians.
 pub fn direction_from_angles(theta: f64, phi: f64) -> Vec3 {
     let (st, ct) = theta.sin_cos();
+    // theta = 90 degrees is the horizon (MODEL.md §1: the value there is 0), not cos(pi/2) =
+    // 6e-17 above it
+    let ct = if (theta.abs() - std::f64::consts::FRAC_PI_2).abs() <= 1e-15 {
+        0.0
+    } else {
+        ct
+    };
     let (sp, cp) = phi.sin_cos();
     Vec3::new(st * cp, st * sp, ct)
 }

@@ -80,6 +80,10 @@ pub struct RawParams {
 }
 
 pub const DEFAULT_QUADRATURE_ORDER: usize = 16;
+/// Largest specular quadrature order N any command accepts.
+pub const MAX_QUADRATURE_ORDER: usize = 1024;
+/// Largest number of height histogram bins K any command accepts.
+pub const MAX_HISTOGRAM_BINS: usize = 65536;
 pub const DEFAULT_HISTOGRAM_BINS: usize = 16;
 
 impl RawParams {
@@ -241,12 +245,12 @@ impl ModelParams {
         )?;
         let exponent = check_range("exponent", raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
         let quadrature_order = raw.quadrature_order.unwrap_or(DEFAULT_QUADRATURE_ORDER);
-        if !(1..=1024).contains(&quadrature_order) {
-            bail!("parameter `quadrature_order` = {quadrature_order} is out of range [1, 1024]");
+        if !(1..=MAX_QUADRATURE_ORDER).contains(&quadrature_order) {
+            bail!("parameter `quadrature_order` = {quadrature_order} is out of range [1, {MAX_QUADRATURE_ORDER}]");
         }
         let histogram_bins = raw.histogram_bins.unwrap_or(DEFAULT_HISTOGRAM_BINS);
-        if !(1..=65536).contains(&histogram_bins) {
-            bail!("parameter `histogram_bins` = {histogram_bins} is out of range [1, 65536]");
+        if !(1..=MAX_HISTOGRAM_BINS).contains(&histogram_bins) {
+            bail!("parameter `histogram_bins` = {histogram_bins} is out of range [1, {MAX_HISTOGRAM_BINS}]");
         }
 
         let height = match (raw.height, raw.elevation_deg) {

@@ -63,22 +63,25 @@ pub struct TopologyMap {
 impl TopologyMap {
     /// Load an 8/16-bit grayscale PNG or a float EXR (channel `Y`, else `R`, else the only one).
     pub fn load(path: &Path) -> Result<Self> {
+        Self::load_as(path, "topology map")
+    }
+
+    /// As [`TopologyMap::load`], for any grayscale map in [0, 1]; errors call it `what` (e.g.
+    /// "mask", "tangent map").
+    pub fn load_as(path: &Path, what: &str) -> Result<Self> {
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(str::to_ascii_lowercase);
         let (width, height, values) = match ext.as_deref() {
-            Some("png") => load_png_gray(path)?,
-            Some("exr") => load_exr_gray(path)?,
-            _ => bail!(
-                "{}: topology map must be a .png or .exr file",
-                path.display()
-            ),
+            Some("png") => load_png_gray(path, what)?,
+            Some("exr") => load_exr_gray(path, what)?,
+            _ => bail!("{}: {what} must be a .png or .exr file", path.display()),
         };
         for (i, v) in values.iter().enumerate() {
             if !(v.is_finite() && (0.0..=1.0).contains(v)) {
                 bail!(
-                    "{}: texel ({}, {}) has value {v}; topology map values must lie in [0, 1]",
+                    "{}: texel ({}, {}) has value {v}; {what} values must lie in [0, 1]",
                     path.display(),
                     i % width,
                     i / width
@@ -86,7 +89,7 @@ impl TopologyMap {
             }
         }
         if values.is_empty() {
-            bail!("{}: topology map has no texels", path.display());
+            bail!("{}: {what} has no texels", path.display());
         }
         Ok(Self {
             width,
@@ -143,13 +146,13 @@ impl TopologyMap {
     }
 }
 
-fn load_png_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
+fn load_png_gray(path: &Path, what: &str) -> Result<(usize, usize, Vec<f32>)> {
     let img = image::ImageReader::open(path)
-        .with_context(|| format!("{}: cannot open topology map", path.display()))?
+        .with_context(|| format!("{}: cannot open {what}", path.display()))?
         .with_guessed_format()
-        .with_context(|| format!("{}: cannot read topology map", path.display()))?
+        .with_context(|| format!("{}: cannot read {what}", path.display()))?
         .decode()
-        .with_context(|| format!("{}: cannot decode topology map", path.display()))?;
+        .with_context(|| format!("{}: cannot decode {what}", path.display()))?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let values: Vec<f32> = match img {
         image::DynamicImage::ImageLuma8(b) => {
@@ -171,7 +174,7 @@ fn load_png_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
             .map(|p| p[0] as f32 / 65535.0)
             .collect(),
         other => bail!(
-            "{}: topology map must be a grayscale PNG (8 or 16 bit), found {:?}",
+            "{}: {what} must be a grayscale PNG (8 or 16 bit), found {:?}",
             path.display(),
             other.color()
         ),
@@ -179,9 +182,9 @@ fn load_png_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     Ok((w, h, values))
 }
 
-fn load_exr_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
+fn load_exr_gray(path: &Path, what: &str) -> Result<(usize, usize, Vec<f32>)> {
     let image = exr::prelude::read_first_flat_layer_from_file(path)
-        .map_err(|e| anyhow::anyhow!("{}: cannot read EXR topology map: {e}", path.display()))?;
+        .map_err(|e| anyhow::anyhow!("{}: cannot read EXR {what}: {e}", path.display()))?;
     let layer = image.layer_data;
     let (w, h) = (layer.size.width(), layer.size.height());
     let channels = &layer.channel_data.list;
@@ -196,7 +199,7 @@ fn load_exr_gray(path: &Path) -> Result<(usize, usize, Vec<f32>)> {
     let Some(channel) = pick else {
         let names: Vec<String> = channels.iter().map(|c| c.name.to_string()).collect();
         bail!(
-            "{}: EXR topology map needs a `Y` or `R` channel (or exactly one channel); found {}",
+            "{}: EXR {what} needs a `Y` or `R` channel (or exactly one channel); found {}",
             path.display(),
             names.join(", ")
         );
