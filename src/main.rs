@@ -1,6 +1,7 @@
 use std::process::ExitCode;
 
 fn main() -> ExitCode {
+    fibrefit::export::atomic::install_signal_cleanup();
     match fibrefit::cli::run(std::env::args_os()) {
         Ok(()) => ExitCode::SUCCESS,
         // a reader that stops early (`| head`) is not an error

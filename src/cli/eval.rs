@@ -95,9 +95,14 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             );
         }
     }
-    // Create the output first: a bad path fails before the work.
+    // Create the output first: a bad path fails before the work; it is never an input.
     let mut out = match &args.out {
-        Some(path) => Some(AtomicFile::create(path)?),
+        Some(path) => {
+            let mut inputs = vec![args.params.clone(), args.queries.clone()];
+            inputs.extend(raw.topology_map.iter().cloned());
+            crate::export::atomic::refuse_inputs(path, &inputs, "--out")?;
+            Some(AtomicFile::create(path)?)
+        }
         None => None,
     };
 

@@ -1,7 +1,7 @@
 //! `fibrefit fit`: fit a rung to measurements and export what a renderer needs.
 
 use super::data::LoadArgs;
-use crate::export::atomic::AtomicFile;
+use crate::export::atomic::{refuse_inputs, AtomicFile};
 use crate::export::{report, result_json as rj};
 use crate::fit::config::FitConfig;
 use crate::fit::problem::{albedos_of, model_for};
@@ -62,6 +62,50 @@ fn sha256_of(path: &Path) -> Result<String> {
         .collect())
 }
 
+/// `--report DIR` must be a directory that exists and is writable, or one that can be created
+/// (its nearest existing ancestor a writable directory); checked before the fit, created after.
+fn check_report_dir(dir: &Path) -> Result<()> {
+    let writable = |d: &Path| -> Result<()> {
+        tempfile::Builder::new()
+            .prefix(".fibrefit-check")
+            .tempfile_in(d)
+            .map(drop)
+            .with_context(|| {
+                format!(
+                    "--report {}: directory {} is not writable",
+                    dir.display(),
+                    d.display()
+                )
+            })
+    };
+    if dir.exists() {
+        if !dir.is_dir() {
+            anyhow::bail!("--report {}: exists and is not a directory", dir.display());
+        }
+        return writable(dir);
+    }
+    let mut up = dir.parent();
+    while let Some(p) = up {
+        let p = if p.as_os_str().is_empty() {
+            Path::new(".")
+        } else {
+            p
+        };
+        if p.exists() {
+            if !p.is_dir() {
+                anyhow::bail!(
+                    "--report {}: {} is not a directory",
+                    dir.display(),
+                    p.display()
+                );
+            }
+            return writable(p);
+        }
+        up = p.parent();
+    }
+    Ok(())
+}
+
 pub fn run(args: &FitArgs) -> Result<()> {
     let mut cfg = FitConfig::load(&args.config)?;
     if let Some(m) = &args.model {
@@ -69,7 +113,15 @@ pub fn run(args: &FitArgs) -> Result<()> {
         cfg.validate()
             .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
     }
-    // Create the output first: a bad path fails before the work.
+    // Check every output first: a bad path fails before the work, and no output replaces an input.
+    let mut inputs = crate::load::input_files(&args.data);
+    inputs.push(args.config.clone());
+    inputs.extend(cfg.knobs.topology_map.iter().cloned());
+    refuse_inputs(&args.out, &inputs, "--out")?;
+    if let Some(dir) = &args.report {
+        check_report_dir(dir)?;
+        refuse_inputs(&dir.join("report.md"), &inputs, "--report")?;
+    }
     let mut out = AtomicFile::create(&args.out)?;
     let opts = args
         .load

@@ -17,6 +17,34 @@ pub struct LoadOptions {
     pub subsample: capture::Subsample,
 }
 
+/// Every file loading `path` reads: the file itself and, for a capture, its images and maps
+/// (so that no output of the run can replace one of them). Unreadable descriptions give just
+/// the file; loading then reports the problem.
+pub fn input_files(path: &Path) -> Vec<std::path::PathBuf> {
+    let mut out = vec![path.to_path_buf()];
+    let is_toml = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+    if let (true, Ok(desc)) = (is_toml, capture::CaptureFile::load(path)) {
+        let base = path.parent().unwrap_or(Path::new("."));
+        let sw = &desc.swatch;
+        for p in [&sw.mask, &sw.tangent_map, &sw.topology_map]
+            .into_iter()
+            .flatten()
+        {
+            out.push(base.join(p));
+        }
+        for im in &desc.images {
+            out.push(base.join(&im.file));
+            if let capture::Camera::ViewMap { file } = &im.camera {
+                out.push(base.join(file));
+            }
+        }
+    }
+    out
+}
+
 /// Load a goniometric CSV (`.csv`) or an image capture description (`.toml`).
 pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
     match path

@@ -235,7 +235,78 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 }
 
 /// Render everything `config` asks for into `out_dir`. Returns what was written.
+///
+/// The set is rendered into a staging directory beside `out_dir` and then put in place, so a
+/// dataset is always all old or all new: a failed or interrupted run leaves `out_dir` as it was.
+/// Files in an existing `out_dir` that no synth run wrote are kept.
 pub fn run(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
+    let parent = match out_dir.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    if out_dir.exists() && !out_dir.is_dir() {
+        bail!("{}: exists and is not a directory", out_dir.display());
+    }
+    std::fs::create_dir_all(&parent)
+        .with_context(|| format!("{}: cannot create output directory", parent.display()))?;
+    let stage = crate::export::atomic::Staging::new(&parent, "synth")?;
+    let info = render_into(config_path, stage.path(), quiet)?;
+    install(stage.keep(), out_dir)?;
+    Ok(info)
+}
+
+/// Put the staged set in place of `out_dir`. Of an old `out_dir`, the files of the old set (its
+/// synth_info.json's list) go with it; other files (a user's own) are kept unless the new set
+/// has one of the same name.
+fn install(stage: PathBuf, out_dir: &Path) -> Result<()> {
+    let fail = |e: std::io::Error| {
+        anyhow!(
+            "{}: cannot put the new dataset in place: {e}",
+            out_dir.display()
+        )
+    };
+    if !out_dir.exists() {
+        return std::fs::rename(&stage, out_dir).map_err(|e| {
+            let _ = std::fs::remove_dir_all(&stage);
+            fail(e)
+        });
+    }
+    let old = stage.with_file_name(format!(
+        "{}-old",
+        stage
+            .file_name()
+            .and_then(|n| n.to_str())
+            .unwrap_or(".fibrefit-synth")
+    ));
+    std::fs::rename(out_dir, &old).map_err(|e| {
+        let _ = std::fs::remove_dir_all(&stage);
+        fail(e)
+    })?;
+    if let Err(e) = std::fs::rename(&stage, out_dir) {
+        let _ = std::fs::rename(&old, out_dir);
+        let _ = std::fs::remove_dir_all(&stage);
+        return Err(fail(e));
+    }
+    // the old set (as its synth_info.json lists it) goes; a user's own files stay
+    let old_set: Vec<String> = std::fs::read_to_string(old.join("synth_info.json"))
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| v.get("files").cloned())
+        .and_then(|f| serde_json::from_value(f).ok())
+        .unwrap_or_default();
+    for entry in std::fs::read_dir(&old).map_err(fail)?.flatten() {
+        let name = entry.file_name();
+        let ours =
+            name == "synth_info.json" || old_set.iter().any(|f| std::ffi::OsStr::new(f) == name);
+        let dest = out_dir.join(&name);
+        if !ours && std::fs::symlink_metadata(&dest).is_err() {
+            std::fs::rename(entry.path(), &dest).map_err(fail)?;
+        }
+    }
+    std::fs::remove_dir_all(&old).map_err(fail)
+}
+
+fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
     let cfg = SynthConfig::load(config_path)?;
     let id: ModelId = cfg
         .model
