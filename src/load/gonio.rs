@@ -155,19 +155,70 @@ const NEGATIVE_SIGMAS: f64 = 4.0;
 const NEGATIVE_FRACTION: f64 = 0.01;
 
 pub fn load(path: &Path, opts: GonioOptions) -> Result<Samples> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot open", path.display()))?;
-    let mut s = parse(&bytes, &path.display().to_string(), opts)?;
+    let file =
+        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let mut s = read(file, &path.display().to_string(), opts)?;
     s.source = path.to_path_buf();
     Ok(s)
 }
 
-/// Parse from any reader; `name` labels errors as `name:line: problem`.
+/// Bytes read per block: memory for loading is this plus the samples kept, whatever the file size.
+const BLOCK: usize = 32 << 20;
+
+/// Parse from any reader, streaming it in blocks; `name` labels errors as `name:line: problem`.
+/// (A quoted field may not span lines across a block boundary; numeric CSVs have none.)
 pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Result<Samples> {
-    let mut bytes = Vec::new();
-    input
-        .read_to_end(&mut bytes)
-        .with_context(|| format!("{name}: cannot read"))?;
-    parse(&bytes, name, opts)
+    let mut buf: Vec<u8> = Vec::with_capacity(BLOCK);
+    let mut eof = false;
+    // fill `buf` with up to BLOCK more bytes; false at the end of the input
+    let mut fill = |buf: &mut Vec<u8>, eof: &mut bool| -> Result<()> {
+        let start = buf.len();
+        buf.resize(start + BLOCK, 0);
+        let mut got = 0;
+        while got < BLOCK {
+            match input.read(&mut buf[start + got..]) {
+                Ok(0) => {
+                    *eof = true;
+                    break;
+                }
+                Ok(n) => got += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(anyhow!("{name}: cannot read: {e}")),
+            }
+        }
+        buf.truncate(start + got);
+        Ok(())
+    };
+    // the header, and everything before it, must be in the buffer
+    fill(&mut buf, &mut eof)?;
+    loop {
+        match header_end(&buf) {
+            Some(_) => break,
+            None if eof => break,
+            None => fill(&mut buf, &mut eof)?,
+        }
+    }
+    let mut state = parse_header(&buf, name)?;
+    let mut rest = buf.split_off(state.body_start);
+    drop(buf);
+    loop {
+        if !eof && memchr::memrchr(b'\n', &rest).is_none() {
+            fill(&mut rest, &mut eof)?;
+            continue;
+        }
+        let complete = if eof {
+            rest.len()
+        } else {
+            memchr::memrchr(b'\n', &rest).map_or(0, |p| p + 1)
+        };
+        state.parse_lines(&rest[..complete], name, opts)?;
+        rest.drain(..complete);
+        if eof {
+            break;
+        }
+        fill(&mut rest, &mut eof)?;
+    }
+    state.finish(name, opts)
 }
 
 /// What one chunk of rows yields.
@@ -275,12 +326,44 @@ fn split_lines(body: &[u8], first_line: u64) -> Vec<(&[u8], u64)> {
     chunks
 }
 
-fn parse(bytes: &[u8], name: &str, opts: GonioOptions) -> Result<Samples> {
-    use rayon::prelude::*;
+/// End of the header line (after its newline) in `bytes`, once the header is complete.
+fn header_end(bytes: &[u8]) -> Option<usize> {
+    let bytes_nobom = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let bom = bytes.len() - bytes_nobom.len();
+    let mut offset = 0;
+    loop {
+        let p = memchr::memchr(b'\n', &bytes_nobom[offset..])?;
+        let l = bytes_nobom[offset..offset + p].trim_ascii();
+        if !(l.is_empty() || l.starts_with(b"#")) {
+            return Some(bom + offset + p + 1);
+        }
+        offset += p + 1;
+    }
+}
+
+/// What parsing has gathered so far.
+struct ParseState {
+    header: Vec<String>,
+    lay: Layout,
+    /// Where the rows start in the first buffer.
+    body_start: usize,
+    /// File line number of the next row.
+    next_line: u64,
+    samples: Vec<Sample>,
+    negatives: Vec<(u64, f64, usize)>,
+    dropped: Dropped,
+    examples: Vec<String>,
+}
+
+fn parse_header(bytes: &[u8], name: &str) -> Result<ParseState> {
     // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column's name.
-    let bytes = bytes.strip_prefix(b"\xEF\xBB\xBF").unwrap_or(bytes);
+    let bom = if bytes.starts_with(b"\xEF\xBB\xBF") {
+        3
+    } else {
+        0
+    };
     // The header: the first line that is not blank or a comment (indented or not).
-    let mut offset = 0usize;
+    let mut offset = bom;
     let mut line = 1u64;
     let skippable = |rest: &[u8]| {
         let end = memchr::memchr(b'\n', rest).unwrap_or(rest.len());
@@ -316,67 +399,99 @@ fn parse(bytes: &[u8], name: &str, opts: GonioOptions) -> Result<Samples> {
             .to_string()
             .replacen(&format!("{name}:1:"), &format!("{name}:{line}:"), 1))
     })?;
-    let channels = lay.values.len();
-    let chunks: Vec<Chunk> = split_lines(&bytes[header_end..], line + 1)
-        .into_par_iter()
-        .map(|(b, first)| parse_chunk(b, first, &lay, &header, name, opts))
-        .collect();
-    let mut samples = Vec::with_capacity(chunks.iter().map(|c| c.samples.len()).sum());
-    let mut dropped = Dropped::default();
-    let mut examples: Vec<String> = Vec::new();
-    let mut negatives = Vec::new();
-    for c in chunks {
-        if let Some(e) = c.error {
-            bail!(e);
+    Ok(ParseState {
+        header,
+        lay,
+        body_start: header_end,
+        next_line: line + 1,
+        samples: Vec::new(),
+        negatives: Vec::new(),
+        dropped: Dropped::default(),
+        examples: Vec::new(),
+    })
+}
+
+impl ParseState {
+    /// Parse whole lines (in parallel chunks) and keep their samples.
+    fn parse_lines(&mut self, body: &[u8], name: &str, opts: GonioOptions) -> Result<()> {
+        use rayon::prelude::*;
+        let (lay, header) = (&self.lay, &self.header);
+        let chunks: Vec<Chunk> = split_lines(body, self.next_line)
+            .into_par_iter()
+            .map(|(b, first)| parse_chunk(b, first, lay, header, name, opts))
+            .collect();
+        self.next_line += memchr::memchr_iter(b'\n', body).count() as u64;
+        self.samples
+            .reserve(chunks.iter().map(|c| c.samples.len()).sum());
+        for c in chunks {
+            if let Some(e) = c.error {
+                bail!(e);
+            }
+            self.samples.extend(c.samples);
+            self.negatives.extend(c.negatives);
+            self.dropped.skipped_rows += c.skipped;
+            if self.examples.len() < 5 {
+                self.examples.extend(c.examples);
+            }
         }
-        samples.extend(c.samples);
-        negatives.extend(c.negatives);
-        dropped.skipped_rows += c.skipped;
-        examples.extend(c.examples);
+        Ok(())
     }
-    examples.truncate(5);
-    if samples.is_empty() {
-        bail!("{name}: no usable rows after the header");
-    }
-    if lay.weight.is_some() && samples.iter().all(|s| s.weight == 0.0) {
-        bail!("{name}: every row has weight 0: there is nothing to fit");
-    }
-    let largest = samples
-        .iter()
-        .flat_map(|s| s.value[..channels].iter().copied())
-        .fold(0.0, f64::max);
-    let mut bad_lines = Vec::new();
-    for (line, value, channel) in negatives {
-        if value < -NEGATIVE_FRACTION * largest {
-            let col = header[lay.values[channel]].as_str();
-            let msg = format!(
+
+    fn finish(self, name: &str, opts: GonioOptions) -> Result<Samples> {
+        let ParseState {
+            header,
+            lay,
+            mut samples,
+            negatives,
+            mut dropped,
+            mut examples,
+            ..
+        } = self;
+        let channels = lay.values.len();
+        examples.truncate(5);
+        if samples.is_empty() {
+            bail!("{name}: no usable rows after the header");
+        }
+        if lay.weight.is_some() && samples.iter().all(|s| s.weight == 0.0) {
+            bail!("{name}: every row has weight 0: there is nothing to fit");
+        }
+        let largest = samples
+            .iter()
+            .flat_map(|s| s.value[..channels].iter().copied())
+            .fold(0.0, f64::max);
+        let mut bad_lines = Vec::new();
+        for (line, value, channel) in negatives {
+            if value < -NEGATIVE_FRACTION * largest {
+                let col = header[lay.values[channel]].as_str();
+                let msg = format!(
                 "{name}:{line}: column `{col}` = {value} is negative beyond noise (more than {} % of the largest value {largest}); give `sigma` if this is noise",
                 NEGATIVE_FRACTION * 100.0
             );
-            if !opts.skip_bad_rows {
-                bail!(msg);
+                if !opts.skip_bad_rows {
+                    bail!(msg);
+                }
+                dropped.skipped_rows += 1;
+                if examples.len() < 5 {
+                    examples.push(msg);
+                }
+                bad_lines.push(line);
             }
-            dropped.skipped_rows += 1;
-            if examples.len() < 5 {
-                examples.push(msg);
-            }
-            bad_lines.push(line);
         }
+        if !bad_lines.is_empty() {
+            samples.retain(|s| !matches!(s.origin, Origin::Line(l) if bad_lines.contains(&l)));
+        }
+        if !opts.small_angles_ok {
+            check_not_radians(&samples, name)?;
+        }
+        Ok(Samples {
+            samples,
+            channels,
+            kind: DataKind::Gonio,
+            source: name.into(),
+            dropped,
+            skipped_examples: examples,
+        })
     }
-    if !bad_lines.is_empty() {
-        samples.retain(|s| !matches!(s.origin, Origin::Line(l) if bad_lines.contains(&l)));
-    }
-    if !opts.small_angles_ok {
-        check_not_radians(&samples, name)?;
-    }
-    Ok(Samples {
-        samples,
-        channels,
-        kind: DataKind::Gonio,
-        source: name.into(),
-        dropped,
-        skipped_examples: examples,
-    })
 }
 
 type Negative = Option<(f64, usize)>;
