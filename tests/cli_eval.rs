@@ -298,6 +298,21 @@ fn bad_input_exits_2_names_the_problem_and_writes_nothing() {
         ),
         (
             vec![
+                "--model".into(),
+                "varying-topology".into(),
+                "--queries".into(),
+                write(
+                    dir.path(),
+                    "hmax.csv",
+                    "theta_i,phi_i,theta_o,phi_o,height\n10,0,10,0,0.5\n10,0,10,0,5\n",
+                )
+                .display()
+                .to_string(),
+            ],
+            "hmax.csv:3: column `height` = 5 exceeds H_max",
+        ),
+        (
+            vec![
                 "--queries".into(),
                 dir.path().join("nope.csv").display().to_string(),
             ],

@@ -128,6 +128,9 @@ fn bad_configs_exit_2_name_the_key_and_leave_the_output_alone() {
         ("model = \"poulin-fournier\"\n[knobs]\nhistogram_bins = 0\n", "knobs.histogram_bins"),
         ("model = \"auto\"\n[parameters]\nheigth = { value = 0.5 }\n", "parameters.heigth: not a parameter of any rung"),
         ("model = \"auto\"\n[parameters]\nexponent = { value = 5, min = 10 }\n", "parameters.exponent.value = 5 is outside its bounds"),
+        // issue 12: the azimuth's range is [-90, 90] (period 180), wider bounds are an error
+        ("model = \"poulin-fournier\"\n[parameters]\nfibre_azimuth_deg = { value = 0, min = -180, max = 180 }\n", "parameters.fibre_azimuth_deg: bounds [-180, 180] exceed the model's range [-90, 90]"),
+        ("model = \"poulin-fournier\"\n[knobs]\nquadrature_order = 2000\n", "knobs.quadrature_order = 2000 must lie in [1, 1024]"),
     ];
     for (k, (text, needle)) in cases.iter().enumerate() {
         let cfg = write(dir.path(), &format!("c{k}.toml"), text);
