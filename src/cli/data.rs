@@ -1,6 +1,6 @@
 //! Loading flags shared by every command that reads measurements.
 
-use crate::load::{capture::Subsample, gonio::GonioOptions, LoadOptions};
+use crate::load::{capture::Subsample, gonio::GonioOptions, rgl::MeasuredOptions, LoadOptions};
 use anyhow::{bail, Result};
 use clap::Args;
 
@@ -21,6 +21,16 @@ pub struct LoadArgs {
     /// Seed of the random pixel fraction
     #[arg(long, value_name = "SEED", default_value_t = 0)]
     pub subsample_seed: u64,
+    /// Measured-BRDF files (.bsdf): direction pairs drawn, light and view uniform in solid angle
+    #[arg(long, value_name = "COUNT", default_value_t = 3000)]
+    pub directions: usize,
+    /// Measured-BRDF files: seed of the drawn directions
+    #[arg(long, value_name = "SEED", default_value_t = 0)]
+    pub direction_seed: u64,
+    /// Measured-BRDF files: largest theta of light and view, degrees (the light also stays within
+    /// the file's measured incidence range)
+    #[arg(long, value_name = "DEG", default_value_t = 78.0)]
+    pub max_theta: f64,
 }
 
 impl LoadArgs {
@@ -43,6 +53,11 @@ impl LoadArgs {
                 stride,
                 fraction,
                 seed: self.subsample_seed,
+            },
+            measured: MeasuredOptions {
+                directions: self.directions,
+                seed: self.direction_seed,
+                max_theta_deg: self.max_theta,
             },
         })
     }

@@ -224,6 +224,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             kind: match samples.kind {
                 DataKind::Gonio => "goniometric".into(),
                 DataKind::Capture => "image capture".into(),
+                DataKind::Measured => "measured BRDF file".into(),
             },
             samples: samples.samples.len(),
             channels,

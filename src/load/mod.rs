@@ -4,6 +4,7 @@ pub mod capture;
 pub mod gonio;
 pub mod image_io;
 pub mod queries;
+pub mod rgl;
 pub mod samples;
 pub mod summary;
 
@@ -15,6 +16,7 @@ use std::path::Path;
 pub struct LoadOptions {
     pub gonio: gonio::GonioOptions,
     pub subsample: capture::Subsample,
+    pub measured: rgl::MeasuredOptions,
 }
 
 /// Every file loading `path` reads: the file itself and, for a capture, its images and maps
@@ -45,7 +47,8 @@ pub fn input_files(path: &Path) -> Vec<std::path::PathBuf> {
     out
 }
 
-/// Load a goniometric CSV (`.csv`) or an image capture description (`.toml`).
+/// Load a goniometric CSV (`.csv`), an image capture description (`.toml`) or an RGL measured
+/// BRDF (`.bsdf`, sampled at seeded directions).
 pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
     match path
         .extension()
@@ -55,8 +58,9 @@ pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
     {
         Some("csv") => gonio::load(path, opts.gonio),
         Some("toml") => capture::load(path, opts.subsample),
+        Some("bsdf") => rgl::load(path, opts.measured),
         _ => bail!(
-            "{}: unknown data file type; expected a goniometric .csv or an image capture .toml",
+            "{}: unknown data file type; expected a goniometric .csv, an image capture .toml or an RGL measured BRDF .bsdf",
             path.display()
         ),
     }

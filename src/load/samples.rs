@@ -36,6 +36,8 @@ pub enum Origin {
 pub enum DataKind {
     Gonio,
     Capture,
+    /// A measured-BRDF file (RGL `.bsdf`) sampled at seeded directions.
+    Measured,
 }
 
 /// Why samples were left out, counted.

@@ -47,6 +47,7 @@ impl Summary {
             kind: match s.kind {
                 DataKind::Gonio => "goniometric",
                 DataKind::Capture => "image capture",
+                DataKind::Measured => "measured BRDF file",
             },
             samples: s.samples.len(),
             channels: s.channels,
