@@ -16,9 +16,12 @@ use std::path::{Path, PathBuf};
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-DATA is a goniometric CSV or an image capture TOML (see `fibrefit inspect --help`).
+DATA is a goniometric CSV, an image capture TOML or an RGL measured BRDF (.bsdf, sampled at
+--directions pairs; see `fibrefit inspect --help`).
 The config (TOML) names the rung (`model`), each parameter's `value`, `min`, `max`, `vary`,
-the residual `metric` (linear | log | cosine), [knobs] (quadrature_order, histogram_bins,
+the residual `metric` (linear: additive noise, under a decade of range; log: ln(f + eps),
+eps = 1 % of the median, for measured BRDFs spanning decades; cosine: errors in shaded
+intensity), [knobs] (quadrature_order, histogram_bins,
 stride, fraction, topology_map), [optimizer] (max_iterations, tolerance, global_candidates
 [default 32 + 24 per free shape parameter], global_subsample [600], separable), `starts` [6]
 and `seed`. Examples: configs/fit_*.toml.
@@ -29,7 +32,7 @@ systematic, a FIT QUALITY banner says so on stderr (even with --quiet). Check a 
 data with `fibrefit score`.
 The result JSON (schema fibrefit-result/1) is written atomically: a failed fit writes nothing.")]
 pub struct FitArgs {
-    /// Goniometric CSV or capture TOML
+    /// Goniometric CSV, capture TOML or measured BRDF (.bsdf)
     pub data: PathBuf,
     /// Fit configuration (TOML)
     #[arg(long, value_name = "FILE")]

@@ -13,7 +13,7 @@ Evaluates RESULT (a `fibrefit fit` JSON) exactly as the fit did (rung, knobs, to
 residual metric) on DATA (goniometric CSV or capture TOML) and prints: residual and sample
 counts, chi-square and reduced chi-square when DATA has sigmas (else the sum of squares), RMSE
 in 1/sr and relative RMSE (RMSE / RMS data), per channel RMSE, relative RMSE and log error
-(RMS of ln(m + eps) - ln(y + eps), eps = 1e-3 x the channel's RMS value), and the mean residual in
+(RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median value), and the mean residual in
 bins of the half-vector angle and of its azimuth from the fibres (* = systematic, > 4 standard
 errors). Scoring a fit's own training data reproduces its statistics; scoring held-out data is
 how a fit is checked. Writes nothing.")]

@@ -14,7 +14,9 @@ use std::path::{Path, PathBuf};
 pub enum Metric {
     /// model - data (divided by sigma, or times sqrt(weight))
     Linear,
-    /// ln(1 + model) - ln(1 + data): relative errors, for data spanning decades
+    /// ln(model + eps) - ln(data + eps), eps = 1 % of the channel's median value: relative
+    /// errors, for data spanning decades (measured BRDFs with peaks); with sigmas the residual
+    /// is scaled by (data + eps)/sigma, so near the data it equals the linear one
     Log,
     /// (model - data) cos(theta_i): residuals in intensity, as a shader sees them
     Cosine,

@@ -33,6 +33,8 @@ pub struct FitProblem<'a> {
     /// Residual scale per sample and channel: 1/sigma or sqrt(weight), times cos(theta_i) for
     /// the cosine metric.
     scale: Vec<[f64; 3]>,
+    /// The `log` metric's floor eps per channel ([`log_floor`]).
+    log_floor: [f64; 3],
     free_shapes: Vec<usize>,
     free_albedos: Vec<(usize, usize)>,
     pub evaluations: AtomicUsize,
@@ -77,7 +79,10 @@ impl<'a> FitProblem<'a> {
             .collect();
         let free_shapes = template.free_shapes();
         let free_albedos = template.free_albedos();
+        let values: Vec<[f64; 3]> = samples.iter().map(|s| s.value).collect();
+        let log_floor = [0, 1, 2].map(|c| log_floor(&values, c));
         Self {
+            log_floor,
             samples,
             template,
             metric,
@@ -388,11 +393,12 @@ impl<'a> FitProblem<'a> {
                 r[i * ch + c] = match self.metric {
                     Metric::Linear | Metric::Cosine => sc[c] * (m - y),
                     Metric::Log => {
+                        let eps = self.log_floor[c];
                         let k = match s.sigma {
-                            Some(sig) => (1.0 + y) / sig[c],
+                            Some(sig) => (y.max(0.0) + eps) / sig[c],
                             None => s.weight.sqrt(),
                         };
-                        k * ((1.0 + m.max(0.0)).ln() - (1.0 + y.max(-0.999_999)).ln())
+                        k * ((m.max(0.0) + eps).ln() - (y.max(0.0) + eps).ln())
                     }
                 };
             }
@@ -490,11 +496,12 @@ impl<'a> FitProblem<'a> {
                 j[(i * ch + c, off + k)] = match self.metric {
                     Metric::Linear | Metric::Cosine => sc * col[comp],
                     Metric::Log => {
+                        let eps = self.log_floor[c];
                         let kk = match s.sigma {
-                            Some(sig) => (1.0 + s.value[c]) / sig[c],
+                            Some(sig) => (s.value[c].max(0.0) + eps) / sig[c],
                             None => s.weight.sqrt(),
                         };
-                        kk * col[comp] / (1.0 + values[i][c].max(0.0))
+                        kk * col[comp] / (values[i][c].max(0.0) + eps)
                     }
                 };
             }
@@ -602,6 +609,19 @@ impl Coordinate {
             }
         }
     }
+}
+
+/// The `log` metric's floor for channel `c`: 1 % of the median |value| (at least 1e-12), so
+/// ln(f + eps) weighs relative errors alike over the data's range while values near zero (noise)
+/// do not dominate.
+pub fn log_floor(values: &[[f64; 3]], c: usize) -> f64 {
+    let mut v: Vec<f64> = values.iter().map(|x| x[c].abs()).collect();
+    if v.is_empty() {
+        return 1e-12;
+    }
+    let mid = v.len() / 2;
+    let (_, median, _) = v.select_nth_unstable_by(mid, f64::total_cmp);
+    (0.01 * *median).max(1e-12)
 }
 
 /// Build the rung at the shape parameters of `set` with the given knobs.
@@ -826,6 +846,18 @@ impl Jacobian for ArgminProblem<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_log_floor_is_relative_to_the_data() {
+        let v: Vec<[f64; 3]> = (1..=101).map(|k| [k as f64 * 0.01, 5.0, 0.0]).collect();
+        // median 0.51 -> 1 % of it; a constant channel; an all-zero channel keeps a tiny floor
+        assert!((log_floor(&v, 0) - 0.0051).abs() < 1e-15);
+        assert!((log_floor(&v, 1) - 0.05).abs() < 1e-15);
+        assert_eq!(log_floor(&v, 2), 1e-12);
+        // scaling the data scales the floor: the metric is relative
+        let w: Vec<[f64; 3]> = v.iter().map(|x| [1e3 * x[0], 0.0, 0.0]).collect();
+        assert!((log_floor(&w, 0) / log_floor(&v, 0) - 1e3).abs() < 1e-9);
+    }
 
     #[test]
     fn bounded_lsq_matches_unconstrained_inside_and_clips_outside() {

@@ -6,8 +6,8 @@
 //! training data reproduces the fit's statistics.
 //!
 //! Per channel: RMSE (1/sr), relative RMSE (RMSE / RMS data), and a log error, the RMS of
-//! ln(max(m, 0) + eps) - ln(max(y, 0) + eps) with eps = 1e-3 x the channel's RMS value (a floor
-//! relative to the data, so noise around zero does not dominate). Overall: chi-square and its
+//! ln(max(m, 0) + eps) - ln(max(y, 0) + eps) with eps = 1 % of the channel's median value (the
+//! `log` metric's floor: relative to the data, so noise around zero does not dominate). Overall: chi-square and its
 //! reduced value when the data carry sigmas (else the weighted sum of squares), and the quality
 //! block's residual-structure bins.
 
@@ -196,7 +196,10 @@ pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
             let n = pairs.len().max(1) as f64;
             let rms_y = (pairs.iter().map(|p| p.1 * p.1).sum::<f64>() / n).sqrt();
             let rmse = (pairs.iter().map(|p| (p.0 - p.1).powi(2)).sum::<f64>() / n).sqrt();
-            let eps = (1e-3 * rms_y).max(f64::MIN_POSITIVE);
+            let eps = super::problem::log_floor(
+                &samples.samples.iter().map(|s| s.value).collect::<Vec<_>>(),
+                c,
+            );
             let log_error = (pairs
                 .iter()
                 .map(|p| ((p.0.max(0.0) + eps).ln() - (p.1.max(0.0) + eps).ln()).powi(2))
