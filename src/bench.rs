@@ -209,7 +209,7 @@ fn best_case(
         "model = \"{rung}\"\nstarts = 2\n[optimizer]\nglobal_candidates = 16\n"
     ))?;
     let o = crate::fit::fit(&data, &cfg, true)?;
-    let m = crate::fit::problem::model_for(&o.set, 16, 16, None);
+    let m = crate::fit::problem::model_for(&o.set, 16, 16, 16, None);
     Ok((m, crate::fit::problem::albedos_of(&o.set)))
 }
 

@@ -34,13 +34,17 @@ The result JSON (schema fibrefit-result/1) is written atomically: a failed fit w
 pub struct FitArgs {
     /// Goniometric CSV, capture TOML or measured BRDF (.bsdf)
     pub data: PathBuf,
-    /// Fit configuration (TOML)
+    /// Fit configuration (TOML) [default: every setting at its default; then --model is needed]
     #[arg(long, value_name = "FILE")]
-    pub config: PathBuf,
+    pub config: Option<PathBuf>,
     /// Rung id, or `auto`: choose the cheapest rung that the held-out data do not reject
     /// [default: the config's `model`]
     #[arg(long, value_name = "ID|auto")]
     pub model: Option<String>,
+    /// Residual metric: linear, log or cosine [default: the config's; without a config, log for
+    /// measured-BRDF files (.bsdf) and linear otherwise]
+    #[arg(long, value_name = "METRIC")]
+    pub metric: Option<String>,
     /// Result JSON for renderers (and `fibrefit eval --params`)
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -110,15 +114,33 @@ fn check_report_dir(dir: &Path) -> Result<()> {
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
-    let mut cfg = FitConfig::load(&args.config)?;
+    let mut cfg = match (&args.config, &args.model) {
+        (Some(path), _) => FitConfig::load(path)?,
+        (None, Some(m)) => {
+            let mut c: FitConfig = toml::from_str(&format!("model = {m:?}\n"))?;
+            let measured = args
+                .data
+                .extension()
+                .is_some_and(|e| e.eq_ignore_ascii_case("bsdf"));
+            if measured {
+                c.metric = crate::fit::config::Metric::Log;
+            }
+            c
+        }
+        (None, None) => anyhow::bail!("give --config FILE, or --model ID|auto to fit with the defaults"),
+    };
     if let Some(m) = &args.model {
         cfg.model = m.clone();
-        cfg.validate()
-            .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
     }
+    if let Some(m) = &args.metric {
+        cfg.metric = serde_json::from_value(serde_json::Value::String(m.clone()))
+            .map_err(|_| anyhow::anyhow!("--metric {m}: expected linear, log or cosine"))?;
+    }
+    cfg.validate()
+        .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
     // Check every output first: a bad path fails before the work, and no output replaces an input.
     let mut inputs = crate::load::input_files(&args.data);
-    inputs.push(args.config.clone());
+    inputs.extend(args.config.iter().cloned());
     inputs.extend(cfg.knobs.topology_map.iter().cloned());
     refuse_inputs(&args.out, &inputs, "--out")?;
     if let Some(dir) = &args.report {
@@ -152,6 +174,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         &outcome.set,
         cfg.knobs.quadrature_order,
         cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
         outcome.map.clone(),
     );
     let albedos = albedos_of(&outcome.set);

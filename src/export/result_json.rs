@@ -78,6 +78,9 @@ pub struct Knobs {
     pub metric: String,
     pub quadrature_order: usize,
     pub histogram_bins: usize,
+    /// Nodes of the fibre-direction spread quadrature.
+    #[serde(default)]
+    pub azimuth_nodes: usize,
     pub stride: usize,
     pub fraction: f64,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -187,6 +190,7 @@ pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
         metric: format!("{:?}", cfg.metric).to_lowercase(),
         quadrature_order: cfg.knobs.quadrature_order,
         histogram_bins: cfg.knobs.histogram_bins,
+        azimuth_nodes: cfg.knobs.azimuth_nodes,
         stride,
         fraction,
         topology_map: cfg

@@ -45,6 +45,9 @@ pub struct Knobs {
     /// Image captures: seeded random fraction of pixels kept.
     #[serde(default = "one_f64")]
     pub fraction: f64,
+    /// Nodes of the fibre-direction spread quadrature (used when `azimuth_spread_deg` > 0).
+    #[serde(default = "default_azimuth_nodes")]
+    pub azimuth_nodes: usize,
     /// Topology map for goniometric spots (the spot averages over its histogram); relative to
     /// the config file. Image captures carry their own.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -58,6 +61,7 @@ impl Default for Knobs {
             histogram_bins: 16,
             stride: 1,
             fraction: 1.0,
+            azimuth_nodes: default_azimuth_nodes(),
             topology_map: None,
         }
     }
@@ -97,6 +101,9 @@ impl Default for Optimizer {
     }
 }
 
+fn default_azimuth_nodes() -> usize {
+    crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES
+}
 fn default_order() -> usize {
     16
 }
@@ -355,6 +362,13 @@ impl FitConfig {
             bail!(
                 "knobs.histogram_bins = {} must lie in [1, {MAX_HISTOGRAM_BINS}]",
                 self.knobs.histogram_bins
+            );
+        }
+        let max_nodes = crate::model::azimuth_spread::MAX_AZIMUTH_NODES;
+        if !(1..=max_nodes).contains(&self.knobs.azimuth_nodes) {
+            bail!(
+                "knobs.azimuth_nodes = {} must lie in [1, {max_nodes}]",
+                self.knobs.azimuth_nodes
             );
         }
         if self.knobs.stride == 0 || !(self.knobs.fraction > 0.0 && self.knobs.fraction <= 1.0) {

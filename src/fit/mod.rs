@@ -111,6 +111,7 @@ pub fn fit_with_hints(
             map.clone(),
             opt.separable,
         )
+        .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
     };
     let full = make(all.clone());
     let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed);

@@ -17,6 +17,7 @@ pub enum Shape {
     Azimuth,
     AlphaX,
     AlphaY,
+    AzimuthSpread,
 }
 
 impl Shape {
@@ -28,6 +29,7 @@ impl Shape {
             Shape::MapScale => "map_scale",
             Shape::Azimuth => "fibre_azimuth_deg",
             Shape::AlphaX => "alpha_x",
+            Shape::AzimuthSpread => "azimuth_spread_deg",
             Shape::AlphaY => "alpha_y",
         }
     }
@@ -126,6 +128,7 @@ fn defaults(name: &str, spacing_max: f64, spacing0: f64) -> Default3 {
         ),
         "map_scale" => d(0.0, 0.0, max_height(spacing_max), false),
         "fibre_azimuth_deg" => d(0.0, -90.0, 90.0, false),
+        "azimuth_spread_deg" => d(0.0, 0.0, 180.0, false),
         "alpha_x" | "alpha_y" => d(0.2, 0.0011, 1.0, true),
         _ => unreachable!("names come from ModelId::parameter_names"),
     }
@@ -139,6 +142,7 @@ fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
         "spacing" => (2.0, 20.0),
         "height" | "map_scale" => (0.0, max_height(spacing_max)),
         "fibre_azimuth_deg" => (-90.0, 90.0),
+        "azimuth_spread_deg" => (0.0, 180.0),
         "alpha_x" | "alpha_y" => (1e-3, 1.0),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
     }
@@ -269,6 +273,7 @@ impl ParamSet {
                         "height" => Shape::Height,
                         "map_scale" => Shape::MapScale,
                         "fibre_azimuth_deg" => Shape::Azimuth,
+                        "azimuth_spread_deg" => Shape::AzimuthSpread,
                         "alpha_x" => Shape::AlphaX,
                         "alpha_y" => Shape::AlphaY,
                         _ => unreachable!(),
@@ -309,6 +314,7 @@ impl ParamSet {
             Shape::Spacing => 2.0,
             Shape::Height | Shape::MapScale | Shape::Azimuth => 0.0,
             Shape::AlphaX | Shape::AlphaY => 0.2,
+            Shape::AzimuthSpread => 0.0,
         })
     }
 

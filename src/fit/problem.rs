@@ -30,6 +30,8 @@ pub struct FitProblem<'a> {
     pub histogram_bins: usize,
     pub map: Option<Arc<TopologyMap>>,
     pub separable: bool,
+    /// Nodes of the fibre-direction spread quadrature.
+    pub azimuth_nodes: usize,
     /// Residual scale per sample and channel: 1/sigma or sqrt(weight), times cos(theta_i) for
     /// the cosine metric.
     scale: Vec<[f64; 3]>,
@@ -82,6 +84,7 @@ impl<'a> FitProblem<'a> {
         let values: Vec<[f64; 3]> = samples.iter().map(|s| s.value).collect();
         let log_floor = [0, 1, 2].map(|c| log_floor(&values, c));
         Self {
+            azimuth_nodes: crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES,
             log_floor,
             samples,
             template,
@@ -95,6 +98,12 @@ impl<'a> FitProblem<'a> {
             free_albedos,
             evaluations: AtomicUsize::new(0),
         }
+    }
+
+    /// This problem with `n` nodes for the fibre-direction spread quadrature.
+    pub fn with_azimuth_nodes(mut self, n: usize) -> Self {
+        self.azimuth_nodes = n;
+        self
     }
 
     /// Residual scale per sample and channel (1/sigma or sqrt(weight), times cos(theta_i) for
@@ -270,6 +279,7 @@ impl<'a> FitProblem<'a> {
             set,
             self.quadrature_order,
             self.histogram_bins,
+            self.azimuth_nodes,
             self.map.clone(),
         )
     }
@@ -626,6 +636,21 @@ pub fn log_floor(values: &[[f64; 3]], c: usize) -> f64 {
 
 /// Build the rung at the shape parameters of `set` with the given knobs.
 pub fn model_for(
+    set: &ParamSet,
+    quadrature_order: usize,
+    histogram_bins: usize,
+    azimuth_nodes: usize,
+    map: Option<Arc<TopologyMap>>,
+) -> Box<dyn ShadingModel> {
+    model::with_spread(
+        aligned_model_for(set, quadrature_order, histogram_bins, map),
+        set.shape_value(Shape::AzimuthSpread),
+        azimuth_nodes,
+        set.shape_value(Shape::Azimuth).to_radians(),
+    )
+}
+
+fn aligned_model_for(
     set: &ParamSet,
     quadrature_order: usize,
     histogram_bins: usize,

@@ -100,6 +100,10 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
         histogram_bins: knob("histogram_bins")
             .and_then(|x| x.as_u64())
             .unwrap_or(16) as usize,
+        azimuth_nodes: knob("azimuth_nodes")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES as u64)
+            as usize,
         topology_map: knob("topology_map")
             .and_then(|x| x.as_str())
             .map(PathBuf::from),
@@ -162,7 +166,8 @@ pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
         result.knobs.histogram_bins,
         map,
         false,
-    );
+    )
+    .with_azimuth_nodes(result.knobs.azimuth_nodes);
     let cols = problem.columns(&result.set)?;
     let r = problem.residuals(&cols, &result.set);
     let values = problem.model_values(&cols, &result.set);

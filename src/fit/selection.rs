@@ -22,6 +22,8 @@ pub struct Candidate {
     /// Unweighted RMSE of model - data on the held-out samples, 1/sr.
     pub heldout_rmse: f64,
     pub heldout_relative_rmse: f64,
+    /// RMS of ln(m + eps) - ln(y + eps) on the held-out samples (eps: the `log` metric's floor).
+    pub heldout_log_error: f64,
     /// Cost of one model evaluation (one sample, all heights), single thread, ns.
     pub ns_per_eval: f64,
     pub fit_seconds: f64,
@@ -49,8 +51,9 @@ fn subset(s: &Samples, idx: &[usize]) -> Samples {
     }
 }
 
-/// Held-out RMSE and relative RMSE of a fitted outcome, and the single-thread cost per sample.
-fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64)> {
+/// Held-out RMSE, relative RMSE and log error of a fitted outcome, and the single-thread cost
+/// per sample.
+fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64, f64)> {
     let p = FitProblem::new(
         test.samples.iter().collect(),
         o.set.clone(),
@@ -59,15 +62,19 @@ fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64,
         cfg.knobs.histogram_bins,
         o.map.clone(),
         cfg.optimizer.separable,
-    );
+    )
+    .with_azimuth_nodes(cfg.knobs.azimuth_nodes);
     let cols = p.columns(&o.set)?;
     let values = p.model_values(&cols, &o.set);
-    let ch = test.channels;
-    let (mut se, mut sy, mut n) = (0.0, 0.0, 0.0);
+    let ch = o.channels;
+    let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
+    let floors: Vec<f64> = (0..ch).map(|c| super::problem::log_floor(&raw, c)).collect();
+    let (mut se, mut sy, mut sl, mut n) = (0.0, 0.0, 0.0, 0.0);
     for (m, s) in values.iter().zip(&test.samples) {
-        for (mc, yc) in m[..ch].iter().zip(&s.value[..ch]) {
+        for (c, (mc, yc)) in m[..ch].iter().zip(&s.value[..ch]).enumerate() {
             se += (mc - yc).powi(2);
             sy += yc.powi(2);
+            sl += ((mc.max(0.0) + floors[c]).ln() - (yc.max(0.0) + floors[c]).ln()).powi(2);
             n += 1.0;
         }
     }
@@ -84,7 +91,7 @@ fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64,
     model.basis_many(&pairs, &mut bases);
     std::hint::black_box(&bases);
     let ns = t.elapsed().as_nanos() as f64 / k.max(1) as f64;
-    Ok(((se / n).sqrt(), (se / sy).sqrt(), ns))
+    Ok(((se / n).sqrt(), (se / sy).sqrt(), (sl / n).sqrt(), ns))
 }
 
 pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
@@ -114,7 +121,7 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
     };
     let mut candidates = Vec::new();
     let mut hints: Vec<Vec<(Shape, f64)>> = Vec::new();
-    let mut fits: Vec<Option<(f64, f64)>> = Vec::new();
+    let mut fits: Vec<Option<(f64, f64, f64)>> = Vec::new();
     for name in &cfg.selection.rungs {
         let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
         let rc = cfg.for_rung(id);
@@ -122,23 +129,24 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
         // every simpler rung's optimum is a start: a rung nested in a richer one (poulin-fournier
         // is varying-topology at height 0) then never ends worse than it on the training data
         let result = fit_with_hints(&train, &rc, true, &hints).and_then(|o| {
-            let (rmse, rel, ns) = heldout(&o, &rc, &test)?;
+            let (rmse, rel, log, ns) = heldout(&o, &rc, &test)?;
             hints.push(o.set.shapes.iter().map(|s| (s.kind, s.value)).collect());
-            Ok((o.statistics.free_parameters, rmse, rel, ns))
+            Ok((o.statistics.free_parameters, rmse, rel, log, ns))
         });
         match result {
-            Ok((p, rmse, rel, ns)) => {
+            Ok((p, rmse, rel, log, ns)) => {
                 candidates.push(Candidate {
                     rung: name.clone(),
                     free_parameters: p,
                     heldout_rmse: rmse,
                     heldout_relative_rmse: rel,
+                    heldout_log_error: log,
                     ns_per_eval: ns,
                     fit_seconds: t.elapsed().as_secs_f64(),
                     chosen: false,
                     error: None,
                 });
-                fits.push(Some((rmse, rel)));
+                fits.push(Some((rmse, rel, log)));
             }
             Err(e) => {
                 candidates.push(Candidate {
@@ -146,6 +154,7 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
                     free_parameters: 0,
                     heldout_rmse: f64::NAN,
                     heldout_relative_rmse: f64::NAN,
+                    heldout_log_error: f64::NAN,
                     ns_per_eval: f64::NAN,
                     fit_seconds: t.elapsed().as_secs_f64(),
                     chosen: false,
@@ -155,7 +164,7 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
             }
         }
     }
-    let Some((best_rmse, best_rel)) = fits
+    let Some((best_rmse, best_rel, _)) = fits
         .iter()
         .flatten()
         .copied()
@@ -163,27 +172,44 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
     else {
         bail!("--model auto: no rung could be fitted");
     };
-    let (rule, accept): (String, Box<dyn Fn(f64, f64) -> bool>) = match cfg.selection.tolerance {
-        Some(t) => (
+    let best_log = fits
+        .iter()
+        .flatten()
+        .map(|f| f.2)
+        .fold(f64::INFINITY, f64::min);
+    type Accept = Box<dyn Fn(f64, f64, f64) -> bool>;
+    let (rule, accept): (String, Accept) = match (cfg.selection.tolerance, cfg.metric) {
+        // the log metric asks for relative errors: judge by them
+        (t, super::config::Metric::Log) => {
+            let t = t.unwrap_or(0.05);
+            (
+                format!(
+                    "held-out log error within {:.1} % of the best (log metric)",
+                    100.0 * t
+                ),
+                Box::new(move |_, _, log| log <= best_log * (1.0 + t)),
+            )
+        }
+        (Some(t), _) => (
             format!("held-out RMSE within {:.1} % of the best", 100.0 * t),
-            Box::new(move |rmse, _| rmse <= best_rmse * (1.0 + t)),
+            Box::new(move |rmse, _, _| rmse <= best_rmse * (1.0 + t)),
         ),
-        None if sigmas => (
+        (None, _) if sigmas => (
             format!(
                 "held-out relative RMSE within the noise level ({:.2} %) of the best ({:.2} %)",
                 100.0 * noise_rel,
                 100.0 * best_rel
             ),
-            Box::new(move |_, rel| rel <= best_rel + noise_rel),
+            Box::new(move |_, rel, _| rel <= best_rel + noise_rel),
         ),
-        None => (
+        (None, _) => (
             "held-out RMSE within 5 % of the best (no sigmas given)".to_string(),
-            Box::new(move |rmse, _| rmse <= best_rmse * 1.05),
+            Box::new(move |rmse, _, _| rmse <= best_rmse * 1.05),
         ),
     };
     let chosen = fits
         .iter()
-        .position(|f| f.is_some_and(|(rmse, rel)| accept(rmse, rel)))
+        .position(|f| f.is_some_and(|(rmse, rel, log)| accept(rmse, rel, log)))
         .expect("the best rung is acceptable");
     candidates[chosen].chosen = true;
     Ok(SelectionOutcome {
@@ -199,24 +225,25 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
 /// The selection table in markdown.
 pub fn table(s: &SelectionOutcome) -> String {
     let mut t = format!(
-        "Model selection ({}; {} training / {} held-out samples)\n\n| rung | free parameters | held-out RMSE [1/sr] | held-out relative RMSE | ns per evaluation | fit time [s] | chosen |\n|---|---|---|---|---|---|---|\n",
+        "Model selection ({}; {} training / {} held-out samples)\n\n| rung | free parameters | held-out RMSE [1/sr] | held-out relative RMSE | held-out log error | ns per evaluation | fit time [s] | chosen |\n|---|---|---|---|---|---|---|---|\n",
         s.rule, s.train_samples, s.heldout_samples
     );
     for c in &s.candidates {
         match &c.error {
             Some(e) => {
                 t += &format!(
-                    "| {} | - | failed: {e} | | | {:.2} | |\n",
+                    "| {} | - | failed: {e} | | | | {:.2} | |\n",
                     c.rung, c.fit_seconds
                 )
             }
             None => {
                 t += &format!(
-                    "| {} | {} | {:.4e} | {:.2} % | {:.0} | {:.2} | {} |\n",
+                    "| {} | {} | {:.4e} | {:.2} % | {:.4} | {:.0} | {:.2} | {} |\n",
                     c.rung,
                     c.free_parameters,
                     c.heldout_rmse,
                     100.0 * c.heldout_relative_rmse,
+                    c.heldout_log_error,
                     c.ns_per_eval,
                     c.fit_seconds,
                     if c.chosen { "**yes**" } else { "" }

@@ -4,6 +4,7 @@
 //! albedo of each linear component. The caller combines it with grey or RGB albedos; the fitter
 //! can solve those exactly (separable least squares).
 
+pub mod azimuth_spread;
 pub mod cross_section;
 pub mod elementary;
 pub mod frame;
@@ -76,8 +77,14 @@ impl ModelId {
         use ModelId::*;
         match self {
             Lambert => vec!["kd"],
-            MaxNormal => vec!["kd", "ks", "exponent", "fibre_azimuth_deg"],
-            HastDiffuse => vec!["kd", "fibre_azimuth_deg"],
+            MaxNormal => vec![
+                "kd",
+                "ks",
+                "exponent",
+                "fibre_azimuth_deg",
+                "azimuth_spread_deg",
+            ],
+            HastDiffuse => vec!["kd", "fibre_azimuth_deg", "azimuth_spread_deg"],
             Ward => vec!["rho_d", "rho_s", "alpha_x", "alpha_y", "fibre_azimuth_deg"],
             PoulinFournier => vec![
                 "kd",
@@ -86,6 +93,7 @@ impl ModelId {
                 "exponent",
                 "spacing",
                 "fibre_azimuth_deg",
+                "azimuth_spread_deg",
             ],
             VaryingTopology | Reference => vec![
                 "kd",
@@ -96,6 +104,7 @@ impl ModelId {
                 "height",
                 "map_scale",
                 "fibre_azimuth_deg",
+                "azimuth_spread_deg",
             ],
         }
     }
@@ -274,8 +283,32 @@ pub fn brdf_at_degrees(
     (0..channels).map(|c| b.brdf(albedos, c)).collect()
 }
 
-/// Build the model `id` from validated parameters.
+/// Build the model `id` from validated parameters (averaged over the fibre-direction spread
+/// when it is not 0).
 pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
+    Ok(with_spread(
+        build_aligned(id, p)?,
+        p.azimuth_spread_deg,
+        p.azimuth_nodes,
+        p.fibre_azimuth,
+    ))
+}
+
+/// `m` averaged over a fibre-direction spread of `spread_deg` (fibre rungs only; 0: `m` itself).
+pub fn with_spread(
+    m: Box<dyn ShadingModel>,
+    spread_deg: f64,
+    nodes: usize,
+    psi: f64,
+) -> Box<dyn ShadingModel> {
+    if spread_deg > 0.0 && !matches!(m.id(), ModelId::Lambert | ModelId::Ward) {
+        Box::new(azimuth_spread::AzimuthSpread::new(m, spread_deg, nodes, psi))
+    } else {
+        m
+    }
+}
+
+fn build_aligned(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
     Ok(match id {
         ModelId::Lambert => Box::new(lambert::Lambert),
         ModelId::MaxNormal => Box::new(max_normal::MaxNormal::new(p.exponent)),

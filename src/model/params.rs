@@ -52,6 +52,9 @@ pub struct RawParams {
     pub map_scale: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fibre_azimuth_deg: Option<f64>,
+    /// Spread of the fibre azimuths around psi, degrees (0 aligned, 180 isotropic).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub azimuth_spread_deg: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub substrate_albedo: Option<Albedo>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -71,6 +74,9 @@ pub struct RawParams {
     /// Height histogram bins K (default 16).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub histogram_bins: Option<usize>,
+    /// Nodes of the azimuth-spread quadrature (default 16).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub azimuth_nodes: Option<usize>,
     /// `lambert` preview: light both sides (seed 003).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub two_sided: Option<bool>,
@@ -142,7 +148,12 @@ fn from_result_json(v: &serde_json::Value) -> Result<RawParams> {
         flat.insert(name.clone(), value);
     }
     if let Some(k) = v.get("knobs") {
-        for key in ["quadrature_order", "histogram_bins", "topology_map"] {
+        for key in [
+            "quadrature_order",
+            "histogram_bins",
+            "azimuth_nodes",
+            "topology_map",
+        ] {
             if let Some(x) = k.get(key) {
                 flat.insert(key.into(), x.clone());
             }
@@ -164,6 +175,9 @@ pub struct ModelParams {
     pub alpha_y: f64,
     pub quadrature_order: usize,
     pub histogram_bins: usize,
+    /// Spread of the fibre azimuths, degrees (0: aligned).
+    pub azimuth_spread_deg: f64,
+    pub azimuth_nodes: usize,
     pub preview: Preview,
 }
 
@@ -198,6 +212,7 @@ fn uses(id: ModelId, name: &str) -> bool {
         }
         "histogram_bins" => id == VaryingTopology,
         "fibre_azimuth_deg" => id != Lambert,
+        "azimuth_spread_deg" | "azimuth_nodes" => !matches!(id, Lambert | Ward),
         "alpha_x" | "alpha_y" | "rho_d" | "rho_s" => id == Ward,
         "two_sided" | "ambient" => id == Lambert,
         _ => true,
@@ -209,7 +224,9 @@ impl ModelParams {
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
         let mut warnings = Vec::new();
-        let given: [(&str, bool); 18] = [
+        let given: [(&str, bool); 20] = [
+            ("azimuth_spread_deg", raw.azimuth_spread_deg.is_some()),
+            ("azimuth_nodes", raw.azimuth_nodes.is_some()),
             ("kd", raw.kd.is_some()),
             ("ks", raw.ks.is_some()),
             ("exponent", raw.exponent.is_some()),
@@ -244,6 +261,21 @@ impl ModelParams {
             90.0,
         )?;
         let exponent = check_range("exponent", raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
+        let azimuth_spread_deg = check_range(
+            "azimuth_spread_deg",
+            raw.azimuth_spread_deg.unwrap_or(0.0),
+            0.0,
+            super::azimuth_spread::ISOTROPIC_DEG,
+        )?;
+        let azimuth_nodes = raw
+            .azimuth_nodes
+            .unwrap_or(super::azimuth_spread::DEFAULT_AZIMUTH_NODES);
+        if !(1..=super::azimuth_spread::MAX_AZIMUTH_NODES).contains(&azimuth_nodes) {
+            bail!(
+                "parameter `azimuth_nodes` = {azimuth_nodes} is out of range [1, {}]",
+                super::azimuth_spread::MAX_AZIMUTH_NODES
+            );
+        }
         let quadrature_order = raw.quadrature_order.unwrap_or(DEFAULT_QUADRATURE_ORDER);
         if !(1..=MAX_QUADRATURE_ORDER).contains(&quadrature_order) {
             bail!("parameter `quadrature_order` = {quadrature_order} is out of range [1, {MAX_QUADRATURE_ORDER}]");
@@ -337,6 +369,8 @@ impl ModelParams {
                 alpha_y,
                 quadrature_order,
                 histogram_bins,
+                azimuth_spread_deg,
+                azimuth_nodes,
                 preview: Preview {
                     two_sided: raw.two_sided.unwrap_or(false),
                     ambient,
