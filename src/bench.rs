@@ -276,7 +276,56 @@ pub fn forward(quick: bool, bar: &ProgressBar) -> Result<Vec<ForwardRow>> {
         }
         bar.inc(1);
     }
+    rows.extend(spread_rows(&pairs, repeats));
     Ok(rows)
+}
+
+/// The fibre-direction spread's knob: poulin-fournier on the gapped set (d 4) with a 30 deg
+/// spread, at several azimuth node counts, against the reference integrating the same law
+/// adaptively.
+fn spread_rows(pairs: &[DirectionPair], repeats: usize) -> Vec<ForwardRow> {
+    use model::azimuth_spread::AzimuthSpread;
+    let set = &SETS[2];
+    let a = albedos(set);
+    let spread = 30.0;
+    let reference = AzimuthSpread::new(
+        Box::new(model::reference::Reference::new(
+            set.spacing,
+            set.exponent,
+            topology(set),
+        )),
+        spread,
+        1,
+        0.0,
+    );
+    let t = Instant::now();
+    let ref_values: Vec<f64> = pairs
+        .iter()
+        .map(|p| reference.basis(p).brdf(&a, 0))
+        .collect();
+    let mut rows = vec![ForwardRow {
+        set: "spread".into(),
+        rung: "reference".into(),
+        knob: format!("spread {spread} deg, adaptive 1e-8"),
+        ns_per_eval: t.elapsed().as_nanos() as f64 / pairs.len() as f64,
+        rms_rel_error: 0.0,
+        max_rel_error: 0.0,
+    }];
+    for nodes in [4, 8, 16, 32, 64] {
+        let pf = model::poulin_fournier::PoulinFournier::new(set.spacing, set.exponent, 16);
+        let m = AzimuthSpread::new(Box::new(pf), spread, nodes, 0.0);
+        let (ns, values) = timed(&m, pairs, &a, repeats);
+        let (rms, max) = errors(&values, &ref_values);
+        rows.push(ForwardRow {
+            set: "spread".into(),
+            rung: "poulin-fournier".into(),
+            knob: format!("spread {spread} deg, N=16, azimuth nodes {nodes}"),
+            ns_per_eval: ns,
+            rms_rel_error: rms,
+            max_rel_error: max,
+        });
+    }
+    rows
 }
 
 /// Fit level on the shipped silk capture: subsampling fractions x quadrature orders.

@@ -127,7 +127,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
             }
             c
         }
-        (None, None) => anyhow::bail!("give --config FILE, or --model ID|auto to fit with the defaults"),
+        (None, None) => {
+            anyhow::bail!("give --config FILE, or --model ID|auto to fit with the defaults")
+        }
     };
     if let Some(m) = &args.model {
         cfg.model = m.clone();

@@ -68,7 +68,9 @@ fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64,
     let values = p.model_values(&cols, &o.set);
     let ch = o.channels;
     let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
-    let floors: Vec<f64> = (0..ch).map(|c| super::problem::log_floor(&raw, c)).collect();
+    let floors: Vec<f64> = (0..ch)
+        .map(|c| super::problem::log_floor(&raw, c))
+        .collect();
     let (mut se, mut sy, mut sl, mut n) = (0.0, 0.0, 0.0, 0.0);
     for (m, s) in values.iter().zip(&test.samples) {
         for (c, (mc, yc)) in m[..ch].iter().zip(&s.value[..ch]).enumerate() {

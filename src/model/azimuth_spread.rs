@@ -61,7 +61,11 @@ impl AzimuthSpread {
         let sigma = sigma_deg.to_radians();
         let n = nodes.max(1);
         let isotropic = sigma_deg >= ISOTROPIC_DEG;
-        let half = if isotropic { FRAC_PI_2 } else { (4.0 * sigma).min(FRAC_PI_2) };
+        let half = if isotropic {
+            FRAC_PI_2
+        } else {
+            (4.0 * sigma).min(FRAC_PI_2)
+        };
         let mut raw: Vec<(f64, f64)> = (0..n)
             .map(|j| {
                 let x = -half + (j as f64 + 0.5) * 2.0 * half / n as f64;

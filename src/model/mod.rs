@@ -302,7 +302,9 @@ pub fn with_spread(
     psi: f64,
 ) -> Box<dyn ShadingModel> {
     if spread_deg > 0.0 && !matches!(m.id(), ModelId::Lambert | ModelId::Ward) {
-        Box::new(azimuth_spread::AzimuthSpread::new(m, spread_deg, nodes, psi))
+        Box::new(azimuth_spread::AzimuthSpread::new(
+            m, spread_deg, nodes, psi,
+        ))
     } else {
         m
     }
