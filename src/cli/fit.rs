@@ -275,15 +275,20 @@ pub fn run(args: &FitArgs) -> Result<()> {
     if let Some(s) = &selection {
         report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
     }
+    let mut result = result;
     if let Some(dir) = &args.report {
-        report::write_dir(
+        // the report is optional: its failure is a warning in the result, never the lost fit
+        if let Err(e) = report::write_dir(
             dir,
             &outcome,
             &samples,
             &report_text,
             outcome.set.shape_value(Shape::Azimuth),
-        )
-        .with_context(|| format!("{}: writing the report", dir.display()))?;
+        ) {
+            let w = format!("{}: the report could not be written: {e:#}", dir.display());
+            eprintln!("warning: {w}");
+            result.warnings.push(w);
+        }
     }
     serde_json::to_writer_pretty(out.writer(), &result)?;
     out.commit()?;
