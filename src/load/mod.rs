@@ -3,6 +3,7 @@
 pub mod capture;
 pub mod gonio;
 pub mod image_io;
+pub mod merl;
 pub mod queries;
 pub mod rgl;
 pub mod samples;
@@ -59,8 +60,9 @@ pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
         Some("csv") => gonio::load(path, opts.gonio),
         Some("toml") => capture::load(path, opts.subsample),
         Some("bsdf") => rgl::load(path, opts.measured),
+        Some("binary") => merl::load(path, opts.measured),
         _ => bail!(
-            "{}: unknown data file type; expected a goniometric .csv, an image capture .toml or an RGL measured BRDF .bsdf",
+            "{}: unknown data file type; expected a goniometric .csv, an image capture .toml, an RGL measured BRDF .bsdf or a MERL .binary",
             path.display()
         ),
     }
