@@ -5,7 +5,9 @@
 //! (max-normal, hast-diffuse, poulin-fournier, varying-topology, reference) take
 //! `azimuth_spread_deg` = s in [0, 180] degrees:
 //!
-//!     f_s(l, v) = int p_s(delta) f(l, v; psi + delta) d delta,
+//! ```text
+//! f_s(l, v) = int p_s(delta) f(l, v; psi + delta) d delta,
+//! ```
 //!
 //! with p_s the wrapped normal law of standard deviation s on the fibres' period of 180 degrees
 //! (T and -T are the same fibres). s = 0 is the aligned rung itself (no averaging, the same bits);
