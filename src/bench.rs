@@ -9,6 +9,7 @@
 //! and parameter error against the truth of a shipped capture at several subsampling fractions
 //! and quadrature orders.
 
+pub mod felt;
 pub mod robustness;
 
 use crate::fit::config::FitConfig;

@@ -33,6 +33,13 @@ pub struct BenchArgs {
     /// Goniometric samples per dataset of the robustness study
     #[arg(long, value_name = "N", default_value_t = 1000)]
     pub samples: usize,
+    /// Instead: the real-felt comparison on this measured file (every rung, aligned and with
+    /// the fibre-direction spread, linear and log metric): writes OUT/felt.md, .csv and .png
+    #[arg(long, value_name = "FILE")]
+    pub felt: Option<PathBuf>,
+    /// Direction pairs of the felt comparison
+    #[arg(long, value_name = "N", default_value_t = 3000)]
+    pub directions: usize,
     /// Only these cases of the robustness study (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
@@ -84,6 +91,22 @@ fn robustness(args: &BenchArgs) -> Result<()> {
 pub fn run(args: &BenchArgs) -> Result<()> {
     if args.robustness {
         return robustness(args);
+    }
+    if let Some(file) = &args.felt {
+        let t = Instant::now();
+        let bar = crate::progress::bar(crate::bench::felt::fit_count(), "felt", args.quiet);
+        let rows = crate::bench::felt::run(file, args.directions, &bar)?;
+        bar.finish_and_clear();
+        let command = format!(
+            "fibrefit bench --felt {} --directions {}",
+            file.display(),
+            args.directions
+        );
+        crate::export::felt_report::write(&args.out, &rows, &command, t.elapsed().as_secs_f64())?;
+        if !args.quiet {
+            eprintln!("wrote {}", args.out.join("felt.md").display());
+        }
+        return Ok(());
     }
     if !args.root.join("data_synthetic/silk/capture.toml").exists() {
         bail!(

@@ -3,6 +3,7 @@
 
 pub mod atomic;
 pub mod eval_table;
+pub mod felt_report;
 pub mod images;
 pub mod plots;
 pub mod report;

@@ -53,7 +53,7 @@ fn subset(s: &Samples, idx: &[usize]) -> Samples {
 
 /// Held-out RMSE, relative RMSE and log error of a fitted outcome, and the single-thread cost
 /// per sample.
-fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64, f64)> {
+pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64, f64)> {
     let p = FitProblem::new(
         test.samples.iter().collect(),
         o.set.clone(),
