@@ -34,15 +34,6 @@ pub struct FeltRow {
     pub chosen: bool,
 }
 
-const RUNGS: [&str; 6] = [
-    "lambert",
-    "hast-diffuse",
-    "ward",
-    "max-normal",
-    "poulin-fournier",
-    "varying-topology",
-];
-
 fn split(s: &Samples, seed: u64) -> (Samples, Samples) {
     let mut idx: Vec<usize> = (0..s.samples.len()).collect();
     idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed));
@@ -71,7 +62,8 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<Felt
     for metric in ["linear", "log"] {
         let auto: FitConfig =
             toml::from_str(&format!("model = \"auto\"\nmetric = \"{metric}\"\n"))?;
-        for rung in RUNGS {
+        // the rungs `--model auto` tries by default, cheapest first
+        for rung in auto.selection.rungs.iter().map(String::as_str) {
             let id = rung.parse().map_err(|e: String| anyhow::anyhow!(e))?;
             let fibre = !matches!(rung, "lambert" | "ward");
             for spread in if fibre {
