@@ -302,7 +302,12 @@ impl FitConfig {
         c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
         if self.model == "auto" {
             for name in allowed {
-                let shape = !matches!(name, "kd" | "ks" | "substrate_albedo" | "rho_d" | "rho_s");
+                // albedos are solved; the Fresnel factor is an optional component (on only when
+                // listed)
+                let shape = !matches!(
+                    name,
+                    "kd" | "ks" | "substrate_albedo" | "rho_d" | "rho_s" | "fresnel_ior"
+                );
                 if shape {
                     c.parameters.entry(name.to_string()).or_insert(ParamEntry {
                         vary: Some(true),

@@ -18,6 +18,7 @@ pub enum Shape {
     AlphaX,
     AlphaY,
     AzimuthSpread,
+    FresnelIor,
 }
 
 impl Shape {
@@ -30,6 +31,7 @@ impl Shape {
             Shape::Azimuth => "fibre_azimuth_deg",
             Shape::AlphaX => "alpha_x",
             Shape::AzimuthSpread => "azimuth_spread_deg",
+            Shape::FresnelIor => "fresnel_ior",
             Shape::AlphaY => "alpha_y",
         }
     }
@@ -129,6 +131,7 @@ fn defaults(name: &str, spacing_max: f64, spacing0: f64) -> Default3 {
         "map_scale" => d(0.0, 0.0, max_height(spacing_max), false),
         "fibre_azimuth_deg" => d(0.0, -90.0, 90.0, false),
         "azimuth_spread_deg" => d(0.0, 0.0, 180.0, false),
+        "fresnel_ior" => d(0.0, 0.0, 10.0, false),
         "alpha_x" | "alpha_y" => d(0.2, 0.0011, 1.0, true),
         _ => unreachable!("names come from ModelId::parameter_names"),
     }
@@ -143,6 +146,7 @@ fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
         "height" | "map_scale" => (0.0, max_height(spacing_max)),
         "fibre_azimuth_deg" => (-90.0, 90.0),
         "azimuth_spread_deg" => (0.0, 180.0),
+        "fresnel_ior" => (0.0, 10.0),
         "alpha_x" | "alpha_y" => (1e-3, 1.0),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
     }
@@ -274,6 +278,7 @@ impl ParamSet {
                         "map_scale" => Shape::MapScale,
                         "fibre_azimuth_deg" => Shape::Azimuth,
                         "azimuth_spread_deg" => Shape::AzimuthSpread,
+                        "fresnel_ior" => Shape::FresnelIor,
                         "alpha_x" => Shape::AlphaX,
                         "alpha_y" => Shape::AlphaY,
                         _ => unreachable!(),
@@ -314,7 +319,7 @@ impl ParamSet {
             Shape::Spacing => 2.0,
             Shape::Height | Shape::MapScale | Shape::Azimuth => 0.0,
             Shape::AlphaX | Shape::AlphaY => 0.2,
-            Shape::AzimuthSpread => 0.0,
+            Shape::AzimuthSpread | Shape::FresnelIor => 0.0,
         })
     }
 

@@ -643,7 +643,10 @@ pub fn model_for(
     map: Option<Arc<TopologyMap>>,
 ) -> Box<dyn ShadingModel> {
     model::with_spread(
-        aligned_model_for(set, quadrature_order, histogram_bins, map),
+        model::with_fresnel(
+            aligned_model_for(set, quadrature_order, histogram_bins, map),
+            set.shape_value(Shape::FresnelIor),
+        ),
         set.shape_value(Shape::AzimuthSpread),
         azimuth_nodes,
         set.shape_value(Shape::Azimuth).to_radians(),

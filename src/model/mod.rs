@@ -8,6 +8,7 @@ pub mod azimuth_spread;
 pub mod cross_section;
 pub mod elementary;
 pub mod frame;
+pub mod fresnel;
 pub mod hast_diffuse;
 pub mod lambert;
 pub mod lanes;
@@ -83,6 +84,7 @@ impl ModelId {
                 "exponent",
                 "fibre_azimuth_deg",
                 "azimuth_spread_deg",
+                "fresnel_ior",
             ],
             HastDiffuse => vec!["kd", "fibre_azimuth_deg", "azimuth_spread_deg"],
             Ward => vec!["rho_d", "rho_s", "alpha_x", "alpha_y", "fibre_azimuth_deg"],
@@ -94,6 +96,7 @@ impl ModelId {
                 "spacing",
                 "fibre_azimuth_deg",
                 "azimuth_spread_deg",
+                "fresnel_ior",
             ],
             VaryingTopology | Reference => vec![
                 "kd",
@@ -105,6 +108,7 @@ impl ModelId {
                 "map_scale",
                 "fibre_azimuth_deg",
                 "azimuth_spread_deg",
+                "fresnel_ior",
             ],
         }
     }
@@ -287,11 +291,20 @@ pub fn brdf_at_degrees(
 /// when it is not 0).
 pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
     Ok(with_spread(
-        build_aligned(id, p)?,
+        with_fresnel(build_aligned(id, p)?, p.fresnel_ior),
         p.azimuth_spread_deg,
         p.azimuth_nodes,
         p.fibre_azimuth,
     ))
+}
+
+/// `m` with a Fresnel factor on its specular lobe (rungs with a lobe; `ior` 0: `m` itself).
+pub fn with_fresnel(m: Box<dyn ShadingModel>, ior: f64) -> Box<dyn ShadingModel> {
+    if ior > 0.0 && m.id().parameter_names().contains(&"fresnel_ior") {
+        Box::new(fresnel::FresnelLobe::new(m, ior))
+    } else {
+        m
+    }
 }
 
 /// `m` averaged over a fibre-direction spread of `spread_deg` (fibre rungs only; 0: `m` itself).

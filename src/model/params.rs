@@ -55,6 +55,9 @@ pub struct RawParams {
     /// Spread of the fibre azimuths around psi, degrees (0 aligned, 180 isotropic).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub azimuth_spread_deg: Option<f64>,
+    /// Index of refraction of the Fresnel factor on the specular lobe (0: off).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fresnel_ior: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub substrate_albedo: Option<Albedo>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -177,6 +180,8 @@ pub struct ModelParams {
     pub histogram_bins: usize,
     /// Spread of the fibre azimuths, degrees (0: aligned).
     pub azimuth_spread_deg: f64,
+    /// Fresnel factor's index of refraction (0: off).
+    pub fresnel_ior: f64,
     pub azimuth_nodes: usize,
     pub preview: Preview,
 }
@@ -213,6 +218,7 @@ fn uses(id: ModelId, name: &str) -> bool {
         "histogram_bins" => id == VaryingTopology,
         "fibre_azimuth_deg" => id != Lambert,
         "azimuth_spread_deg" | "azimuth_nodes" => !matches!(id, Lambert | Ward),
+        "fresnel_ior" => matches!(id, MaxNormal | PoulinFournier | VaryingTopology | Reference),
         "alpha_x" | "alpha_y" | "rho_d" | "rho_s" => id == Ward,
         "two_sided" | "ambient" => id == Lambert,
         _ => true,
@@ -224,7 +230,8 @@ impl ModelParams {
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
         let mut warnings = Vec::new();
-        let given: [(&str, bool); 20] = [
+        let given: [(&str, bool); 21] = [
+            ("fresnel_ior", raw.fresnel_ior.is_some()),
             ("azimuth_spread_deg", raw.azimuth_spread_deg.is_some()),
             ("azimuth_nodes", raw.azimuth_nodes.is_some()),
             ("kd", raw.kd.is_some()),
@@ -267,6 +274,7 @@ impl ModelParams {
             0.0,
             super::azimuth_spread::ISOTROPIC_DEG,
         )?;
+        let fresnel_ior = check_range("fresnel_ior", raw.fresnel_ior.unwrap_or(0.0), 0.0, 10.0)?;
         let azimuth_nodes = raw
             .azimuth_nodes
             .unwrap_or(super::azimuth_spread::DEFAULT_AZIMUTH_NODES);
@@ -371,6 +379,7 @@ impl ModelParams {
                 histogram_bins,
                 azimuth_spread_deg,
                 azimuth_nodes,
+                fresnel_ior,
                 preview: Preview {
                     two_sided: raw.two_sided.unwrap_or(false),
                     ambient,
