@@ -6,7 +6,7 @@
 //! error).
 
 use crate::fit::config::FitConfig;
-use crate::fit::selection::heldout;
+use crate::fit::selection::{heldout, model_values_on};
 use crate::load::rgl::MeasuredOptions;
 use crate::load::samples::Samples;
 use crate::load::{load_data, LoadOptions};
@@ -31,7 +31,31 @@ pub struct FeltRow {
     pub ns_per_eval: f64,
     pub fit_seconds: f64,
     pub azimuth_spread_deg: Option<f64>,
+    /// Held-out sum of data over sum of model where both theta_i and theta_o exceed 55 deg with
+    /// light and view on opposite sides (the grazing forward peak); 1 = matched.
+    pub grazing_forward_ratio: f64,
+    /// The same where both thetas are below 30 deg.
+    pub near_normal_ratio: f64,
     pub chosen: bool,
+}
+
+/// (grazing forward, near normal) ratios of data to model sums, all channels.
+fn region_ratios(test: &Samples, model: &[[f64; 3]]) -> (f64, f64) {
+    let (mut gd, mut gm, mut nd, mut nm) = (0.0, 0.0, 0.0, 0.0);
+    for (s, m) in test.samples.iter().zip(model) {
+        let (ti, to) = (s.l.z.acos().to_degrees(), s.v.z.acos().to_degrees());
+        let opposite = s.l.x * s.v.x + s.l.y * s.v.y < 0.0;
+        let (y, f): (f64, f64) = (s.value.iter().sum(), m.iter().sum());
+        if ti > 55.0 && to > 55.0 && opposite {
+            gd += y;
+            gm += f;
+        }
+        if ti < 30.0 && to < 30.0 {
+            nd += y;
+            nm += f;
+        }
+    }
+    (gd / gm, nd / nm)
 }
 
 fn split(s: &Samples, seed: u64) -> (Samples, Samples) {
@@ -84,6 +108,8 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<Felt
                 let fit_seconds = t.elapsed().as_secs_f64();
                 let (_, train_rel, train_log, _) = heldout(&o, &cfg, &train)?;
                 let (_, rel, log, ns) = heldout(&o, &cfg, &test)?;
+                let (grazing_forward_ratio, near_normal_ratio) =
+                    region_ratios(&test, &model_values_on(&o, &cfg, &test)?.1);
                 rows.push(FeltRow {
                     rung: rung.into(),
                     fibres: if spread { "spread" } else { "aligned" }.into(),
@@ -100,6 +126,8 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<Felt
                         .iter()
                         .find(|r| r.name == "azimuth_spread_deg" && !r.fixed)
                         .map(|r| r.value[0]),
+                    grazing_forward_ratio,
+                    near_normal_ratio,
                     chosen: false,
                 });
                 bar.inc(1);

@@ -50,13 +50,17 @@ pub fn write(dir: &Path, rows: &[FeltRow], command: &str, seconds: f64) -> Resul
          fibre rungs aligned and with the fibre-direction spread free, under the linear and the log \
          metric. Log error: RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median. \
          Chosen: the rung `--model auto` picks under the log metric (cheapest within 5 % of the best \
-         held-out log error). The ratio column is the held-out log error over Ward's (same metric).\n\n"
+         held-out log error). The ratio column is the held-out log error over Ward's (same metric). \
+         Grazing fwd and near normal: held-out sum of data over sum of model where theta_i and theta_o \
+         both exceed 55 deg with light and view on opposite sides (the grazing forward peak, 2/3 of \
+         the sum of f^2), and where both are below 30 deg; 1 = matched, above 1 = the model \
+         underpredicts.\n\n"
     );
     md += "![held-out log error vs cost](felt.png)\n\n";
-    md += "| metric | rung | fibres | free | spread [deg] | train rel. RMSE | train log err. | held-out rel. RMSE | held-out log err. | / Ward | ns / eval | fit [s] | chosen |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    md += "| metric | rung | fibres | free | spread [deg] | train rel. RMSE | train log err. | held-out rel. RMSE | held-out log err. | / Ward | grazing fwd | near normal | ns / eval | fit [s] | chosen |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for r in rows {
         md += &format!(
-            "| {} | {} | {} | {} | {} | {:.2} % | {:.4} | {:.2} % | {:.4} | {:.2} | {:.0} | {:.1} | {} |\n",
+            "| {} | {} | {} | {} | {} | {:.2} % | {:.4} | {:.2} % | {:.4} | {:.2} | {:.2} | {:.2} | {:.0} | {:.1} | {} |\n",
             r.metric,
             r.rung,
             r.fibres,
@@ -67,6 +71,8 @@ pub fn write(dir: &Path, rows: &[FeltRow], command: &str, seconds: f64) -> Resul
             100.0 * r.heldout_relative_rmse,
             r.heldout_log_error,
             r.heldout_log_error / ward(&r.metric),
+            r.grazing_forward_ratio,
+            r.near_normal_ratio,
             r.ns_per_eval,
             r.fit_seconds,
             if r.chosen { "**yes**" } else { "" }

@@ -51,11 +51,14 @@ fn subset(s: &Samples, idx: &[usize]) -> Samples {
     }
 }
 
-/// Held-out RMSE, relative RMSE and log error of a fitted outcome, and the single-thread cost
-/// per sample.
-pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64, f64)> {
+/// The fitted model's values (per sample and channel) on `samples`, and the problem it used.
+pub fn model_values_on<'a>(
+    o: &FitOutcome,
+    cfg: &FitConfig,
+    samples: &'a Samples,
+) -> Result<(FitProblem<'a>, Vec<[f64; 3]>)> {
     let p = FitProblem::new(
-        test.samples.iter().collect(),
+        samples.samples.iter().collect(),
         o.set.clone(),
         cfg.metric,
         cfg.knobs.quadrature_order,
@@ -66,6 +69,13 @@ pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, 
     .with_azimuth_nodes(cfg.knobs.azimuth_nodes);
     let cols = p.columns(&o.set)?;
     let values = p.model_values(&cols, &o.set);
+    Ok((p, values))
+}
+
+/// Held-out RMSE, relative RMSE and log error of a fitted outcome, and the single-thread cost
+/// per sample.
+pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64, f64)> {
+    let (p, values) = model_values_on(o, cfg, test)?;
     let ch = o.channels;
     let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
     let floors: Vec<f64> = (0..ch)
