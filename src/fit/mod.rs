@@ -126,7 +126,7 @@ pub fn fit_with_hints(
         let mut idx: Vec<usize> = (0..all.len()).collect();
         idx.shuffle(&mut rng);
         idx.truncate(opt.global_subsample.max(full.dim() * 4).min(all.len()));
-        let sub = make(idx.iter().map(|&i| all[i]).collect());
+        let sub = make(idx.iter().map(|&i| all[i]).collect()).with_log_floor_of(&full);
         let mut forced = vec![sub.theta_of(&template)];
         for h in hints {
             let mut set = template.clone();

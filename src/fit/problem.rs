@@ -81,8 +81,12 @@ impl<'a> FitProblem<'a> {
             .collect();
         let free_shapes = template.free_shapes();
         let free_albedos = template.free_albedos();
-        let values: Vec<[f64; 3]> = samples.iter().map(|s| s.value).collect();
-        let log_floor = [0, 1, 2].map(|c| log_floor(&values, c));
+        let log_floor = if metric == Metric::Log {
+            let values: Vec<[f64; 3]> = samples.iter().map(|s| s.value).collect();
+            [0, 1, 2].map(|c| log_floor(&values, c))
+        } else {
+            [0.0; 3] // unused by the other metrics
+        };
         Self {
             azimuth_nodes: crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES,
             log_floor,
@@ -103,6 +107,13 @@ impl<'a> FitProblem<'a> {
     /// This problem with `n` nodes for the fibre-direction spread quadrature.
     pub fn with_azimuth_nodes(mut self, n: usize) -> Self {
         self.azimuth_nodes = n;
+        self
+    }
+
+    /// This problem with the `log` metric's floors of another sample set (the full data, so a
+    /// subsample's cost is the same function).
+    pub fn with_log_floor_of(mut self, other: &FitProblem) -> Self {
+        self.log_floor = other.log_floor;
         self
     }
 
