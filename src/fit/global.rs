@@ -7,8 +7,12 @@
 //!    subsample of `global_subsample` samples;
 //! 2. the `starts` best candidates that lie apart from each other (distance >= 0.1 of the box,
 //!    periodic in the azimuth) are polished by a few Levenberg–Marquardt iterations;
-//! 3. the polished points are clustered into basins (distance < 0.02 of the box); the basins
-//!    whose cost is competitive with the best are polished to convergence on the subsample.
+//! 3. the geometry scan: a second design over the fibre geometry alone (spacing, height, map
+//!    scale; a third of it on the touching-fibre face d = min) with the other coordinates at the
+//!    best basin so far, its best distinct points polished likewise;
+//! 4. all polished points are clustered into basins (distance < 0.02 of the box); the basins
+//!    whose cost is competitive with the best (at most [`MAX_BASINS`]) are polished further on the
+//!    subsample.
 //!
 //! What comes out is the list of distinct competitive basins, best first; the final stage
 //! polishes each on all samples.
