@@ -198,58 +198,22 @@ fn the_spread_is_recovered_from_noisy_data() {
 fn on_real_felt_a_fibre_rung_with_spread_beats_ward() {
     // a fast version of the felt comparison: 1200 directions, poulin-fournier against Ward,
     // both with the log metric, scored on 600 other directions
-    let felt = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/rgl/acrylic_felt_green_rgb.bsdf");
-    let opts = |n: usize, seed: u64| fibrefit::load::LoadOptions {
-        measured: fibrefit::load::rgl::MeasuredOptions {
-            directions: n,
-            seed,
-            max_theta_deg: 78.0,
-        },
-        ..Default::default()
-    };
-    let train = fibrefit::load::load_data(&felt, &opts(1200, 1)).unwrap();
-    let test = fibrefit::load::load_data(&felt, &opts(600, 2)).unwrap();
     let auto: fibrefit::fit::config::FitConfig =
         toml::from_str("model = \"auto\"\nmetric = \"log\"\n[knobs]\nazimuth_nodes = 12\n")
             .unwrap();
-    let log_error = |rung: &str| {
-        let cfg = auto.for_rung(rung.parse().unwrap());
-        let o = fibrefit::fit::fit(&train, &cfg, true).unwrap();
-        let p = fibrefit::fit::problem::FitProblem::new(
-            test.samples.iter().collect(),
-            o.set.clone(),
-            cfg.metric,
-            16,
-            16,
-            None,
-            false,
-        )
-        .with_azimuth_nodes(12);
-        let cols = p.columns(&o.set).unwrap();
-        let m = p.model_values(&cols, &o.set);
-        let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
-        let (mut sl, mut se, mut sy, mut n) = (0.0, 0.0, 0.0, 0.0);
-        for c in 0..3 {
-            let eps = fibrefit::fit::problem::log_floor(&raw, c);
-            for (mv, s) in m.iter().zip(&test.samples) {
-                sl += ((mv[c].max(0.0) + eps).ln() - (s.value[c] + eps).ln()).powi(2);
-                se += (mv[c] - s.value[c]).powi(2);
-                sy += s.value[c].powi(2);
-                n += 1.0;
-            }
-        }
-        ((sl / n).sqrt(), (se / sy).sqrt())
-    };
-    let (ward_log, ward_rel) = log_error("ward");
-    let (pf_log, pf_rel) = log_error("poulin-fournier");
-    eprintln!("felt held-out: ward log {ward_log:.4} rel {ward_rel:.4}; poulin-fournier log {pf_log:.4} rel {pf_rel:.4}");
+    let ward = common::felt_heldout(&auto.for_rung(ModelId::Ward));
+    let pf = common::felt_heldout(&auto.for_rung(ModelId::PoulinFournier));
+    eprintln!("felt held-out: ward {ward:?}; poulin-fournier {pf:?}");
     assert!(
-        pf_log <= 0.85 * ward_log,
-        "log error {pf_log} vs Ward {ward_log}"
+        pf.log_error <= 0.85 * ward.log_error,
+        "log error {} vs Ward {}",
+        pf.log_error,
+        ward.log_error
     );
     assert!(
-        pf_rel <= ward_rel,
-        "relative RMSE {pf_rel} vs Ward {ward_rel}"
+        pf.relative_rmse <= ward.relative_rmse,
+        "relative RMSE {} vs Ward {}",
+        pf.relative_rmse,
+        ward.relative_rmse
     );
 }

@@ -125,12 +125,18 @@ fn fit_report_has_its_pictures() {
         "+/-",
         "residuals.png",
         "residual_map_000.png",
-        "In-plane slice",
+        "## Slices",
+        "slices.png",
+        "## Hemisphere maps",
+        "hemispheres.png",
     ] {
         assert!(md.contains(needle), "report lacks {needle}");
     }
     for k in 0..4 {
         assert!(rep.join(format!("residual_map_{k:03}.png")).exists());
     }
-    assert!(rep.join("residuals.png").exists());
+    for png in ["residuals.png", "slices.png", "hemispheres.png"] {
+        let img = image::open(rep.join(png)).unwrap();
+        assert!(img.width() > 500 && img.height() > 500, "{png}");
+    }
 }

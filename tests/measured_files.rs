@@ -29,6 +29,7 @@ fn the_felt_is_inspected_fitted_and_scored() {
     let cfg = dir.path().join("lambert.toml");
     fs::write(&cfg, "model = \"lambert\"\n").unwrap();
     let out = dir.path().join("felt.json");
+    let rep = dir.path().join("report");
     let o = fibrefit()
         .arg("fit")
         .arg(felt())
@@ -36,10 +37,21 @@ fn the_felt_is_inspected_fitted_and_scored() {
         .arg(&cfg)
         .arg("--out")
         .arg(&out)
+        .arg("--report")
+        .arg(&rep)
         .args(["--quiet", "--directions", "800", "--max-theta", "70"])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // the report draws the file itself along the slices and densely on the hemisphere maps
+    let md = fs::read_to_string(rep.join("report.md")).unwrap();
+    for needle in [
+        "dashed: the measured file on the same directions",
+        "Measured: the file evaluated densely",
+    ] {
+        assert!(md.contains(needle), "report lacks {needle}");
+    }
+    assert!(rep.join("slices.png").exists() && rep.join("hemispheres.png").exists());
     let r: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(r["data"]["kind"], "measured BRDF file");
     assert_eq!(r["data"]["samples"], 800);

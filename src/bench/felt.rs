@@ -1,9 +1,10 @@
-//! `fibrefit bench --felt FILE`: every rung, with and without the fibre-direction spread, under
-//! the linear and the log metric, fitted to a measured felt (the RGL database's acrylic felt in
+//! `fibrefit bench --felt FILE`: every rung, alone and with each optional component (the
+//! fibre-direction spread, the Fresnel factor on the lobe, the fuzz layer), under the linear and
+//! the log metric, fitted to a measured felt (the RGL database's acrylic felt in
 //! `../shared/data/rgl`) on a seeded 80 % of 3000 direction pairs and measured on the other 20 %:
 //! relative RMSE and log error (train and held-out), cost per evaluation, fit time, and which
-//! rung `--model auto` would choose (log metric: the cheapest within 5 % of the best held-out log
-//! error).
+//! rung `--model auto` would choose (log metric, without the opt-in components: the cheapest
+//! within 5 % of the best held-out log error).
 
 use crate::fit::config::FitConfig;
 use crate::fit::selection::{heldout, model_values_on};
@@ -20,8 +21,9 @@ use std::time::Instant;
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct FeltRow {
     pub rung: String,
-    /// "aligned" or "spread".
-    pub fibres: String,
+    /// The optional components fitted with the rung: "-" (none), "spread", "spread + fresnel",
+    /// "spread + fuzz" or "fuzz".
+    pub components: String,
     pub metric: String,
     pub free_parameters: usize,
     pub train_relative_rmse: f64,
@@ -31,12 +33,42 @@ pub struct FeltRow {
     pub ns_per_eval: f64,
     pub fit_seconds: f64,
     pub azimuth_spread_deg: Option<f64>,
+    /// Fitted fuzz layer depth and asymmetry, when it has one.
+    pub fuzz_depth: Option<f64>,
+    pub fuzz_asymmetry: Option<f64>,
     /// Held-out sum of data over sum of model where both theta_i and theta_o exceed 55 deg with
     /// light and view on opposite sides (the grazing forward peak); 1 = matched.
     pub grazing_forward_ratio: f64,
     /// The same where both thetas are below 30 deg.
     pub near_normal_ratio: f64,
     pub chosen: bool,
+}
+
+/// The component variants measured with a rung, plain first.
+pub fn variants(rung: &str) -> Vec<&'static str> {
+    match rung {
+        "lambert" | "ward" => vec!["-", "fuzz"],
+        "hast-diffuse" => vec!["-", "spread", "spread + fuzz"],
+        _ => vec!["-", "spread", "spread + fresnel", "spread + fuzz"],
+    }
+}
+
+/// `cfg` (an auto config narrowed to one rung) with the components of `variant`.
+fn with_variant(mut cfg: FitConfig, variant: &str) -> FitConfig {
+    if !variant.contains("spread") {
+        cfg.parameters.remove("azimuth_spread_deg");
+    }
+    let free = || crate::fit::config::ParamEntry {
+        vary: Some(true),
+        ..Default::default()
+    };
+    if variant.contains("fresnel") {
+        cfg.parameters.insert("fresnel_ior".into(), free());
+    }
+    if variant.contains("fuzz") {
+        cfg.parameters.insert("fuzz_depth".into(), free());
+    }
+    cfg
 }
 
 /// (grazing forward, near normal) ratios of data to model sums, all channels.
@@ -69,7 +101,14 @@ fn split(s: &Samples, seed: u64) -> (Samples, Samples) {
     (pick(&idx[n_test..]), pick(&idx[..n_test]))
 }
 
-pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<FeltRow>> {
+/// The comparison's rows with each row's fit (outcome and config), and the held-out samples.
+pub struct FeltRun {
+    pub rows: Vec<FeltRow>,
+    pub fits: Vec<(crate::fit::FitOutcome, FitConfig)>,
+    pub test: Samples,
+}
+
+pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun> {
     let data = load_data(
         file,
         &LoadOptions {
@@ -83,26 +122,16 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<Felt
     )?;
     let (train, test) = split(&data, 0x5e1ec7);
     let mut rows = Vec::new();
+    let mut fits = Vec::new();
     for metric in ["linear", "log"] {
         let auto: FitConfig =
             toml::from_str(&format!("model = \"auto\"\nmetric = \"{metric}\"\n"))?;
         // the rungs `--model auto` tries by default, cheapest first
         for rung in auto.selection.rungs.iter().map(String::as_str) {
             let id = rung.parse().map_err(|e: String| anyhow::anyhow!(e))?;
-            let fibre = !matches!(rung, "lambert" | "ward");
-            for spread in if fibre {
-                vec![false, true]
-            } else {
-                vec![false]
-            } {
-                bar.set_message(format!(
-                    "felt: {rung} {metric}{}",
-                    if spread { " spread" } else { "" }
-                ));
-                let mut cfg = auto.for_rung(id);
-                if !spread {
-                    cfg.parameters.remove("azimuth_spread_deg");
-                }
+            for variant in variants(rung) {
+                bar.set_message(format!("felt: {rung} {metric} {variant}"));
+                let cfg = with_variant(auto.for_rung(id), variant);
                 let t = Instant::now();
                 let o = crate::fit::fit(&train, &cfg, true)?;
                 let fit_seconds = t.elapsed().as_secs_f64();
@@ -110,9 +139,15 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<Felt
                 let (_, rel, log, ns) = heldout(&o, &cfg, &test)?;
                 let (grazing_forward_ratio, near_normal_ratio) =
                     region_ratios(&test, &model_values_on(&o, &cfg, &test)?.1);
+                let fitted = |name: &str| {
+                    o.records
+                        .iter()
+                        .find(|r| r.name == name && !r.fixed)
+                        .map(|r| r.value[0])
+                };
                 rows.push(FeltRow {
                     rung: rung.into(),
-                    fibres: if spread { "spread" } else { "aligned" }.into(),
+                    components: variant.into(),
                     metric: metric.into(),
                     free_parameters: o.statistics.free_parameters,
                     train_relative_rmse: train_rel,
@@ -121,35 +156,43 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<Vec<Felt
                     heldout_log_error: log,
                     ns_per_eval: ns,
                     fit_seconds,
-                    azimuth_spread_deg: o
-                        .records
-                        .iter()
-                        .find(|r| r.name == "azimuth_spread_deg" && !r.fixed)
-                        .map(|r| r.value[0]),
+                    azimuth_spread_deg: fitted("azimuth_spread_deg"),
+                    fuzz_depth: fitted("fuzz_depth"),
+                    fuzz_asymmetry: fitted("fuzz_asymmetry"),
                     grazing_forward_ratio,
                     near_normal_ratio,
                     chosen: false,
                 });
+                fits.push((o, cfg));
                 bar.inc(1);
             }
         }
     }
-    // the auto rule under the log metric, among the log rows (cheapest first = table order)
+    // the auto rule under the log metric, among the log rows auto fits by default (the rungs
+    // with their spread; cheapest first = table order)
+    let default =
+        |r: &FeltRow| r.metric == "log" && matches!(r.components.as_str(), "-" | "spread");
     let best = rows
         .iter()
-        .filter(|r| r.metric == "log")
+        .filter(|r| default(r))
         .map(|r| r.heldout_log_error)
         .fold(f64::INFINITY, f64::min);
     if let Some(r) = rows
         .iter_mut()
-        .find(|r| r.metric == "log" && r.heldout_log_error <= 1.05 * best)
+        .find(|r| default(r) && r.heldout_log_error <= 1.05 * best)
     {
         r.chosen = true;
     }
-    Ok(rows)
+    Ok(FeltRun { rows, fits, test })
 }
 
 /// Fits the report runs (for the progress bar).
 pub fn fit_count() -> u64 {
-    2 * (2 + 4 * 2)
+    let auto: FitConfig = toml::from_str("model = \"auto\"\n").expect("a valid config");
+    2 * auto
+        .selection
+        .rungs
+        .iter()
+        .map(|r| variants(r).len() as u64)
+        .sum::<u64>()
 }

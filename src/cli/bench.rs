@@ -95,14 +95,21 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     if let Some(file) = &args.felt {
         let t = Instant::now();
         let bar = crate::progress::bar(crate::bench::felt::fit_count(), "felt", args.quiet);
-        let rows = crate::bench::felt::run(file, args.directions, &bar)?;
+        let run = crate::bench::felt::run(file, args.directions, &bar)?;
         bar.finish_and_clear();
         let command = format!(
             "fibrefit bench --felt {} --directions {}",
             file.display(),
             args.directions
         );
-        crate::export::felt_report::write(&args.out, &rows, &command, t.elapsed().as_secs_f64())?;
+        let measured = crate::load::measured_brdf(file)?;
+        crate::export::felt_report::write(
+            &args.out,
+            &run,
+            measured.as_deref(),
+            &command,
+            t.elapsed().as_secs_f64(),
+        )?;
         if !args.quiet {
             eprintln!("wrote {}", args.out.join("felt.md").display());
         }

@@ -24,6 +24,14 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
   topology_map    grayscale PNG (8/16 bit) or EXR map, relative to the parameter file
   fibre_azimuth_deg  fibre direction psi in [-90, 90] degrees       (default 0: along x)
   alpha_x, alpha_y   Ward roughness in (0.001, 1] (x along the fibres)
+  azimuth_spread_deg spread of the fibre directions around psi, [0, 180] degrees
+                     (default 0: parallel; 180: isotropic, felt); fibre rungs
+  azimuth_nodes      nodes of the spread's quadrature N_psi            (default 16)
+  fresnel_ior        Schlick Fresnel factor on the lobe, index in [0, 10] (default 0: off)
+  fuzz, fuzz_depth, fuzz_asymmetry
+                     fuzz layer over any rung: weight in [0, 50] (grey or RGB), optical
+                     depth in [0.001, 10] (default 0: no layer), Henyey-Greenstein g in
+                     [-0.9, 0.95] (> 0: forward scattering); README, Optional components
   quadrature_order   specular Gauss-Legendre order N                 (default 16)
   histogram_bins     height histogram bins K                         (default 16)
   two_sided, ambient lambert preview shading of seed 003 (intensity column only)

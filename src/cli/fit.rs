@@ -42,9 +42,14 @@ pub struct FitArgs {
     #[arg(long, value_name = "ID|auto")]
     pub model: Option<String>,
     /// Residual metric: linear, log or cosine [default: the config's; without a config, log for
-    /// measured-BRDF files (.bsdf) and linear otherwise]
+    /// measured-BRDF files (.bsdf, .binary) and linear otherwise]
     #[arg(long, value_name = "METRIC")]
     pub metric: Option<String>,
+    /// Add the fuzz layer (stray fibres scattering light forward at grazing angles; its weight
+    /// `fuzz`, depth `fuzz_depth` and asymmetry `fuzz_asymmetry` free) to the rung, or to every
+    /// rung `auto` tries. Real felt and brushed cloth need it (reports/felt.md)
+    #[arg(long)]
+    pub fuzz: bool,
     /// Result JSON for renderers (and `fibrefit eval --params`)
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -118,10 +123,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
         (Some(path), _) => FitConfig::load(path)?,
         (None, Some(m)) => {
             let mut c: FitConfig = toml::from_str(&format!("model = {m:?}\n"))?;
-            let measured = args
-                .data
-                .extension()
-                .is_some_and(|e| e.eq_ignore_ascii_case("bsdf"));
+            let measured = args.data.extension().is_some_and(|e| {
+                e.eq_ignore_ascii_case("bsdf") || e.eq_ignore_ascii_case("binary")
+            });
             if measured {
                 c.metric = crate::fit::config::Metric::Log;
             }
@@ -137,6 +141,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
     if let Some(m) = &args.metric {
         cfg.metric = serde_json::from_value(serde_json::Value::String(m.clone()))
             .map_err(|_| anyhow::anyhow!("--metric {m}: expected linear, log or cosine"))?;
+    }
+    if args.fuzz {
+        cfg.parameters.entry("fuzz_depth".into()).or_default();
     }
     cfg.validate()
         .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
@@ -278,12 +285,15 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let mut result = result;
     if let Some(dir) = &args.report {
         // the report is optional: its failure is a warning in the result, never the lost fit
+        let fitted = fit::fitted_brdf(&outcome, &cfg);
+        let measured = crate::load::measured_brdf(&args.data).unwrap_or(None);
         if let Err(e) = report::write_dir(
             dir,
             &outcome,
             &samples,
             &report_text,
-            outcome.set.shape_value(Shape::Azimuth),
+            fitted.as_ref(),
+            measured.as_deref(),
         ) {
             let w = format!("{}: the report could not be written: {e:#}", dir.display());
             eprintln!("warning: {w}");

@@ -2,6 +2,7 @@
 //! half-written file or clobbers an existing one.
 
 pub mod atomic;
+pub mod brdf_plots;
 pub mod eval_table;
 pub mod felt_report;
 pub mod images;

@@ -10,7 +10,7 @@ use std::sync::Once;
 static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
 static REGISTER: Once = Once::new();
 
-fn font() {
+pub(crate) fn font() {
     REGISTER.call_once(|| {
         // the embedded font is valid; failure would only mean no text
         let _ = plotters::style::register_font("sans-serif", FontStyle::Normal, FONT);
@@ -33,7 +33,7 @@ pub struct Series {
 const W: u32 = 900;
 const H: u32 = 600;
 
-fn palette(i: usize) -> RGBColor {
+pub(crate) fn palette(i: usize) -> RGBColor {
     const C: [RGBColor; 10] = [
         RGBColor(31, 119, 180),
         RGBColor(255, 127, 14),

@@ -124,86 +124,98 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
     t
 }
 
-/// Write `dir/report.md` with the fit report and its pictures: measured vs fitted along the
-/// in-plane (across the fibres) and cross-plane (along the fibres) slices, a histogram of the
-/// relative residuals, and for image captures a residual map per image.
+/// Write `dir/report.md` with the fit report and its pictures: the fitted model as curves along
+/// slices at fixed incidence (along and across the fibres) with the measured samples near each
+/// slice, hemisphere maps of measured / fitted / residual for a few incidences (dense when the
+/// data is a measured file, `measured`), a histogram of the relative residuals, and for image
+/// captures a residual map per image.
 pub fn write_dir(
     dir: &std::path::Path,
     outcome: &FitOutcome,
     samples: &crate::load::samples::Samples,
     report_text: &str,
-    psi_deg: f64,
+    fitted: super::brdf_plots::Brdf,
+    measured: Option<super::brdf_plots::Brdf>,
 ) -> anyhow::Result<()> {
-    use super::plots::{self, Series};
+    use super::brdf_plots::{self, Curve};
+    use super::plots;
     use crate::load::samples::Origin;
-    use crate::model::frame::FibreFrame;
     std::fs::create_dir_all(dir)?;
     let mut md = format!("# fibrefit fit report\n\n```text\n{report_text}```\n\n");
     let ch = samples.channels;
-    // slices: samples whose light and view lie (within 0.1 in direction cosine) in a plane
-    for (name, file, across) in [
-        (
-            "In-plane slice (light and view across the fibres, in the B-N plane)",
-            "slice_across.png",
-            true,
-        ),
-        (
-            "Cross-plane slice (light and view along the fibres, in the T-N plane)",
-            "slice_along.png",
-            false,
-        ),
-    ] {
-        let (mut measured, mut fitted) = (Vec::new(), Vec::new());
-        for (s, m) in samples.samples.iter().zip(&outcome.fitted) {
-            let frame = FibreFrame::from_azimuth(s.fibre_azimuth.unwrap_or(psi_deg.to_radians()));
-            let (l, v) = (frame.to_local(&s.l), frame.to_local(&s.v));
-            let off = if across {
-                l.t.abs().max(v.t.abs())
-            } else {
-                l.b.abs().max(v.b.abs())
-            };
-            if off < 0.1 {
-                let x = if across {
-                    v.b.atan2(v.n)
-                } else {
-                    v.t.atan2(v.n)
-                }
-                .to_degrees();
-                let y_data: f64 = s.value[..ch].iter().sum::<f64>() / ch as f64;
-                let y_fit: f64 = m[..ch].iter().sum::<f64>() / ch as f64;
-                measured.push((x, y_data));
-                fitted.push((x, y_fit));
-            }
-        }
-        if measured.len() >= 3 {
-            plots::xy(
-                &dir.join(file),
-                name,
-                "signed view angle in the plane [deg]",
-                "BRDF [1/sr] (channel mean)",
-                &[
-                    Series {
-                        name: "measured".into(),
-                        points: measured.clone(),
-                        line: false,
-                    },
-                    Series {
-                        name: "fitted".into(),
-                        points: fitted,
-                        line: false,
-                    },
-                ],
-                false,
-                false,
-            )?;
-            md += &format!(
-                "## {name}\n\n{} samples.\n\n![{name}]({file})\n\n",
-                measured.len()
-            );
-        } else {
-            md += &format!("## {name}\n\nFewer than 3 samples lie in this plane; no plot.\n\n");
-        }
+    let psi_deg = outcome
+        .set
+        .shape_value(crate::fit::parameters::Shape::Azimuth);
+    // measured data spanning decades reads best on a log axis
+    let positive: Vec<f64> = samples
+        .samples
+        .iter()
+        .map(|s| s.value[..ch].iter().sum::<f64>() / ch as f64)
+        .filter(|v| *v > 0.0)
+        .collect();
+    let lo = positive.iter().copied().fold(f64::INFINITY, f64::min);
+    let hi = positive.iter().copied().fold(0.0f64, f64::max);
+    let log_y = positive.len() == samples.samples.len() && hi > 30.0 * lo;
+    let mut curves = Vec::new();
+    if let Some(m) = measured {
+        curves.push(Curve {
+            name: "measured file".into(),
+            brdf: m,
+            dashed: true,
+        });
     }
+    curves.push(Curve {
+        name: format!("fitted {}", outcome.set.rung),
+        brdf: fitted,
+        dashed: false,
+    });
+    let points = brdf_plots::slices(
+        &dir.join("slices.png"),
+        "Slices at fixed incidence: fitted curves and measured samples",
+        psi_deg,
+        ch,
+        &curves,
+        &samples.samples,
+        log_y,
+    )?;
+    md += &format!(
+        "## Slices\n\nThe fitted BRDF (1/sr, channel mean{}) along the plane of the fibres (T-N, fibres at \
+         {psi_deg:.1} deg) and across it (B-N) at incidence {} deg: the light on the negative side, the \
+         view at a signed angle (+: the far side){}; dots: the {points} samples near a slice (theta_i \
+         within {:.0} deg, both directions within {:.0} deg of the plane).\n\n![slices](slices.png)\n\n",
+        if log_y { ", log axis" } else { "" },
+        brdf_plots::SLICE_THETAS.map(|t| format!("{t:.0}")).join(", "),
+        if measured.is_some() {
+            "; dashed: the measured file on the same directions"
+        } else {
+            ""
+        },
+        brdf_plots::NEAR_THETA_DEG,
+        brdf_plots::NEAR_PLANE_COSINE.asin().to_degrees(),
+    );
+    let near = brdf_plots::hemispheres(
+        &dir.join("hemispheres.png"),
+        "Hemisphere maps: measured, fitted, residual",
+        psi_deg,
+        ch,
+        fitted,
+        measured,
+        &samples.samples,
+    )?;
+    md += &format!(
+        "## Hemisphere maps\n\nEvery view direction for a light across the fibres at incidence {} deg \
+         (orthographic, seen from above; right = the far side of the light). {}\n\n\
+         ![hemisphere maps](hemispheres.png)\n\n",
+        brdf_plots::MAP_THETAS.map(|t| format!("{t:.0}")).join(", "),
+        if measured.is_some() {
+            "Measured: the file evaluated densely.".to_string()
+        } else {
+            format!(
+                "Measured and residual: the {near} samples whose light lies within {:.0} deg of the map's.",
+                brdf_plots::NEAR_LIGHT_DEG
+            )
+        }
+    );
     let rel: Vec<f64> = samples
         .samples
         .iter()

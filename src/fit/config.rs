@@ -302,11 +302,18 @@ impl FitConfig {
         c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
         if self.model == "auto" {
             for name in allowed {
-                // albedos are solved; the Fresnel factor is an optional component (on only when
-                // listed)
+                // albedos are solved; the Fresnel factor and the fuzz layer are optional
+                // components (on only when listed)
                 let shape = !matches!(
                     name,
-                    "kd" | "ks" | "substrate_albedo" | "rho_d" | "rho_s" | "fresnel_ior"
+                    "kd" | "ks"
+                        | "substrate_albedo"
+                        | "rho_d"
+                        | "rho_s"
+                        | "fresnel_ior"
+                        | "fuzz"
+                        | "fuzz_depth"
+                        | "fuzz_asymmetry"
                 );
                 if shape {
                     c.parameters.entry(name.to_string()).or_insert(ParamEntry {

@@ -183,3 +183,27 @@ fn free_values(set: &ParamSet) -> Vec<f64> {
 pub fn wrap_azimuth(deg: f64) -> f64 {
     (deg + 90.0).rem_euclid(180.0) - 90.0
 }
+
+/// The fitted BRDF (1/sr per channel) of an outcome as a function of the swatch-frame directions,
+/// at the fitted fibre azimuth and with the knobs of `cfg` (for plots and comparisons).
+pub fn fitted_brdf(o: &FitOutcome, cfg: &FitConfig) -> crate::model::BrdfFn {
+    let m = problem::model_for(
+        &o.set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        o.map.clone(),
+    );
+    let albedos = problem::albedos_of(&o.set);
+    let frame =
+        crate::model::FibreFrame::from_azimuth(o.set.shape_value(Shape::Azimuth).to_radians());
+    let channels = o.channels;
+    Box::new(move |l, v| {
+        let b = m.basis(&crate::model::DirectionPair::new(&frame, l, v));
+        let mut out = [0.0; 3];
+        for (c, x) in out.iter_mut().enumerate() {
+            *x = b.brdf(&albedos, c.min(channels - 1));
+        }
+        Some(out)
+    })
+}

@@ -3,6 +3,7 @@
 //! whether it varies. Exponent and Ward roughness are fitted in log space.
 
 use super::config::{FitConfig, ParamEntry};
+use crate::model::fuzz::{ASYMMETRY_RANGE, DEPTH_RANGE};
 use crate::model::params::Albedo;
 use crate::model::topology::max_height;
 use crate::model::ModelId;
@@ -19,6 +20,8 @@ pub enum Shape {
     AlphaY,
     AzimuthSpread,
     FresnelIor,
+    FuzzDepth,
+    FuzzAsymmetry,
 }
 
 impl Shape {
@@ -32,13 +35,18 @@ impl Shape {
             Shape::AlphaX => "alpha_x",
             Shape::AzimuthSpread => "azimuth_spread_deg",
             Shape::FresnelIor => "fresnel_ior",
+            Shape::FuzzDepth => "fuzz_depth",
+            Shape::FuzzAsymmetry => "fuzz_asymmetry",
             Shape::AlphaY => "alpha_y",
         }
     }
 
     /// Fitted as ln(value)?
     pub fn log_space(self) -> bool {
-        matches!(self, Shape::Exponent | Shape::AlphaX | Shape::AlphaY)
+        matches!(
+            self,
+            Shape::Exponent | Shape::AlphaX | Shape::AlphaY | Shape::FuzzDepth
+        )
     }
 
     pub fn to_internal(self, v: f64) -> f64 {
@@ -64,6 +72,8 @@ pub enum Component {
     Diffuse,
     Specular,
     Substrate,
+    /// The fuzz layer's weight.
+    Fuzz,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -132,6 +142,10 @@ fn defaults(name: &str, spacing_max: f64, spacing0: f64) -> Default3 {
         "fibre_azimuth_deg" => d(0.0, -90.0, 90.0, false),
         "azimuth_spread_deg" => d(0.0, 0.0, 180.0, false),
         "fresnel_ior" => d(0.0, 0.0, 10.0, false),
+        // the fuzz layer, when listed: a thin forward-scattering layer of unit strength to start
+        "fuzz" => d(1.0, 0.0, crate::model::fuzz::WEIGHT_MAX, true),
+        "fuzz_depth" => d(0.3, DEPTH_RANGE.0, DEPTH_RANGE.1, true),
+        "fuzz_asymmetry" => d(0.5, ASYMMETRY_RANGE.0, ASYMMETRY_RANGE.1, true),
         "alpha_x" | "alpha_y" => d(0.2, 0.0011, 1.0, true),
         _ => unreachable!("names come from ModelId::parameter_names"),
     }
@@ -147,6 +161,9 @@ fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
         "fibre_azimuth_deg" => (-90.0, 90.0),
         "azimuth_spread_deg" => (0.0, 180.0),
         "fresnel_ior" => (0.0, 10.0),
+        "fuzz" => (0.0, crate::model::fuzz::WEIGHT_MAX),
+        "fuzz_depth" => DEPTH_RANGE,
+        "fuzz_asymmetry" => ASYMMETRY_RANGE,
         "alpha_x" | "alpha_y" => (1e-3, 1.0),
         _ => (f64::NEG_INFINITY, f64::INFINITY),
     }
@@ -224,6 +241,9 @@ impl ParamSet {
         };
         let mut shapes = Vec::new();
         let mut albedos = Vec::new();
+        let fuzz_layer = crate::model::FUZZ_PARAMETERS
+            .iter()
+            .any(|n| cfg.parameters.contains_key(*n));
         for name in rung.parameter_names() {
             let listed = cfg.parameters.contains_key(name);
             let e = entry(name);
@@ -240,8 +260,12 @@ impl ParamSet {
                 "kd" | "rho_d" => Some(Component::Diffuse),
                 "ks" | "rho_s" => Some(Component::Specular),
                 "substrate_albedo" => Some(Component::Substrate),
+                "fuzz" => Some(Component::Fuzz),
                 _ => None,
             };
+            if crate::model::FUZZ_PARAMETERS.contains(&name) && !fuzz_layer {
+                continue; // an optional component, on when any of its parameters is listed
+            }
             match albedo_component {
                 Some(component) => {
                     if component == Component::Substrate && !listed {
@@ -279,6 +303,8 @@ impl ParamSet {
                         "fibre_azimuth_deg" => Shape::Azimuth,
                         "azimuth_spread_deg" => Shape::AzimuthSpread,
                         "fresnel_ior" => Shape::FresnelIor,
+                        "fuzz_depth" => Shape::FuzzDepth,
+                        "fuzz_asymmetry" => Shape::FuzzAsymmetry,
                         "alpha_x" => Shape::AlphaX,
                         "alpha_y" => Shape::AlphaY,
                         _ => unreachable!(),
@@ -320,6 +346,7 @@ impl ParamSet {
             Shape::Height | Shape::MapScale | Shape::Azimuth => 0.0,
             Shape::AlphaX | Shape::AlphaY => 0.2,
             Shape::AzimuthSpread | Shape::FresnelIor => 0.0,
+            Shape::FuzzDepth | Shape::FuzzAsymmetry => 0.0, // no layer
         })
     }
 

@@ -19,8 +19,8 @@ use rayon::prelude::*;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::Arc;
 
-/// Model columns per sample: [diffuse (+ substrate when tied), specular, substrate].
-pub type Columns = [f64; 3];
+/// Model columns per sample: [diffuse (+ substrate when tied), specular, substrate, fuzz].
+pub type Columns = [f64; 4];
 
 pub struct FitProblem<'a> {
     pub samples: Vec<&'a Sample>,
@@ -47,6 +47,7 @@ fn component_index(c: Component) -> usize {
         Component::Diffuse => 0,
         Component::Specular => 1,
         Component::Substrate => 2,
+        Component::Fuzz => 3,
     }
 }
 
@@ -336,9 +337,9 @@ impl<'a> FitProblem<'a> {
                 }
                 bases.into_iter().map(move |b| {
                     if tied {
-                        [b.diffuse + b.substrate, b.specular, 0.0]
+                        [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
                     } else {
-                        [b.diffuse, b.specular, b.substrate]
+                        [b.diffuse, b.specular, b.substrate, b.fuzz]
                     }
                 })
             })
@@ -369,8 +370,8 @@ impl<'a> FitProblem<'a> {
             .collect();
         for c in 0..self.channels() {
             // Gram matrix and right-hand side with fixed albedos moved to the data side
-            let mut g = [[0.0f64; 3]; 3];
-            let mut h = [0.0f64; 3];
+            let mut g = [[0.0f64; 4]; 4];
+            let mut h = [0.0f64; 4];
             for (s, (col, sc)) in self.samples.iter().zip(cols.iter().zip(&self.scale)) {
                 let w2 = sc[c] * sc[c];
                 let mut y = s.value[c];
@@ -653,14 +654,18 @@ pub fn model_for(
     azimuth_nodes: usize,
     map: Option<Arc<TopologyMap>>,
 ) -> Box<dyn ShadingModel> {
-    model::with_spread(
-        model::with_fresnel(
-            aligned_model_for(set, quadrature_order, histogram_bins, map),
-            set.shape_value(Shape::FresnelIor),
+    model::with_fuzz(
+        model::with_spread(
+            model::with_fresnel(
+                aligned_model_for(set, quadrature_order, histogram_bins, map),
+                set.shape_value(Shape::FresnelIor),
+            ),
+            set.shape_value(Shape::AzimuthSpread),
+            azimuth_nodes,
+            set.shape_value(Shape::Azimuth).to_radians(),
         ),
-        set.shape_value(Shape::AzimuthSpread),
-        azimuth_nodes,
-        set.shape_value(Shape::Azimuth).to_radians(),
+        set.shape_value(Shape::FuzzDepth),
+        set.shape_value(Shape::FuzzAsymmetry),
     )
 }
 
@@ -714,6 +719,7 @@ pub fn albedos_of(set: &ParamSet) -> model::Albedos {
             }
             Component::Specular => a.specular = p.value,
             Component::Substrate => a.substrate = p.value,
+            Component::Fuzz => a.fuzz = p.value,
         }
     }
     a
@@ -743,8 +749,8 @@ pub fn describe(set: &ParamSet) -> String {
 /// min over a of a^T G a - 2 a^T h with a_k in bounds, for the `free` indices (at most 3):
 /// every assignment of each variable to {free, lower, upper} is tried and the best feasible kept.
 fn bounded_small_lsq(
-    g: &[[f64; 3]; 3],
-    h: &[f64; 3],
+    g: &[[f64; 4]; 4],
+    h: &[f64; 4],
     free: &[usize],
     bounds: &[(f64, f64)],
 ) -> Vec<f64> {
@@ -764,7 +770,7 @@ fn bounded_small_lsq(
     };
     let mut best: Option<(f64, Vec<f64>)> = None;
     for code in 0..3usize.pow(m as u32) {
-        let mut state = [0usize; 3];
+        let mut state = [0usize; 4];
         let mut x = code;
         for s in state.iter_mut().take(m) {
             *s = x % 3;
@@ -901,14 +907,35 @@ mod tests {
     #[test]
     fn bounded_lsq_matches_unconstrained_inside_and_clips_outside() {
         // G = I, h = (0.3, 0.7): unconstrained a = h
-        let g = [[1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
-        let a = bounded_small_lsq(&g, &[0.3, 0.7, 0.0], &[0, 1], &[(0.0, 1.0), (0.0, 1.0)]);
+        let mut g = [[0.0; 4]; 4];
+        (0..4).for_each(|i| g[i][i] = 1.0);
+        let a = bounded_small_lsq(
+            &g,
+            &[0.3, 0.7, 0.0, 0.0],
+            &[0, 1],
+            &[(0.0, 1.0), (0.0, 1.0)],
+        );
         assert!((a[0] - 0.3).abs() < 1e-15 && (a[1] - 0.7).abs() < 1e-15);
-        let a = bounded_small_lsq(&g, &[-0.3, 1.7, 0.0], &[0, 1], &[(0.0, 1.0), (0.0, 1.0)]);
+        let a = bounded_small_lsq(
+            &g,
+            &[-0.3, 1.7, 0.0, 0.0],
+            &[0, 1],
+            &[(0.0, 1.0), (0.0, 1.0)],
+        );
         assert_eq!(a, vec![0.0, 1.0]);
         // correlated columns: optimum with one at its bound re-solves the other
-        let g = [[2.0, 1.0, 0.0], [1.0, 2.0, 0.0], [0.0, 0.0, 1.0]];
-        let a = bounded_small_lsq(&g, &[2.0, -1.0, 0.0], &[0, 1], &[(0.0, 1.0), (0.0, 1.0)]);
+        let g = [
+            [2.0, 1.0, 0.0, 0.0],
+            [1.0, 2.0, 0.0, 0.0],
+            [0.0, 0.0, 1.0, 0.0],
+            [0.0, 0.0, 0.0, 1.0],
+        ];
+        let a = bounded_small_lsq(
+            &g,
+            &[2.0, -1.0, 0.0, 0.0],
+            &[0, 1],
+            &[(0.0, 1.0), (0.0, 1.0)],
+        );
         // with a1 = 0: 2 a0 = 2 -> a0 = 1
         assert!((a[0] - 1.0).abs() < 1e-12 && a[1].abs() < 1e-12, "{a:?}");
     }

@@ -9,6 +9,7 @@ pub mod rgl;
 pub mod samples;
 pub mod summary;
 
+use crate::model::frame::Vec3;
 use anyhow::{bail, Result};
 use std::path::Path;
 
@@ -66,4 +67,27 @@ pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
             path.display()
         ),
     }
+}
+
+/// The measured file at `path` as a function of the directions, for dense plots, when it is one
+/// (RGL `.bsdf`: lights up to its measured incidence; MERL `.binary`); `None` for other data.
+pub fn measured_brdf(path: &Path) -> Result<Option<crate::model::BrdfFn>> {
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    Ok(match ext.as_deref() {
+        Some("bsdf") => {
+            let b = rgl::RglBsdf::load(path)?;
+            let max_cos = b.max_theta_i.cos();
+            Some(Box::new(move |l: &Vec3, v: &Vec3| {
+                (l.z >= max_cos - 1e-12).then(|| b.brdf(l, v))
+            }))
+        }
+        Some("binary") => {
+            let b = merl::MerlBrdf::load(path)?;
+            Some(Box::new(move |l: &Vec3, v: &Vec3| b.brdf(l, v)))
+        }
+        _ => None,
+    })
 }

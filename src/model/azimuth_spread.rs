@@ -105,7 +105,7 @@ impl AzimuthSpread {
         let r = adaptive_gk15_vec(&[-half, 0.0, half], 1e-8, 1e-300, |d| {
             let b = f(&Self::rotate(pair, d.cos(), d.sin()));
             let w = density(d, self.sigma);
-            [b.diffuse * w, b.specular * w, b.substrate * w]
+            [b.diffuse * w, b.specular * w, b.substrate * w, b.fuzz * w]
         });
         // the law's mass inside the window (1 up to 1e-15 for +-8 sigma or a whole period)
         let mass = adaptive_gk15_vec(&[-half, 0.0, half], 1e-12, 1e-300, |d| {
@@ -115,6 +115,7 @@ impl AzimuthSpread {
             diffuse: r.value[0] / mass.value[0],
             specular: r.value[1] / mass.value[0],
             substrate: r.value[2] / mass.value[0],
+            fuzz: r.value[3] / mass.value[0],
         }
     }
 }

@@ -33,6 +33,7 @@ impl ShadingModel for MaxNormal {
             diffuse: FRAC_1_PI * lp / cos_l,
             specular: lobe.powf(self.exponent) / cos_l,
             substrate: 0.0,
+            fuzz: 0.0,
         }
     }
 }

@@ -9,6 +9,7 @@ pub mod cross_section;
 pub mod elementary;
 pub mod frame;
 pub mod fresnel;
+pub mod fuzz;
 pub mod hast_diffuse;
 pub mod lambert;
 pub mod lanes;
@@ -39,6 +40,10 @@ pub enum ModelId {
     Reference,
     Ward,
 }
+
+/// The fuzz layer's parameters: its weight (linear, per channel), optical depth and phase
+/// asymmetry.
+pub const FUZZ_PARAMETERS: [&str; 3] = ["fuzz", "fuzz_depth", "fuzz_asymmetry"];
 
 impl ModelId {
     /// Cheapest first.
@@ -73,10 +78,11 @@ impl ModelId {
         )
     }
 
-    /// Names of the parameters this rung has (MODEL.md §5), as fit configs list them.
+    /// Names of the parameters this rung has (MODEL.md §5, and the optional components), as fit
+    /// configs list them.
     pub fn parameter_names(self) -> Vec<&'static str> {
         use ModelId::*;
-        match self {
+        let mut names = match self {
             Lambert => vec!["kd"],
             MaxNormal => vec![
                 "kd",
@@ -110,7 +116,10 @@ impl ModelId {
                 "azimuth_spread_deg",
                 "fresnel_ior",
             ],
-        }
+        };
+        // the fuzz layer goes over any rung
+        names.extend(FUZZ_PARAMETERS);
+        names
     }
 
     /// Models whose elevation comes from the topology (height, map).
@@ -144,13 +153,14 @@ impl FromStr for ModelId {
 
 /// BRDF (1/sr) per unit albedo of each linear component.
 ///
-/// `diffuse` multiplies `kd` (Ward: `rho_d`), `specular` multiplies `ks` (Ward: `rho_s`) and
-/// `substrate` multiplies `substrate_albedo`.
+/// `diffuse` multiplies `kd` (Ward: `rho_d`), `specular` multiplies `ks` (Ward: `rho_s`),
+/// `substrate` multiplies `substrate_albedo` and `fuzz` the fuzz layer's weight `fuzz`.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Basis {
     pub diffuse: f64,
     pub specular: f64,
     pub substrate: f64,
+    pub fuzz: f64,
 }
 
 impl Basis {
@@ -159,6 +169,7 @@ impl Basis {
             diffuse: self.diffuse * w,
             specular: self.specular * w,
             substrate: self.substrate * w,
+            fuzz: self.fuzz * w,
         }
     }
 
@@ -167,10 +178,14 @@ impl Basis {
         self.diffuse * albedos.diffuse[channel]
             + self.specular * albedos.specular[channel]
             + self.substrate * albedos.substrate[channel]
+            + self.fuzz * albedos.fuzz[channel]
     }
 
     pub fn is_finite(&self) -> bool {
-        self.diffuse.is_finite() && self.specular.is_finite() && self.substrate.is_finite()
+        self.diffuse.is_finite()
+            && self.specular.is_finite()
+            && self.substrate.is_finite()
+            && self.fuzz.is_finite()
     }
 }
 
@@ -181,16 +196,19 @@ impl std::ops::Add for Basis {
             diffuse: self.diffuse + o.diffuse,
             specular: self.specular + o.specular,
             substrate: self.substrate + o.substrate,
+            fuzz: self.fuzz + o.fuzz,
         }
     }
 }
 
-/// Albedos of the three linear components, per channel (grey models repeat one value).
+/// Albedos of the linear components, per channel (grey models repeat one value).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Albedos {
     pub diffuse: [f64; 3],
     pub specular: [f64; 3],
     pub substrate: [f64; 3],
+    /// Weight of the fuzz layer (0 without one).
+    pub fuzz: [f64; 3],
     /// Whether any albedo was given per channel.
     pub rgb: bool,
 }
@@ -201,6 +219,7 @@ impl Albedos {
             diffuse: [diffuse; 3],
             specular: [specular; 3],
             substrate: [substrate; 3],
+            fuzz: [0.0; 3],
             rgb: false,
         }
     }
@@ -259,6 +278,10 @@ pub trait ShadingModel: Send + Sync {
     }
 }
 
+/// A BRDF per channel (1/sr) as a function of the swatch-frame directions (l, v); `None` where
+/// it is not defined (outside a measured file's range). Fitted models and measured files alike.
+pub type BrdfFn = Box<dyn Fn(&Vec3, &Vec3) -> Option<[f64; 3]> + Sync>;
+
 /// Shaded intensity I = f (N.l) (MODEL.md §1), zero below the horizon.
 pub fn intensity(brdf: f64, pair: &DirectionPair) -> f64 {
     if pair.above_horizon() {
@@ -288,14 +311,28 @@ pub fn brdf_at_degrees(
 }
 
 /// Build the model `id` from validated parameters (averaged over the fibre-direction spread
-/// when it is not 0).
+/// when it is not 0, under a fuzz layer when its depth is not 0).
 pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
-    Ok(with_spread(
-        with_fresnel(build_aligned(id, p)?, p.fresnel_ior),
-        p.azimuth_spread_deg,
-        p.azimuth_nodes,
-        p.fibre_azimuth,
+    Ok(with_fuzz(
+        with_spread(
+            with_fresnel(build_aligned(id, p)?, p.fresnel_ior),
+            p.azimuth_spread_deg,
+            p.azimuth_nodes,
+            p.fibre_azimuth,
+        ),
+        p.fuzz_depth,
+        p.fuzz_asymmetry,
     ))
+}
+
+/// `m` under a fuzz layer of optical depth `depth` and phase asymmetry `g` (any rung; `depth` 0:
+/// `m` itself).
+pub fn with_fuzz(m: Box<dyn ShadingModel>, depth: f64, g: f64) -> Box<dyn ShadingModel> {
+    if depth > 0.0 {
+        Box::new(fuzz::FuzzLayer::new(m, depth, g))
+    } else {
+        m
+    }
 }
 
 /// `m` with a Fresnel factor on its specular lobe (rungs with a lobe; `ior` 0: `m` itself).

@@ -60,6 +60,15 @@ pub struct RawParams {
     pub fresnel_ior: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub substrate_albedo: Option<Albedo>,
+    /// Fuzz layer weight per channel (0 to 50; used when `fuzz_depth` > 0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fuzz: Option<Albedo>,
+    /// Fuzz layer optical depth tau (0: no layer).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fuzz_depth: Option<f64>,
+    /// Fuzz layer Henyey–Greenstein asymmetry g (> 0: forward scattering).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fuzz_asymmetry: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub alpha_x: Option<f64>,
     #[serde(skip_serializing_if = "Option::is_none")]
@@ -182,6 +191,9 @@ pub struct ModelParams {
     pub azimuth_spread_deg: f64,
     /// Fresnel factor's index of refraction (0: off).
     pub fresnel_ior: f64,
+    /// Fuzz layer optical depth (0: no layer) and phase asymmetry; its weight is in `albedos`.
+    pub fuzz_depth: f64,
+    pub fuzz_asymmetry: f64,
     pub azimuth_nodes: usize,
     pub preview: Preview,
 }
@@ -230,7 +242,10 @@ impl ModelParams {
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
         let mut warnings = Vec::new();
-        let given: [(&str, bool); 21] = [
+        let given: [(&str, bool); 24] = [
+            ("fuzz", raw.fuzz.is_some()),
+            ("fuzz_depth", raw.fuzz_depth.is_some()),
+            ("fuzz_asymmetry", raw.fuzz_asymmetry.is_some()),
             ("fresnel_ior", raw.fresnel_ior.is_some()),
             ("azimuth_spread_deg", raw.azimuth_spread_deg.is_some()),
             ("azimuth_nodes", raw.azimuth_nodes.is_some()),
@@ -275,6 +290,25 @@ impl ModelParams {
             super::azimuth_spread::ISOTROPIC_DEG,
         )?;
         let fresnel_ior = check_range("fresnel_ior", raw.fresnel_ior.unwrap_or(0.0), 0.0, 10.0)?;
+        let (fuzz_lo, fuzz_hi) = super::fuzz::DEPTH_RANGE;
+        let fuzz_depth = check_range("fuzz_depth", raw.fuzz_depth.unwrap_or(0.0), 0.0, fuzz_hi)?;
+        if fuzz_depth > 0.0 && fuzz_depth < fuzz_lo {
+            bail!("parameter `fuzz_depth` = {fuzz_depth}: give 0 (no layer) or a depth in [{fuzz_lo}, {fuzz_hi}]");
+        }
+        let (g_lo, g_hi) = super::fuzz::ASYMMETRY_RANGE;
+        let fuzz_asymmetry = check_range(
+            "fuzz_asymmetry",
+            raw.fuzz_asymmetry.unwrap_or(0.0),
+            g_lo,
+            g_hi,
+        )?;
+        let fuzz = raw.fuzz.unwrap_or(Albedo::Grey(0.0));
+        for c in fuzz.channels() {
+            check_range("fuzz", c, 0.0, super::fuzz::WEIGHT_MAX)?;
+        }
+        if fuzz_depth > 0.0 && raw.fuzz.is_none() {
+            bail!("parameter `fuzz_depth` > 0 needs the layer's weight `fuzz`");
+        }
         let azimuth_nodes = raw
             .azimuth_nodes
             .unwrap_or(super::azimuth_spread::DEFAULT_AZIMUTH_NODES);
@@ -331,6 +365,7 @@ impl ModelParams {
                 diffuse: rho_d.channels(),
                 specular: rho_s.channels(),
                 substrate: [0.0; 3],
+                fuzz: [0.0; 3],
                 rgb: rho_d.is_rgb() || rho_s.is_rgb(),
             };
             (a, ax, ay)
@@ -354,12 +389,18 @@ impl ModelParams {
                 diffuse: kd.channels(),
                 specular: ks_c,
                 substrate: sub_c,
+                fuzz: [0.0; 3],
                 rgb: kd.is_rgb()
                     || (uses_spec && ks.is_rgb())
                     || (uses(id, "substrate_albedo") && sub.is_rgb()),
             };
             (a, 1.0, 1.0)
         };
+        let mut albedos = albedos;
+        if fuzz_depth > 0.0 {
+            albedos.fuzz = fuzz.channels();
+            albedos.rgb |= fuzz.is_rgb();
+        }
         let ambient = check_range("ambient", raw.ambient.unwrap_or(0.0), 0.0, 1.0)?;
 
         Ok((
@@ -380,6 +421,8 @@ impl ModelParams {
                 azimuth_spread_deg,
                 azimuth_nodes,
                 fresnel_ior,
+                fuzz_depth,
+                fuzz_asymmetry,
                 preview: Preview {
                     two_sided: raw.two_sided.unwrap_or(false),
                     ambient,

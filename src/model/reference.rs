@@ -80,6 +80,7 @@ impl Reference {
             diffuse: FRAC_1_PI * diffuse / denom,
             specular: (e + 2.0) / (2.0 * PI) * specular / denom,
             substrate: FRAC_1_PI * pattern.substrate_fraction(&sp.l, &sp.v),
+            fuzz: 0.0,
         }
     }
 }
@@ -125,6 +126,7 @@ impl ShadingModel for Reference {
                             diffuse: d,
                             specular: s,
                             substrate: u,
+                            fuzz: 0.0,
                         }
                         .scaled(1.0 / width));
                 }

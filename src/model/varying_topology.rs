@@ -179,6 +179,7 @@ impl GaussSection {
                     diffuse: weight * FRAC_1_PI * visit.diffuse / denom,
                     specular: 0.0,
                     substrate: weight * FRAC_1_PI * visit.substrate,
+                    fuzz: 0.0,
                 };
                 out[visit.pair] = out[visit.pair] + b;
             }

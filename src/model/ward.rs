@@ -39,6 +39,7 @@ impl ShadingModel for Ward {
             diffuse: FRAC_1_PI,
             specular: lobe,
             substrate: 0.0,
+            fuzz: 0.0,
         }
     }
 }

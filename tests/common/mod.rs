@@ -145,3 +145,54 @@ pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
 pub fn rel_diff(a: f64, b: f64) -> f64 {
     (a - b).abs() / a.abs().max(b.abs()).max(1e-300)
 }
+
+/// Held-out errors of a fit on the shared real felt.
+#[derive(Debug)]
+pub struct FeltScore {
+    /// RMS of ln(m + eps) - ln(y + eps), eps the log metric's floor.
+    pub log_error: f64,
+    pub relative_rmse: f64,
+    /// Sum of data over sum of model where theta_i, theta_o > 55 deg on opposite sides.
+    pub grazing_forward_ratio: f64,
+}
+
+/// Fit `cfg` to 1200 seeded directions of the shared felt (`../shared/data/rgl`) and score it
+/// on 600 others: a fast version of `fibrefit bench --felt`.
+pub fn felt_heldout(cfg: &fibrefit::fit::config::FitConfig) -> FeltScore {
+    let felt = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data/rgl/acrylic_felt_green_rgb.bsdf");
+    let opts = |n: usize, seed: u64| fibrefit::load::LoadOptions {
+        measured: fibrefit::load::rgl::MeasuredOptions {
+            directions: n,
+            seed,
+            max_theta_deg: 78.0,
+        },
+        ..Default::default()
+    };
+    let train = fibrefit::load::load_data(&felt, &opts(1200, 1)).unwrap();
+    let test = fibrefit::load::load_data(&felt, &opts(600, 2)).unwrap();
+    let o = fibrefit::fit::fit(&train, cfg, true).unwrap();
+    let (_, m) = fibrefit::fit::selection::model_values_on(&o, cfg, &test).unwrap();
+    let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
+    let (mut sl, mut se, mut sy, mut n) = (0.0, 0.0, 0.0, 0.0);
+    let (mut gd, mut gm) = (0.0, 0.0);
+    for c in 0..3 {
+        let eps = fibrefit::fit::problem::log_floor(&raw, c);
+        for (mv, s) in m.iter().zip(&test.samples) {
+            sl += ((mv[c].max(0.0) + eps).ln() - (s.value[c] + eps).ln()).powi(2);
+            se += (mv[c] - s.value[c]).powi(2);
+            sy += s.value[c].powi(2);
+            n += 1.0;
+            let opposite = s.l.x * s.v.x + s.l.y * s.v.y < 0.0;
+            if s.l.z < 55f64.to_radians().cos() && s.v.z < 55f64.to_radians().cos() && opposite {
+                gd += s.value[c];
+                gm += mv[c];
+            }
+        }
+    }
+    FeltScore {
+        log_error: (sl / n).sqrt(),
+        relative_rmse: (se / sy).sqrt(),
+        grazing_forward_ratio: gd / gm,
+    }
+}
