@@ -205,6 +205,7 @@ fn best_case(
         source: "reference".into(),
         dropped: Dropped::default(),
         skipped_examples: vec![],
+        image_size: None,
     };
     let cfg: FitConfig = toml::from_str(&format!(
         "model = \"{rung}\"\nstarts = 2\n[optimizer]\nglobal_candidates = 16\n"

@@ -200,6 +200,7 @@ pub fn case_samples(case: &Case, map: Option<&Path>, n: usize, seed: u64) -> Res
         source: format!("robustness/{}", case.name).into(),
         dropped: Dropped::default(),
         skipped_examples: vec![],
+        image_size: None,
     })
 }
 

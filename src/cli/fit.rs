@@ -53,6 +53,10 @@ pub struct FitArgs {
     /// Result JSON for renderers (and `fibrefit eval --params`)
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// Image captures: also recover the per-texel maps the config's [maps] section asks for
+    /// (height, fibre_azimuth, kd, ks) and write them as EXRs into DIR
+    #[arg(long, value_name = "DIR")]
+    pub maps: Option<PathBuf>,
     /// Also write a report (report.md with the fit report) into DIR
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
@@ -76,7 +80,7 @@ fn sha256_of(path: &Path) -> Result<String> {
 
 /// `--report DIR` must be a directory that exists and is writable, or one that can be created
 /// (its nearest existing ancestor a writable directory); checked before the fit, created after.
-fn check_report_dir(dir: &Path) -> Result<()> {
+fn check_report_dir(dir: &Path, flag: &str) -> Result<()> {
     let writable = |d: &Path| -> Result<()> {
         tempfile::Builder::new()
             .prefix(".fibrefit-check")
@@ -84,7 +88,7 @@ fn check_report_dir(dir: &Path) -> Result<()> {
             .map(drop)
             .with_context(|| {
                 format!(
-                    "--report {}: directory {} is not writable",
+                    "{flag} {}: directory {} is not writable",
                     dir.display(),
                     d.display()
                 )
@@ -92,7 +96,7 @@ fn check_report_dir(dir: &Path) -> Result<()> {
     };
     if dir.exists() {
         if !dir.is_dir() {
-            anyhow::bail!("--report {}: exists and is not a directory", dir.display());
+            anyhow::bail!("{flag} {}: exists and is not a directory", dir.display());
         }
         return writable(dir);
     }
@@ -106,7 +110,7 @@ fn check_report_dir(dir: &Path) -> Result<()> {
         if p.exists() {
             if !p.is_dir() {
                 anyhow::bail!(
-                    "--report {}: {} is not a directory",
+                    "{flag} {}: {} is not a directory",
                     dir.display(),
                     p.display()
                 );
@@ -153,8 +157,18 @@ pub fn run(args: &FitArgs) -> Result<()> {
     inputs.extend(cfg.knobs.topology_map.iter().cloned());
     refuse_inputs(&args.out, &inputs, "--out")?;
     if let Some(dir) = &args.report {
-        check_report_dir(dir)?;
+        check_report_dir(dir, "--report")?;
         refuse_inputs(&dir.join("report.md"), &inputs, "--report")?;
+    }
+    if let Some(dir) = &args.maps {
+        if cfg.model == "auto" {
+            anyhow::bail!("--maps: name a rung (`model` or --model), not auto");
+        }
+        crate::fit::maps::check_request(&cfg, &cfg.maps)?;
+        check_report_dir(dir, "--maps")?;
+        for f in crate::export::maps_out::file_names(&cfg.maps.requested()) {
+            refuse_inputs(&dir.join(f), &inputs, "--maps")?;
+        }
     }
     let mut out = AtomicFile::create(&args.out)?;
     let opts = args
@@ -176,8 +190,22 @@ pub fn run(args: &FitArgs) -> Result<()> {
         .as_ref()
         .map(|s| s.hints.clone())
         .unwrap_or_default();
-    let outcome = fit::fit_with_hints(&samples, &cfg, args.quiet || args.json, &hints)
-        .with_context(|| format!("fitting {} to {}", id, args.data.display()))?;
+    let (outcome, recovered) = match &args.maps {
+        Some(_) => {
+            let mo = fit::maps::recover(&samples, &cfg, &cfg.maps, args.quiet || args.json)
+                .with_context(|| {
+                    format!("recovering maps with {} from {}", id, args.data.display())
+                })?;
+            let mut global = mo.global;
+            global.warnings.extend(mo.warnings.iter().cloned());
+            (global, Some((mo.maps, mo.costs, mo.residual_variance)))
+        }
+        None => (
+            fit::fit_with_hints(&samples, &cfg, args.quiet || args.json, &hints)
+                .with_context(|| format!("fitting {} to {}", id, args.data.display()))?,
+            None,
+        ),
+    };
     let channels = samples.channels;
     let m = model_for(
         &outcome.set,
@@ -276,6 +304,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             })
             .unwrap_or_default(),
         quality: Some(serde_json::to_value(&outcome.quality)?),
+        maps: None,
         warnings: warnings.clone(),
     };
     let mut report_text = report::text(&outcome, id.as_str(), &args.data.display().to_string());
@@ -283,6 +312,17 @@ pub fn run(args: &FitArgs) -> Result<()> {
         report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
     }
     let mut result = result;
+    if let (Some(dir), Some((maps, costs, variance))) = (&args.maps, &recovered) {
+        let mut desc = crate::export::maps_out::write(dir, &cfg.maps.requested(), maps)?;
+        desc["method"] = serde_json::json!({
+            "rounds": costs.len() - 1,
+            "total_cost_per_round": costs,
+            "residual_variance": variance,
+            "smoothness": cfg.maps.smoothness,
+            "global_texels": cfg.maps.global_texels,
+        });
+        result.maps = Some(desc);
+    }
     if let Some(dir) = &args.report {
         // the report is optional: its failure is a warning in the result, never the lost fit
         let fitted = fit::fitted_brdf(&outcome, &cfg);

@@ -6,6 +6,7 @@ pub mod brdf_plots;
 pub mod eval_table;
 pub mod felt_report;
 pub mod images;
+pub mod maps_out;
 pub mod plots;
 pub mod report;
 pub mod result_json;

@@ -29,6 +29,9 @@ pub struct ResultFile {
     /// before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub quality: Option<serde_json::Value>,
+    /// `fit --maps`: the recovered per-texel maps (files, units, grid) and how they were found.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub maps: Option<serde_json::Value>,
     pub warnings: Vec<String>,
 }
 

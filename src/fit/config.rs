@@ -155,6 +155,77 @@ pub struct FitConfig {
     /// `--model auto`: how rungs are compared.
     #[serde(default)]
     pub selection: Selection,
+    /// Per-texel maps recovered from an image capture (`fibrefit fit --maps DIR`).
+    #[serde(default)]
+    pub maps: MapsConfig,
+}
+
+/// `[maps]`: which per-texel maps `fit --maps` recovers beside the global parameters, and how.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct MapsConfig {
+    /// Per-texel height H (the topology map), fibre radii (varying-topology, reference).
+    #[serde(default)]
+    pub height: bool,
+    /// Per-texel fibre azimuth psi (the tangent map), degrees (every rung but lambert).
+    #[serde(default)]
+    pub fibre_azimuth: bool,
+    /// Per-texel diffuse albedo kd (Ward: rho_d), per channel.
+    #[serde(default)]
+    pub kd: bool,
+    /// Per-texel specular weight ks (Ward: rho_s), per channel.
+    #[serde(default)]
+    pub ks: bool,
+    /// Alternations of (global fit given the maps, per-texel fits given the globals) at most;
+    /// they stop earlier when the total cost falls by less than 1e-6 of itself.
+    #[serde(default = "default_map_rounds")]
+    pub rounds: usize,
+    /// Texels (seeded sample) the global fit given the maps uses.
+    #[serde(default = "default_global_texels")]
+    pub global_texels: usize,
+    /// Weight of the optional smoothness prior (0: off): per texel, w * (u - mean of its 4
+    /// neighbours)^2 per nonlinear map value u (H in fibre radii, psi in units of 10 degrees),
+    /// added to the texel's cost, for texels the images leave undetermined.
+    #[serde(default)]
+    pub smoothness: f64,
+}
+
+fn default_map_rounds() -> usize {
+    6
+}
+
+fn default_global_texels() -> usize {
+    2048
+}
+
+impl Default for MapsConfig {
+    fn default() -> Self {
+        Self {
+            height: false,
+            fibre_azimuth: false,
+            kd: false,
+            ks: false,
+            rounds: default_map_rounds(),
+            global_texels: default_global_texels(),
+            smoothness: 0.0,
+        }
+    }
+}
+
+impl MapsConfig {
+    /// Names of the maps requested, in output order.
+    pub fn requested(&self) -> Vec<&'static str> {
+        [
+            ("height", self.height),
+            ("fibre_azimuth", self.fibre_azimuth),
+            ("kd", self.kd),
+            ("ks", self.ks),
+        ]
+        .into_iter()
+        .filter(|x| x.1)
+        .map(|x| x.0)
+        .collect()
+    }
 }
 
 /// Model components (applied on top of `[parameters]`).

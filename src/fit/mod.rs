@@ -12,6 +12,7 @@ pub mod config;
 pub mod finish;
 pub mod global;
 pub mod lm;
+pub mod maps;
 pub mod parameters;
 pub mod polish;
 pub mod problem;

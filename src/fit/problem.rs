@@ -22,8 +22,20 @@ use std::sync::Arc;
 /// Model columns per sample: [diffuse (+ substrate when tied), specular, substrate, fuzz].
 pub type Columns = [f64; 4];
 
+/// Per-sample values of recovered maps (`src/fit/maps.rs`), in the order of the problem's
+/// samples: a texel height H (fibre radii) that replaces the topology (clamped to H_max of the
+/// spacing being tried), and per-component albedos (indexed like [`Columns`]) that replace the
+/// set's, whose parameter is then held fixed.
+#[derive(Clone, Debug, Default)]
+pub struct SampleMaps {
+    pub height: Option<Vec<f64>>,
+    pub albedo: [Option<Vec<[f64; 3]>>; 4],
+}
+
 pub struct FitProblem<'a> {
     pub samples: Vec<&'a Sample>,
+    /// Recovered per-texel values, when fitting the globals given maps.
+    pub sample_maps: Option<Arc<SampleMaps>>,
     pub template: ParamSet,
     pub metric: Metric,
     pub quadrature_order: usize,
@@ -42,7 +54,7 @@ pub struct FitProblem<'a> {
     pub evaluations: AtomicUsize,
 }
 
-fn component_index(c: Component) -> usize {
+pub fn component_index(c: Component) -> usize {
     match c {
         Component::Diffuse => 0,
         Component::Specular => 1,
@@ -89,6 +101,7 @@ impl<'a> FitProblem<'a> {
             [0.0; 3] // unused by the other metrics
         };
         Self {
+            sample_maps: None,
             azimuth_nodes: crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES,
             log_floor,
             samples,
@@ -102,6 +115,24 @@ impl<'a> FitProblem<'a> {
             free_shapes,
             free_albedos,
             evaluations: AtomicUsize::new(0),
+        }
+    }
+
+    /// This problem with per-sample map values (one entry per sample).
+    pub fn with_sample_maps(mut self, maps: Arc<SampleMaps>) -> Self {
+        if let Some(h) = &maps.height {
+            assert_eq!(h.len(), self.samples.len());
+        }
+        self.sample_maps = Some(maps);
+        self
+    }
+
+    /// The albedo of component `k` (a [`Columns`] index) for sample `i`, channel `c`: the map's
+    /// when the component is mapped, else `set_value`.
+    fn albedo_at(&self, k: usize, i: usize, c: usize, set_value: f64) -> f64 {
+        match self.sample_maps.as_ref().and_then(|m| m.albedo[k].as_ref()) {
+            Some(v) => v[i][c],
+            None => set_value,
         }
     }
 
@@ -311,10 +342,18 @@ impl<'a> FitProblem<'a> {
         let tied = set.substrate_tied;
         // Chunks of samples go through `basis_many` (the cross-section rungs batch their lobe
         // quadrature); samples with a topology texel are evaluated at their own height.
+        let heights = self
+            .sample_maps
+            .as_ref()
+            .and_then(|m| m.height.as_deref())
+            .filter(|_| has_topology);
+        let h_max = crate::model::topology::max_height(d);
+        let index: Vec<usize> = (0..self.samples.len()).collect();
         let cols: Vec<Columns> = self
             .samples
             .par_chunks(512)
-            .flat_map_iter(|chunk| {
+            .zip(index.par_chunks(512))
+            .flat_map_iter(|(chunk, ids)| {
                 let pairs: Vec<DirectionPair> = chunk
                     .iter()
                     .map(|s| {
@@ -323,7 +362,13 @@ impl<'a> FitProblem<'a> {
                     })
                     .collect();
                 let mut bases = vec![Basis::default(); chunk.len()];
-                if has_topology && chunk.iter().any(|s| s.map_value.is_some()) {
+                if let Some(hs) = heights {
+                    for ((&i, pair), b) in ids.iter().zip(&pairs).zip(bases.iter_mut()) {
+                        *b = m
+                            .basis_at_height(pair, hs[i].clamp(0.0, h_max))
+                            .unwrap_or_default();
+                    }
+                } else if has_topology && chunk.iter().any(|s| s.map_value.is_some()) {
                     for ((s, pair), b) in chunk.iter().zip(&pairs).zip(bases.iter_mut()) {
                         *b = match s.map_value {
                             Some(mv) if has_topology => m
@@ -372,12 +417,17 @@ impl<'a> FitProblem<'a> {
             // Gram matrix and right-hand side with fixed albedos moved to the data side
             let mut g = [[0.0f64; 4]; 4];
             let mut h = [0.0f64; 4];
-            for (s, (col, sc)) in self.samples.iter().zip(cols.iter().zip(&self.scale)) {
+            for (i, (s, (col, sc))) in self
+                .samples
+                .iter()
+                .zip(cols.iter().zip(&self.scale))
+                .enumerate()
+            {
                 let w2 = sc[c] * sc[c];
                 let mut y = s.value[c];
                 for (k, alb) in set.albedos.iter().enumerate() {
                     if !alb.vary {
-                        y -= alb.value[c] * col[comp[k]];
+                        y -= self.albedo_at(comp[k], i, c, alb.value[c]) * col[comp[k]];
                     }
                 }
                 for &a in &free {
@@ -410,7 +460,10 @@ impl<'a> FitProblem<'a> {
             .enumerate()
         {
             for c in 0..ch {
-                let m: f64 = comps.iter().map(|(k, a)| a[c] * col[*k]).sum();
+                let m: f64 = comps
+                    .iter()
+                    .map(|(k, a)| self.albedo_at(*k, i, c, a[c]) * col[*k])
+                    .sum();
                 let y = s.value[c];
                 r[i * ch + c] = match self.metric {
                     Metric::Linear | Metric::Cosine => sc[c] * (m - y),
@@ -431,13 +484,17 @@ impl<'a> FitProblem<'a> {
     /// Model values (unweighted) per sample and channel.
     pub fn model_values(&self, cols: &[Columns], set: &ParamSet) -> Vec<[f64; 3]> {
         cols.iter()
-            .map(|col| {
+            .enumerate()
+            .map(|(i, col)| {
                 let mut v = [0.0; 3];
                 for (c, vc) in v.iter_mut().enumerate().take(self.channels()) {
                     *vc = set
                         .albedos
                         .iter()
-                        .map(|a| a.value[c] * col[component_index(a.component)])
+                        .map(|a| {
+                            let k = component_index(a.component);
+                            self.albedo_at(k, i, c, a.value[c]) * col[k]
+                        })
                         .sum();
                 }
                 v
@@ -748,7 +805,7 @@ pub fn describe(set: &ParamSet) -> String {
 
 /// min over a of a^T G a - 2 a^T h with a_k in bounds, for the `free` indices (at most 3):
 /// every assignment of each variable to {free, lower, upper} is tried and the best feasible kept.
-fn bounded_small_lsq(
+pub(crate) fn bounded_small_lsq(
     g: &[[f64; 4]; 4],
     h: &[f64; 4],
     free: &[usize],
@@ -980,6 +1037,7 @@ mod nan_tests {
             source: "nan".into(),
             dropped: Default::default(),
             skipped_examples: vec![],
+            image_size: None,
         };
         assert!(crate::fit::fit(&data, &cfg, true).is_err());
     }

@@ -119,6 +119,7 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
         parameters: entries,
         components: Default::default(),
         selection: Default::default(),
+        maps: Default::default(),
     };
     cfg.validate()
         .map_err(|e| anyhow!("{}: {e}", path.display()))?;

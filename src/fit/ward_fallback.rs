@@ -60,6 +60,7 @@ pub fn fit(
         source: "fitted model".into(),
         dropped: Dropped::default(),
         skipped_examples: vec![],
+        image_size: None,
     };
     let psi = super::wrap_azimuth(psi_deg);
     let text = format!(

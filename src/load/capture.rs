@@ -480,6 +480,7 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
         source: path.to_path_buf(),
         dropped,
         skipped_examples: vec![],
+        image_size: Some((w, h)),
     })
 }
 

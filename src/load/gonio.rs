@@ -490,6 +490,7 @@ impl ParseState {
             source: name.into(),
             dropped,
             skipped_examples: examples,
+            image_size: None,
         })
     }
 }

@@ -151,6 +151,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
         source: path.to_path_buf(),
         dropped,
         skipped_examples: vec![],
+        image_size: None,
     })
 }
 

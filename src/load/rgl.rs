@@ -430,6 +430,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
         source: path.to_path_buf(),
         dropped: Dropped::default(),
         skipped_examples: vec![],
+        image_size: None,
     })
 }
 

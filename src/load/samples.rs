@@ -78,4 +78,6 @@ pub struct Samples {
     pub dropped: Dropped,
     /// First problem of each kind met when rows were skipped (for the report).
     pub skipped_examples: Vec<String>,
+    /// Image captures: the images' size (width, height) in pixels, the texel grid of maps.
+    pub image_size: Option<(usize, usize)>,
 }

@@ -1,0 +1,966 @@
+//! Per-texel map recovery from image captures (`fibrefit fit CAPTURE --maps DIR`): the topology
+//! (height H), the fibre direction psi and the albedos kd, ks per texel, beside the shared
+//! global parameters.
+//!
+//! The method alternates two fits until the total cost stops falling:
+//! 1. per texel, given the globals: the texel's mapped values from its own pixels (one per
+//!    image). The nonlinear ones (H in [0, H_max(d)], psi over its period) start from a grid
+//!    (9 heights x 12 azimuths, and the current values) and are polished by a damped
+//!    Gauss–Newton; the mapped albedos are solved linearly (bounded to [0, 1]) at every step;
+//! 2. the globals given the maps: the usual bounded LM from the current globals on a seeded
+//!    sample of texels (`[maps] global_texels`), the mapped parameters held fixed; the new globals
+//!    are kept only if they lower the cost over all texels.
+//!
+//! Each stage starts from the current values and keeps them unless it finds a lower cost, so
+//! the total cost never rises. Standard errors per texel come from the texel's Jacobian over all
+//! its unknowns, scaled by the residual variance over all pixels (N - P degrees of freedom, P
+//! counting every texel's unknowns and the globals): honest when the model fits within the noise,
+//! large (or infinite) where the images leave a value undetermined. An optional smoothness prior
+//! (`[maps] smoothness`, off by default) pulls H and psi towards the mean of the 4 neighbours.
+
+use super::config::{FitConfig, MapsConfig};
+use super::parameters::{Component, ParamSet, Shape};
+use super::problem::{self, bounded_small_lsq, component_index, FitProblem, SampleMaps};
+use super::{polish, wrap_azimuth, FitOutcome};
+use crate::load::samples::{DataKind, Origin, Sample, Samples};
+use crate::model::frame::FibreFrame;
+use crate::model::topology::max_height;
+use crate::model::{DirectionPair, ShadingModel};
+use anyhow::{bail, Result};
+use nalgebra::{DMatrix, DVector};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rayon::prelude::*;
+use std::sync::Arc;
+
+/// Grid minima a per-texel fit polishes (besides its start).
+pub const TEXEL_STARTS: usize = 3;
+/// Another minimum of a texel within this many residual variances of the best makes the texel
+/// ambiguous: its standard errors grow to cover the distance between the minima.
+pub const AMBIGUITY_DELTA: f64 = 4.0;
+
+/// One texel's values (external units: H in fibre radii, psi in degrees).
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct TexelValues {
+    pub height: f64,
+    pub psi: f64,
+    pub kd: [f64; 3],
+    pub ks: [f64; 3],
+}
+
+/// The recovered maps over the capture's pixel grid (texels without pixels are absent).
+#[derive(Clone, Debug)]
+pub struct TexelMaps {
+    pub width: usize,
+    pub height: usize,
+    /// (x, y) of each texel with pixels, row-major order.
+    pub texels: Vec<(u32, u32)>,
+    pub values: Vec<TexelValues>,
+    /// Standard errors, same layout (NaN or infinity where undetermined; 0 for values not
+    /// mapped).
+    pub std_errors: Vec<TexelValues>,
+    /// RMS relative residual (model - data) / data over the texel's pixels and channels.
+    pub residual: Vec<f64>,
+    pub channels: usize,
+}
+
+pub struct MapOutcome {
+    /// The global fit given the final maps (its uncertainties are conditional on the maps).
+    pub global: FitOutcome,
+    pub maps: TexelMaps,
+    /// Total cost (sum of squared weighted residuals) after each round, the initial global fit
+    /// first.
+    pub costs: Vec<f64>,
+    /// Residual variance per pixel and channel used for the per-texel standard errors.
+    pub residual_variance: f64,
+    /// Warnings (undetermined texels, rounds exhausted).
+    pub warnings: Vec<String>,
+}
+
+/// Which values of a texel are free.
+#[derive(Clone, Copy, Debug)]
+struct Free {
+    height: bool,
+    psi: bool,
+    kd: bool,
+    ks: bool,
+}
+
+/// Check that the rung of `cfg` can honour every requested map.
+pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
+    let id = cfg.model_id()?;
+    let names = id.parameter_names();
+    if req.requested().is_empty() {
+        bail!("--maps: [maps] in the config requests no map; set height, fibre_azimuth, kd or ks = true");
+    }
+    if req.height && !id.has_topology() {
+        bail!("[maps] height = true: model `{id}` has no fibre topology (use varying-topology or reference)");
+    }
+    if req.fibre_azimuth && !names.contains(&"fibre_azimuth_deg") {
+        bail!("[maps] fibre_azimuth = true: model `{id}` has no fibre direction");
+    }
+    if req.ks && !(names.contains(&"ks") || names.contains(&"rho_s")) {
+        bail!("[maps] ks = true: model `{id}` has no specular lobe");
+    }
+    if req.ks && !cfg.components.specular {
+        bail!("[maps] ks = true, but [components] specular = false switches the lobe off");
+    }
+    if !(req.smoothness >= 0.0 && req.smoothness.is_finite()) {
+        bail!(
+            "[maps] smoothness = {}: must be a finite weight >= 0",
+            req.smoothness
+        );
+    }
+    if req.rounds == 0 || req.global_texels == 0 {
+        bail!("[maps] rounds and global_texels must be at least 1");
+    }
+    Ok(())
+}
+
+/// Samples grouped by texel: (x, y) and sample indices, row-major.
+/// (width, height, texel (x, y) list, sample indices per texel).
+type Grouped = (usize, usize, Vec<(u32, u32)>, Vec<Vec<usize>>);
+
+/// A texel's fit: best values, its cost, and the other distinct minima with their costs.
+type TexelFit = (TexelValues, f64, Vec<(TexelValues, f64)>);
+
+fn group(samples: &Samples) -> Result<Grouped> {
+    if samples.kind != DataKind::Capture {
+        bail!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels");
+    }
+    let mut keyed: Vec<((u32, u32), usize)> = samples
+        .samples
+        .iter()
+        .enumerate()
+        .map(|(i, s)| match s.origin {
+            Origin::Pixel { x, y, .. } => Ok(((y, x), i)),
+            _ => bail!("--maps: sample {i} is not a pixel"),
+        })
+        .collect::<Result<_>>()?;
+    keyed.sort_unstable();
+    let (mut texels, mut members): (Vec<(u32, u32)>, Vec<Vec<usize>>) = (vec![], vec![]);
+    for ((y, x), i) in keyed {
+        if texels.last() != Some(&(x, y)) {
+            texels.push((x, y));
+            members.push(Vec::new());
+        }
+        members.last_mut().expect("pushed").push(i);
+    }
+    let (w, h) = samples.image_size.unwrap_or((
+        texels.iter().map(|t| t.0).max().unwrap_or(0) as usize + 1,
+        texels.iter().map(|t| t.1).max().unwrap_or(0) as usize + 1,
+    ));
+    Ok((w, h, texels, members))
+}
+
+/// The globals with the mapped parameters held fixed (their values come from the maps).
+fn fix_mapped(set: &ParamSet, req: &MapsConfig) -> ParamSet {
+    let mut s = set.clone();
+    for sh in &mut s.shapes {
+        let mapped = match sh.kind {
+            Shape::Height | Shape::MapScale => req.height,
+            Shape::Azimuth => req.fibre_azimuth,
+            _ => false,
+        };
+        if mapped {
+            sh.vary = false;
+        }
+    }
+    for a in &mut s.albedos {
+        if (a.component == Component::Diffuse && req.kd)
+            || (a.component == Component::Specular && req.ks)
+        {
+            a.vary = false;
+        }
+    }
+    s
+}
+
+/// Everything a per-texel fit needs from the globals.
+struct Globals<'m> {
+    model: &'m dyn ShadingModel,
+    has_topology: bool,
+    h_max: f64,
+    tied: bool,
+    channels: usize,
+    /// Global albedo per component index and channel (0 where absent).
+    albedo: [[f64; 3]; 4],
+}
+
+/// One texel's problem.
+struct Texel<'a> {
+    obs: Vec<&'a Sample>,
+    /// Per observation and channel: residual weight (1/sigma or sqrt(weight)).
+    scale: Vec<[f64; 3]>,
+    free: Free,
+    /// Prior: (weight, neighbour mean of H, neighbour mean of psi) when smoothing.
+    prior: Option<(f64, f64, f64)>,
+}
+
+impl Texel<'_> {
+    /// Columns of every observation at (H, psi).
+    fn columns(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+        let frame = FibreFrame::from_azimuth(psi.to_radians());
+        self.obs
+            .iter()
+            .map(|s| {
+                let pair = DirectionPair::new(&frame, &s.l, &s.v);
+                let b = if g.has_topology {
+                    g.model
+                        .basis_at_height(&pair, h.clamp(0.0, g.h_max))
+                        .unwrap_or_default()
+                } else {
+                    g.model.basis(&pair)
+                };
+                if g.tied {
+                    [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
+                } else {
+                    [b.diffuse, b.specular, b.substrate, b.fuzz]
+                }
+            })
+            .collect()
+    }
+
+    /// Albedos of the texel (mapped ones solved linearly, bounded to [0, 1]) and the weighted
+    /// residuals, at fixed columns.
+    fn solve(&self, g: &Globals, cols: &[[f64; 4]], v: &mut TexelValues) -> Vec<f64> {
+        let mapped: Vec<usize> = [(0usize, self.free.kd), (1, self.free.ks)]
+            .into_iter()
+            .filter(|x| x.1)
+            .map(|x| x.0)
+            .collect();
+        for c in 0..g.channels {
+            if mapped.is_empty() {
+                break;
+            }
+            let mut gm = [[0.0f64; 4]; 4];
+            let mut hv = [0.0f64; 4];
+            for ((s, col), sc) in self.obs.iter().zip(cols).zip(&self.scale) {
+                let w2 = sc[c] * sc[c];
+                let mut y = s.value[c];
+                for (k, x) in col.iter().enumerate() {
+                    if !mapped.contains(&k) {
+                        y -= g.albedo[k][c] * x;
+                    }
+                }
+                for &a in &mapped {
+                    hv[a] += w2 * col[a] * y;
+                    for &b in &mapped {
+                        gm[a][b] += w2 * col[a] * col[b];
+                    }
+                }
+            }
+            let bounds = vec![(0.0, 1.0); mapped.len()];
+            let sol = bounded_small_lsq(&gm, &hv, &mapped, &bounds);
+            for (&a, x) in mapped.iter().zip(sol) {
+                if a == 0 {
+                    v.kd[c] = x;
+                } else {
+                    v.ks[c] = x;
+                }
+            }
+        }
+        self.residuals(g, cols, v)
+    }
+
+    fn albedo(&self, g: &Globals, v: &TexelValues, k: usize, c: usize) -> f64 {
+        match k {
+            0 if self.free.kd => v.kd[c],
+            1 if self.free.ks => v.ks[c],
+            _ => g.albedo[k][c],
+        }
+    }
+
+    fn residuals(&self, g: &Globals, cols: &[[f64; 4]], v: &TexelValues) -> Vec<f64> {
+        let mut r = Vec::with_capacity(self.obs.len() * g.channels + 2);
+        for ((s, col), sc) in self.obs.iter().zip(cols).zip(&self.scale) {
+            for (c, scale) in sc.iter().enumerate().take(g.channels) {
+                let m: f64 = (0..4).map(|k| self.albedo(g, v, k, c) * col[k]).sum();
+                r.push(scale * (m - s.value[c]));
+            }
+        }
+        if let Some((w, hm, pm)) = self.prior {
+            let sw = w.sqrt();
+            if self.free.height {
+                r.push(sw * (v.height - hm));
+            }
+            if self.free.psi {
+                r.push(sw * wrap_azimuth(v.psi - pm) / 10.0);
+            }
+        }
+        r
+    }
+
+    /// Cost and solved values at nonlinear values `u` (H and/or psi in that order).
+    fn cost_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (f64, TexelValues) {
+        let mut v = *base;
+        let mut k = 0;
+        if self.free.height {
+            v.height = u[k].clamp(0.0, g.h_max);
+            k += 1;
+        }
+        if self.free.psi {
+            v.psi = wrap_azimuth(u[k]);
+        }
+        let cols = self.columns(g, v.height, v.psi);
+        let r = self.solve(g, &cols, &mut v);
+        (r.iter().map(|x| x * x).sum(), v)
+    }
+
+    fn nonlinear(&self, v: &TexelValues) -> Vec<f64> {
+        let mut u = Vec::new();
+        if self.free.height {
+            u.push(v.height);
+        }
+        if self.free.psi {
+            u.push(v.psi);
+        }
+        u
+    }
+
+    /// Fit the texel from `start`: a grid over the nonlinear values (9 heights x 12 azimuths),
+    /// then damped Gauss–Newton from the best grid minima (up to [`TEXEL_STARTS`] distinct ones)
+    /// and from `start`. Returns the best (never worse than `start`) and the other distinct
+    /// minima found, best first.
+    fn fit(&self, g: &Globals, start: &TexelValues) -> TexelFit {
+        let u0 = self.nonlinear(start);
+        let (c0, v0) = self.cost_at(g, start, &u0);
+        if u0.is_empty() {
+            return (v0, c0, vec![]);
+        }
+        let hs: Vec<f64> = if self.free.height {
+            (0..9).map(|i| g.h_max * i as f64 / 8.0).collect()
+        } else {
+            vec![f64::NAN]
+        };
+        let ps: Vec<f64> = if self.free.psi {
+            (0..12).map(|i| -90.0 + 15.0 * i as f64).collect()
+        } else {
+            vec![f64::NAN]
+        };
+        let (nh, np) = (hs.len(), ps.len());
+        let mut grid = vec![(f64::INFINITY, TexelValues::default()); nh * np];
+        for (i, &h) in hs.iter().enumerate() {
+            for (j, &p) in ps.iter().enumerate() {
+                let u: Vec<f64> = [h, p].into_iter().filter(|x| !x.is_nan()).collect();
+                grid[i * np + j] = self.cost_at(g, start, &u);
+            }
+        }
+        // grid points no 4-neighbour undercuts (the azimuth wraps)
+        let mut local: Vec<usize> = (0..nh * np)
+            .filter(|&k| {
+                let (i, j) = (k / np, k % np);
+                let mut nb = Vec::new();
+                if i > 0 {
+                    nb.push(k - np);
+                }
+                if i + 1 < nh {
+                    nb.push(k + np);
+                }
+                if np > 1 {
+                    nb.push(i * np + (j + 1) % np);
+                    nb.push(i * np + (j + np - 1) % np);
+                }
+                nb.iter().all(|&n| grid[n].0 >= grid[k].0)
+            })
+            .collect();
+        local.sort_by(|a, b| grid[*a].0.total_cmp(&grid[*b].0));
+        local.truncate(TEXEL_STARTS);
+        let mut minima: Vec<(TexelValues, f64)> = Vec::new();
+        let starts = std::iter::once((v0, c0)).chain(local.iter().map(|&k| (grid[k].1, grid[k].0)));
+        for (v, c) in starts {
+            let (v, c) = self.polish(g, start, v, c);
+            let same = |w: &TexelValues| {
+                (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
+                    && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
+            };
+            match minima.iter_mut().find(|m| same(&m.0)) {
+                Some(m) if c < m.1 => *m = (v, c),
+                Some(_) => {}
+                None => minima.push((v, c)),
+            }
+        }
+        minima.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let (best, best_cost) = minima.remove(0);
+        (best, best_cost, minima)
+    }
+
+    /// Damped Gauss–Newton on the nonlinear values from `v` (cost `c`); albedos re-solved at
+    /// every point.
+    fn polish(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        v: TexelValues,
+        c: f64,
+    ) -> (TexelValues, f64) {
+        let (mut best, mut best_cost) = (v, c);
+        let mut best_u = self.nonlinear(&best);
+        let mut lambda = 1e-3;
+        for _ in 0..30 {
+            let (r0, _) = {
+                let cols = self.columns(g, best.height, best.psi);
+                let mut v = best;
+                (self.solve(g, &cols, &mut v), v)
+            };
+            let n = best_u.len();
+            let steps: Vec<f64> = (0..n)
+                .map(|k| {
+                    if self.free.height && k == 0 {
+                        1e-4 * g.h_max.max(1e-3)
+                    } else {
+                        1e-3
+                    }
+                })
+                .collect();
+            let mut jac = DMatrix::zeros(r0.len(), n);
+            for k in 0..n {
+                let mut u = best_u.clone();
+                let mut hstep = steps[k];
+                if self.free.height && k == 0 && u[0] + hstep > g.h_max {
+                    hstep = -hstep;
+                }
+                u[k] += hstep;
+                let mut v = best;
+                if self.free.height && k == 0 {
+                    v.height = u[0];
+                } else {
+                    v.psi = u[k];
+                }
+                let cols = self.columns(g, v.height, v.psi);
+                let r = self.solve(g, &cols, &mut v);
+                for (i, (a, b)) in r.iter().zip(&r0).enumerate() {
+                    jac[(i, k)] = (a - b) / hstep;
+                }
+            }
+            let jt = jac.transpose();
+            let mut a = &jt * &jac;
+            let grad = &jt * DVector::from_vec(r0.clone());
+            let mut improved = false;
+            for _ in 0..8 {
+                let mut m = a.clone();
+                for k in 0..n {
+                    m[(k, k)] += lambda * a[(k, k)].max(1e-12);
+                }
+                let Some(step) = m.clone().cholesky().map(|ch| ch.solve(&(-&grad))) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let u: Vec<f64> = best_u.iter().zip(step.iter()).map(|(x, d)| x + d).collect();
+                let (c, v) = self.cost_at(g, start, &u);
+                if c < best_cost {
+                    let gain = (best_cost - c) / best_cost.max(1e-300);
+                    best_cost = c;
+                    best = v;
+                    best_u = self.nonlinear(&v);
+                    lambda = (lambda * 0.3).max(1e-9);
+                    improved = gain > 1e-10;
+                    break;
+                }
+                lambda *= 10.0;
+            }
+            a.fill(0.0);
+            if !improved {
+                break;
+            }
+        }
+        (best, best_cost)
+    }
+
+    /// Standard errors of the texel's unknowns from its Jacobian over all of them (nonlinear by
+    /// differences, albedos analytic), scaled by `variance`.
+    fn std_errors(&self, g: &Globals, v: &TexelValues, variance: f64) -> TexelValues {
+        let mut se = TexelValues::default();
+        let cols = self.columns(g, v.height, v.psi);
+        let r0 = self.residuals(g, &cols, v);
+        let mut jcols: Vec<Vec<f64>> = Vec::new();
+        let mut which: Vec<(u8, usize)> = Vec::new();
+        let diff = |h: f64, psi: f64, step: f64| -> Vec<f64> {
+            let mut w = *v;
+            w.height = h;
+            w.psi = psi;
+            let c = self.columns(g, h, psi);
+            let r = self.residuals(g, &c, &w);
+            r.iter().zip(&r0).map(|(a, b)| (a - b) / step).collect()
+        };
+        if self.free.height {
+            let step = 1e-5
+                * g.h_max.max(1e-3)
+                * if v.height + 1e-5 * g.h_max > g.h_max {
+                    -1.0
+                } else {
+                    1.0
+                };
+            jcols.push(diff(v.height + step, v.psi, step));
+            which.push((0, 0));
+        }
+        if self.free.psi {
+            jcols.push(diff(v.height, v.psi + 1e-4, 1e-4));
+            which.push((1, 0));
+        }
+        for (kind, comp, on) in [(2u8, 0usize, self.free.kd), (3, 1, self.free.ks)] {
+            if !on {
+                continue;
+            }
+            for c in 0..g.channels {
+                let mut col = vec![0.0; r0.len()];
+                for (i, (cl, sc)) in cols.iter().zip(&self.scale).enumerate() {
+                    col[i * g.channels + c] = sc[c] * cl[comp];
+                }
+                jcols.push(col);
+                which.push((kind, c));
+            }
+        }
+        let p = jcols.len();
+        let mut jtj: DMatrix<f64> = DMatrix::zeros(p, p);
+        for a in 0..p {
+            for b in 0..p {
+                jtj[(a, b)] = jcols[a].iter().zip(&jcols[b]).map(|(x, y)| x * y).sum();
+            }
+        }
+        let cov = jtj.try_inverse();
+        for (k, &(kind, c)) in which.iter().enumerate() {
+            let s = match &cov {
+                Some(m) if m[(k, k)] >= 0.0 => (variance * m[(k, k)]).sqrt(),
+                _ => f64::INFINITY,
+            };
+            match kind {
+                0 => se.height = s,
+                1 => se.psi = s,
+                2 => se.kd[c] = s,
+                _ => se.ks[c] = s,
+            }
+        }
+        se
+    }
+
+    /// RMS relative residual over the texel's pixels and channels.
+    fn relative_residual(&self, g: &Globals, v: &TexelValues) -> f64 {
+        let cols = self.columns(g, v.height, v.psi);
+        let (mut s, mut n) = (0.0, 0.0);
+        for (o, col) in self.obs.iter().zip(&cols) {
+            for c in 0..g.channels {
+                let m: f64 = (0..4).map(|k| self.albedo(g, v, k, c) * col[k]).sum();
+                s += ((m - o.value[c]) / o.value[c].abs().max(1e-12)).powi(2);
+                n += 1.0;
+            }
+        }
+        (s / n).sqrt()
+    }
+}
+
+fn globals_albedo(set: &ParamSet) -> [[f64; 3]; 4] {
+    let mut a = [[0.0; 3]; 4];
+    for p in &set.albedos {
+        a[component_index(p.component)] = p.value;
+    }
+    a
+}
+
+/// Recover the maps `req` asks for, with the globals of `cfg`.
+pub fn recover(
+    samples: &Samples,
+    cfg: &FitConfig,
+    req: &MapsConfig,
+    quiet: bool,
+) -> Result<MapOutcome> {
+    check_request(cfg, req)?;
+    let (width, height, texels, members) = group(samples)?;
+    if cfg.metric != super::config::Metric::Linear {
+        bail!("--maps fits captures with the linear metric; set metric = \"linear\"");
+    }
+    let free = Free {
+        height: req.height,
+        psi: req.fibre_azimuth,
+        kd: req.kd,
+        ks: req.ks,
+    };
+    // 0. the global fit with the capture's own inputs (the maps' starting point)
+    let first = super::fit(samples, cfg, quiet)?;
+    let mut set = fix_mapped(&first.set, req);
+    let channels = first.channels;
+    let d = set.shape_value(Shape::Spacing);
+    let topo = crate::model::topology::Topology {
+        height: set.shape_value(Shape::Height),
+        map_scale: set.shape_value(Shape::MapScale),
+        map: None,
+    };
+    let g_psi = set.shape_value(Shape::Azimuth);
+    let galb = globals_albedo(&set);
+    let mut values: Vec<TexelValues> = members
+        .iter()
+        .map(|m| {
+            let s = &samples.samples[m[0]];
+            TexelValues {
+                height: s
+                    .map_value
+                    .map(|mv| topo.texel_height(mv, d))
+                    .unwrap_or(topo.height),
+                psi: s.fibre_azimuth.map(|p| p.to_degrees()).unwrap_or(g_psi),
+                kd: galb[0],
+                ks: galb[1],
+            }
+        })
+        .collect();
+    let scale_of = |s: &Sample| -> [f64; 3] {
+        let mut k = [0.0; 3];
+        for (c, kc) in k.iter_mut().enumerate() {
+            *kc = match s.sigma {
+                Some(sig) => 1.0 / sig[c],
+                None => s.weight.sqrt(),
+            };
+        }
+        k
+    };
+    let index: std::collections::HashMap<(u32, u32), usize> =
+        texels.iter().enumerate().map(|(i, t)| (*t, i)).collect();
+    let neighbours: Vec<Vec<usize>> = texels
+        .iter()
+        .map(|&(x, y)| {
+            [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+                .iter()
+                .filter_map(|(dx, dy)| {
+                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                    (nx >= 0 && ny >= 0)
+                        .then(|| index.get(&(nx as u32, ny as u32)).copied())
+                        .flatten()
+                })
+                .collect()
+        })
+        .collect();
+    let build = |values: &[TexelValues]| -> Vec<Texel> {
+        members
+            .iter()
+            .enumerate()
+            .map(|(t, m)| {
+                let prior = (req.smoothness > 0.0 && !neighbours[t].is_empty()).then(|| {
+                    let n = neighbours[t].len() as f64;
+                    let hm = neighbours[t].iter().map(|&j| values[j].height).sum::<f64>() / n;
+                    // circular mean of the axial azimuths
+                    let (sx, sy) = neighbours[t].iter().fold((0.0, 0.0), |(a, b), &j| {
+                        let th = (2.0 * values[j].psi).to_radians();
+                        (a + th.cos(), b + th.sin())
+                    });
+                    (req.smoothness, hm, sy.atan2(sx).to_degrees() / 2.0)
+                });
+                Texel {
+                    obs: m.iter().map(|&i| &samples.samples[i]).collect(),
+                    scale: m.iter().map(|&i| scale_of(&samples.samples[i])).collect(),
+                    free,
+                    prior,
+                }
+            })
+            .collect()
+    };
+    let bar = crate::progress::bar((req.rounds * texels.len()) as u64, "maps", quiet);
+    let mut costs = vec![first.statistics.chi_square];
+    let mut warnings = Vec::new();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x6d61_7073);
+    let mut converged = false;
+    for round in 0..req.rounds {
+        // 1. per texel given the globals
+        let model = problem::model_for(
+            &set,
+            cfg.knobs.quadrature_order,
+            cfg.knobs.histogram_bins,
+            cfg.knobs.azimuth_nodes,
+            None,
+        );
+        let g = Globals {
+            model: model.as_ref(),
+            has_topology: set.rung.has_topology(),
+            h_max: max_height(set.shape_value(Shape::Spacing)),
+            tied: set.substrate_tied,
+            channels,
+            albedo: globals_albedo(&set),
+        };
+        let problems = build(&values);
+        let fitted: Vec<(TexelValues, f64)> = problems
+            .par_iter()
+            .zip(values.par_iter())
+            .map(|(p, v)| {
+                let r = p.fit(&g, v);
+                bar.inc(1);
+                (r.0, r.1)
+            })
+            .collect();
+        values = fitted.iter().map(|x| x.0).collect();
+        let after_texels: f64 = fitted.iter().map(|x| x.1).sum();
+        // 2. the globals given the maps, on a sample of texels; kept if the total cost falls
+        let mut order: Vec<usize> = (0..texels.len()).collect();
+        order.shuffle(&mut rng);
+        order.truncate(req.global_texels);
+        let (_, new_set) = global_given_maps(samples, cfg, &set, &values, &members, &order, free)?;
+        let total_new = if new_set != set {
+            total_cost(samples, cfg, &new_set, &values, &members, free)?
+        } else {
+            f64::INFINITY
+        };
+        let before = *costs.last().expect("non-empty");
+        let now = if total_new < after_texels {
+            set = new_set;
+            total_new
+        } else {
+            after_texels
+        };
+        costs.push(now);
+        if round > 0 && before - now <= 1e-6 * before {
+            converged = true;
+            break;
+        }
+    }
+    bar.finish_and_clear();
+    if !converged {
+        warnings.push(format!(
+            "map recovery: the total cost was still falling after {} rounds ([maps] rounds); the maps may not be final",
+            req.rounds
+        ));
+    }
+    // a last per-texel pass at the final globals, keeping every texel's other minima
+    let model = problem::model_for(
+        &set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        None,
+    );
+    let g = Globals {
+        model: model.as_ref(),
+        has_topology: set.rung.has_topology(),
+        h_max: max_height(set.shape_value(Shape::Spacing)),
+        tied: set.substrate_tied,
+        channels,
+        albedo: globals_albedo(&set),
+    };
+    let problems = build(&values);
+    let refit: Vec<TexelFit> = problems
+        .par_iter()
+        .zip(values.par_iter())
+        .map(|(p, v)| p.fit(&g, v))
+        .collect();
+    values = refit.iter().map(|r| r.0).collect();
+    // final globals with uncertainties (conditional on the maps), over all pixels
+    let (global, variance) = final_global(samples, cfg, &set, &values, &members, free, quiet)?;
+    let problems = build(&values);
+    let mut ambiguous = 0;
+    let (std_errors, residual): (Vec<TexelValues>, Vec<f64>) = problems
+        .par_iter()
+        .zip(refit.par_iter())
+        .map(|(p, (v, cost, others))| {
+            let mut se = p.std_errors(&g, v, variance);
+            // another minimum as good as the best within the noise: the images do not decide
+            // between them, and the standard error says so
+            for (w, c) in others {
+                if c - cost <= AMBIGUITY_DELTA * variance {
+                    if free.height {
+                        se.height = se.height.max((w.height - v.height).abs());
+                    }
+                    if free.psi {
+                        se.psi = se.psi.max(wrap_azimuth(w.psi - v.psi).abs());
+                    }
+                }
+            }
+            (se, p.relative_residual(&g, v))
+        })
+        .unzip();
+    for (v, cost, others) in &refit {
+        let _ = v;
+        if others
+            .iter()
+            .any(|(_, c)| c - cost <= AMBIGUITY_DELTA * variance)
+        {
+            ambiguous += 1;
+        }
+    }
+    if ambiguous > 0 {
+        warnings.push(format!(
+            "{ambiguous} of {} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (distinct height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima",
+            texels.len()
+        ));
+    }
+    let undetermined = std_errors
+        .iter()
+        .filter(|s| (free.height && !(s.height < g.h_max)) || (free.psi && !(s.psi < 90.0)))
+        .count();
+    if undetermined > 0 {
+        warnings.push(format!(
+            "{undetermined} of {} texels have a mapped height or fibre azimuth the images leave undetermined (standard error above its whole range); more light and view directions, or [maps] smoothness, would fix them",
+            texels.len()
+        ));
+    }
+    Ok(MapOutcome {
+        global,
+        maps: TexelMaps {
+            width,
+            height,
+            texels,
+            values,
+            std_errors,
+            residual,
+            channels,
+        },
+        costs,
+        residual_variance: variance,
+        warnings,
+    })
+}
+
+/// Copies of the samples of `texel_ids` with each texel's azimuth (when mapped), and the
+/// per-sample map values for a [`FitProblem`].
+fn mapped_samples(
+    samples: &Samples,
+    values: &[TexelValues],
+    members: &[Vec<usize>],
+    texel_ids: &[usize],
+    free: Free,
+) -> (Vec<Sample>, SampleMaps) {
+    let mut out = Vec::new();
+    let (mut hs, mut kd, mut ks) = (Vec::new(), Vec::new(), Vec::new());
+    for &t in texel_ids {
+        for &i in &members[t] {
+            let mut s = samples.samples[i].clone();
+            if free.psi {
+                s.fibre_azimuth = Some(values[t].psi.to_radians());
+            }
+            out.push(s);
+            hs.push(values[t].height);
+            kd.push(values[t].kd);
+            ks.push(values[t].ks);
+        }
+    }
+    let mut maps = SampleMaps::default();
+    if free.height {
+        maps.height = Some(hs);
+    }
+    if free.kd {
+        maps.albedo[0] = Some(kd);
+    }
+    if free.ks {
+        maps.albedo[1] = Some(ks);
+    }
+    (out, maps)
+}
+
+fn problem_on<'a>(
+    cfg: &FitConfig,
+    set: &ParamSet,
+    subset: &'a [Sample],
+    maps: SampleMaps,
+) -> FitProblem<'a> {
+    FitProblem::new(
+        subset.iter().collect(),
+        set.clone(),
+        cfg.metric,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        None,
+        cfg.optimizer.separable,
+    )
+    .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
+    .with_sample_maps(Arc::new(maps))
+}
+
+/// Stage 2: LM from the current globals on the texels `order`, maps fixed.
+fn global_given_maps(
+    samples: &Samples,
+    cfg: &FitConfig,
+    set: &ParamSet,
+    values: &[TexelValues],
+    members: &[Vec<usize>],
+    order: &[usize],
+    free: Free,
+) -> Result<(f64, ParamSet)> {
+    let (subset, maps) = mapped_samples(samples, values, members, order, free);
+    let p = problem_on(cfg, set, &subset, maps);
+    if p.dim() == 0 {
+        return Ok((f64::NAN, set.clone()));
+    }
+    let bar = indicatif::ProgressBar::hidden();
+    let (theta, cost, _) = polish::run_lm(
+        &p,
+        set,
+        p.theta_of(set),
+        cfg.optimizer.max_iterations,
+        cfg.optimizer.tolerance,
+        &bar,
+    )?;
+    let mut new = p.set_at(&theta, set);
+    if p.separable {
+        let cols = p.columns(&new)?;
+        p.solve_albedos(&cols, &mut new);
+    }
+    Ok((cost, new))
+}
+
+/// Sum of squared weighted residuals over every pixel at `set` and the maps.
+fn total_cost(
+    samples: &Samples,
+    cfg: &FitConfig,
+    set: &ParamSet,
+    values: &[TexelValues],
+    members: &[Vec<usize>],
+    free: Free,
+) -> Result<f64> {
+    let all: Vec<usize> = (0..members.len()).collect();
+    let (subset, maps) = mapped_samples(samples, values, members, &all, free);
+    let p = problem_on(cfg, set, &subset, maps);
+    let cols = p.columns(set)?;
+    Ok(p.residuals(&cols, set).norm_squared())
+}
+
+/// The global outcome at `set` given the maps, over all pixels, and the residual variance per
+/// pixel and channel with every texel's unknowns counted.
+fn final_global(
+    samples: &Samples,
+    cfg: &FitConfig,
+    set: &ParamSet,
+    values: &[TexelValues],
+    members: &[Vec<usize>],
+    free: Free,
+    _quiet: bool,
+) -> Result<(FitOutcome, f64)> {
+    let all: Vec<usize> = (0..members.len()).collect();
+    let (subset, maps) = mapped_samples(samples, values, members, &all, free);
+    let p = problem_on(cfg, set, &subset, maps);
+    let view = Samples {
+        samples: subset.clone(),
+        channels: samples.channels,
+        kind: samples.kind,
+        source: samples.source.clone(),
+        dropped: samples.dropped.clone(),
+        skipped_examples: samples.skipped_examples.clone(),
+        image_size: samples.image_size,
+    };
+    let cost = {
+        let cols = p.columns(set)?;
+        p.residuals(&cols, set).norm_squared()
+    };
+    let mut outcome =
+        super::finish::finish(&p, &view, set.channels, &[(set.clone(), cost)], vec![])?;
+    let per_texel = usize::from(free.height)
+        + usize::from(free.psi)
+        + set.channels * (usize::from(free.kd) + usize::from(free.ks));
+    let n = p.residual_count();
+    let params = per_texel * members.len() + p.dim();
+    if n <= params {
+        bail!(
+            "--maps: {n} pixel values cannot determine {params} unknowns ({per_texel} per texel and {} globals); use more images",
+            p.dim()
+        );
+    }
+    let variance = cost / (n - params) as f64;
+    outcome.warnings.push(format!(
+        "the global uncertainties are conditional on the recovered maps (held fixed); per-texel standard errors use the residual variance {variance:.4e} over {n} pixel values less {params} unknowns"
+    ));
+    // the outcome's fitted values follow the subset order; put them back in sample order
+    let mut fitted = vec![[0.0; 3]; samples.samples.len()];
+    let mut k = 0;
+    for m in members {
+        for &i in m {
+            fitted[i] = outcome.fitted[k];
+            k += 1;
+        }
+    }
+    outcome.fitted = fitted;
+    Ok((outcome, variance))
+}

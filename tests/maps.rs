@@ -1,0 +1,237 @@
+//! `fibrefit fit CAPTURE --maps DIR`: per-texel maps recovered from a small synthetic capture
+//! whose maps are known, with honest standard errors; requests the rung cannot honour refused.
+
+use assert_cmd::Command;
+use fibrefit::load::image_io;
+use fibrefit::model::topology::TopologyMap;
+use std::path::Path;
+
+fn fibrefit() -> Command {
+    Command::cargo_bin("fibrefit").expect("binary built")
+}
+
+const SYNTH: &str = r#"
+model = "varying-topology"
+[params]
+kd = 0.4
+ks = 0.3
+exponent = 40
+spacing = 2.0
+height = 0.9
+map_scale = 0.6
+fibre_azimuth_deg = 0
+[topology_map]
+width = 24
+height = 24
+seed = 3
+[capture]
+width = 24
+height = 24
+size_mm = [20.0, 20.0]
+format = "exr"
+tangent = { from_deg = -30, to_deg = 40 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 30, phi_deg = 110, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 0, phi_deg = 0 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 60, phi_deg = 100, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 30, phi_deg = 290 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 45, phi_deg = 20, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 45, phi_deg = 200 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 70, phi_deg = 300, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 20, phi_deg = 110 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 50, phi_deg = 180, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 50, phi_deg = 0 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 20, phi_deg = 200, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 60, phi_deg = 20 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 65, phi_deg = 240, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 40, phi_deg = 60 }
+[[capture.images]]
+light = { type = "directional", theta_deg = 40, phi_deg = 330, irradiance = 1.0 }
+camera = { type = "orthographic", theta_deg = 55, phi_deg = 150 }
+[noise]
+relative = 0.01
+seed = 5
+"#;
+
+const FIT: &str = r#"
+model = "varying-topology"
+metric = "linear"
+seed = 1
+[parameters]
+kd = { value = 0.5 }
+ks = { value = 0.2 }
+exponent = { value = 20, min = 1, max = 1000 }
+spacing = { value = 2.0, vary = false }
+height = { value = 0.8 }
+fibre_azimuth_deg = { value = 0 }
+[maps]
+height = true
+fibre_azimuth = true
+kd = true
+rounds = 25
+"#;
+
+/// A synthetic capture in `dir`, and a copy of its capture TOML without the maps (the unknowns).
+fn capture(dir: &Path) -> std::path::PathBuf {
+    std::fs::write(dir.join("synth.toml"), SYNTH).unwrap();
+    fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("d"), true).unwrap();
+    let text = std::fs::read_to_string(dir.join("d/capture.toml")).unwrap();
+    let blind: String = text
+        .lines()
+        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(dir.join("d/blind.toml"), blind).unwrap();
+    dir.join("d/blind.toml")
+}
+
+fn sorted(mut v: Vec<f64>) -> Vec<f64> {
+    v.sort_by(f64::total_cmp);
+    v
+}
+
+#[test]
+fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let blind = capture(dir.path());
+    std::fs::write(dir.path().join("fit.toml"), FIT).unwrap();
+    let out = dir.path().join("maps");
+    let run = fibrefit()
+        .arg("fit")
+        .arg(&blind)
+        .arg("--config")
+        .arg(dir.path().join("fit.toml"))
+        .arg("--out")
+        .arg(dir.path().join("r.json"))
+        .arg("--maps")
+        .arg(&out)
+        .arg("-q")
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let read = |n: &str| image_io::read(&out.join(n), None, None).unwrap();
+    let (h, h_se, p, p_se) = (
+        read("height.exr"),
+        read("height_std_error.exr"),
+        read("fibre_azimuth.exr"),
+        read("fibre_azimuth_std_error.exr"),
+    );
+    let (kd, kd_se) = (read("kd.exr"), read("kd_std_error.exr"));
+    assert!(out.join("residual.exr").exists());
+    let topo = TopologyMap::load(&dir.path().join("d/topology.png")).unwrap();
+    let tan = TopologyMap::load_as(&dir.path().join("d/tangent.png"), "tangent map").unwrap();
+    let (mut zh, mut zp, mut zk) = (vec![], vec![], vec![]);
+    let (mut eh, mut ep) = (0.0, 0.0);
+    for y in 0..24 {
+        for x in 0..24 {
+            let th = 0.9 + 0.6 * (2.0 * topo.texel(x, y) - 1.0);
+            let tp = -90.0 + 180.0 * tan.texel(x, y);
+            let dh = h.pixel(x, y)[0] as f64 - th;
+            let dp = (p.pixel(x, y)[0] as f64 - tp + 90.0).rem_euclid(180.0) - 90.0;
+            eh += dh * dh;
+            ep += dp * dp;
+            zh.push((dh / h_se.pixel(x, y)[0] as f64).abs());
+            zp.push((dp / p_se.pixel(x, y)[0] as f64).abs());
+            zk.push(((kd.pixel(x, y)[0] as f64 - 0.4) / kd_se.pixel(x, y)[0] as f64).abs());
+        }
+    }
+    let n = 576.0;
+    let (rms_h, rms_p) = ((eh / n).sqrt(), (ep / n).sqrt());
+    eprintln!("rms error: H {rms_h:.4} fibre radii, psi {rms_p:.3} deg");
+    assert!(rms_h < 0.1 && rms_p < 1.5, "H {rms_h}, psi {rms_p}");
+    // honest standard errors: |error| / se behaves like |N(0, 1)| for the bulk of the texels
+    for (name, z) in [("H", zh), ("psi", zp), ("kd", zk)] {
+        let z = sorted(z);
+        let median = z[z.len() / 2];
+        let within = z.iter().filter(|x| **x <= 3.0).count() as f64 / z.len() as f64;
+        eprintln!("{name}: median |z| {median:.2}, within 3 se {within:.3}");
+        assert!((0.4..=1.1).contains(&median), "{name}: median |z| {median}");
+        assert!(within >= 0.95, "{name}: {within} within 3 se");
+    }
+    // the result names the maps with their units; the globals are recovered too
+    let r: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.path().join("r.json")).unwrap()).unwrap();
+    assert_eq!(r["maps"]["maps"]["height"]["file"], "height.exr");
+    assert!(r["maps"]["maps"]["height"]["unit"]
+        .as_str()
+        .unwrap()
+        .contains("fibre radii"));
+    assert!(r["maps"]["maps"]["fibre_azimuth"]["unit"]
+        .as_str()
+        .unwrap()
+        .contains("degrees"));
+    let e = &r["parameters"]["exponent"];
+    let (v, se) = (
+        e["value"].as_f64().unwrap(),
+        e["std_error"].as_f64().unwrap(),
+    );
+    assert!((v - 40.0).abs() < 5.0 * se + 0.2, "exponent {v} +/- {se}");
+}
+
+#[test]
+fn map_requests_the_rung_or_data_cannot_honour_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let capture = root.join("data_synthetic/loose/capture.toml");
+    let gonio = root.join("data_synthetic/silk/gonio.csv");
+    let cases = [
+        (
+            "model = \"lambert\"\n[maps]\nheight = true\n",
+            &capture,
+            "no fibre topology",
+        ),
+        (
+            "model = \"lambert\"\n[maps]\nfibre_azimuth = true\n",
+            &capture,
+            "no fibre direction",
+        ),
+        ("model = \"poulin-fournier\"\n", &capture, "requests no map"),
+        (
+            "model = \"poulin-fournier\"\n[maps]\nkd = true\n",
+            &gonio,
+            "needs an image capture",
+        ),
+        (
+            "model = \"poulin-fournier\"\n[maps]\nkd = true\nsmoothness = -1\n",
+            &capture,
+            "smoothness",
+        ),
+        (
+            "model = \"poulin-fournier\"\n[maps]\nkd = true\nsharpness = 1\n",
+            &capture,
+            "sharpness",
+        ),
+    ];
+    for (k, (cfg, data, says)) in cases.iter().enumerate() {
+        let c = dir.path().join(format!("c{k}.toml"));
+        std::fs::write(&c, cfg).unwrap();
+        let out = dir.path().join(format!("r{k}.json"));
+        let maps = dir.path().join(format!("maps{k}"));
+        let run = fibrefit()
+            .arg("fit")
+            .arg(data)
+            .arg("--config")
+            .arg(&c)
+            .arg("--out")
+            .arg(&out)
+            .arg("--maps")
+            .arg(&maps)
+            .args(["-q", "--stride", "4"])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&run.stderr);
+        assert_eq!(run.status.code(), Some(2), "case {k}: {err}");
+        assert!(err.contains(says), "case {k}: {err}");
+        assert!(!out.exists() && !maps.exists(), "case {k} wrote output");
+    }
+}
