@@ -192,6 +192,7 @@ fn best_case(
             v: Vec3::new(p.v.t, p.v.b, p.v.n),
             fibre_azimuth: None,
             map_value: None,
+            texel_height: None,
             value: [f; 3],
             sigma: None,
             weight: 1.0,

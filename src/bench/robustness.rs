@@ -186,6 +186,7 @@ pub fn case_samples(case: &Case, map: Option<&Path>, n: usize, seed: u64) -> Res
                 v,
                 fibre_azimuth: None,
                 map_value: None,
+                texel_height: None,
                 value: [noisy; 3],
                 sigma: Some([sigma; 3]),
                 weight: 1.0,

@@ -499,6 +499,7 @@ mod tests {
             v,
             fibre_azimuth: None,
             map_value: None,
+            texel_height: None,
             value: [0.2, 0.4, 0.6],
             sigma: None,
             weight: 1.0,

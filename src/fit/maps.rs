@@ -593,8 +593,8 @@ pub fn recover(
             let s = &samples.samples[m[0]];
             TexelValues {
                 height: s
-                    .map_value
-                    .map(|mv| topo.texel_height(mv, d))
+                    .texel_height
+                    .or(s.map_value.map(|mv| topo.texel_height(mv, d)))
                     .unwrap_or(topo.height),
                 psi: s.fibre_azimuth.map(|p| p.to_degrees()).unwrap_or(g_psi),
                 kd: galb[0],

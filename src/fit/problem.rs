@@ -368,13 +368,20 @@ impl<'a> FitProblem<'a> {
                             .basis_at_height(pair, hs[i].clamp(0.0, h_max))
                             .unwrap_or_default();
                     }
-                } else if has_topology && chunk.iter().any(|s| s.map_value.is_some()) {
+                } else if has_topology
+                    && chunk
+                        .iter()
+                        .any(|s| s.map_value.is_some() || s.texel_height.is_some())
+                {
                     for ((s, pair), b) in chunk.iter().zip(&pairs).zip(bases.iter_mut()) {
-                        *b = match s.map_value {
-                            Some(mv) if has_topology => m
-                                .basis_at_height(pair, topology.texel_height(mv, d))
-                                .unwrap_or_default(),
-                            _ => m.basis(pair),
+                        let h = match (s.texel_height, s.map_value) {
+                            (Some(h), _) => Some(h.clamp(0.0, h_max)),
+                            (None, Some(mv)) => Some(topology.texel_height(mv, d)),
+                            _ => None,
+                        };
+                        *b = match h {
+                            Some(h) => m.basis_at_height(pair, h).unwrap_or_default(),
+                            None => m.basis(pair),
                         };
                     }
                 } else {
@@ -1012,6 +1019,7 @@ mod nan_tests {
             v: direction_from_angles(0.5, 2.0),
             fibre_azimuth: None,
             map_value: None,
+            texel_height: None,
             value: [f64::NAN; 3],
             sigma: None,
             weight: 1.0,

@@ -398,6 +398,7 @@ mod tests {
             v,
             fibre_azimuth: None,
             map_value: None,
+            texel_height: None,
             value: [y; 3],
             sigma: None,
             weight: 1.0,

@@ -46,6 +46,7 @@ pub fn fit(
                 v: direction_from_angles(to.to_radians(), po.to_radians()),
                 fibre_azimuth: None,
                 map_value: None,
+                texel_height: None,
                 value,
                 sigma: None,
                 weight: 1.0,

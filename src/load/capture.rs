@@ -44,6 +44,15 @@ pub struct Swatch {
     /// Grayscale topology map (PNG 8/16-bit or EXR) registered to the image pixels.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<PathBuf>,
+    /// Float EXR of the texel height H in fibre radii per pixel (a recovered `height.exr`);
+    /// instead of `topology_map`. NaN texels are left out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub height_map: Option<PathBuf>,
+    /// Float EXR of the fibre azimuth psi in degrees per pixel (a recovered
+    /// `fibre_azimuth.exr`); instead of `tangent_map` or `fibre_azimuth_deg`. NaN texels are
+    /// left out.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fibre_azimuth_map: Option<PathBuf>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -321,8 +330,21 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
     if !(w_mm > 0.0 && h_mm > 0.0 && w_mm.is_finite() && h_mm.is_finite()) {
         bail!("{name}: swatch.size_mm must be two positive lengths in millimetres");
     }
-    if desc.swatch.fibre_azimuth_deg.is_some() && desc.swatch.tangent_map.is_some() {
-        bail!("{name}: give swatch.fibre_azimuth_deg or swatch.tangent_map, not both");
+    let sw = &desc.swatch;
+    if [
+        sw.fibre_azimuth_deg.is_some(),
+        sw.tangent_map.is_some(),
+        sw.fibre_azimuth_map.is_some(),
+    ]
+    .iter()
+    .filter(|x| **x)
+    .count()
+        > 1
+    {
+        bail!("{name}: give one of swatch.fibre_azimuth_deg, swatch.tangent_map and swatch.fibre_azimuth_map");
+    }
+    if sw.topology_map.is_some() && sw.height_map.is_some() {
+        bail!("{name}: give swatch.topology_map or swatch.height_map, not both");
     }
     if let Some(psi) = desc.swatch.fibre_azimuth_deg {
         if !(-90.0..=90.0).contains(&psi) {
@@ -372,6 +394,50 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
         }
     };
     let topology = load_map(&desc.swatch.topology_map, "topology map")?;
+    // maps in physical units (recovered by `fit --maps`): (path, lowest, highest allowed)
+    let load_unit_map = |p: &Option<PathBuf>,
+                         what: &str,
+                         lo: f32,
+                         hi: f32|
+     -> Result<Option<LinearImage>> {
+        let Some(p) = p else { return Ok(None) };
+        let full = resolve(base, p);
+        let m = image_io::read(&full, None, None)?;
+        check_size(what, &full, (m.width, m.height), (w, h))?;
+        if m.channels != 1 {
+            bail!(
+                "{}: a {what} has one channel, this has {}",
+                full.display(),
+                m.channels
+            );
+        }
+        if let Some(i) = m
+            .data
+            .iter()
+            .position(|v| !v.is_nan() && !(lo..=hi).contains(v))
+        {
+            bail!(
+                "{}: texel ({}, {}) has value {}; {what} values must lie in [{lo}, {hi}] (NaN: no texel)",
+                full.display(),
+                i % w,
+                i / w,
+                m.data[i]
+            );
+        }
+        Ok(Some(m))
+    };
+    let height_map = load_unit_map(
+        &desc.swatch.height_map,
+        "height map (fibre radii)",
+        0.0,
+        20.0,
+    )?;
+    let azimuth_map = load_unit_map(
+        &desc.swatch.fibre_azimuth_map,
+        "fibre azimuth map (degrees)",
+        -90.0,
+        90.0,
+    )?;
     let tangent = load_map(&desc.swatch.tangent_map, "tangent map")?;
     let mask = load_map(&desc.swatch.mask, "mask")?;
     let view_maps: Vec<Option<LinearImage>> = desc
@@ -417,7 +483,12 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
                     continue;
                 }
                 let px = img.pixel(x, y);
-                if px.iter().any(|v| !v.is_finite()) {
+                let texel_height = height_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
+                let texel_psi = azimuth_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
+                if px.iter().any(|v| !v.is_finite())
+                    || texel_height.is_some_and(f64::is_nan)
+                    || texel_psi.is_some_and(f64::is_nan)
+                {
                     dropped.invalid += 1;
                     continue;
                 }
@@ -448,12 +519,14 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
                 samples.push(Sample {
                     l,
                     v,
-                    fibre_azimuth: match (&tangent, desc.swatch.fibre_azimuth_deg) {
-                        (Some(t), _) => Some((-90.0 + 180.0 * t.texel(x, y)).to_radians()),
-                        (None, Some(psi)) => Some(psi.to_radians()),
-                        (None, None) => None,
+                    fibre_azimuth: match (&tangent, desc.swatch.fibre_azimuth_deg, texel_psi) {
+                        (_, _, Some(psi)) => Some(psi.to_radians()),
+                        (Some(t), _, _) => Some((-90.0 + 180.0 * t.texel(x, y)).to_radians()),
+                        (None, Some(psi), _) => Some(psi.to_radians()),
+                        (None, None, None) => None,
                     },
                     map_value: topology.as_ref().map(|t| t.texel(x, y)),
+                    texel_height,
                     value,
                     sigma: None,
                     weight: 1.0,

@@ -617,6 +617,7 @@ fn parse_row(
         v: direction_from_angles(deg[2].to_radians(), deg[3].to_radians()),
         fibre_azimuth: None,
         map_value: None,
+        texel_height: None,
         value,
         sigma,
         weight,

@@ -130,6 +130,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
                 v,
                 fibre_azimuth: None,
                 map_value: None,
+                texel_height: None,
                 value,
                 sigma: None,
                 weight: 1.0,

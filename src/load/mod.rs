@@ -33,9 +33,15 @@ pub fn input_files(path: &Path) -> Vec<std::path::PathBuf> {
     if let (true, Ok(desc)) = (is_toml, capture::CaptureFile::load(path)) {
         let base = path.parent().unwrap_or(Path::new("."));
         let sw = &desc.swatch;
-        for p in [&sw.mask, &sw.tangent_map, &sw.topology_map]
-            .into_iter()
-            .flatten()
+        for p in [
+            &sw.mask,
+            &sw.tangent_map,
+            &sw.topology_map,
+            &sw.height_map,
+            &sw.fibre_azimuth_map,
+        ]
+        .into_iter()
+        .flatten()
         {
             out.push(base.join(p));
         }

@@ -416,6 +416,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
                 v,
                 fibre_azimuth: None,
                 map_value: None,
+                texel_height: None,
                 value: b.brdf(&l, &v),
                 sigma: None,
                 weight: 1.0,

@@ -16,6 +16,9 @@ pub struct Sample {
     /// Topology map value m in [0, 1] of this pixel's texel; `None` for a spot that averages
     /// over the map (goniometric samples).
     pub map_value: Option<f64>,
+    /// Height H (fibre radii) of this pixel's texel from a height map (a recovered
+    /// `height.exr`); wins over `map_value`.
+    pub texel_height: Option<f64>,
     /// BRDF per channel (grey data repeats channel 0), 1/sr.
     pub value: [f64; 3],
     /// Standard deviation of `value` per channel, when known.

@@ -53,7 +53,10 @@ impl Summary {
             channels: s.channels,
             brdf_range,
             has_sigma: s.samples.iter().any(|x| x.sigma.is_some()),
-            has_topology_map: s.samples.iter().any(|x| x.map_value.is_some()),
+            has_topology_map: s
+                .samples
+                .iter()
+                .any(|x| x.map_value.is_some() || x.texel_height.is_some()),
             has_tangent: s.samples.iter().any(|x| x.fibre_azimuth.is_some()),
             theta_light_hist: th.0,
             theta_view_hist: th.1,

@@ -4,7 +4,7 @@
 //!
 //! Config (example: `configs/synth_silk.toml`):
 //! - `model`: rung id; `[params]`: parameter names of MODEL.md §5 (relative paths resolve against
-//!   the config file);
+//!   the config file), or `params_file`: a parameter file or a fit's result JSON;
 //! - `[topology_map]`: a generated map (`width`, `height`, `seed`, `waves`) written as
 //!   `topology.png`; it becomes the params' `topology_map`;
 //! - `[gonio]`: `grid` (lists of `theta_i`, `phi_i`, `theta_o`, `phi_o` in degrees, all
@@ -12,8 +12,10 @@
 //!   `values = "brdf"` (default) or `"radiance"` with `irradiance`;
 //! - `[capture]`: `width`, `height`, `size_mm`, `format = "exr" | "png"` (PNG: 16-bit with
 //!   `encoding`), optional `tangent` (psi varying linearly across x from `from_deg` to `to_deg`,
-//!   written as `tangent.png`), and `[[capture.images]]` with a `light` and a `camera` as in
-//!   capture files;
+//!   written as `tangent.png`), optional `maps`: a directory of per-texel maps as `fit --maps`
+//!   writes them (`height.exr`, `fibre_azimuth.exr`, `kd.exr`, `ks.exr`; copied beside the
+//!   capture as its height and fibre azimuth maps), and `[[capture.images]]` with a `light` and a
+//!   `camera` as in capture files;
 //! - `[noise]`: `relative` (Gaussian, times the value), `floor` (additive Gaussian, 1/sr), `seed`.
 
 use crate::export::atomic::AtomicFile;
@@ -36,7 +38,10 @@ use std::path::{Path, PathBuf};
 #[serde(deny_unknown_fields)]
 pub struct SynthConfig {
     pub model: String,
+    /// The parameters inline, or (`params_file`) from a parameter file or a fit's result JSON.
+    #[serde(default)]
     pub params: RawParams,
+    pub params_file: Option<PathBuf>,
     pub topology_map: Option<MapSpec>,
     pub gonio: Option<GonioSpec>,
     pub capture: Option<CaptureSpec>,
@@ -111,7 +116,69 @@ pub struct CaptureSpec {
     pub format: String,
     pub encoding: Option<Encoding>,
     pub tangent: Option<TangentSpec>,
+    /// A directory of per-texel maps as `fit --maps` writes them (`height.exr` in fibre radii,
+    /// `fibre_azimuth.exr` in degrees, `kd.exr`, `ks.exr`; those present are used, NaN texels
+    /// take the global value), registered to the capture's pixels.
+    pub maps: Option<PathBuf>,
     pub images: Vec<SynthImage>,
+}
+
+/// Per-texel maps read from a `fit --maps` directory.
+struct UnitMaps {
+    height: Option<crate::load::image_io::LinearImage>,
+    psi: Option<crate::load::image_io::LinearImage>,
+    kd: Option<crate::load::image_io::LinearImage>,
+    ks: Option<crate::load::image_io::LinearImage>,
+}
+
+impl UnitMaps {
+    fn load(dir: &Path, w: usize, h: usize) -> Result<Self> {
+        if !dir.is_dir() {
+            bail!("capture.maps = {}: not a directory", dir.display());
+        }
+        let read = |name: &str| -> Result<Option<crate::load::image_io::LinearImage>> {
+            let p = dir.join(name);
+            if !p.exists() {
+                return Ok(None);
+            }
+            let m = crate::load::image_io::read(&p, None, None)?;
+            if (m.width, m.height) != (w, h) {
+                bail!(
+                    "{}: is {}x{} but the capture is {w}x{h}; maps must be registered to it",
+                    p.display(),
+                    m.width,
+                    m.height
+                );
+            }
+            Ok(Some(m))
+        };
+        let maps = Self {
+            height: read("height.exr")?,
+            psi: read("fibre_azimuth.exr")?,
+            kd: read("kd.exr")?,
+            ks: read("ks.exr")?,
+        };
+        if maps.height.is_none() && maps.psi.is_none() && maps.kd.is_none() && maps.ks.is_none() {
+            bail!(
+                "capture.maps = {}: no height.exr, fibre_azimuth.exr, kd.exr or ks.exr in it",
+                dir.display()
+            );
+        }
+        Ok(maps)
+    }
+
+    /// The map's value at (x, y), channel c (clamped to its channels), unless NaN.
+    fn at(
+        m: &Option<crate::load::image_io::LinearImage>,
+        x: usize,
+        y: usize,
+        c: usize,
+    ) -> Option<f64> {
+        let m = m.as_ref()?;
+        let px = m.pixel(x, y);
+        let v = px[c.min(px.len() - 1)] as f64;
+        (!v.is_nan()).then_some(v)
+    }
 }
 
 fn default_format() -> String {
@@ -160,6 +227,28 @@ impl SynthConfig {
             .with_context(|| format!("{}: cannot read", path.display()))?;
         let mut cfg: SynthConfig = toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        let base = path.parent().unwrap_or(Path::new("."));
+        if let Some(file) = cfg.params_file.clone() {
+            if toml::to_string(&cfg.params).map(|t| !t.trim().is_empty())? {
+                bail!("{}: give [params] or params_file, not both", path.display());
+            }
+            let file = if file.is_relative() {
+                base.join(file)
+            } else {
+                file
+            };
+            cfg.params = RawParams::load(&file)
+                .with_context(|| format!("{}: params_file", path.display()))?;
+            cfg.params.model = None;
+            // a fit's knobs carry the map it used, resolved already
+        }
+        if let Some(c) = &mut cfg.capture {
+            if let Some(m) = &c.maps {
+                if m.is_relative() {
+                    c.maps = Some(base.join(m));
+                }
+            }
+        }
         if let Some(map) = &cfg.params.topology_map {
             if map.is_relative() {
                 cfg.params.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
@@ -393,7 +482,8 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
     }
     let mut n_images = 0;
     if let Some(c) = &cfg.capture {
-        let written = render_capture(c, shading.as_ref(), &params, &noise, out_dir, quiet)?;
+        let tied = raw.substrate_albedo.is_none();
+        let written = render_capture(c, tied, shading.as_ref(), &params, &noise, out_dir, quiet)?;
         n_images = c.images.len();
         files.extend(written);
     }
@@ -555,8 +645,10 @@ fn render_gonio(
     Ok(out)
 }
 
+#[allow(clippy::too_many_arguments)]
 fn render_capture(
     c: &CaptureSpec,
+    substrate_tied: bool,
     shading: &dyn ShadingModel,
     p: &ModelParams,
     noise: &Noise,
@@ -618,7 +710,23 @@ fn render_capture(
             );
         }
     }
-    let channels = p.albedos.channels();
+    let unit_maps = match &c.maps {
+        Some(dir) => Some(UnitMaps::load(dir, w, h)?),
+        None => None,
+    };
+    if let Some(m) = &unit_maps {
+        if m.psi.is_some() && c.tangent.is_some() {
+            bail!("give capture.tangent or a fibre_azimuth.exr in capture.maps, not both");
+        }
+    }
+    let mut channels = p.albedos.channels();
+    if unit_maps.as_ref().is_some_and(|m| {
+        [&m.kd, &m.ks]
+            .iter()
+            .any(|x| x.as_ref().is_some_and(|i| i.channels == 3))
+    }) {
+        channels = 3;
+    }
     let bar = crate::progress::bar((c.images.len() * h) as u64, "rendering", quiet);
     let mut specs = Vec::new();
     for (k, img) in c.images.iter().enumerate() {
@@ -635,22 +743,39 @@ fn render_capture(
                         let (l, e) = capture::light_at(&img.light, &pos);
                         let v =
                             capture::view_at(&img.camera, &pos).expect("checked: not a view map");
-                        let psi = match &tangent_map {
-                            Some(t) => (-90.0 + 180.0 * t.texel(x, y)).to_radians(),
-                            None => psi_of(x),
-                        };
+                        let um = unit_maps.as_ref();
+                        let psi =
+                            match (&tangent_map, um.and_then(|m| UnitMaps::at(&m.psi, x, y, 0))) {
+                                (_, Some(deg)) => deg.to_radians(),
+                                (Some(t), None) => (-90.0 + 180.0 * t.texel(x, y)).to_radians(),
+                                (None, None) => psi_of(x),
+                            };
                         let pair = DirectionPair::new(&FibreFrame::from_azimuth(psi), &l, &v);
-                        let basis = match &topo_map {
-                            Some(m) if shading.id().has_topology() => shading
-                                .basis_at_height(
-                                    &pair,
-                                    p.topology.texel_height(m.texel(x, y), p.spacing),
-                                )
-                                .unwrap_or_default(),
+                        let height = um
+                            .and_then(|m| UnitMaps::at(&m.height, x, y, 0))
+                            .or(topo_map
+                                .as_ref()
+                                .map(|m| p.topology.texel_height(m.texel(x, y), p.spacing)));
+                        let basis = match height {
+                            Some(hh) if shading.id().has_topology() => {
+                                shading.basis_at_height(&pair, hh).unwrap_or_default()
+                            }
                             _ => shading.basis(&pair),
                         };
+                        let mut albedos = p.albedos;
+                        for ch in 0..3 {
+                            if let Some(k) = um.and_then(|m| UnitMaps::at(&m.kd, x, y, ch)) {
+                                albedos.diffuse[ch] = k;
+                                if substrate_tied {
+                                    albedos.substrate[ch] = k;
+                                }
+                            }
+                            if let Some(k) = um.and_then(|m| UnitMaps::at(&m.ks, x, y, ch)) {
+                                albedos.specular[ch] = k;
+                            }
+                        }
                         (
-                            [0, 1, 2].map(|ch| basis.brdf(&p.albedos, ch)),
+                            [0, 1, 2].map(|ch| basis.brdf(&albedos, ch)),
                             e * l.z.max(0.0),
                         )
                     })
@@ -703,18 +828,39 @@ fn render_capture(
         });
     }
     bar.finish_and_clear();
+    // recovered maps travel with the capture, as its height and fibre azimuth maps
+    let mut copy_map = |name: &str| -> Result<Option<PathBuf>> {
+        let Some(dir) = &c.maps else { return Ok(None) };
+        let src = dir.join(name);
+        if !src.exists() {
+            return Ok(None);
+        }
+        let bytes =
+            std::fs::read(&src).with_context(|| format!("{}: cannot read", src.display()))?;
+        write_file(&out_dir.join(name), &bytes)?;
+        files.push(name.to_string());
+        Ok(Some(PathBuf::from(name)))
+    };
+    let height_map = copy_map("height.exr")?;
+    let fibre_azimuth_map = copy_map("fibre_azimuth.exr")?;
     let capture_file = CaptureFile {
         swatch: Swatch {
             size_mm: c.size_mm,
             roi: None,
             mask: None,
-            fibre_azimuth_deg: if tangent_file.is_none() {
+            fibre_azimuth_deg: if tangent_file.is_none() && fibre_azimuth_map.is_none() {
                 Some(p.fibre_azimuth.to_degrees())
             } else {
                 None
             },
             tangent_map: tangent_file,
-            topology_map: topo_map.as_ref().map(|m| relative_to(&m.source, out_dir)),
+            topology_map: if height_map.is_none() {
+                topo_map.as_ref().map(|m| relative_to(&m.source, out_dir))
+            } else {
+                None
+            },
+            height_map,
+            fibre_azimuth_map,
         },
         images: specs,
     };
