@@ -283,3 +283,71 @@ fn map_requests_the_rung_or_data_cannot_honour_are_refused() {
         assert!(!out.exists() && !maps.exists(), "case {k} wrote output");
     }
 }
+
+#[test]
+fn eval_takes_map_values_per_query_row() {
+    // a row with a texel's map values equals the model with those values as its parameters
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, text: &str| {
+        let p = dir.path().join(name);
+        std::fs::write(&p, text).unwrap();
+        p
+    };
+    let base = "model = \"varying-topology\"\nspacing = 2.0\nexponent = 30\nfibre_azimuth_deg = 0\nheight = 0.5\nkd = 0.4\nks = 0.3\n";
+    let texel = "model = \"varying-topology\"\nspacing = 2.0\nexponent = 30\nfibre_azimuth_deg = 25\nheight = 0.8\nkd = [0.2, 0.3, 0.1]\nks = [0.5, 0.5, 0.5]\n";
+    let rows = "40,10,50,200\n30,90,30,90\n60,0,70,180\n";
+    let mapped: String = rows
+        .lines()
+        .map(|l| format!("{l},0.8,25,0.2,0.3,0.1,0.5\n"))
+        .collect();
+    let q_mapped = write(
+        "qm.csv",
+        &format!(
+            "theta_i,phi_i,theta_o,phi_o,height,fibre_azimuth_deg,kd_r,kd_g,kd_b,ks\n{mapped}"
+        ),
+    );
+    let q_plain = write("qp.csv", &format!("theta_i,phi_i,theta_o,phi_o\n{rows}"));
+    let run = |params: &Path, q: &Path| -> Vec<Vec<f64>> {
+        let o = fibrefit()
+            .arg("eval")
+            .arg("--params")
+            .arg(params)
+            .arg("--queries")
+            .arg(q)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        String::from_utf8(o.stdout)
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| {
+                let f: Vec<f64> = l.split(',').map(|x| x.parse().unwrap()).collect();
+                f[f.len() - 6..f.len() - 3].to_vec()
+            })
+            .collect()
+    };
+    let a = run(&write("base.toml", base), &q_mapped);
+    let b = run(&write("texel.toml", texel), &q_plain);
+    for (x, y) in a.iter().flatten().zip(b.iter().flatten()) {
+        assert!(
+            (x - y).abs() <= 1e-12 * y.abs().max(1e-12),
+            "{a:?} vs {b:?}"
+        );
+    }
+    // a texel column out of range is refused, naming the line
+    let bad = write(
+        "bad.csv",
+        "theta_i,phi_i,theta_o,phi_o,fibre_azimuth_deg\n30,0,30,180,120\n",
+    );
+    let o = fibrefit()
+        .arg("eval")
+        .arg("--params")
+        .arg(dir.path().join("base.toml"))
+        .arg("--queries")
+        .arg(&bad)
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("bad.csv:2"));
+}

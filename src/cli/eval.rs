@@ -38,8 +38,10 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
   model           model id (used when --model is not given)
 
 QUERIES: CSV with header theta_i,phi_i,theta_o,phi_o in degrees (theta from the normal, phi from
-the swatch x axis) and an optional `height` column: the H of one texel, which replaces the
-height distribution for that row (varying-topology and reference only).
+the swatch x axis) and optional per-texel columns (the values of recovered maps, `fit --maps`, at
+the row's texel): `height`, the H of one texel in fibre radii, which replaces the height
+distribution for that row (varying-topology and reference only); `fibre_azimuth_deg`, psi in
+[-90, 90] degrees; `kd`, `ks` (grey) or `kd_r,kd_g,kd_b`, `ks_r,ks_g,ks_b` (RGB) in [0, 1].
 
 OUTPUT: the query columns, then brdf,intensity (1/sr; I = f cos theta_i) for grey parameters or
 brdf_r,brdf_g,brdf_b,intensity_r,intensity_g,intensity_b for RGB ones.")]
@@ -116,6 +118,8 @@ pub fn run(args: &EvalArgs) -> Result<()> {
 
     let frame = FibreFrame::from_azimuth(params.fibre_azimuth);
     let albedos = params.albedos;
+    // a kd column replaces the substrate's albedo too when it shares kd
+    let tied = raw.substrate_albedo.is_none();
     let preview = (id == ModelId::Lambert
         && (params.preview.two_sided || params.preview.ambient > 0.0))
         .then_some(params.preview);
@@ -126,7 +130,20 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         .map(|q| {
             let l = direction_from_angles(q.theta_i, q.phi_i);
             let v = direction_from_angles(q.theta_o, q.phi_o);
-            let pair = DirectionPair::new(&frame, &l, &v);
+            let pair = match q.fibre_azimuth {
+                Some(psi) => DirectionPair::new(&FibreFrame::from_azimuth(psi), &l, &v),
+                None => DirectionPair::new(&frame, &l, &v),
+            };
+            let mut albedos = albedos;
+            if let Some(kd) = q.kd {
+                albedos.diffuse = kd;
+                if tied {
+                    albedos.substrate = kd;
+                }
+            }
+            if let Some(ks) = q.ks {
+                albedos.specular = ks;
+            }
             let basis = match q.height {
                 Some(h) => shading.basis_at_height(&pair, h).unwrap_or_default(),
                 None => shading.basis(&pair),
@@ -155,7 +172,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             queries.rows[bad].fields.join(",")
         );
     }
-    let channels = albedos.channels();
+    let rgb_columns = queries.rows.iter().any(|q| {
+        [q.kd, q.ks]
+            .iter()
+            .flatten()
+            .any(|a| a[0] != a[1] || a[1] != a[2])
+    });
+    let channels = if rgb_columns { 3 } else { albedos.channels() };
     match out.as_mut() {
         Some(file) => {
             eval_table::write(file.writer(), &queries, &values, channels)?;

@@ -1,5 +1,7 @@
 //! Direction queries for `fibrefit eval`: CSV with header `theta_i,phi_i,theta_o,phi_o`
-//! (degrees, MODEL.md §1) and an optional `height` column (H of one texel, in fibre radii).
+//! (degrees, MODEL.md §1) and optional per-texel columns, the values of recovered maps at the
+//! row's texel: `height` (H, fibre radii), `fibre_azimuth_deg` (psi, degrees), `kd` and `ks`
+//! (grey) or `kd_r,kd_g,kd_b` and `ks_r,ks_g,ks_b` (RGB).
 
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::Path;
@@ -13,6 +15,11 @@ pub struct Query {
     pub theta_o: f64,
     pub phi_o: f64,
     pub height: Option<f64>,
+    /// Radians.
+    pub fibre_azimuth: Option<f64>,
+    /// Per-channel albedo overrides of the row's texel.
+    pub kd: Option<[f64; 3]>,
+    pub ks: Option<[f64; 3]>,
     pub fields: Vec<String>,
     /// Line of the file (1: the header).
     pub line: u64,
@@ -26,6 +33,23 @@ pub struct Queries {
 }
 
 const ANGLES: [&str; 4] = ["theta_i", "phi_i", "theta_o", "phi_o"];
+/// Every column a query file may have.
+const COLUMNS: [&str; 14] = [
+    "theta_i",
+    "phi_i",
+    "theta_o",
+    "phi_o",
+    "height",
+    "fibre_azimuth_deg",
+    "kd",
+    "kd_r",
+    "kd_g",
+    "kd_b",
+    "ks",
+    "ks_r",
+    "ks_g",
+    "ks_b",
+];
 
 pub fn load(path: &Path) -> Result<Queries> {
     let file = std::fs::File::open(path)
@@ -45,18 +69,14 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
         .iter()
         .map(str::to_owned)
         .collect();
-    let mut index = [usize::MAX; 5];
+    let mut index = [usize::MAX; COLUMNS.len()];
     for (i, col) in header.iter().enumerate() {
-        let slot = match col.as_str() {
-            "theta_i" => 0,
-            "phi_i" => 1,
-            "theta_o" => 2,
-            "phi_o" => 3,
-            "height" => 4,
-            other => bail!(
-                "{name}:1: unknown column `{other}`; expected theta_i, phi_i, theta_o, phi_o and optionally height"
-            ),
-        };
+        let slot = COLUMNS.iter().position(|c| c == col).ok_or_else(|| {
+            anyhow!(
+                "{name}:1: unknown column `{col}`; expected theta_i, phi_i, theta_o, phi_o and optionally {}",
+                COLUMNS[4..].join(", ")
+            )
+        })?;
         if index[slot] != usize::MAX {
             bail!("{name}:1: column `{col}` appears twice");
         }
@@ -67,6 +87,24 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             bail!("{name}:1: missing column `{col}` (header must hold theta_i, phi_i, theta_o, phi_o, in degrees)");
         }
     }
+    for (grey, first) in [(6usize, 7usize), (10, 11)] {
+        let rgb = (first..first + 3)
+            .filter(|&k| index[k] != usize::MAX)
+            .count();
+        if index[grey] != usize::MAX && rgb > 0 {
+            bail!(
+                "{name}:1: give `{}` or `{}`, not both",
+                COLUMNS[grey],
+                COLUMNS[first..first + 3].join(",")
+            );
+        }
+        if rgb != 0 && rgb != 3 {
+            bail!(
+                "{name}:1: give all of {}",
+                COLUMNS[first..first + 3].join(", ")
+            );
+        }
+    }
     let mut rows = Vec::new();
     for record in reader.records() {
         let record = record.map_err(|e| {
@@ -75,7 +113,7 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
         })?;
         let line = record.position().map(|p| p.line()).unwrap_or(0);
         let number = |slot: usize| -> Result<f64> {
-            let col = if slot < 4 { ANGLES[slot] } else { "height" };
+            let col = COLUMNS[slot];
             let text = record.get(index[slot]).unwrap_or("");
             let v: f64 = text
                 .parse()
@@ -107,12 +145,41 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
         } else {
             None
         };
+        let fibre_azimuth = if index[5] != usize::MAX {
+            let psi = number(5)?;
+            if !(-90.0..=90.0).contains(&psi) {
+                bail!("{name}:{line}: column `fibre_azimuth_deg` = {psi} is outside [-90, 90] degrees");
+            }
+            Some(psi.to_radians())
+        } else {
+            None
+        };
+        let albedo = |grey: usize, first: usize| -> Result<Option<[f64; 3]>> {
+            let v = if index[grey] != usize::MAX {
+                [number(grey)?; 3]
+            } else if index[first] != usize::MAX {
+                [number(first)?, number(first + 1)?, number(first + 2)?]
+            } else {
+                return Ok(None);
+            };
+            if let Some(x) = v.iter().find(|x| !(0.0..=1.0).contains(*x)) {
+                bail!(
+                    "{name}:{line}: albedo column `{}` = {x} is outside [0, 1]",
+                    COLUMNS[grey]
+                );
+            }
+            Ok(Some(v))
+        };
+        let (kd, ks) = (albedo(6, 7)?, albedo(10, 11)?);
         rows.push(Query {
             theta_i: angles[0].to_radians(),
             phi_i: angles[1].to_radians(),
             theta_o: angles[2].to_radians(),
             phi_o: angles[3].to_radians(),
             height,
+            fibre_azimuth,
+            kd,
+            ks,
             fields: record.iter().map(str::to_owned).collect(),
             line,
         });
