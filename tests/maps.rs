@@ -351,3 +351,111 @@ fn eval_takes_map_values_per_query_row() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("bad.csv:2"));
 }
+
+#[test]
+fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let small = SYNTH.replace("width = 24\nheight = 24", "width = 12\nheight = 12");
+    std::fs::write(d.join("synth.toml"), small).unwrap();
+    fibrefit::synth::run(&d.join("synth.toml"), &d.join("d"), true).unwrap();
+    let capture = d.join("d/capture.toml");
+    let cfg = d.join("fit.toml");
+    std::fs::write(&cfg, FIT.replace("kd = true\n", "")).unwrap();
+    let fit = |extra: &[&str]| {
+        let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_fibrefit"));
+        c.arg("fit")
+            .arg(&capture)
+            .arg("--config")
+            .arg(&cfg)
+            .arg("-q");
+        c.args(extra);
+        c
+    };
+    let ok = |mut c: std::process::Command| {
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    };
+    let p = |x: &str| d.join(x).display().to_string();
+    ok(fit(&["--out", &p("single.json"), "--maps", &p("single")]));
+    ok(fit(&["--out", &p("g.json"), "--map-globals"]));
+    // the tiles as parallel local processes, as a job array would run them
+    let children: Vec<_> = (0..3)
+        .map(|i| {
+            fit(&[
+                "--globals",
+                &p("g.json"),
+                "--tile",
+                &format!("{i}/3"),
+                "--maps",
+                &p("tiles"),
+            ])
+            .spawn()
+            .unwrap()
+        })
+        .collect();
+    for mut c in children {
+        assert!(c.wait().unwrap().success());
+    }
+    let merge = |tiles: &str, globals: &str, out: &str| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_fibrefit"))
+            .args(["merge-maps", &p(tiles), "--globals", &p(globals)])
+            .args([
+                "--maps",
+                &p(&format!("{out}_maps")),
+                "--out",
+                &p(&format!("{out}.json")),
+                "-q",
+            ])
+            .output()
+            .unwrap()
+    };
+    let o = merge("tiles", "g.json", "merged");
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    for f in [
+        "height.exr",
+        "height_std_error.exr",
+        "fibre_azimuth.exr",
+        "fibre_azimuth_std_error.exr",
+        "residual.exr",
+    ] {
+        let a = std::fs::read(d.join("single").join(f)).unwrap();
+        let b = std::fs::read(d.join("merged_maps").join(f)).unwrap();
+        assert!(
+            a == b,
+            "{f} differs between the single run and the merged tiles"
+        );
+    }
+    // refused, writing nothing: a tile index out of range, a missing tile, other globals
+    let o = fit(&[
+        "--globals",
+        &p("g.json"),
+        "--tile",
+        "3/3",
+        "--maps",
+        &p("tiles"),
+    ])
+    .output()
+    .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("0 <= I < N"));
+    std::fs::create_dir(d.join("partial")).unwrap();
+    for i in [0, 2] {
+        std::fs::copy(
+            d.join(format!("tiles/tile_{i}_of_3.json")),
+            d.join(format!("partial/tile_{i}_of_3.json")),
+        )
+        .unwrap();
+    }
+    let o = merge("partial", "g.json", "never");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("tiles 1 of 3 are missing"));
+    let mut other: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(d.join("g.json")).unwrap()).unwrap();
+    other["parameters"]["exponent"]["value"] = serde_json::json!(41.0);
+    std::fs::write(d.join("other.json"), other.to_string()).unwrap();
+    let o = merge("tiles", "other.json", "never");
+    assert_eq!(o.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&o.stderr).contains("other globals"));
+    assert!(!d.join("never.json").exists() && !d.join("never_maps").exists());
+}

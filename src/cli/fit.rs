@@ -50,9 +50,20 @@ pub struct FitArgs {
     /// rung `auto` tries. Real felt and brushed cloth need it (reports/felt.md)
     #[arg(long)]
     pub fuzz: bool,
-    /// Result JSON for renderers (and `fibrefit eval --params`)
-    #[arg(long, value_name = "FILE")]
-    pub out: PathBuf,
+    /// Result JSON for renderers (and `fibrefit eval --params`) [not with --tile]
+    #[arg(long, value_name = "FILE", required_unless_present = "tile")]
+    pub out: Option<PathBuf>,
+    /// With [maps] in the config: only the first stage of map recovery, the global parameters
+    /// (from `[maps] global_texels` texels), written to --out for `--tile` runs
+    #[arg(long, conflicts_with_all = ["maps", "tile"])]
+    pub map_globals: bool,
+    /// Fit the per-texel maps of the rows of tile I of N (I from 0) given --globals, writing
+    /// DIR/tile_I_of_N.json for `fibrefit merge-maps` (use with --maps DIR)
+    #[arg(long, value_name = "I/N", requires_all = ["globals", "maps"])]
+    pub tile: Option<String>,
+    /// The result of `fit --map-globals` that the tiles share
+    #[arg(long, value_name = "FILE", requires = "tile")]
+    pub globals: Option<PathBuf>,
     /// Image captures: also recover the per-texel maps the config's [maps] section asks for
     /// (height, fibre_azimuth, kd, ks) and write them as EXRs into DIR
     #[arg(long, value_name = "DIR")]
@@ -155,7 +166,14 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let mut inputs = crate::load::input_files(&args.data);
     inputs.extend(args.config.iter().cloned());
     inputs.extend(cfg.knobs.topology_map.iter().cloned());
-    refuse_inputs(&args.out, &inputs, "--out")?;
+    if let Some(tile) = &args.tile {
+        return super::map_tiles::run_tile(args, cfg, tile, &inputs);
+    }
+    let out_path = args.out.clone().expect("clap: --out unless --tile");
+    refuse_inputs(&out_path, &inputs, "--out")?;
+    if args.map_globals {
+        crate::fit::maps::check_request(&cfg, &cfg.maps)?;
+    }
     if let Some(dir) = &args.report {
         check_report_dir(dir, "--report")?;
         refuse_inputs(&dir.join("report.md"), &inputs, "--report")?;
@@ -170,7 +188,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             refuse_inputs(&dir.join(f), &inputs, "--maps")?;
         }
     }
-    let mut out = AtomicFile::create(&args.out)?;
+    let mut out = AtomicFile::create(&out_path)?;
     let opts = args
         .load
         .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
@@ -190,17 +208,17 @@ pub fn run(args: &FitArgs) -> Result<()> {
         .as_ref()
         .map(|s| s.hints.clone())
         .unwrap_or_default();
-    let (outcome, recovered) = match &args.maps {
-        Some(_) => {
-            let mo = fit::maps::recover(&samples, &cfg, &cfg.maps, args.quiet || args.json)
+    let (mut outcome, stage_costs) = match args.maps.is_some() || args.map_globals {
+        true => {
+            let st = fit::maps::global_stage(&samples, &cfg, &cfg.maps, args.quiet || args.json)
                 .with_context(|| {
                     format!("recovering maps with {} from {}", id, args.data.display())
                 })?;
-            let mut global = mo.global;
-            global.warnings.extend(mo.warnings.iter().cloned());
-            (global, Some((mo.maps, mo.costs, mo.residual_variance)))
+            let mut global = st.outcome;
+            global.warnings.extend(st.warnings.iter().cloned());
+            (global, Some(st.costs))
         }
-        None => (
+        false => (
             fit::fit_with_hints(&samples, &cfg, args.quiet || args.json, &hints)
                 .with_context(|| format!("fitting {} to {}", id, args.data.display()))?,
             None,
@@ -312,16 +330,46 @@ pub fn run(args: &FitArgs) -> Result<()> {
         report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
     }
     let mut result = result;
-    if let (Some(dir), Some((maps, costs, variance))) = (&args.maps, &recovered) {
-        let mut desc = crate::export::maps_out::write(dir, &cfg.maps.requested(), maps)?;
-        desc["method"] = serde_json::json!({
-            "rounds": costs.len() - 1,
-            "total_cost_per_round": costs,
-            "residual_variance": variance,
-            "smoothness": cfg.maps.smoothness,
-            "global_texels": cfg.maps.global_texels,
-        });
-        result.maps = Some(desc);
+    if let Some(costs) = &stage_costs {
+        let method = super::map_tiles::method(&cfg, costs);
+        if args.map_globals {
+            result.maps = Some(serde_json::json!({
+                "stage": "globals",
+                "requested": cfg.maps.requested(),
+                "method": method,
+            }));
+        } else if let Some(dir) = &args.maps {
+            // the texel stage takes the globals as the result states them, as tiles do
+            let globals = crate::fit::score::result_from_value(
+                &serde_json::to_value(&result)?,
+                "the global fit",
+                channels,
+            )?
+            .set;
+            let (w, h) = samples.image_size.unwrap_or((0, 0));
+            let part = fit::maps::texel_stage(
+                &samples,
+                &cfg,
+                &cfg.maps,
+                &globals,
+                (0, h as u32),
+                args.quiet || args.json,
+            )?;
+            let (maps, variance, warns) = fit::maps::finish_maps(
+                std::slice::from_ref(&part),
+                w,
+                h,
+                channels,
+                &cfg.maps,
+                outcome.statistics.free_parameters,
+            )?;
+            let mut desc = crate::export::maps_out::write(dir, &cfg.maps.requested(), &maps)?;
+            desc["method"] = method;
+            desc["method"]["residual_variance"] = serde_json::json!(variance);
+            result.maps = Some(desc);
+            result.warnings.extend(warns);
+            outcome.fitted = fit::maps::fitted_all(&samples, &cfg, &cfg.maps, &globals, &maps)?;
+        }
     }
     if let Some(dir) = &args.report {
         // the report is optional: its failure is a warning in the result, never the lost fit
@@ -347,7 +395,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         println!(
             "{}",
             serde_json::json!({
-                "model": id.as_str(), "out": args.out.display().to_string(), "samples": samples.samples.len(),
+                "model": id.as_str(), "out": out_path.display().to_string(), "samples": samples.samples.len(),
                 "rmse": s.rmse, "relative_rmse": s.relative_rmse, "reduced_chi_square": s.reduced_chi_square,
                 "iterations": outcome.iterations, "evaluations": outcome.evaluations,
                 "seconds": outcome.elapsed_seconds, "warnings": outcome.warnings.len()
@@ -355,7 +403,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         );
     } else if !args.quiet {
         print!("{report_text}");
-        eprintln!("wrote {}", args.out.display());
+        eprintln!("wrote {}", out_path.display());
     }
     if !args.quiet {
         for w in warnings

@@ -6,6 +6,7 @@ pub mod data;
 pub mod eval;
 pub mod fit;
 pub mod inspect;
+pub mod map_tiles;
 pub mod score;
 pub mod synth;
 
@@ -41,6 +42,8 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// Render synthetic measurements (gonio CSV, image captures) from known parameters.
     Synth(synth::SynthArgs),
+    /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
+    MergeMaps(map_tiles::MergeMapsArgs),
 }
 
 /// Parse `args` and run. Returns the process exit code (help and version print and return 0).
@@ -67,6 +70,7 @@ where
         Command::Score(args) => score::run(&args),
         Command::Synth(args) => synth::run(&args),
         Command::Bench(args) => bench::run(&args),
+        Command::MergeMaps(args) => map_tiles::run_merge(&args),
     }
 }
 

@@ -2,21 +2,25 @@
 //! (height H), the fibre direction psi and the albedos kd, ks per texel, beside the shared
 //! global parameters.
 //!
-//! The method alternates two fits until the total cost stops falling:
-//! 1. per texel, given the globals: the texel's mapped values from its own pixels (one per
-//!    image). The nonlinear ones (H in [0, H_max(d)], psi over its period) start from a grid
-//!    (9 heights x 12 azimuths, and the current values) and are polished by a damped
-//!    Gauss–Newton; the mapped albedos are solved linearly (bounded to [0, 1]) at every step;
-//! 2. the globals given the maps: the usual bounded LM from the current globals on a seeded
-//!    sample of texels (`[maps] global_texels`), the mapped parameters held fixed; the new globals
-//!    are kept only if they lower the cost over all texels.
+//! Two stages:
+//! 1. [`global_stage`]: on a seeded sample of texels (`[maps] global_texels`), alternate (a) per
+//!    texel, given the globals, the texel's mapped values from its own pixels (one per image):
+//!    the nonlinear ones (H in [0, H_max(d)], psi over its period) from a grid (17 heights x 12
+//!    azimuths), the best grid minima and the current values each polished by a compass search
+//!    (the cost is kinked in H where occlusion changes) and damped Gauss–Newton, the mapped
+//!    albedos solved linearly (bounded to [0, 1]) at every step; (b) the globals given the maps,
+//!    the usual bounded LM with the mapped parameters held fixed, kept only if the cost falls.
+//!    Each keeps the current values unless it finds a lower cost, so the cost never rises.
+//! 2. [`texel_stage`]: every texel as in (a), independently, from the globals' values (with the
+//!    smoothness prior: Jacobi sweeps with the neighbours' previous values), over any band of
+//!    rows, so tiles can be fitted apart; [`finish_maps`] assembles the bands.
 //!
-//! Each stage starts from the current values and keeps them unless it finds a lower cost, so
-//! the total cost never rises. Standard errors per texel come from the texel's Jacobian over all
-//! its unknowns, scaled by the residual variance over all pixels (N - P degrees of freedom, P
-//! counting every texel's unknowns and the globals): honest when the model fits within the noise,
-//! large (or infinite) where the images leave a value undetermined. An optional smoothness prior
-//! (`[maps] smoothness`, off by default) pulls H and psi towards the mean of the 4 neighbours.
+//! Standard errors per texel come from the texel's Jacobian over all its unknowns, scaled by the
+//! residual variance over all pixels (N - P degrees of freedom, P counting every texel's unknowns
+//! and the globals): honest when the model fits within the noise, large (or infinite) where the
+//! images leave a value undetermined, and widened to cover any other minimum or grid value whose
+//! cost lies within [`AMBIGUITY_DELTA`] residual variances of the best. An optional smoothness
+//! prior (`[maps] smoothness`, off by default) pulls H and psi towards their neighbours' mean.
 
 use super::config::{FitConfig, MapsConfig};
 use super::parameters::{Component, ParamSet, Shape};
@@ -35,12 +39,14 @@ use std::sync::Arc;
 
 /// Grid minima a per-texel fit polishes (besides its start).
 pub const TEXEL_STARTS: usize = 3;
+/// Heights of the per-texel grid, from 0 to H_max.
+pub const HEIGHT_GRID: usize = 17;
 /// Another minimum of a texel within this many residual variances of the best makes the texel
 /// ambiguous: its standard errors grow to cover the distance between the minima.
-pub const AMBIGUITY_DELTA: f64 = 4.0;
+pub const AMBIGUITY_DELTA: f64 = 9.0;
 
 /// One texel's values (external units: H in fibre radii, psi in degrees).
-#[derive(Clone, Copy, Debug, Default, PartialEq)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct TexelValues {
     pub height: f64,
     pub psi: f64,
@@ -187,6 +193,19 @@ struct Globals<'m> {
     albedo: [[f64; 3]; 4],
 }
 
+impl<'m> Globals<'m> {
+    fn of(set: &ParamSet, model: &'m dyn ShadingModel, channels: usize) -> Self {
+        Self {
+            model,
+            has_topology: set.rung.has_topology(),
+            h_max: max_height(set.shape_value(Shape::Spacing)),
+            tied: set.substrate_tied,
+            channels,
+            albedo: globals_albedo(set),
+        }
+    }
+}
+
 /// One texel's problem.
 struct Texel<'a> {
     obs: Vec<&'a Sample>,
@@ -329,7 +348,9 @@ impl Texel<'_> {
             return (v0, c0, vec![]);
         }
         let hs: Vec<f64> = if self.free.height {
-            (0..9).map(|i| g.h_max * i as f64 / 8.0).collect()
+            (0..HEIGHT_GRID)
+                .map(|i| g.h_max * i as f64 / (HEIGHT_GRID - 1) as f64)
+                .collect()
         } else {
             vec![f64::NAN]
         };
@@ -382,6 +403,25 @@ impl Texel<'_> {
         }
         minima.sort_by(|a, b| a.1.total_cmp(&b.1));
         let (best, best_cost) = minima.remove(0);
+        // the grid's profiles (best over the other value at each grid height, and at each grid
+        // azimuth) count as other candidates too: a flat profile is an undetermined value even
+        // where it has no separate minimum
+        for i in 0..nh {
+            if let Some(k) =
+                (0..np).min_by(|a, b| grid[i * np + a].0.total_cmp(&grid[i * np + b].0))
+            {
+                let (c, v) = grid[i * np + k];
+                minima.push((v, c));
+            }
+        }
+        for j in 0..np {
+            if let Some(i) =
+                (0..nh).min_by(|a, b| grid[a * np + j].0.total_cmp(&grid[b * np + j].0))
+            {
+                let (c, v) = grid[i * np + j];
+                minima.push((v, c));
+            }
+        }
         (best, best_cost, minima)
     }
 
@@ -396,6 +436,40 @@ impl Texel<'_> {
     ) -> (TexelValues, f64) {
         let (mut best, mut best_cost) = (v, c);
         let mut best_u = self.nonlinear(&best);
+        // a compass search first: occlusion makes the cost kinked in H, where Gauss–Newton
+        // stalls; halving steps from a sixteenth of H_max and 7.5 degrees
+        let mut steps: Vec<f64> = (0..best_u.len())
+            .map(|k| {
+                if self.free.height && k == 0 {
+                    g.h_max / 16.0
+                } else {
+                    7.5
+                }
+            })
+            .collect();
+        let floor: Vec<f64> = steps.iter().map(|s| s * 1e-4).collect();
+        for _ in 0..400 {
+            if steps.iter().zip(&floor).all(|(s, f)| s <= f) {
+                break;
+            }
+            let mut moved = false;
+            for k in 0..best_u.len() {
+                for sign in [1.0, -1.0] {
+                    let mut u = best_u.clone();
+                    u[k] += sign * steps[k];
+                    let (c, v) = self.cost_at(g, start, &u);
+                    if c < best_cost {
+                        (best_cost, best) = (c, v);
+                        best_u = self.nonlinear(&v);
+                        moved = true;
+                        break;
+                    }
+                }
+            }
+            if !moved {
+                steps.iter_mut().for_each(|s| *s *= 0.5);
+            }
+        }
         let mut lambda = 1e-3;
         for _ in 0..30 {
             let (r0, _) = {
@@ -557,91 +631,93 @@ fn globals_albedo(set: &ParamSet) -> [[f64; 3]; 4] {
     a
 }
 
-/// Recover the maps `req` asks for, with the globals of `cfg`.
-pub fn recover(
-    samples: &Samples,
-    cfg: &FitConfig,
-    req: &MapsConfig,
-    quiet: bool,
-) -> Result<MapOutcome> {
-    check_request(cfg, req)?;
-    let (width, height, texels, members) = group(samples)?;
-    if cfg.metric != super::config::Metric::Linear {
-        bail!("--maps fits captures with the linear metric; set metric = \"linear\"");
-    }
-    let free = Free {
-        height: req.height,
-        psi: req.fibre_azimuth,
-        kd: req.kd,
-        ks: req.ks,
-    };
-    // 0. the global fit with the capture's own inputs (the maps' starting point)
-    let first = super::fit(samples, cfg, quiet)?;
-    let mut set = fix_mapped(&first.set, req);
-    let channels = first.channels;
-    let d = set.shape_value(Shape::Spacing);
-    let topo = crate::model::topology::Topology {
-        height: set.shape_value(Shape::Height),
-        map_scale: set.shape_value(Shape::MapScale),
-        map: None,
-    };
-    let g_psi = set.shape_value(Shape::Azimuth);
-    let galb = globals_albedo(&set);
-    let mut values: Vec<TexelValues> = members
-        .iter()
-        .map(|m| {
-            let s = &samples.samples[m[0]];
-            TexelValues {
-                height: s
-                    .texel_height
-                    .or(s.map_value.map(|mv| topo.texel_height(mv, d)))
-                    .unwrap_or(topo.height),
-                psi: s.fibre_azimuth.map(|p| p.to_degrees()).unwrap_or(g_psi),
-                kd: galb[0],
-                ks: galb[1],
-            }
-        })
-        .collect();
-    let scale_of = |s: &Sample| -> [f64; 3] {
-        let mut k = [0.0; 3];
-        for (c, kc) in k.iter_mut().enumerate() {
-            *kc = match s.sigma {
-                Some(sig) => 1.0 / sig[c],
-                None => s.weight.sqrt(),
-            };
-        }
-        k
-    };
-    let index: std::collections::HashMap<(u32, u32), usize> =
-        texels.iter().enumerate().map(|(i, t)| (*t, i)).collect();
-    let neighbours: Vec<Vec<usize>> = texels
-        .iter()
-        .map(|&(x, y)| {
-            [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
-                .iter()
-                .filter_map(|(dx, dy)| {
-                    let (nx, ny) = (x as i64 + dx, y as i64 + dy);
-                    (nx >= 0 && ny >= 0)
-                        .then(|| index.get(&(nx as u32, ny as u32)).copied())
-                        .flatten()
-                })
-                .collect()
-        })
-        .collect();
-    let build = |values: &[TexelValues]| -> Vec<Texel> {
-        members
+/// Texels with pixels, their sample indices and neighbours, and the start values from the
+/// globals (or the capture's input maps).
+struct Layout {
+    width: usize,
+    height: usize,
+    texels: Vec<(u32, u32)>,
+    members: Vec<Vec<usize>>,
+    neighbours: Vec<Vec<usize>>,
+}
+
+impl Layout {
+    fn new(samples: &Samples) -> Result<Self> {
+        let (width, height, texels, members) = group(samples)?;
+        let index: std::collections::HashMap<(u32, u32), usize> =
+            texels.iter().enumerate().map(|(i, t)| (*t, i)).collect();
+        let neighbours = texels
             .iter()
-            .enumerate()
-            .map(|(t, m)| {
-                let prior = (req.smoothness > 0.0 && !neighbours[t].is_empty()).then(|| {
-                    let n = neighbours[t].len() as f64;
-                    let hm = neighbours[t].iter().map(|&j| values[j].height).sum::<f64>() / n;
+            .map(|&(x, y)| {
+                [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+                    .iter()
+                    .filter_map(|(dx, dy)| {
+                        let (nx, ny) = (x as i64 + dx, y as i64 + dy);
+                        (nx >= 0 && ny >= 0)
+                            .then(|| index.get(&(nx as u32, ny as u32)).copied())
+                            .flatten()
+                    })
+                    .collect()
+            })
+            .collect();
+        Ok(Self {
+            width,
+            height,
+            texels,
+            members,
+            neighbours,
+        })
+    }
+
+    /// Start values of every texel: the capture's own maps where it has them, else the globals.
+    fn start_values(&self, samples: &Samples, set: &ParamSet) -> Vec<TexelValues> {
+        let d = set.shape_value(Shape::Spacing);
+        let topo = crate::model::topology::Topology {
+            height: set.shape_value(Shape::Height),
+            map_scale: set.shape_value(Shape::MapScale),
+            map: None,
+        };
+        let g_psi = set.shape_value(Shape::Azimuth);
+        let galb = globals_albedo(set);
+        self.members
+            .iter()
+            .map(|m| {
+                let s = &samples.samples[m[0]];
+                TexelValues {
+                    height: s
+                        .texel_height
+                        .or(s.map_value.map(|mv| topo.texel_height(mv, d)))
+                        .unwrap_or(topo.height),
+                    psi: s.fibre_azimuth.map(|p| p.to_degrees()).unwrap_or(g_psi),
+                    kd: galb[0],
+                    ks: galb[1],
+                }
+            })
+            .collect()
+    }
+
+    /// The per-texel problems of `ids`, with the smoothness prior from `values` when on.
+    fn problems<'a>(
+        &self,
+        samples: &'a Samples,
+        ids: &[usize],
+        values: &[TexelValues],
+        free: Free,
+        smoothness: f64,
+    ) -> Vec<Texel<'a>> {
+        ids.iter()
+            .map(|&t| {
+                let m = &self.members[t];
+                let nb = &self.neighbours[t];
+                let prior = (smoothness > 0.0 && !nb.is_empty()).then(|| {
+                    let n = nb.len() as f64;
+                    let hm = nb.iter().map(|&j| values[j].height).sum::<f64>() / n;
                     // circular mean of the axial azimuths
-                    let (sx, sy) = neighbours[t].iter().fold((0.0, 0.0), |(a, b), &j| {
+                    let (sx, sy) = nb.iter().fold((0.0, 0.0), |(a, b), &j| {
                         let th = (2.0 * values[j].psi).to_radians();
                         (a + th.cos(), b + th.sin())
                     });
-                    (req.smoothness, hm, sy.atan2(sx).to_degrees() / 2.0)
+                    (smoothness, hm, sy.atan2(sx).to_degrees() / 2.0)
                 });
                 Texel {
                     obs: m.iter().map(|&i| &samples.samples[i]).collect(),
@@ -651,14 +727,92 @@ pub fn recover(
                 }
             })
             .collect()
+    }
+}
+
+fn scale_of(s: &Sample) -> [f64; 3] {
+    let mut k = [0.0; 3];
+    for (c, kc) in k.iter_mut().enumerate() {
+        *kc = match s.sigma {
+            Some(sig) => 1.0 / sig[c],
+            None => s.weight.sqrt(),
+        };
+    }
+    k
+}
+
+fn free_of(req: &MapsConfig) -> Free {
+    Free {
+        height: req.height,
+        psi: req.fibre_azimuth,
+        kd: req.kd,
+        ks: req.ks,
+    }
+}
+
+/// Unknowns per texel.
+fn per_texel_unknowns(free: Free, channels: usize) -> usize {
+    usize::from(free.height)
+        + usize::from(free.psi)
+        + channels * (usize::from(free.kd) + usize::from(free.ks))
+}
+
+/// Stage 1: the globals, from alternating fits on a seeded sample of texels.
+pub struct GlobalStage {
+    /// The global fit given the sample's maps (uncertainties conditional on them).
+    pub outcome: FitOutcome,
+    /// Cost over the sampled texels: the plain global fit's, then after each round.
+    pub costs: Vec<f64>,
+    pub warnings: Vec<String>,
+}
+
+/// Stage 1 of map recovery: the global parameters, alternating per-texel fits and the global
+/// LM on `[maps] global_texels` seeded texels until their cost stops falling.
+pub fn global_stage(
+    samples: &Samples,
+    cfg: &FitConfig,
+    req: &MapsConfig,
+    quiet: bool,
+) -> Result<GlobalStage> {
+    check_request(cfg, req)?;
+    if cfg.metric != super::config::Metric::Linear {
+        bail!("--maps fits captures with the linear metric; set metric = \"linear\"");
+    }
+    let layout = Layout::new(samples)?;
+    let free = free_of(req);
+    // the texels of the global stage, and the plain global fit on their pixels
+    let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x6d61_7073);
+    let mut chosen: Vec<usize> = (0..layout.texels.len()).collect();
+    chosen.shuffle(&mut rng);
+    chosen.truncate(req.global_texels);
+    chosen.sort_unstable();
+    let sub = Samples {
+        samples: chosen
+            .iter()
+            .flat_map(|&t| {
+                layout.members[t]
+                    .iter()
+                    .map(|&i| samples.samples[i].clone())
+            })
+            .collect(),
+        channels: samples.channels,
+        kind: samples.kind,
+        source: samples.source.clone(),
+        dropped: samples.dropped.clone(),
+        skipped_examples: vec![],
+        image_size: samples.image_size,
     };
-    let bar = crate::progress::bar((req.rounds * texels.len()) as u64, "maps", quiet);
+    let sub_layout = Layout::new(&sub)?;
+    let first = super::fit(&sub, cfg, quiet)?;
+    let mut set = fix_mapped(&first.set, req);
+    let mut values = sub_layout.start_values(&sub, &set);
+    let all: Vec<usize> = (0..sub_layout.texels.len()).collect();
+    let bar = crate::progress::bar(req.rounds as u64, "maps: globals", quiet);
     let mut costs = vec![first.statistics.chi_square];
     let mut warnings = Vec::new();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x6d61_7073);
     let mut converged = false;
     for round in 0..req.rounds {
-        // 1. per texel given the globals
+        // per texel given the globals
         let model = problem::model_for(
             &set,
             cfg.knobs.quadrature_order,
@@ -666,33 +820,23 @@ pub fn recover(
             cfg.knobs.azimuth_nodes,
             None,
         );
-        let g = Globals {
-            model: model.as_ref(),
-            has_topology: set.rung.has_topology(),
-            h_max: max_height(set.shape_value(Shape::Spacing)),
-            tied: set.substrate_tied,
-            channels,
-            albedo: globals_albedo(&set),
-        };
-        let problems = build(&values);
+        let g = Globals::of(&set, model.as_ref(), sub.channels);
+        let problems = sub_layout.problems(&sub, &all, &values, free, req.smoothness);
         let fitted: Vec<(TexelValues, f64)> = problems
             .par_iter()
             .zip(values.par_iter())
             .map(|(p, v)| {
                 let r = p.fit(&g, v);
-                bar.inc(1);
                 (r.0, r.1)
             })
             .collect();
         values = fitted.iter().map(|x| x.0).collect();
         let after_texels: f64 = fitted.iter().map(|x| x.1).sum();
-        // 2. the globals given the maps, on a sample of texels; kept if the total cost falls
-        let mut order: Vec<usize> = (0..texels.len()).collect();
-        order.shuffle(&mut rng);
-        order.truncate(req.global_texels);
-        let (_, new_set) = global_given_maps(samples, cfg, &set, &values, &members, &order, free)?;
+        // the globals given the maps; kept if the cost falls
+        let (_, new_set) =
+            global_given_maps(&sub, cfg, &set, &values, &sub_layout.members, &all, free)?;
         let total_new = if new_set != set {
-            total_cost(samples, cfg, &new_set, &values, &members, free)?
+            total_cost(&sub, cfg, &new_set, &values, &sub_layout.members, free)?
         } else {
             f64::INFINITY
         };
@@ -704,6 +848,7 @@ pub fn recover(
             after_texels
         };
         costs.push(now);
+        bar.inc(1);
         if round > 0 && before - now <= 1e-6 * before {
             converged = true;
             break;
@@ -712,11 +857,56 @@ pub fn recover(
     bar.finish_and_clear();
     if !converged {
         warnings.push(format!(
-            "map recovery: the total cost was still falling after {} rounds ([maps] rounds); the maps may not be final",
+            "map recovery: the cost of the global stage was still falling after {} rounds ([maps] rounds); the globals may not be final",
             req.rounds
         ));
     }
-    // a last per-texel pass at the final globals, keeping every texel's other minima
+    let (mut outcome, _) = final_global(&sub, cfg, &set, &values, &sub_layout.members, free)?;
+    outcome.warnings.push(format!(
+        "the global parameters come from {} sampled texels ([maps] global_texels) with their maps; their uncertainties are conditional on those maps",
+        sub_layout.texels.len()
+    ));
+    Ok(GlobalStage {
+        outcome,
+        costs,
+        warnings,
+    })
+}
+
+/// Sweeps of the per-texel stage with the smoothness prior on (the first without it).
+pub const PRIOR_SWEEPS: usize = 2;
+
+/// Stage 2 over some rows: every texel fitted independently given the globals (with the prior,
+/// [`PRIOR_SWEEPS`] Jacobi sweeps after the first), standard errors before scaling by the
+/// residual variance, which needs every row ([`finish_maps`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct TexelPart {
+    /// Rows [first, last) of the capture this part covers.
+    pub rows: [u32; 2],
+    pub texels: Vec<(u32, u32)>,
+    pub values: Vec<TexelValues>,
+    /// sqrt of the diagonal of (J^T J)^-1 per value (infinity where singular).
+    pub unscaled_std_errors: Vec<TexelValues>,
+    /// Other minima of each texel: (cost above the best, |dH|, |dpsi| in degrees).
+    pub other_minima: Vec<Vec<[f64; 3]>>,
+    pub residual: Vec<f64>,
+    /// Per row of the part: (sum of squared weighted residuals, residual count).
+    pub row_costs: Vec<(f64, usize)>,
+}
+
+/// Stage 2 for the texels in rows [`rows.0`, `rows.1`) given the globals `set`.
+pub fn texel_stage(
+    samples: &Samples,
+    cfg: &FitConfig,
+    req: &MapsConfig,
+    set: &ParamSet,
+    rows: (u32, u32),
+    quiet: bool,
+) -> Result<TexelPart> {
+    check_request(cfg, req)?;
+    let layout = Layout::new(samples)?;
+    let free = free_of(req);
+    let set = fix_mapped(set, req);
     let model = problem::model_for(
         &set,
         cfg.knobs.quadrature_order,
@@ -724,85 +914,233 @@ pub fn recover(
         cfg.knobs.azimuth_nodes,
         None,
     );
-    let g = Globals {
-        model: model.as_ref(),
-        has_topology: set.rung.has_topology(),
-        h_max: max_height(set.shape_value(Shape::Spacing)),
-        tied: set.substrate_tied,
-        channels,
-        albedo: globals_albedo(&set),
+    let g = Globals::of(&set, model.as_ref(), samples.channels);
+    let sweeps = if req.smoothness > 0.0 {
+        1 + PRIOR_SWEEPS
+    } else {
+        1
     };
-    let problems = build(&values);
-    let refit: Vec<TexelFit> = problems
-        .par_iter()
-        .zip(values.par_iter())
-        .map(|(p, v)| p.fit(&g, v))
+    // a halo of one row per later sweep makes a part's texels what a single run gives
+    let halo = (sweeps - 1) as u32;
+    let lo = rows.0.saturating_sub(halo);
+    let hi = rows.1.saturating_add(halo);
+    let ids: Vec<usize> = (0..layout.texels.len())
+        .filter(|&t| (lo..hi).contains(&layout.texels[t].1))
         .collect();
-    values = refit.iter().map(|r| r.0).collect();
-    // final globals with uncertainties (conditional on the maps), over all pixels
-    let (global, variance) = final_global(samples, cfg, &set, &values, &members, free, quiet)?;
-    let problems = build(&values);
-    let mut ambiguous = 0;
-    let (std_errors, residual): (Vec<TexelValues>, Vec<f64>) = problems
+    let start = layout.start_values(samples, &set);
+    let mut values = start.clone();
+    let bar = crate::progress::bar((sweeps * ids.len()) as u64, "maps: texels", quiet);
+    let mut fits: Vec<TexelFit> = Vec::new();
+    for sweep in 0..sweeps {
+        let smoothness = if sweep == 0 { 0.0 } else { req.smoothness };
+        let problems = layout.problems(samples, &ids, &values, free, smoothness);
+        fits = problems
+            .par_iter()
+            .zip(ids.par_iter())
+            .map(|(p, &t)| {
+                bar.inc(1);
+                p.fit(&g, &start[t])
+            })
+            .collect();
+        for (k, &t) in ids.iter().enumerate() {
+            values[t] = fits[k].0;
+        }
+    }
+    bar.finish_and_clear();
+    let problems = layout.problems(
+        samples,
+        &ids,
+        &values,
+        free,
+        req.smoothness * f64::from(u8::from(sweeps > 1)),
+    );
+    let keep: Vec<usize> = (0..ids.len())
+        .filter(|&k| (rows.0..rows.1).contains(&layout.texels[ids[k]].1))
+        .collect();
+    let details: Vec<(TexelValues, f64, Vec<[f64; 3]>)> = keep
         .par_iter()
-        .zip(refit.par_iter())
-        .map(|(p, (v, cost, others))| {
-            let mut se = p.std_errors(&g, v, variance);
-            // another minimum as good as the best within the noise: the images do not decide
-            // between them, and the standard error says so
-            for (w, c) in others {
-                if c - cost <= AMBIGUITY_DELTA * variance {
+        .map(|&k| {
+            let (v, cost, others) = &fits[k];
+            let p = &problems[k];
+            let se = p.std_errors(&g, v, 1.0);
+            let others = others
+                .iter()
+                .map(|(w, c)| {
+                    [
+                        c - cost,
+                        (w.height - v.height).abs(),
+                        wrap_azimuth(w.psi - v.psi).abs(),
+                    ]
+                })
+                .collect();
+            (se, p.relative_residual(&g, v), others)
+        })
+        .collect();
+    let n_rows = (rows.1 - rows.0) as usize;
+    let mut row_costs = vec![(0.0, 0usize); n_rows];
+    for &k in &keep {
+        let y = layout.texels[ids[k]].1;
+        let r = &mut row_costs[(y - rows.0) as usize];
+        r.0 += fits[k].1;
+        r.1 += problems[k].obs.len() * samples.channels;
+    }
+    Ok(TexelPart {
+        rows: [rows.0, rows.1],
+        texels: keep.iter().map(|&k| layout.texels[ids[k]]).collect(),
+        values: keep.iter().map(|&k| fits[k].0).collect(),
+        unscaled_std_errors: details.iter().map(|d| d.0).collect(),
+        other_minima: details.iter().map(|d| d.2.clone()).collect(),
+        residual: details.iter().map(|d| d.1).collect(),
+        row_costs,
+    })
+}
+
+/// Assemble parts covering every row into the maps: the residual variance over all pixel values
+/// less every unknown (each texel's and `global_free` globals'), the standard errors scaled by
+/// it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
+pub fn finish_maps(
+    parts: &[TexelPart],
+    width: usize,
+    height: usize,
+    channels: usize,
+    req: &MapsConfig,
+    global_free: usize,
+) -> Result<(TexelMaps, f64, Vec<String>)> {
+    let free = free_of(req);
+    let mut parts: Vec<&TexelPart> = parts.iter().collect();
+    parts.sort_by_key(|p| p.rows[0]);
+    let mut next = 0u32;
+    for p in &parts {
+        if p.rows[0] != next {
+            bail!(
+                "the map parts do not cover rows {next}..{} exactly (a part starts at row {})",
+                height,
+                p.rows[0]
+            );
+        }
+        next = p.rows[1];
+    }
+    if next as usize != height {
+        bail!("the map parts end at row {next}, the capture has {height} rows");
+    }
+    // sums in row order: the same bits however the rows were split
+    let (mut cost, mut n) = (0.0, 0usize);
+    for p in &parts {
+        for &(c, k) in &p.row_costs {
+            cost += c;
+            n += k;
+        }
+    }
+    let texels: usize = parts.iter().map(|p| p.texels.len()).sum();
+    let params = per_texel_unknowns(free, channels) * texels + global_free;
+    if n <= params {
+        bail!("--maps: {n} pixel values cannot determine {params} unknowns; use more images");
+    }
+    let variance = cost / (n - params) as f64;
+    let scale = variance.sqrt();
+    let mut maps = TexelMaps {
+        width,
+        height,
+        texels: Vec::with_capacity(texels),
+        values: Vec::with_capacity(texels),
+        std_errors: Vec::with_capacity(texels),
+        residual: Vec::with_capacity(texels),
+        channels,
+    };
+    let mut ambiguous = 0;
+    for p in &parts {
+        for k in 0..p.texels.len() {
+            let u = &p.unscaled_std_errors[k];
+            let mut se = TexelValues {
+                height: u.height * scale,
+                psi: u.psi * scale,
+                kd: u.kd.map(|x| x * scale),
+                ks: u.ks.map(|x| x * scale),
+            };
+            let mut amb = false;
+            for &[dc, dh, dp] in &p.other_minima[k] {
+                if dc <= AMBIGUITY_DELTA * variance {
+                    amb = true;
                     if free.height {
-                        se.height = se.height.max((w.height - v.height).abs());
+                        se.height = se.height.max(dh);
                     }
                     if free.psi {
-                        se.psi = se.psi.max(wrap_azimuth(w.psi - v.psi).abs());
+                        se.psi = se.psi.max(dp);
                     }
                 }
             }
-            (se, p.relative_residual(&g, v))
-        })
-        .unzip();
-    for (v, cost, others) in &refit {
-        let _ = v;
-        if others
-            .iter()
-            .any(|(_, c)| c - cost <= AMBIGUITY_DELTA * variance)
-        {
-            ambiguous += 1;
+            ambiguous += usize::from(amb);
+            maps.texels.push(p.texels[k]);
+            maps.values.push(p.values[k]);
+            maps.std_errors.push(se);
+            maps.residual.push(p.residual[k]);
         }
     }
+    let mut warnings = Vec::new();
     if ambiguous > 0 {
         warnings.push(format!(
-            "{ambiguous} of {} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (distinct height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima",
-            texels.len()
+            "{ambiguous} of {texels} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (a height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima"
         ));
     }
-    let undetermined = std_errors
-        .iter()
-        .filter(|s| (free.height && !(s.height < g.h_max)) || (free.psi && !(s.psi < 90.0)))
-        .count();
-    if undetermined > 0 {
-        warnings.push(format!(
-            "{undetermined} of {} texels have a mapped height or fibre azimuth the images leave undetermined (standard error above its whole range); more light and view directions, or [maps] smoothness, would fix them",
-            texels.len()
-        ));
-    }
+    Ok((maps, variance, warnings))
+}
+
+/// Recover the maps `req` asks for, with the globals of `cfg`: [`global_stage`], then
+/// [`texel_stage`] over every row and [`finish_maps`].
+pub fn recover(
+    samples: &Samples,
+    cfg: &FitConfig,
+    req: &MapsConfig,
+    quiet: bool,
+) -> Result<MapOutcome> {
+    let stage = global_stage(samples, cfg, req, quiet)?;
+    let (w, h) = samples.image_size.unwrap_or((0, 0));
+    let h = h.max(Layout::new(samples)?.height);
+    let part = texel_stage(samples, cfg, req, &stage.outcome.set, (0, h as u32), quiet)?;
+    let global_free = stage.outcome.statistics.free_parameters;
+    let (maps, variance, mut warnings) = finish_maps(
+        std::slice::from_ref(&part),
+        w.max(Layout::new(samples)?.width),
+        h,
+        samples.channels,
+        req,
+        global_free,
+    )?;
+    warnings.splice(0..0, stage.warnings.iter().cloned());
+    let mut global = stage.outcome;
+    global.fitted = fitted_all(samples, cfg, req, &global.set.clone(), &maps)?;
     Ok(MapOutcome {
         global,
-        maps: TexelMaps {
-            width,
-            height,
-            texels,
-            values,
-            std_errors,
-            residual,
-            channels,
-        },
-        costs,
+        maps,
+        costs: stage.costs,
         residual_variance: variance,
         warnings,
     })
+}
+
+/// The model at every pixel (sample order) with its texel's values and the globals `set`.
+pub fn fitted_all(
+    samples: &Samples,
+    cfg: &FitConfig,
+    req: &MapsConfig,
+    set: &ParamSet,
+    maps: &TexelMaps,
+) -> Result<Vec<[f64; 3]>> {
+    let layout = Layout::new(samples)?;
+    if layout.texels != maps.texels {
+        bail!("the maps do not belong to these samples (their texels differ)");
+    }
+    let set = fix_mapped(set, req);
+    let all: Vec<usize> = (0..layout.texels.len()).collect();
+    let (subset, smaps) =
+        mapped_samples(samples, &maps.values, &layout.members, &all, free_of(req));
+    let p = problem_on(cfg, &set, &subset, smaps);
+    let values = p.model_values(&p.columns(&set)?, &set);
+    let mut fitted = vec![[0.0; 3]; samples.samples.len()];
+    for (i, v) in layout.members.iter().flatten().zip(values) {
+        fitted[*i] = v;
+    }
+    Ok(fitted)
 }
 
 /// Copies of the samples of `texel_ids` with each texel's azimuth (when mapped), and the
@@ -917,7 +1255,6 @@ fn final_global(
     values: &[TexelValues],
     members: &[Vec<usize>],
     free: Free,
-    _quiet: bool,
 ) -> Result<(FitOutcome, f64)> {
     let all: Vec<usize> = (0..members.len()).collect();
     let (subset, maps) = mapped_samples(samples, values, members, &all, free);
@@ -949,9 +1286,6 @@ fn final_global(
         );
     }
     let variance = cost / (n - params) as f64;
-    outcome.warnings.push(format!(
-        "the global uncertainties are conditional on the recovered maps (held fixed); per-texel standard errors use the residual variance {variance:.4e} over {n} pixel values less {params} unknowns"
-    ));
     // the outcome's fitted values follow the subset order; put them back in sample order
     let mut fitted = vec![[0.0; 3]; samples.samples.len()];
     let mut k = 0;

@@ -40,12 +40,21 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
         .with_context(|| format!("{}: cannot read result file", path.display()))?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let at = |what: &str| anyhow!("{}: {what}", path.display());
+    result_from_value(&v, &path.display().to_string(), channels)
+}
+
+/// [`read_result`] of a result already parsed; `name` labels errors.
+pub fn result_from_value(
+    v: &serde_json::Value,
+    name: &str,
+    channels: usize,
+) -> Result<FittedResult> {
+    let at = |what: &str| anyhow!("{}: {what}", name);
     match v.get("schema").and_then(|s| s.as_str()) {
         Some(super::RESULT_SCHEMA) => {}
         Some(other) => bail!(
             "{}: schema `{other}` is not one this fibrefit reads ({})",
-            path.display(),
+            name,
             super::RESULT_SCHEMA
         ),
         None => return Err(at("not a fibrefit result (no `schema`)")),
@@ -84,7 +93,7 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
         );
     }
     if rgb && channels == 1 {
-        bail!("{}: an RGB result cannot score grey data", path.display());
+        bail!("{}: an RGB result cannot score grey data", name);
     }
     let k = v.get("knobs");
     let knob = |name: &str| k.and_then(|k| k.get(name));
@@ -121,10 +130,8 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
         selection: Default::default(),
         maps: Default::default(),
     };
-    cfg.validate()
-        .map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    let set =
-        ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
+    let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
     Ok(FittedResult {
         set,
         metric,

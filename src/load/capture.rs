@@ -341,7 +341,7 @@ pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
     .count()
         > 1
     {
-        bail!("{name}: give one of swatch.fibre_azimuth_deg, swatch.tangent_map and swatch.fibre_azimuth_map");
+        bail!("{name}: swatch.fibre_azimuth_deg, swatch.tangent_map and swatch.fibre_azimuth_map each give the fibre direction: give one, not both");
     }
     if sw.topology_map.is_some() && sw.height_map.is_some() {
         bail!("{name}: give swatch.topology_map or swatch.height_map, not both");
