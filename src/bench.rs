@@ -10,6 +10,7 @@
 //! and quadrature orders.
 
 pub mod felt;
+pub mod maps;
 pub mod robustness;
 
 use crate::fit::config::FitConfig;

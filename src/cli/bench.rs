@@ -40,6 +40,10 @@ pub struct BenchArgs {
     /// Direction pairs of the felt comparison
     #[arg(long, value_name = "N", default_value_t = 3000)]
     pub directions: usize,
+    /// Instead: the per-texel map recovery study (synthetic captures with known maps, shrinking
+    /// light/view sets): writes OUT/maps_accuracy.md, .csv and .png
+    #[arg(long)]
+    pub maps: bool,
     /// Only these cases of the robustness study (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
@@ -91,6 +95,25 @@ fn robustness(args: &BenchArgs) -> Result<()> {
 pub fn run(args: &BenchArgs) -> Result<()> {
     if args.robustness {
         return robustness(args);
+    }
+    if args.maps {
+        let t = Instant::now();
+        let bar =
+            crate::progress::bar(crate::bench::maps::cases().len() as u64, "maps", args.quiet);
+        let scratch = tempfile::tempdir()?;
+        let (rows, pictures) = crate::bench::maps::run(scratch.path(), &bar)?;
+        bar.finish_and_clear();
+        crate::export::maps_report::write(
+            &args.out,
+            &rows,
+            &pictures,
+            "fibrefit bench --maps",
+            t.elapsed().as_secs_f64(),
+        )?;
+        if !args.quiet {
+            eprintln!("wrote {}", args.out.join("maps_accuracy.md").display());
+        }
+        return Ok(());
     }
     if let Some(file) = &args.felt {
         let t = Instant::now();

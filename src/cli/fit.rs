@@ -362,6 +362,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 channels,
                 &cfg.maps,
                 outcome.statistics.free_parameters,
+                crate::model::topology::max_height(globals.shape_value(Shape::Spacing)),
             )?;
             let mut desc = crate::export::maps_out::write(dir, &cfg.maps.requested(), &maps)?;
             desc["method"] = method;

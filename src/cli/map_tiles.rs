@@ -267,9 +267,14 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
     let mut out = AtomicFile::create(&args.out)?;
     let (width, height, channels, global_free) =
         (first.width, first.height, first.channels, first.global_free);
+    let set =
+        crate::fit::score::result_from_value(&g, &args.globals.display().to_string(), channels)?
+            .set;
+    let h_max =
+        crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Shape::Spacing));
     let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
     let (maps, variance, warns) =
-        maps::finish_maps(&parts, width, height, channels, &req, global_free)?;
+        maps::finish_maps(&parts, width, height, channels, &req, global_free, h_max)?;
     let method = g["maps"]["method"].clone();
     let mut desc = crate::export::maps_out::write(&args.maps, &req.requested(), &maps)?;
     desc["method"] = method;

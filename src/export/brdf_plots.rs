@@ -286,7 +286,7 @@ fn save(path: &Path, w: u32, h: u32, buf: Vec<u8>) -> Result<()> {
 }
 
 /// Viridis-like colour of t in [0, 1].
-fn sequential(t: f64) -> RGBColor {
+pub(crate) fn sequential(t: f64) -> RGBColor {
     const C: [(f64, f64, f64); 5] = [
         (68.0, 1.0, 84.0),
         (59.0, 82.0, 139.0),
@@ -306,7 +306,7 @@ fn sequential(t: f64) -> RGBColor {
 }
 
 /// Blue (model below data) - white - red (above) for t in [-1, 1].
-fn diverging(t: f64) -> RGBColor {
+pub(crate) fn diverging(t: f64) -> RGBColor {
     let t = t.clamp(-1.0, 1.0);
     let a = (255.0 * (1.0 - t.abs())) as u8;
     if t >= 0.0 {

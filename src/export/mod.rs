@@ -7,6 +7,7 @@ pub mod eval_table;
 pub mod felt_report;
 pub mod images;
 pub mod maps_out;
+pub mod maps_report;
 pub mod plots;
 pub mod report;
 pub mod result_json;

@@ -1005,6 +1005,7 @@ pub fn finish_maps(
     channels: usize,
     req: &MapsConfig,
     global_free: usize,
+    h_max: f64,
 ) -> Result<(TexelMaps, f64, Vec<String>)> {
     let free = free_of(req);
     let mut parts: Vec<&TexelPart> = parts.iter().collect();
@@ -1077,6 +1078,32 @@ pub fn finish_maps(
         }
     }
     let mut warnings = Vec::new();
+    let undetermined = |pick: fn(&TexelValues) -> f64, half_range: f64| {
+        maps.std_errors
+            .iter()
+            .filter(|e| !(pick(e) < half_range))
+            .count()
+    };
+    for (on, name, count, range) in [
+        (
+            free.height,
+            "height H",
+            undetermined(|e| e.height, h_max / 2.0),
+            "H_max / 2",
+        ),
+        (
+            free.psi,
+            "fibre azimuth",
+            undetermined(|e| e.psi, 45.0),
+            "45 deg",
+        ),
+    ] {
+        if on && count > 0 {
+            warnings.push(format!(
+                "the images leave the {name} undetermined in {count} of {texels} texels (standard error at or above {range}): add light and view directions that separate it (grazing light across the fibres, views on both sides), or set [maps] smoothness"
+            ));
+        }
+    }
     if ambiguous > 0 {
         warnings.push(format!(
             "{ambiguous} of {texels} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (a height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima"
@@ -1098,6 +1125,7 @@ pub fn recover(
     let h = h.max(Layout::new(samples)?.height);
     let part = texel_stage(samples, cfg, req, &stage.outcome.set, (0, h as u32), quiet)?;
     let global_free = stage.outcome.statistics.free_parameters;
+    let h_max = max_height(stage.outcome.set.shape_value(Shape::Spacing));
     let (maps, variance, mut warnings) = finish_maps(
         std::slice::from_ref(&part),
         w.max(Layout::new(samples)?.width),
@@ -1105,6 +1133,7 @@ pub fn recover(
         samples.channels,
         req,
         global_free,
+        h_max,
     )?;
     warnings.splice(0..0, stage.warnings.iter().cloned());
     let mut global = stage.outcome;
