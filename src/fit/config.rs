@@ -191,11 +191,11 @@ pub struct MapsConfig {
 }
 
 fn default_map_rounds() -> usize {
-    6
+    20
 }
 
 fn default_global_texels() -> usize {
-    2048
+    512
 }
 
 impl Default for MapsConfig {

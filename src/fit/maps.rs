@@ -447,7 +447,7 @@ impl Texel<'_> {
                 }
             })
             .collect();
-        let floor: Vec<f64> = steps.iter().map(|s| s * 1e-4).collect();
+        let floor: Vec<f64> = steps.iter().map(|s| s * 1e-2).collect();
         for _ in 0..400 {
             if steps.iter().zip(&floor).all(|(s, f)| s <= f) {
                 break;
