@@ -132,7 +132,10 @@ fn stats(err: &[f64], z: &[f64]) -> (f64, f64, f64, f64) {
     (rms(err), rms(z), a[a.len() / 2], within)
 }
 
-fn measure(case: &Case, scratch: &Path) -> Result<(MapRow, TexelMaps, Vec<(f64, f64)>)> {
+/// A case's row, its recovered maps and the true (H, psi) of each texel.
+type Measured = (MapRow, TexelMaps, Vec<(f64, f64)>);
+
+fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
     let dir = scratch.join(case.name.replace(' ', "_"));
     std::fs::create_dir_all(&dir)?;
     std::fs::write(dir.join("synth.toml"), synth_config(&case.images))?;

@@ -81,7 +81,8 @@ pub struct FitArgs {
     pub load: LoadArgs,
 }
 
-fn sha256_of(path: &Path) -> Result<String> {
+/// SHA-256 of a file, hex.
+pub(crate) fn sha256_of(path: &Path) -> Result<String> {
     let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
     Ok(Sha256::digest(&bytes)
         .iter()

@@ -2,6 +2,7 @@
 //! of one band of rows given the globals of `fit --map-globals`, and `fibrefit merge-maps`
 //! assembles the bands into the same maps (bit for bit) as a single `fit --maps` run.
 
+use super::fit::sha256_of;
 use super::fit::FitArgs;
 use crate::export::atomic::{refuse_inputs, AtomicFile};
 use crate::fit::config::FitConfig;
@@ -9,8 +10,7 @@ use crate::fit::maps::{self, TexelPart};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use serde::{Deserialize, Serialize};
-use sha2::{Digest, Sha256};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 /// Schema of a tile file.
 pub const TILE_SCHEMA: &str = "fibrefit-map-tile/1";
@@ -34,14 +34,6 @@ pub struct TileFile {
     /// Free global parameters (they count in the residual variance's degrees of freedom).
     pub global_free: usize,
     pub part: TexelPart,
-}
-
-fn sha256_of(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    Ok(Sha256::digest(&bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
 }
 
 /// Rows [first, last) of tile `i` of `n` for a capture of `height` rows.

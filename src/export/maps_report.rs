@@ -14,6 +14,9 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("plot: {e:?}")
 }
 
+/// A panel: its title, values per texel and colour map.
+type Panel<'a> = (&'a str, &'a Vec<f64>, Box<dyn Fn(f64) -> RGBColor>);
+
 /// Panels: true H, recovered H, true psi, recovered psi (shared scales per pair), error / se.
 fn figure(path: &Path, p: &Pictures) -> Result<()> {
     font();
@@ -34,7 +37,7 @@ fn figure(path: &Path, p: &Pictures) -> Result<()> {
         };
         let (h0, h1) = range(&p.true_height, &p.height);
         let (p0, p1) = range(&p.true_psi, &p.psi);
-        let panels: [(&str, &Vec<f64>, Box<dyn Fn(f64) -> RGBColor>); 5] = [
+        let panels: [Panel; 5] = [
             (
                 "true H",
                 &p.true_height,

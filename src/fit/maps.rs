@@ -193,6 +193,17 @@ struct Globals<'m> {
     albedo: [[f64; 3]; 4],
 }
 
+/// The rung at the globals `set` with the knobs of `cfg` (no map: texels carry their height).
+fn rung_of(set: &ParamSet, cfg: &FitConfig) -> Box<dyn ShadingModel> {
+    problem::model_for(
+        set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        None,
+    )
+}
+
 impl<'m> Globals<'m> {
     fn of(set: &ParamSet, model: &'m dyn ShadingModel, channels: usize) -> Self {
         Self {
@@ -813,13 +824,7 @@ pub fn global_stage(
     let mut converged = false;
     for round in 0..req.rounds {
         // per texel given the globals
-        let model = problem::model_for(
-            &set,
-            cfg.knobs.quadrature_order,
-            cfg.knobs.histogram_bins,
-            cfg.knobs.azimuth_nodes,
-            None,
-        );
+        let model = rung_of(&set, cfg);
         let g = Globals::of(&set, model.as_ref(), sub.channels);
         let problems = sub_layout.problems(&sub, &all, &values, free, req.smoothness);
         let fitted: Vec<(TexelValues, f64)> = problems
@@ -907,13 +912,7 @@ pub fn texel_stage(
     let layout = Layout::new(samples)?;
     let free = free_of(req);
     let set = fix_mapped(set, req);
-    let model = problem::model_for(
-        &set,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
-        cfg.knobs.azimuth_nodes,
-        None,
-    );
+    let model = rung_of(&set, cfg);
     let g = Globals::of(&set, model.as_ref(), samples.channels);
     let sweeps = if req.smoothness > 0.0 {
         1 + PRIOR_SWEEPS
