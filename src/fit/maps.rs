@@ -866,7 +866,7 @@ pub fn global_stage(
             req.rounds
         ));
     }
-    let (mut outcome, _) = final_global(&sub, cfg, &set, &values, &sub_layout.members, free)?;
+    let mut outcome = final_global(&sub, cfg, &set, &values, &sub_layout.members, free)?;
     outcome.warnings.push(format!(
         "the global parameters come from {} sampled texels ([maps] global_texels) with their maps; their uncertainties are conditional on those maps",
         sub_layout.texels.len()
@@ -1274,8 +1274,8 @@ fn total_cost(
     Ok(p.residuals(&cols, set).norm_squared())
 }
 
-/// The global outcome at `set` given the maps, over all pixels, and the residual variance per
-/// pixel and channel with every texel's unknowns counted.
+/// The global outcome at `set` given the maps of the texels `members` (held fixed); refused when
+/// their pixels cannot determine every texel's unknowns and the globals.
 fn final_global(
     samples: &Samples,
     cfg: &FitConfig,
@@ -1283,7 +1283,7 @@ fn final_global(
     values: &[TexelValues],
     members: &[Vec<usize>],
     free: Free,
-) -> Result<(FitOutcome, f64)> {
+) -> Result<FitOutcome> {
     let all: Vec<usize> = (0..members.len()).collect();
     let (subset, maps) = mapped_samples(samples, values, members, &all, free);
     let p = problem_on(cfg, set, &subset, maps);
@@ -1313,7 +1313,6 @@ fn final_global(
             p.dim()
         );
     }
-    let variance = cost / (n - params) as f64;
     // the outcome's fitted values follow the subset order; put them back in sample order
     let mut fitted = vec![[0.0; 3]; samples.samples.len()];
     let mut k = 0;
@@ -1324,5 +1323,5 @@ fn final_global(
         }
     }
     outcome.fitted = fitted;
-    Ok((outcome, variance))
+    Ok(outcome)
 }
