@@ -11,19 +11,6 @@
 use fibrefit::fit::config::FitConfig;
 use fibrefit::load::samples::Samples;
 use fibrefit::model::{DirectionPair, Vec3};
-use rand::seq::SliceRandom;
-use rand::SeedableRng;
-
-fn split(s: &Samples, seed: u64) -> (Samples, Samples) {
-    let mut idx: Vec<usize> = (0..s.samples.len()).collect();
-    idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed));
-    let n_test = s.samples.len() / 5;
-    let pick = |ids: &[usize]| Samples {
-        samples: ids.iter().map(|&i| s.samples[i].clone()).collect(),
-        ..s.clone()
-    };
-    (pick(&idx[n_test..]), pick(&idx[..n_test]))
-}
 
 /// Fit nonneg weights per channel in the log metric; return weights.
 fn fit_w(cols: &[Vec<f64>], ys: &[[f64; 3]], eps: [f64; 3]) -> Vec<[f64; 3]> {
@@ -98,7 +85,7 @@ fn main() {
         ..Default::default()
     };
     let data = fibrefit::load::load_data(felt, &opts).unwrap();
-    let (train, test) = split(&data, 0x5e1ec7);
+    let (train, test) = fibrefit::bench::felt::split(&data, fibrefit::bench::felt::SPLIT_SEED);
     let fuzz = std::env::args().nth(1).is_some();
     let auto: FitConfig = toml::from_str("model = \"auto\"\nmetric = \"log\"\n").unwrap();
     let mut cfg = auto.for_rung("poulin-fournier".parse().unwrap());

@@ -90,7 +90,11 @@ fn region_ratios(test: &Samples, model: &[[f64; 3]]) -> (f64, f64) {
     (gd / gm, nd / nm)
 }
 
-fn split(s: &Samples, seed: u64) -> (Samples, Samples) {
+/// Seed of the comparison's split.
+pub const SPLIT_SEED: u64 = 0x5e1ec7;
+
+/// The comparison's split: a seeded 80 % to fit, the other 20 % held out.
+pub fn split(s: &Samples, seed: u64) -> (Samples, Samples) {
     let mut idx: Vec<usize> = (0..s.samples.len()).collect();
     idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed));
     let n_test = s.samples.len() / 5;
@@ -120,7 +124,7 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun>
             ..Default::default()
         },
     )?;
-    let (train, test) = split(&data, 0x5e1ec7);
+    let (train, test) = split(&data, SPLIT_SEED);
     let mut rows = Vec::new();
     let mut fits = Vec::new();
     for metric in ["linear", "log"] {

@@ -1159,9 +1159,7 @@ pub fn fitted_all(
         bail!("the maps do not belong to these samples (their texels differ)");
     }
     let set = fix_mapped(set, req);
-    let all: Vec<usize> = (0..layout.texels.len()).collect();
-    let (subset, smaps) =
-        mapped_samples(samples, &maps.values, &layout.members, &all, free_of(req));
+    let (subset, smaps) = mapped_all(samples, &maps.values, &layout.members, free_of(req));
     let p = problem_on(cfg, &set, &subset, smaps);
     let values = p.model_values(&p.columns(&set)?, &set);
     let mut fitted = vec![[0.0; 3]; samples.samples.len()];
@@ -1169,6 +1167,17 @@ pub fn fitted_all(
         fitted[*i] = v;
     }
     Ok(fitted)
+}
+
+/// [`mapped_samples`] of every texel.
+fn mapped_all(
+    samples: &Samples,
+    values: &[TexelValues],
+    members: &[Vec<usize>],
+    free: Free,
+) -> (Vec<Sample>, SampleMaps) {
+    let all: Vec<usize> = (0..members.len()).collect();
+    mapped_samples(samples, values, members, &all, free)
 }
 
 /// Copies of the samples of `texel_ids` with each texel's azimuth (when mapped), and the
@@ -1267,8 +1276,7 @@ fn total_cost(
     members: &[Vec<usize>],
     free: Free,
 ) -> Result<f64> {
-    let all: Vec<usize> = (0..members.len()).collect();
-    let (subset, maps) = mapped_samples(samples, values, members, &all, free);
+    let (subset, maps) = mapped_all(samples, values, members, free);
     let p = problem_on(cfg, set, &subset, maps);
     let cols = p.columns(set)?;
     Ok(p.residuals(&cols, set).norm_squared())
@@ -1284,8 +1292,7 @@ fn final_global(
     members: &[Vec<usize>],
     free: Free,
 ) -> Result<FitOutcome> {
-    let all: Vec<usize> = (0..members.len()).collect();
-    let (subset, maps) = mapped_samples(samples, values, members, &all, free);
+    let (subset, maps) = mapped_all(samples, values, members, free);
     let p = problem_on(cfg, set, &subset, maps);
     let view = Samples {
         samples: subset.clone(),

@@ -16,7 +16,7 @@
 //! `ks` absorbs the overall scale (it is solved linearly).
 
 use super::frame::DirectionPair;
-use super::{Basis, ModelId, ShadingModel};
+use super::{Basis, BasisTransform, ShadingModel, Transformed};
 
 /// Schlick's Fresnel factor at cos theta_d for index of refraction `ior`.
 pub fn schlick(cos_d: f64, ior: f64) -> f64 {
@@ -36,42 +36,24 @@ pub fn cos_half(pair: &DirectionPair) -> f64 {
     (l.t * h[0] + l.b * h[1] + l.n * h[2]) / norm
 }
 
-pub struct FresnelLobe {
-    inner: Box<dyn ShadingModel>,
+/// Schlick's factor at l.h on the specular component.
+pub struct FresnelFactor {
     ior: f64,
 }
 
-impl FresnelLobe {
-    pub fn new(inner: Box<dyn ShadingModel>, ior: f64) -> Self {
-        Self { inner, ior }
-    }
-
+impl BasisTransform for FresnelFactor {
     fn apply(&self, pair: &DirectionPair, mut b: Basis) -> Basis {
         b.specular *= schlick(cos_half(pair), self.ior);
         b
     }
 }
 
-impl ShadingModel for FresnelLobe {
-    fn id(&self) -> ModelId {
-        self.inner.id()
-    }
+/// A rung with the Fresnel factor on its lobe.
+pub type FresnelLobe = Transformed<FresnelFactor>;
 
-    fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
-        self.apply(pair, self.inner.basis(pair))
-    }
-
-    fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        self.inner
-            .basis_at_height(pair, height)
-            .map(|b| self.apply(pair, b))
-    }
-
-    fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
-        self.inner.basis_many(pairs, out);
-        for (p, o) in pairs.iter().zip(out.iter_mut()) {
-            *o = self.apply(p, *o);
-        }
+impl FresnelLobe {
+    pub fn new(inner: Box<dyn ShadingModel>, ior: f64) -> Self {
+        Transformed::with(inner, FresnelFactor { ior })
     }
 }
 

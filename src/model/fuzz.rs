@@ -26,7 +26,7 @@
 //! grazing angles A -> 0 and P stays finite while either direction is above the horizon.
 
 use super::frame::DirectionPair;
-use super::{Basis, ModelId, ShadingModel};
+use super::{Basis, BasisTransform, ShadingModel, Transformed};
 use std::f64::consts::PI;
 
 /// Range of a layer's optical depth tau when it has one (0 turns it off).
@@ -54,21 +54,13 @@ pub fn layer(pair: &DirectionPair, depth: f64, g: f64) -> (f64, f64) {
     (a, p)
 }
 
-pub struct FuzzLayer {
-    inner: Box<dyn ShadingModel>,
+/// The layer's attenuation of the rung and its own single-scattering column.
+pub struct FuzzFactor {
     depth: f64,
     asymmetry: f64,
 }
 
-impl FuzzLayer {
-    pub fn new(inner: Box<dyn ShadingModel>, depth: f64, asymmetry: f64) -> Self {
-        Self {
-            inner,
-            depth,
-            asymmetry,
-        }
-    }
-
+impl BasisTransform for FuzzFactor {
     fn apply(&self, pair: &DirectionPair, b: Basis) -> Basis {
         let (a, p) = layer(pair, self.depth, self.asymmetry);
         Basis {
@@ -78,30 +70,12 @@ impl FuzzLayer {
     }
 }
 
-impl ShadingModel for FuzzLayer {
-    fn id(&self) -> ModelId {
-        self.inner.id()
-    }
+/// A rung under a fuzz layer.
+pub type FuzzLayer = Transformed<FuzzFactor>;
 
-    fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
-        self.apply(pair, self.inner.basis(pair))
-    }
-
-    fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        self.inner
-            .basis_at_height(pair, height)
-            .map(|b| self.apply(pair, b))
-    }
-
-    fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
-        self.inner.basis_many(pairs, out);
-        for (p, o) in pairs.iter().zip(out.iter_mut()) {
-            *o = if p.above_horizon() {
-                self.apply(p, *o)
-            } else {
-                Basis::default()
-            };
-        }
+impl FuzzLayer {
+    pub fn new(inner: Box<dyn ShadingModel>, depth: f64, asymmetry: f64) -> Self {
+        Transformed::with(inner, FuzzFactor { depth, asymmetry })
     }
 }
 

@@ -282,6 +282,50 @@ pub trait ShadingModel: Send + Sync {
 /// it is not defined (outside a measured file's range). Fitted models and measured files alike.
 pub type BrdfFn = Box<dyn Fn(&Vec3, &Vec3) -> Option<[f64; 3]> + Sync>;
 
+/// A change to a rung's basis made pair by pair: the Fresnel factor on the lobe, the fuzz layer.
+pub trait BasisTransform: Send + Sync {
+    fn apply(&self, pair: &DirectionPair, b: Basis) -> Basis;
+}
+
+/// A rung with a [`BasisTransform`] on its basis (zero at and below the horizon, as every rung).
+pub struct Transformed<T> {
+    inner: Box<dyn ShadingModel>,
+    transform: T,
+}
+
+impl<T: BasisTransform> Transformed<T> {
+    pub fn with(inner: Box<dyn ShadingModel>, transform: T) -> Self {
+        Self { inner, transform }
+    }
+}
+
+impl<T: BasisTransform> ShadingModel for Transformed<T> {
+    fn id(&self) -> ModelId {
+        self.inner.id()
+    }
+
+    fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
+        self.transform.apply(pair, self.inner.basis(pair))
+    }
+
+    fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
+        self.inner
+            .basis_at_height(pair, height)
+            .map(|b| self.transform.apply(pair, b))
+    }
+
+    fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
+        self.inner.basis_many(pairs, out);
+        for (p, o) in pairs.iter().zip(out.iter_mut()) {
+            *o = if p.above_horizon() {
+                self.transform.apply(p, *o)
+            } else {
+                Basis::default()
+            };
+        }
+    }
+}
+
 /// Shaded intensity I = f (N.l) (MODEL.md §1), zero below the horizon.
 pub fn intensity(brdf: f64, pair: &DirectionPair) -> f64 {
     if pair.above_horizon() {
