@@ -6,6 +6,7 @@
 
 use crate::fit::config::FitConfig;
 use crate::fit::maps::{self, TexelMaps};
+use crate::load::capture_store::CaptureStore;
 use crate::model::topology::TopologyMap;
 use anyhow::Result;
 use indicatif::ProgressBar;
@@ -148,10 +149,10 @@ fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
         .map(|l| format!("{l}\n"))
         .collect();
     std::fs::write(dir.join("d/blind.toml"), blind)?;
-    let samples = crate::load::load_data(&dir.join("d/blind.toml"), &Default::default())?;
+    let store = CaptureStore::load(&dir.join("d/blind.toml"), Default::default())?;
     let cfg: FitConfig = toml::from_str(FIT)?;
     let t = Instant::now();
-    let o = maps::recover(&samples, &cfg, &cfg.maps, true)?;
+    let o = maps::recover(&store, &cfg, &cfg.maps, true)?;
     let seconds = t.elapsed().as_secs_f64();
     let topo = TopologyMap::load(&dir.join("d/topology.png"))?;
     let tan = TopologyMap::load_as(&dir.join("d/tangent.png"), "tangent map")?;

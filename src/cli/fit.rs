@@ -6,6 +6,7 @@ use crate::export::{report, result_json as rj};
 use crate::fit::config::FitConfig;
 use crate::fit::problem::{albedos_of, model_for};
 use crate::fit::{self, parameters::Shape, ward_fallback};
+use crate::load::capture_store::CaptureStore;
 use crate::load::load_data;
 use crate::load::samples::DataKind;
 use crate::model::{brdf_at_degrees, ModelId};
@@ -193,7 +194,15 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let opts = args
         .load
         .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
-    let samples = load_data(&args.data, &opts)?;
+    // captures are held compactly by texel; the global fit takes a seeded sample of texels
+    let store = match crate::load::is_capture(&args.data) {
+        true => Some(CaptureStore::load(&args.data, opts.subsample)?),
+        false => None,
+    };
+    let samples = match &store {
+        Some(st) => st.samples_of(&fit_texel_sample(st, &cfg)),
+        None => load_data(&args.data, &opts)?,
+    };
     let selection = if cfg.model == "auto" {
         let s = crate::fit::selection::select(&samples, &cfg)?;
         cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow::anyhow!(e))?);
@@ -211,7 +220,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
         .unwrap_or_default();
     let (mut outcome, stage_costs) = match args.maps.is_some() || args.map_globals {
         true => {
-            let st = fit::maps::global_stage(&samples, &cfg, &cfg.maps, args.quiet || args.json)
+            let store = store.as_ref().ok_or_else(|| {
+                anyhow::anyhow!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels")
+            })?;
+            let st = fit::maps::global_stage(store, &cfg, &cfg.maps, args.quiet || args.json)
                 .with_context(|| {
                     format!("recovering maps with {} from {}", id, args.data.display())
                 })?;
@@ -226,6 +238,20 @@ pub fn run(args: &FitArgs) -> Result<()> {
         ),
     };
     let channels = samples.channels;
+    // a fit on a sample of a capture's texels, checked on every pixel
+    let mut all_pixels = None;
+    if let (Some(st), None) = (&store, &stage_costs) {
+        let fitted_texels = fit_texel_sample(st, &cfg).len();
+        if fitted_texels < st.texels().len() {
+            let all = fit::all_pixels::statistics(st, &cfg, &outcome, args.quiet || args.json)?;
+            if let Some(w) =
+                fit::all_pixels::warning(&all, outcome.statistics.reduced_chi_square, fitted_texels)
+            {
+                outcome.warnings.push(w);
+            }
+            all_pixels = Some(all);
+        }
+    }
     let m = model_for(
         &outcome.set,
         cfg.knobs.quadrature_order,
@@ -294,7 +320,13 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 r: *r,
             })
             .collect(),
-        statistics: serde_json::to_value(&outcome.statistics)?,
+        statistics: {
+            let mut v = serde_json::to_value(&outcome.statistics)?;
+            if let Some(all) = &all_pixels {
+                v["all_pixels"] = serde_json::to_value(all)?;
+            }
+            v
+        },
         knobs,
         data: rj::Provenance {
             file: args
@@ -347,9 +379,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 channels,
             )?
             .set;
-            let (w, h) = samples.image_size.unwrap_or((0, 0));
+            let store = store.as_ref().expect("the global stage needed the capture");
+            let (w, h) = (store.width, store.height);
             let part = fit::maps::texel_stage(
-                &samples,
+                store,
                 &cfg,
                 &cfg.maps,
                 &globals,
@@ -418,6 +451,16 @@ pub fn run(args: &FitArgs) -> Result<()> {
     // what the quality checks found is printed even with --quiet: it must not be missed
     quality_banner(&outcome.quality);
     Ok(())
+}
+
+/// The texels of a capture the global fit uses: every one, or a seeded sample of
+/// `[knobs] fit_texels` of them.
+fn fit_texel_sample(store: &CaptureStore, cfg: &FitConfig) -> Vec<usize> {
+    let n = match cfg.knobs.fit_texels {
+        0 => usize::MAX,
+        k => k,
+    };
+    store.sample_texels(n, cfg.seed ^ 0x6669_7474)
 }
 
 /// The quality warnings as a banner on stderr (bold red on a terminal).

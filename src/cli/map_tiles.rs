@@ -110,15 +110,16 @@ pub fn run_tile(args: &FitArgs, cfg: FitConfig, tile: &str, inputs: &[PathBuf]) 
     let opts = args
         .load
         .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
-    let samples = crate::load::load_data(&args.data, &opts)?;
-    let channels = samples.channels;
+    if !crate::load::is_capture(&args.data) {
+        bail!("--tile needs an image capture (a capture TOML)");
+    }
+    let store = crate::load::capture_store::CaptureStore::load(&args.data, opts.subsample)?;
+    let channels = store.channels;
     let set =
         crate::fit::score::result_from_value(&g, &globals.display().to_string(), channels)?.set;
-    let (w, h) = samples
-        .image_size
-        .ok_or_else(|| anyhow!("--tile needs an image capture"))?;
+    let (w, h) = (store.width, store.height);
     let rows = tile_rows(i, n, h);
-    let part = maps::texel_stage(&samples, &cfg, &cfg.maps, &set, rows, args.quiet)?;
+    let part = maps::texel_stage(&store, &cfg, &cfg.maps, &set, rows, args.quiet)?;
     let global_free = g["statistics"]["free_parameters"].as_u64().unwrap_or(0) as usize;
     let t = TileFile {
         schema: TILE_SCHEMA.into(),

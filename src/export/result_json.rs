@@ -86,6 +86,9 @@ pub struct Knobs {
     pub azimuth_nodes: usize,
     pub stride: usize,
     pub fraction: f64,
+    /// Image captures: the texels the global fit used at most (0: all).
+    #[serde(default)]
+    pub fit_texels: usize,
     #[serde(skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<String>,
     pub separable: bool,
@@ -196,6 +199,7 @@ pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
         azimuth_nodes: cfg.knobs.azimuth_nodes,
         stride,
         fraction,
+        fit_texels: cfg.knobs.fit_texels,
         topology_map: cfg
             .knobs
             .topology_map

@@ -48,10 +48,23 @@ pub struct Knobs {
     /// Nodes of the fibre-direction spread quadrature (used when `azimuth_spread_deg` > 0).
     #[serde(default = "default_azimuth_nodes")]
     pub azimuth_nodes: usize,
+    /// Image captures: the global fit uses at most this many texels (a seeded sample, every
+    /// image's pixel of each), the statistics over every pixel are computed after; 0: every
+    /// texel. A capture at camera resolution over-determines the few global parameters many
+    /// times over: their standard errors, from the sample, are honest and only wider.
+    #[serde(default = "default_fit_texels")]
+    pub fit_texels: usize,
     /// Topology map for goniometric spots (the spot averages over its histogram); relative to
     /// the config file. Image captures carry their own.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<PathBuf>,
+}
+
+/// Texels of a capture's global fit by default (8 images: 262 144 pixel values).
+pub const DEFAULT_FIT_TEXELS: usize = 32_768;
+
+fn default_fit_texels() -> usize {
+    DEFAULT_FIT_TEXELS
 }
 
 impl Default for Knobs {
@@ -62,6 +75,7 @@ impl Default for Knobs {
             stride: 1,
             fraction: 1.0,
             azimuth_nodes: default_azimuth_nodes(),
+            fit_texels: default_fit_texels(),
             topology_map: None,
         }
     }

@@ -26,21 +26,27 @@ use super::config::{FitConfig, MapsConfig};
 use super::parameters::{Component, ParamSet, Shape};
 use super::problem::{self, bounded_small_lsq, component_index, FitProblem, SampleMaps};
 use super::{polish, wrap_azimuth, FitOutcome};
+use crate::load::capture_store::CaptureStore;
 use crate::load::samples::{DataKind, Origin, Sample, Samples};
 use crate::model::frame::FibreFrame;
 use crate::model::topology::max_height;
-use crate::model::{DirectionPair, ShadingModel};
+use crate::model::{Basis, DirectionPair, ShadingModel};
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
-use rand::seq::SliceRandom;
-use rand::SeedableRng;
 use rayon::prelude::*;
-use std::sync::Arc;
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 /// Grid minima a per-texel fit polishes (besides its start).
 pub const TEXEL_STARTS: usize = 3;
 /// Heights of the per-texel grid, from 0 to H_max.
 pub const HEIGHT_GRID: usize = 17;
+/// Compass search of a texel: every candidate to steps of this fraction of half the grid's
+/// spacing, the best on to [`COMPASS_FINE`] (H_max / 1600, 0.075 degrees), then Gauss–Newton.
+const COMPASS_COARSE: f64 = 0.125;
+const COMPASS_FINE: f64 = 0.02;
+/// Gauss–Newton stops when an iteration lowers the cost by less than this fraction.
+const GAUSS_NEWTON_GAIN: f64 = 1e-10;
 /// Another minimum of a texel within this many residual variances of the best makes the texel
 /// ambiguous: its standard errors grow to cover the distance between the minima.
 pub const AMBIGUITY_DELTA: f64 = 9.0;
@@ -123,9 +129,8 @@ pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
     Ok(())
 }
 
-/// Samples grouped by texel: (x, y) and sample indices, row-major.
-/// (width, height, texel (x, y) list, sample indices per texel).
-type Grouped = (usize, usize, Vec<(u32, u32)>, Vec<Vec<usize>>);
+/// Samples grouped by texel, row-major: (texel (x, y) list, sample indices per texel).
+type Grouped = (Vec<(u32, u32)>, Vec<Vec<usize>>);
 
 /// A texel's fit: best values, its cost, and the other distinct minima with their costs.
 type TexelFit = (TexelValues, f64, Vec<(TexelValues, f64)>);
@@ -152,11 +157,7 @@ fn group(samples: &Samples) -> Result<Grouped> {
         }
         members.last_mut().expect("pushed").push(i);
     }
-    let (w, h) = samples.image_size.unwrap_or((
-        texels.iter().map(|t| t.0).max().unwrap_or(0) as usize + 1,
-        texels.iter().map(|t| t.1).max().unwrap_or(0) as usize + 1,
-    ));
-    Ok((w, h, texels, members))
+    Ok((texels, members))
 }
 
 /// The globals with the mapped parameters held fixed (their values come from the maps).
@@ -191,6 +192,40 @@ struct Globals<'m> {
     channels: usize,
     /// Global albedo per component index and channel (0 where absent).
     albedo: [[f64; 3]; 4],
+    /// Model columns of the per-texel grid by the texel's directions ([`GridCache`]).
+    grids: GridCache,
+}
+
+/// Texel grids kept at most (texels whose directions all differ, a pinhole camera's, compute
+/// their own).
+const GRID_CACHE_ENTRIES: usize = 64;
+
+/// The model columns of a texel's grid (every grid point, every observation) depend only on
+/// its observations' light and view directions (and its fixed height or azimuth when those are
+/// not mapped): with a directional light and an orthographic camera per image, every texel sees
+/// the same directions, so the grid is computed once and each texel only solves its albedos
+/// against it.
+#[derive(Default)]
+struct GridCache {
+    grids: Mutex<HashMap<Vec<u64>, Arc<Vec<Vec<[f64; 4]>>>>>,
+}
+
+impl GridCache {
+    fn get_or(
+        &self,
+        key: Vec<u64>,
+        make: impl FnOnce() -> Vec<Vec<[f64; 4]>>,
+    ) -> Arc<Vec<Vec<[f64; 4]>>> {
+        if let Some(g) = self.grids.lock().expect("grid cache").get(&key) {
+            return g.clone();
+        }
+        let grid = Arc::new(make());
+        let mut grids = self.grids.lock().expect("grid cache");
+        if grids.len() < GRID_CACHE_ENTRIES {
+            grids.entry(key).or_insert_with(|| grid.clone());
+        }
+        grid
+    }
 }
 
 /// The rung at the globals `set` with the knobs of `cfg` (no map: texels carry their height).
@@ -213,13 +248,15 @@ impl<'m> Globals<'m> {
             tied: set.substrate_tied,
             channels,
             albedo: globals_albedo(set),
+            grids: GridCache::default(),
         }
     }
 }
 
 /// One texel's problem.
-struct Texel<'a> {
-    obs: Vec<&'a Sample>,
+struct Texel {
+    /// The texel's samples, one per image.
+    obs: Vec<Sample>,
     /// Per observation and channel: residual weight (1/sigma or sqrt(weight)).
     scale: Vec<[f64; 3]>,
     free: Free,
@@ -227,21 +264,52 @@ struct Texel<'a> {
     prior: Option<(f64, f64, f64)>,
 }
 
-impl Texel<'_> {
+impl Texel {
+    fn new(obs: Vec<Sample>, free: Free, prior: Option<(f64, f64, f64)>) -> Self {
+        Self {
+            scale: obs.iter().map(scale_of).collect(),
+            obs,
+            free,
+            prior,
+        }
+    }
+
+    /// What the grid's columns depend on besides the globals: every observation's directions,
+    /// and the texel's height or azimuth where they are fixed.
+    fn grid_key(&self, start: &TexelValues) -> Vec<u64> {
+        let mut key: Vec<u64> = self
+            .obs
+            .iter()
+            .flat_map(|s| [s.l.x, s.l.y, s.l.z, s.v.x, s.v.y, s.v.z].map(f64::to_bits))
+            .collect();
+        if !self.free.height {
+            key.push(start.height.to_bits());
+        }
+        if !self.free.psi {
+            key.push(start.psi.to_bits());
+        }
+        key
+    }
+
     /// Columns of every observation at (H, psi).
     fn columns(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
         let frame = FibreFrame::from_azimuth(psi.to_radians());
-        self.obs
+        let pairs: Vec<DirectionPair> = self
+            .obs
             .iter()
-            .map(|s| {
-                let pair = DirectionPair::new(&frame, &s.l, &s.v);
-                let b = if g.has_topology {
-                    g.model
-                        .basis_at_height(&pair, h.clamp(0.0, g.h_max))
-                        .unwrap_or_default()
-                } else {
-                    g.model.basis(&pair)
-                };
+            .map(|s| DirectionPair::new(&frame, &s.l, &s.v))
+            .collect();
+        // one texel is one pattern seen in every image: one batch
+        let mut bases = vec![Basis::default(); pairs.len()];
+        if !(g.has_topology
+            && g.model
+                .basis_many_at_height(&pairs, h.clamp(0.0, g.h_max), &mut bases))
+        {
+            g.model.basis_many(&pairs, &mut bases);
+        }
+        bases
+            .iter()
+            .map(|b| {
                 if g.tied {
                     [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
                 } else {
@@ -323,6 +391,12 @@ impl Texel<'_> {
 
     /// Cost and solved values at nonlinear values `u` (H and/or psi in that order).
     fn cost_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (f64, TexelValues) {
+        let (r, v) = self.residuals_at(g, base, u);
+        (r.iter().map(|x| x * x).sum(), v)
+    }
+
+    /// Residuals and solved values at nonlinear values `u`.
+    fn residuals_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (Vec<f64>, TexelValues) {
         let mut v = *base;
         let mut k = 0;
         if self.free.height {
@@ -333,8 +407,7 @@ impl Texel<'_> {
             v.psi = wrap_azimuth(u[k]);
         }
         let cols = self.columns(g, v.height, v.psi);
-        let r = self.solve(g, &cols, &mut v);
-        (r.iter().map(|x| x * x).sum(), v)
+        (self.solve(g, &cols, &mut v), v)
     }
 
     fn nonlinear(&self, v: &TexelValues) -> Vec<f64> {
@@ -348,10 +421,10 @@ impl Texel<'_> {
         u
     }
 
-    /// Fit the texel from `start`: a grid over the nonlinear values (9 heights x 12 azimuths),
-    /// then damped Gauss–Newton from the best grid minima (up to [`TEXEL_STARTS`] distinct ones)
-    /// and from `start`. Returns the best (never worse than `start`) and the other distinct
-    /// minima found, best first.
+    /// Fit the texel from `start`: a grid over the nonlinear values (17 heights x 12 azimuths),
+    /// a coarse compass search from the best [`TEXEL_STARTS`] of its local minima and `start`,
+    /// the best of those searched on and polished by damped Gauss–Newton. Returns the best
+    /// (never worse than `start`) and the other distinct minima found, best first.
     fn fit(&self, g: &Globals, start: &TexelValues) -> TexelFit {
         let u0 = self.nonlinear(start);
         let (c0, v0) = self.cost_at(g, start, &u0);
@@ -371,13 +444,32 @@ impl Texel<'_> {
             vec![f64::NAN]
         };
         let (nh, np) = (hs.len(), ps.len());
-        let mut grid = vec![(f64::INFINITY, TexelValues::default()); nh * np];
-        for (i, &h) in hs.iter().enumerate() {
-            for (j, &p) in ps.iter().enumerate() {
-                let u: Vec<f64> = [h, p].into_iter().filter(|x| !x.is_nan()).collect();
-                grid[i * np + j] = self.cost_at(g, start, &u);
+        // the values of grid point (i, j) as `cost_at` sets them
+        let point = |i: usize, j: usize| {
+            let mut v = *start;
+            if self.free.height {
+                v.height = hs[i].clamp(0.0, g.h_max);
             }
-        }
+            if self.free.psi {
+                v.psi = wrap_azimuth(ps[j]);
+            }
+            v
+        };
+        let columns = g.grids.get_or(self.grid_key(start), || {
+            (0..nh * np)
+                .map(|k| {
+                    let v = point(k / np, k % np);
+                    self.columns(g, v.height, v.psi)
+                })
+                .collect()
+        });
+        let grid: Vec<(f64, TexelValues)> = (0..nh * np)
+            .map(|k| {
+                let mut v = point(k / np, k % np);
+                let r = self.solve(g, &columns[k], &mut v);
+                (r.iter().map(|x| x * x).sum(), v)
+            })
+            .collect();
         // grid points no 4-neighbour undercuts (the azimuth wraps)
         let mut local: Vec<usize> = (0..nh * np)
             .filter(|&k| {
@@ -398,22 +490,37 @@ impl Texel<'_> {
             .collect();
         local.sort_by(|a, b| grid[*a].0.total_cmp(&grid[*b].0));
         local.truncate(TEXEL_STARTS);
+        // the start competes with the grid minima for the polishes (so the fit is never worse
+        // than the start); each is searched to a coarse step, the best of them to the end
+        let mut candidates: Vec<(TexelValues, f64)> =
+            local.iter().map(|&k| (grid[k].1, grid[k].0)).collect();
+        candidates.push((v0, c0));
+        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+        candidates.truncate(TEXEL_STARTS);
+        let same = |w: &TexelValues, v: &TexelValues| {
+            (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
+                && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
+        };
         let mut minima: Vec<(TexelValues, f64)> = Vec::new();
-        let starts = std::iter::once((v0, c0)).chain(local.iter().map(|&k| (grid[k].1, grid[k].0)));
-        for (v, c) in starts {
-            let (v, c) = self.polish(g, start, v, c);
-            let same = |w: &TexelValues| {
-                (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
-                    && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
-            };
-            match minima.iter_mut().find(|m| same(&m.0)) {
+        for (v, c) in candidates {
+            let (v, c) = self.compass(g, start, v, c, 1.0, COMPASS_COARSE);
+            match minima.iter_mut().find(|m| same(&m.0, &v)) {
                 Some(m) if c < m.1 => *m = (v, c),
                 Some(_) => {}
                 None => minima.push((v, c)),
             }
         }
+        // searched on to the end: every minimum that could still be the best (coarse cost
+        // within twice the lowest: a coarse step costs well under one noise variance, the
+        // ambiguity margin is nine)
+        let lowest = minima.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
+        for m in minima.iter_mut().filter(|m| m.1 <= 2.0 * lowest) {
+            let (v, c) = self.compass(g, start, m.0, m.1, COMPASS_COARSE, COMPASS_FINE);
+            *m = self.gauss_newton(g, start, v, c);
+        }
         minima.sort_by(|a, b| a.1.total_cmp(&b.1));
         let (best, best_cost) = minima.remove(0);
+        minima.retain(|m| !same(&m.0, &best));
         // the grid's profiles (best over the other value at each grid height, and at each grid
         // azimuth) count as other candidates too: a flat profile is an undetermined value even
         // where it has no separate minimum
@@ -436,38 +543,39 @@ impl Texel<'_> {
         (best, best_cost, minima)
     }
 
-    /// Damped Gauss–Newton on the nonlinear values from `v` (cost `c`); albedos re-solved at
-    /// every point.
-    fn polish(
+    /// A compass search on the nonlinear values from `v` (cost `c`), albedos re-solved at every
+    /// point: occlusion makes the cost kinked in H, where Gauss–Newton stalls. Steps halve from
+    /// `from` to `to` times (H_max / 32, 3.75 degrees), half the grid's spacing.
+    fn compass(
         &self,
         g: &Globals,
         start: &TexelValues,
         v: TexelValues,
         c: f64,
+        from: f64,
+        to: f64,
     ) -> (TexelValues, f64) {
         let (mut best, mut best_cost) = (v, c);
         let mut best_u = self.nonlinear(&best);
-        // a compass search first: occlusion makes the cost kinked in H, where Gauss–Newton
-        // stalls; halving steps from a sixteenth of H_max and 7.5 degrees
-        let mut steps: Vec<f64> = (0..best_u.len())
+        let unit: Vec<f64> = (0..best_u.len())
             .map(|k| {
                 if self.free.height && k == 0 {
-                    g.h_max / 16.0
+                    g.h_max / 32.0
                 } else {
-                    7.5
+                    3.75
                 }
             })
             .collect();
-        let floor: Vec<f64> = steps.iter().map(|s| s * 1e-2).collect();
+        let mut scale = from;
         for _ in 0..400 {
-            if steps.iter().zip(&floor).all(|(s, f)| s <= f) {
+            if scale < to {
                 break;
             }
             let mut moved = false;
             for k in 0..best_u.len() {
                 for sign in [1.0, -1.0] {
                     let mut u = best_u.clone();
-                    u[k] += sign * steps[k];
+                    u[k] += sign * scale * unit[k];
                     let (c, v) = self.cost_at(g, start, &u);
                     if c < best_cost {
                         (best_cost, best) = (c, v);
@@ -478,48 +586,46 @@ impl Texel<'_> {
                 }
             }
             if !moved {
-                steps.iter_mut().for_each(|s| *s *= 0.5);
+                scale *= 0.5;
             }
         }
+        (best, best_cost)
+    }
+
+    /// Damped Gauss–Newton on the nonlinear values from `v` (cost `c`); albedos re-solved at
+    /// every point.
+    fn gauss_newton(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        v: TexelValues,
+        c: f64,
+    ) -> (TexelValues, f64) {
+        let (mut best, mut best_cost) = (v, c);
+        let mut best_u = self.nonlinear(&best);
+        let n = best_u.len();
+        let (mut r0, _) = self.residuals_at(g, start, &best_u);
         let mut lambda = 1e-3;
         for _ in 0..30 {
-            let (r0, _) = {
-                let cols = self.columns(g, best.height, best.psi);
-                let mut v = best;
-                (self.solve(g, &cols, &mut v), v)
-            };
-            let n = best_u.len();
-            let steps: Vec<f64> = (0..n)
-                .map(|k| {
-                    if self.free.height && k == 0 {
-                        1e-4 * g.h_max.max(1e-3)
-                    } else {
-                        1e-3
-                    }
-                })
-                .collect();
             let mut jac = DMatrix::zeros(r0.len(), n);
             for k in 0..n {
                 let mut u = best_u.clone();
-                let mut hstep = steps[k];
-                if self.free.height && k == 0 && u[0] + hstep > g.h_max {
-                    hstep = -hstep;
-                }
-                u[k] += hstep;
-                let mut v = best;
-                if self.free.height && k == 0 {
-                    v.height = u[0];
+                let mut step = if self.free.height && k == 0 {
+                    1e-4 * g.h_max.max(1e-3)
                 } else {
-                    v.psi = u[k];
+                    1e-3
+                };
+                if self.free.height && k == 0 && u[0] + step > g.h_max {
+                    step = -step;
                 }
-                let cols = self.columns(g, v.height, v.psi);
-                let r = self.solve(g, &cols, &mut v);
+                u[k] += step;
+                let (r, _) = self.residuals_at(g, start, &u);
                 for (i, (a, b)) in r.iter().zip(&r0).enumerate() {
-                    jac[(i, k)] = (a - b) / hstep;
+                    jac[(i, k)] = (a - b) / step;
                 }
             }
             let jt = jac.transpose();
-            let mut a = &jt * &jac;
+            let a = &jt * &jac;
             let grad = &jt * DVector::from_vec(r0.clone());
             let mut improved = false;
             for _ in 0..8 {
@@ -527,24 +633,23 @@ impl Texel<'_> {
                 for k in 0..n {
                     m[(k, k)] += lambda * a[(k, k)].max(1e-12);
                 }
-                let Some(step) = m.clone().cholesky().map(|ch| ch.solve(&(-&grad))) else {
+                let Some(step) = m.cholesky().map(|ch| ch.solve(&(-&grad))) else {
                     lambda *= 10.0;
                     continue;
                 };
                 let u: Vec<f64> = best_u.iter().zip(step.iter()).map(|(x, d)| x + d).collect();
-                let (c, v) = self.cost_at(g, start, &u);
+                let (r, v) = self.residuals_at(g, start, &u);
+                let c: f64 = r.iter().map(|x| x * x).sum();
                 if c < best_cost {
                     let gain = (best_cost - c) / best_cost.max(1e-300);
-                    best_cost = c;
-                    best = v;
+                    (best_cost, best, r0) = (c, v, r);
                     best_u = self.nonlinear(&v);
                     lambda = (lambda * 0.3).max(1e-9);
-                    improved = gain > 1e-10;
+                    improved = gain > GAUSS_NEWTON_GAIN;
                     break;
                 }
                 lambda *= 10.0;
             }
-            a.fill(0.0);
             if !improved {
                 break;
             }
@@ -645,8 +750,6 @@ fn globals_albedo(set: &ParamSet) -> [[f64; 3]; 4] {
 /// Texels with pixels, their sample indices and neighbours, and the start values from the
 /// globals (or the capture's input maps).
 struct Layout {
-    width: usize,
-    height: usize,
     texels: Vec<(u32, u32)>,
     members: Vec<Vec<usize>>,
     neighbours: Vec<Vec<usize>>,
@@ -654,7 +757,7 @@ struct Layout {
 
 impl Layout {
     fn new(samples: &Samples) -> Result<Self> {
-        let (width, height, texels, members) = group(samples)?;
+        let (texels, members) = group(samples)?;
         let index: std::collections::HashMap<(u32, u32), usize> =
             texels.iter().enumerate().map(|(i, t)| (*t, i)).collect();
         let neighbours = texels
@@ -672,73 +775,81 @@ impl Layout {
             })
             .collect();
         Ok(Self {
-            width,
-            height,
             texels,
             members,
             neighbours,
         })
     }
 
-    /// Start values of every texel: the capture's own maps where it has them, else the globals.
+    /// Start values of every texel ([`start_value`]).
     fn start_values(&self, samples: &Samples, set: &ParamSet) -> Vec<TexelValues> {
-        let d = set.shape_value(Shape::Spacing);
-        let topo = crate::model::topology::Topology {
-            height: set.shape_value(Shape::Height),
-            map_scale: set.shape_value(Shape::MapScale),
-            map: None,
-        };
-        let g_psi = set.shape_value(Shape::Azimuth);
-        let galb = globals_albedo(set);
         self.members
             .iter()
-            .map(|m| {
-                let s = &samples.samples[m[0]];
-                TexelValues {
-                    height: s
-                        .texel_height
-                        .or(s.map_value.map(|mv| topo.texel_height(mv, d)))
-                        .unwrap_or(topo.height),
-                    psi: s.fibre_azimuth.map(|p| p.to_degrees()).unwrap_or(g_psi),
-                    kd: galb[0],
-                    ks: galb[1],
-                }
-            })
+            .map(|m| start_value(&samples.samples[m[0]], set))
             .collect()
     }
 
     /// The per-texel problems of `ids`, with the smoothness prior from `values` when on.
-    fn problems<'a>(
+    fn problems(
         &self,
-        samples: &'a Samples,
+        samples: &Samples,
         ids: &[usize],
         values: &[TexelValues],
         free: Free,
         smoothness: f64,
-    ) -> Vec<Texel<'a>> {
+    ) -> Vec<Texel> {
         ids.iter()
             .map(|&t| {
-                let m = &self.members[t];
-                let nb = &self.neighbours[t];
-                let prior = (smoothness > 0.0 && !nb.is_empty()).then(|| {
-                    let n = nb.len() as f64;
-                    let hm = nb.iter().map(|&j| values[j].height).sum::<f64>() / n;
-                    // circular mean of the axial azimuths
-                    let (sx, sy) = nb.iter().fold((0.0, 0.0), |(a, b), &j| {
-                        let th = (2.0 * values[j].psi).to_radians();
-                        (a + th.cos(), b + th.sin())
-                    });
-                    (smoothness, hm, sy.atan2(sx).to_degrees() / 2.0)
-                });
-                Texel {
-                    obs: m.iter().map(|&i| &samples.samples[i]).collect(),
-                    scale: m.iter().map(|&i| scale_of(&samples.samples[i])).collect(),
+                let nbs: Vec<TexelValues> = self.neighbours[t].iter().map(|&j| values[j]).collect();
+                Texel::new(
+                    self.members[t]
+                        .iter()
+                        .map(|&i| samples.samples[i].clone())
+                        .collect(),
                     free,
-                    prior,
-                }
+                    prior_of(&nbs, smoothness),
+                )
             })
             .collect()
     }
+}
+
+/// A texel's start: the capture's own maps where it has them (height or topology map, tangent
+/// or azimuth map), else the globals `set`; `s` is any of its samples.
+fn start_value(s: &Sample, set: &ParamSet) -> TexelValues {
+    let d = set.shape_value(Shape::Spacing);
+    let topo = crate::model::topology::Topology {
+        height: set.shape_value(Shape::Height),
+        map_scale: set.shape_value(Shape::MapScale),
+        map: None,
+    };
+    let galb = globals_albedo(set);
+    TexelValues {
+        height: s
+            .texel_height
+            .or(s.map_value.map(|mv| topo.texel_height(mv, d)))
+            .unwrap_or(topo.height),
+        psi: s
+            .fibre_azimuth
+            .map(|p| p.to_degrees())
+            .unwrap_or(set.shape_value(Shape::Azimuth)),
+        kd: galb[0],
+        ks: galb[1],
+    }
+}
+
+/// The smoothness prior from the neighbours' values: (weight, mean H, circular mean of the
+/// axial azimuths); none when off or without neighbours.
+fn prior_of(neighbours: &[TexelValues], smoothness: f64) -> Option<(f64, f64, f64)> {
+    (smoothness > 0.0 && !neighbours.is_empty()).then(|| {
+        let n = neighbours.len() as f64;
+        let hm = neighbours.iter().map(|v| v.height).sum::<f64>() / n;
+        let (sx, sy) = neighbours.iter().fold((0.0, 0.0), |(a, b), v| {
+            let th = (2.0 * v.psi).to_radians();
+            (a + th.cos(), b + th.sin())
+        });
+        (smoothness, hm, sy.atan2(sx).to_degrees() / 2.0)
+    })
 }
 
 fn scale_of(s: &Sample) -> [f64; 3] {
@@ -780,7 +891,7 @@ pub struct GlobalStage {
 /// Stage 1 of map recovery: the global parameters, alternating per-texel fits and the global
 /// LM on `[maps] global_texels` seeded texels until their cost stops falling.
 pub fn global_stage(
-    samples: &Samples,
+    store: &CaptureStore,
     cfg: &FitConfig,
     req: &MapsConfig,
     quiet: bool,
@@ -789,30 +900,15 @@ pub fn global_stage(
     if cfg.metric != super::config::Metric::Linear {
         bail!("--maps fits captures with the linear metric; set metric = \"linear\"");
     }
-    let layout = Layout::new(samples)?;
     let free = free_of(req);
     // the texels of the global stage, and the plain global fit on their pixels
-    let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x6d61_7073);
-    let mut chosen: Vec<usize> = (0..layout.texels.len()).collect();
-    chosen.shuffle(&mut rng);
-    chosen.truncate(req.global_texels);
-    chosen.sort_unstable();
-    let sub = Samples {
-        samples: chosen
-            .iter()
-            .flat_map(|&t| {
-                layout.members[t]
-                    .iter()
-                    .map(|&i| samples.samples[i].clone())
-            })
-            .collect(),
-        channels: samples.channels,
-        kind: samples.kind,
-        source: samples.source.clone(),
-        dropped: samples.dropped.clone(),
-        skipped_examples: vec![],
-        image_size: samples.image_size,
-    };
+    let chosen = store.sample_texels(req.global_texels, cfg.seed ^ 0x6d61_7073);
+    // texel by texel (the order the stage was measured with: reports/maps_accuracy.md)
+    let mut sub = store.samples_of(&[]);
+    sub.samples = chosen
+        .iter()
+        .flat_map(|&t| store.texel_samples(t))
+        .collect();
     let sub_layout = Layout::new(&sub)?;
     let first = super::fit(&sub, cfg, quiet)?;
     let mut set = fix_mapped(&first.set, req);
@@ -899,9 +995,11 @@ pub struct TexelPart {
     pub row_costs: Vec<(f64, usize)>,
 }
 
-/// Stage 2 for the texels in rows [`rows.0`, `rows.1`) given the globals `set`.
+/// Stage 2 for the texels in rows [`rows.0`, `rows.1`) given the globals `set`, texel by
+/// texel from the compact store (no texel's samples are made before it is fitted, none kept
+/// after).
 pub fn texel_stage(
-    samples: &Samples,
+    store: &CaptureStore,
     cfg: &FitConfig,
     req: &MapsConfig,
     set: &ParamSet,
@@ -909,11 +1007,10 @@ pub fn texel_stage(
     quiet: bool,
 ) -> Result<TexelPart> {
     check_request(cfg, req)?;
-    let layout = Layout::new(samples)?;
     let free = free_of(req);
     let set = fix_mapped(set, req);
     let model = rung_of(&set, cfg);
-    let g = Globals::of(&set, model.as_ref(), samples.channels);
+    let g = Globals::of(&set, model.as_ref(), store.channels);
     let sweeps = if req.smoothness > 0.0 {
         1 + PRIOR_SWEEPS
     } else {
@@ -923,75 +1020,121 @@ pub fn texel_stage(
     let halo = (sweeps - 1) as u32;
     let lo = rows.0.saturating_sub(halo);
     let hi = rows.1.saturating_add(halo);
-    let ids: Vec<usize> = (0..layout.texels.len())
-        .filter(|&t| (lo..hi).contains(&layout.texels[t].1))
-        .collect();
-    let start = layout.start_values(samples, &set);
-    let mut values = start.clone();
-    let bar = crate::progress::bar((sweeps * ids.len()) as u64, "maps: texels", quiet);
-    let mut fits: Vec<TexelFit> = Vec::new();
-    for sweep in 0..sweeps {
-        let smoothness = if sweep == 0 { 0.0 } else { req.smoothness };
-        let problems = layout.problems(samples, &ids, &values, free, smoothness);
-        fits = problems
-            .par_iter()
-            .zip(ids.par_iter())
-            .map(|(p, &t)| {
-                bar.inc(1);
-                p.fit(&g, &start[t])
+    let texels = store.texels();
+    // texels are row-major: those of rows [lo, hi) are the ids [t0, t1)
+    let t0 = texels.partition_point(|t| t.1 < lo);
+    let t1 = texels.partition_point(|t| t.1 < hi);
+    let start_of = |t: usize| -> TexelValues {
+        let s = (0..store.images())
+            .find_map(|k| store.sample(t, k))
+            .expect("a stored texel has a sample");
+        start_value(&s, &set)
+    };
+    let start: Vec<TexelValues> = (t0..t1).into_par_iter().map(start_of).collect();
+    let neighbours = |t: usize| -> Vec<usize> {
+        let (x, y) = (texels[t].0 as i64, texels[t].1 as i64);
+        [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .filter_map(|(dx, dy)| store.texel_at(x + dx, y + dy))
+            .collect()
+    };
+    let problem = |t: usize, values: &[TexelValues], smoothness: f64| -> Texel {
+        let nbs: Vec<TexelValues> = neighbours(t)
+            .into_iter()
+            .map(|j| match j.checked_sub(t0) {
+                Some(k) if j < t1 => values[k],
+                _ => start_of(j),
             })
             .collect();
-        for (k, &t) in ids.iter().enumerate() {
-            values[t] = fits[k].0;
+        Texel::new(store.texel_samples(t), free, prior_of(&nbs, smoothness))
+    };
+    let mut values = start.clone();
+    let bar = crate::progress::bar((sweeps * (t1 - t0)) as u64, "maps: texels", quiet);
+    let kept = |t: usize| (rows.0..rows.1).contains(&texels[t].1);
+    // per texel: best values, cost, other minima (pruned; last sweep, kept texels only)
+    let mut fits: Vec<(TexelValues, f64, Vec<[f64; 3]>)> = Vec::new();
+    for sweep in 0..sweeps {
+        let smoothness = if sweep == 0 { 0.0 } else { req.smoothness };
+        let last = sweep + 1 == sweeps;
+        fits = (t0..t1)
+            .into_par_iter()
+            .map(|t| {
+                let (v, cost, others) = problem(t, &values, smoothness).fit(&g, &start[t - t0]);
+                bar.inc(1);
+                let others = if last && kept(t) {
+                    prune_minima(&v, cost, &others)
+                } else {
+                    vec![]
+                };
+                (v, cost, others)
+            })
+            .collect();
+        for (k, f) in fits.iter().enumerate() {
+            values[k] = f.0;
         }
     }
     bar.finish_and_clear();
-    let problems = layout.problems(
-        samples,
-        &ids,
-        &values,
-        free,
-        req.smoothness * f64::from(u8::from(sweeps > 1)),
-    );
-    let keep: Vec<usize> = (0..ids.len())
-        .filter(|&k| (rows.0..rows.1).contains(&layout.texels[ids[k]].1))
-        .collect();
-    let details: Vec<(TexelValues, f64, Vec<[f64; 3]>)> = keep
+    let smoothness = req.smoothness * f64::from(u8::from(sweeps > 1));
+    let keep: Vec<usize> = (t0..t1).filter(|&t| kept(t)).collect();
+    // standard errors before scaling, relative residual, residual count
+    let details: Vec<(TexelValues, f64, usize)> = keep
         .par_iter()
-        .map(|&k| {
-            let (v, cost, others) = &fits[k];
-            let p = &problems[k];
-            let se = p.std_errors(&g, v, 1.0);
-            let others = others
-                .iter()
-                .map(|(w, c)| {
-                    [
-                        c - cost,
-                        (w.height - v.height).abs(),
-                        wrap_azimuth(w.psi - v.psi).abs(),
-                    ]
-                })
-                .collect();
-            (se, p.relative_residual(&g, v), others)
+        .map(|&t| {
+            let p = problem(t, &values, smoothness);
+            let v = &fits[t - t0].0;
+            (
+                p.std_errors(&g, v, 1.0),
+                p.relative_residual(&g, v),
+                p.obs.len() * store.channels,
+            )
         })
         .collect();
     let n_rows = (rows.1 - rows.0) as usize;
     let mut row_costs = vec![(0.0, 0usize); n_rows];
-    for &k in &keep {
-        let y = layout.texels[ids[k]].1;
-        let r = &mut row_costs[(y - rows.0) as usize];
-        r.0 += fits[k].1;
-        r.1 += problems[k].obs.len() * samples.channels;
+    for (&t, d) in keep.iter().zip(&details) {
+        let r = &mut row_costs[(texels[t].1 - rows.0) as usize];
+        r.0 += fits[t - t0].1;
+        r.1 += d.2;
     }
     Ok(TexelPart {
         rows: [rows.0, rows.1],
-        texels: keep.iter().map(|&k| layout.texels[ids[k]]).collect(),
-        values: keep.iter().map(|&k| fits[k].0).collect(),
+        texels: keep.iter().map(|&t| texels[t]).collect(),
+        values: keep.iter().map(|&t| fits[t - t0].0).collect(),
         unscaled_std_errors: details.iter().map(|d| d.0).collect(),
-        other_minima: details.iter().map(|d| d.2.clone()).collect(),
+        other_minima: keep
+            .iter()
+            .map(|&t| std::mem::take(&mut fits[t - t0].2))
+            .collect(),
         residual: details.iter().map(|d| d.1).collect(),
         row_costs,
     })
+}
+
+/// The other minima of a texel fitted to `v` at `cost` as (cost above the best, |dH|, |dpsi|
+/// in degrees), keeping only those no other one dominates (as good or better in cost and as
+/// far or farther in both H and psi): [`finish_maps`] widens the standard errors by the
+/// farthest minimum within a cost margin, which the kept ones give for any margin.
+fn prune_minima(v: &TexelValues, cost: f64, others: &[(TexelValues, f64)]) -> Vec<[f64; 3]> {
+    let all: Vec<[f64; 3]> = others
+        .iter()
+        .map(|(w, c)| {
+            [
+                c - cost,
+                (w.height - v.height).abs(),
+                wrap_azimuth(w.psi - v.psi).abs(),
+            ]
+        })
+        .collect();
+    let mut kept: Vec<[f64; 3]> = Vec::new();
+    for (i, a) in all.iter().enumerate() {
+        let dominated = all.iter().enumerate().any(|(j, b)| {
+            j != i && b[0] <= a[0] && b[1] >= a[1] && b[2] >= a[2] && (b != a || j < i)
+        });
+        if !dominated {
+            kept.push(*a);
+        }
+    }
+    kept
 }
 
 /// Assemble parts covering every row into the maps: the residual variance over all pixel values
@@ -1113,30 +1256,30 @@ pub fn finish_maps(
 
 /// Recover the maps `req` asks for, with the globals of `cfg`: [`global_stage`], then
 /// [`texel_stage`] over every row and [`finish_maps`].
+/// The outcome's `fitted` values are those of the global stage's samples (`global.fitted`
+/// follows their order); [`fitted_all`] gives any others.
 pub fn recover(
-    samples: &Samples,
+    store: &CaptureStore,
     cfg: &FitConfig,
     req: &MapsConfig,
     quiet: bool,
 ) -> Result<MapOutcome> {
-    let stage = global_stage(samples, cfg, req, quiet)?;
-    let (w, h) = samples.image_size.unwrap_or((0, 0));
-    let h = h.max(Layout::new(samples)?.height);
-    let part = texel_stage(samples, cfg, req, &stage.outcome.set, (0, h as u32), quiet)?;
+    let stage = global_stage(store, cfg, req, quiet)?;
+    let (w, h) = (store.width, store.height);
+    let part = texel_stage(store, cfg, req, &stage.outcome.set, (0, h as u32), quiet)?;
     let global_free = stage.outcome.statistics.free_parameters;
     let h_max = max_height(stage.outcome.set.shape_value(Shape::Spacing));
     let (maps, variance, mut warnings) = finish_maps(
         std::slice::from_ref(&part),
-        w.max(Layout::new(samples)?.width),
+        w,
         h,
-        samples.channels,
+        store.channels,
         req,
         global_free,
         h_max,
     )?;
     warnings.splice(0..0, stage.warnings.iter().cloned());
-    let mut global = stage.outcome;
-    global.fitted = fitted_all(samples, cfg, req, &global.set.clone(), &maps)?;
+    let global = stage.outcome;
     Ok(MapOutcome {
         global,
         maps,
@@ -1155,11 +1298,26 @@ pub fn fitted_all(
     maps: &TexelMaps,
 ) -> Result<Vec<[f64; 3]>> {
     let layout = Layout::new(samples)?;
-    if layout.texels != maps.texels {
-        bail!("the maps do not belong to these samples (their texels differ)");
-    }
+    let index: HashMap<(u32, u32), usize> = maps
+        .texels
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (*t, i))
+        .collect();
+    let values = layout
+        .texels
+        .iter()
+        .map(|t| match index.get(t) {
+            Some(&i) => Ok(maps.values[i]),
+            None => bail!(
+                "the maps do not belong to these samples (no texel ({}, {}))",
+                t.0,
+                t.1
+            ),
+        })
+        .collect::<Result<Vec<_>>>()?;
     let set = fix_mapped(set, req);
-    let (subset, smaps) = mapped_all(samples, &maps.values, &layout.members, free_of(req));
+    let (subset, smaps) = mapped_all(samples, &values, &layout.members, free_of(req));
     let p = problem_on(cfg, &set, &subset, smaps);
     let values = p.model_values(&p.columns(&set)?, &set);
     let mut fitted = vec![[0.0; 3]; samples.samples.len()];

@@ -8,6 +8,7 @@
 //! The fibre models are linear in their albedos, which are solved exactly inside every step
 //! (see [`problem`]).
 
+pub mod all_pixels;
 pub mod config;
 pub mod finish;
 pub mod global;

@@ -363,26 +363,38 @@ impl<'a> FitProblem<'a> {
                     .collect();
                 let mut bases = vec![Basis::default(); chunk.len()];
                 if let Some(hs) = heights {
-                    for ((&i, pair), b) in ids.iter().zip(&pairs).zip(bases.iter_mut()) {
-                        *b = m
-                            .basis_at_height(pair, hs[i].clamp(0.0, h_max))
-                            .unwrap_or_default();
-                    }
+                    let hts: Vec<f64> = ids.iter().map(|&i| hs[i].clamp(0.0, h_max)).collect();
+                    model::bases_at_heights(m.as_ref(), &pairs, &hts, &mut bases);
                 } else if has_topology
                     && chunk
                         .iter()
                         .any(|s| s.map_value.is_some() || s.texel_height.is_some())
                 {
-                    for ((s, pair), b) in chunk.iter().zip(&pairs).zip(bases.iter_mut()) {
-                        let h = match (s.texel_height, s.map_value) {
+                    // samples with a texel at their texel's height, batched by height; the
+                    // others (a spot over the whole map) through the model's topology
+                    let hts: Vec<Option<f64>> = chunk
+                        .iter()
+                        .map(|s| match (s.texel_height, s.map_value) {
                             (Some(h), _) => Some(h.clamp(0.0, h_max)),
                             (None, Some(mv)) => Some(topology.texel_height(mv, d)),
                             _ => None,
-                        };
-                        *b = match h {
-                            Some(h) => m.basis_at_height(pair, h).unwrap_or_default(),
-                            None => m.basis(pair),
-                        };
+                        })
+                        .collect();
+                    let (with, without): (Vec<usize>, Vec<usize>) =
+                        (0..chunk.len()).partition(|&k| hts[k].is_some());
+                    for (ks, at_height) in [(with, true), (without, false)] {
+                        let sub: Vec<DirectionPair> = ks.iter().map(|&k| pairs[k]).collect();
+                        let mut out = vec![Basis::default(); ks.len()];
+                        if at_height {
+                            let h: Vec<f64> =
+                                ks.iter().map(|&k| hts[k].expect("partitioned")).collect();
+                            model::bases_at_heights(m.as_ref(), &sub, &h, &mut out);
+                        } else {
+                            m.basis_many(&sub, &mut out);
+                        }
+                        for (&k, b) in ks.iter().zip(out) {
+                            bases[k] = b;
+                        }
                     }
                 } else {
                     m.basis_many(&pairs, &mut bases);

@@ -1,6 +1,7 @@
 //! Image captures: a TOML description of a swatch and its images (example:
 //! `configs/capture_example.toml`). Every pixel of every image becomes a sample with its own
-//! light and view directions, fibre tangent and topology-map texel.
+//! light and view directions, fibre tangent and topology-map texel; the pixels are held compactly
+//! by texel in a [`CaptureStore`] (`capture_store.rs`).
 //!
 //! Pixel (x, y) (column x, row y from the top) of a W x H image covers the swatch point
 //! p = (((x + 0.5)/W - 0.5) w, (0.5 - (y + 0.5)/H) h, 0) mm for a swatch of w x h mm centred on
@@ -9,10 +10,10 @@
 //! radiance / (E cos theta_i) with E the irradiance perpendicular to the light: `irradiance` for
 //! a directional light, `intensity / r^2` (r in metres) for a point light.
 
-use super::image_io::{self, Encoding, LinearImage};
-use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
+pub use super::capture_store::CaptureStore;
+use super::image_io::{Encoding, LinearImage};
+use super::samples::Samples;
 use crate::model::frame::{direction_from_angles, Vec3};
-use crate::model::topology::TopologyMap;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -125,7 +126,7 @@ impl Default for Subsample {
 }
 
 impl Subsample {
-    fn keeps(&self, image: usize, x: usize, y: usize) -> bool {
+    pub(crate) fn keeps(&self, image: usize, x: usize, y: usize) -> bool {
         if x % self.stride != 0 || y % self.stride != 0 {
             return false;
         }
@@ -198,7 +199,7 @@ pub fn view_at(camera: &Camera, p: &Vec3) -> Option<Vec3> {
     }
 }
 
-fn resolve(base: &Path, p: &Path) -> PathBuf {
+pub(crate) fn resolve(base: &Path, p: &Path) -> PathBuf {
     if p.is_relative() {
         base.join(p)
     } else {
@@ -206,7 +207,12 @@ fn resolve(base: &Path, p: &Path) -> PathBuf {
     }
 }
 
-fn check_size(what: &str, path: &Path, got: (usize, usize), want: (usize, usize)) -> Result<()> {
+pub(crate) fn check_size(
+    what: &str,
+    path: &Path,
+    got: (usize, usize),
+    want: (usize, usize),
+) -> Result<()> {
     if got != want {
         bail!(
             "{}: {what} is {}x{} pixels but the images are {}x{}; maps must be registered to the image pixels",
@@ -223,7 +229,7 @@ fn check_size(what: &str, path: &Path, got: (usize, usize), want: (usize, usize)
 /// Light, camera, exposure and saturation of image `k` (numbered from 1 in messages): every angle
 /// finite and in [0, 90) degrees from the normal, irradiance, intensity and exposure finite and
 /// positive, a saturation level only for EXR images and then finite and positive.
-fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result<()> {
+pub(crate) fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result<()> {
     let at = format!("{name}: [[images]] {} ({})", k + 1, spec.file.display());
     let theta = |what: &str, t: f64| -> Result<()> {
         if !(t.is_finite() && (0.0..90.0).contains(&t)) {
@@ -295,7 +301,7 @@ fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result<()> {
 
 /// Negative pixel values beyond noise (below -1 % of the image's largest value) are an error, as
 /// in the CSV loader: a linear image of radiance cannot be negative.
-fn check_no_negatives(path: &Path, img: &LinearImage) -> Result<()> {
+pub(crate) fn check_no_negatives(path: &Path, img: &LinearImage) -> Result<()> {
     let largest = img
         .data
         .iter()
@@ -319,242 +325,10 @@ fn check_no_negatives(path: &Path, img: &LinearImage) -> Result<()> {
     Ok(())
 }
 
+/// Every pixel of the capture at `path` as a sample (image by image, rows from the top), via
+/// the compact [`CaptureStore`].
 pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
-    let desc = CaptureFile::load(path)?;
-    let base = path.parent().unwrap_or(Path::new("."));
-    let name = path.display().to_string();
-    if desc.images.is_empty() {
-        bail!("{name}: no [[images]]");
-    }
-    let [w_mm, h_mm] = desc.swatch.size_mm;
-    if !(w_mm > 0.0 && h_mm > 0.0 && w_mm.is_finite() && h_mm.is_finite()) {
-        bail!("{name}: swatch.size_mm must be two positive lengths in millimetres");
-    }
-    let sw = &desc.swatch;
-    if [
-        sw.fibre_azimuth_deg.is_some(),
-        sw.tangent_map.is_some(),
-        sw.fibre_azimuth_map.is_some(),
-    ]
-    .iter()
-    .filter(|x| **x)
-    .count()
-        > 1
-    {
-        bail!("{name}: swatch.fibre_azimuth_deg, swatch.tangent_map and swatch.fibre_azimuth_map each give the fibre direction: give one, not both");
-    }
-    if sw.topology_map.is_some() && sw.height_map.is_some() {
-        bail!("{name}: give swatch.topology_map or swatch.height_map, not both");
-    }
-    if let Some(psi) = desc.swatch.fibre_azimuth_deg {
-        if !(-90.0..=90.0).contains(&psi) {
-            bail!("{name}: swatch.fibre_azimuth_deg = {psi} is outside [-90, 90] degrees");
-        }
-    }
-    if subsample.stride == 0 || !(subsample.fraction > 0.0 && subsample.fraction <= 1.0) {
-        bail!("subsampling: stride must be >= 1 and fraction in (0, 1]");
-    }
-    for (k, spec) in desc.images.iter().enumerate() {
-        check_image_spec(&name, k, spec)?;
-    }
-    let images: Vec<LinearImage> = desc
-        .images
-        .iter()
-        .map(|spec| image_io::read(&resolve(base, &spec.file), spec.encoding, spec.saturation))
-        .collect::<Result<_>>()?;
-    for (spec, img) in desc.images.iter().zip(&images) {
-        check_no_negatives(&resolve(base, &spec.file), img)?;
-    }
-    let (w, h) = (images[0].width, images[0].height);
-    let channels = images[0].channels;
-    for (spec, img) in desc.images.iter().zip(&images) {
-        check_size(
-            "image",
-            &resolve(base, &spec.file),
-            (img.width, img.height),
-            (w, h),
-        )?;
-        if img.channels != channels {
-            bail!(
-                "{}: has {} channels, the first image {channels}; all images must match",
-                spec.file.display(),
-                img.channels
-            );
-        }
-    }
-    let load_map = |p: &Option<PathBuf>, what: &str| -> Result<Option<TopologyMap>> {
-        match p {
-            Some(p) => {
-                let full = resolve(base, p);
-                let m = TopologyMap::load_as(&full, what)?;
-                check_size(what, &full, (m.width, m.height), (w, h))?;
-                Ok(Some(m))
-            }
-            None => Ok(None),
-        }
-    };
-    let topology = load_map(&desc.swatch.topology_map, "topology map")?;
-    // maps in physical units (recovered by `fit --maps`): (path, lowest, highest allowed)
-    let load_unit_map = |p: &Option<PathBuf>,
-                         what: &str,
-                         lo: f32,
-                         hi: f32|
-     -> Result<Option<LinearImage>> {
-        let Some(p) = p else { return Ok(None) };
-        let full = resolve(base, p);
-        let m = image_io::read(&full, None, None)?;
-        check_size(what, &full, (m.width, m.height), (w, h))?;
-        if m.channels != 1 {
-            bail!(
-                "{}: a {what} has one channel, this has {}",
-                full.display(),
-                m.channels
-            );
-        }
-        if let Some(i) = m
-            .data
-            .iter()
-            .position(|v| !v.is_nan() && !(lo..=hi).contains(v))
-        {
-            bail!(
-                "{}: texel ({}, {}) has value {}; {what} values must lie in [{lo}, {hi}] (NaN: no texel)",
-                full.display(),
-                i % w,
-                i / w,
-                m.data[i]
-            );
-        }
-        Ok(Some(m))
-    };
-    let height_map = load_unit_map(
-        &desc.swatch.height_map,
-        "height map (fibre radii)",
-        0.0,
-        20.0,
-    )?;
-    let azimuth_map = load_unit_map(
-        &desc.swatch.fibre_azimuth_map,
-        "fibre azimuth map (degrees)",
-        -90.0,
-        90.0,
-    )?;
-    let tangent = load_map(&desc.swatch.tangent_map, "tangent map")?;
-    let mask = load_map(&desc.swatch.mask, "mask")?;
-    let view_maps: Vec<Option<LinearImage>> = desc
-        .images
-        .iter()
-        .map(|spec| match &spec.camera {
-            Camera::ViewMap { file } => {
-                let full = resolve(base, file);
-                let m = image_io::read(&full, None, None)?;
-                check_size("view map", &full, (m.width, m.height), (w, h))?;
-                if m.channels != 3 {
-                    bail!(
-                        "{}: a view map needs R, G, B channels holding x, y, z",
-                        full.display()
-                    );
-                }
-                Ok(Some(m))
-            }
-            _ => Ok(None),
-        })
-        .collect::<Result<_>>()?;
-    let roi = desc.swatch.roi.unwrap_or([0, 0, w, h]);
-    if roi[0] >= roi[2] || roi[1] >= roi[3] || roi[2] > w || roi[3] > h {
-        bail!("{name}: swatch.roi = {roi:?} is not a rectangle inside the {w}x{h} image");
-    }
-
-    let mut samples = Vec::new();
-    let mut dropped = Dropped::default();
-    for (k, (spec, img)) in desc.images.iter().zip(&images).enumerate() {
-        for y in 0..h {
-            for x in 0..w {
-                let inside = x >= roi[0] && x < roi[2] && y >= roi[1] && y < roi[3];
-                if !inside || mask.as_ref().is_some_and(|m| m.texel(x, y) == 0.0) {
-                    dropped.masked += 1;
-                    continue;
-                }
-                if !subsample.keeps(k, x, y) {
-                    dropped.subsampled += 1;
-                    continue;
-                }
-                if img.saturated[y * w + x] {
-                    dropped.saturated += 1;
-                    continue;
-                }
-                let px = img.pixel(x, y);
-                let texel_height = height_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
-                let texel_psi = azimuth_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
-                if px.iter().any(|v| !v.is_finite())
-                    || texel_height.is_some_and(f64::is_nan)
-                    || texel_psi.is_some_and(f64::is_nan)
-                {
-                    dropped.invalid += 1;
-                    continue;
-                }
-                let p = pixel_position(desc.swatch.size_mm, w, h, x, y);
-                let (l, e) = light_at(&spec.light, &p);
-                let v = match &view_maps[k] {
-                    Some(m) => {
-                        let d = m.pixel(x, y);
-                        let v = Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
-                        let n = v.norm();
-                        if !(n > 0.0) {
-                            dropped.invalid += 1;
-                            continue;
-                        }
-                        v / n
-                    }
-                    None => view_at(&spec.camera, &p).expect("non-map camera"),
-                };
-                if l.z <= 0.0 || v.z <= 0.0 || !(e > 0.0) {
-                    dropped.below_horizon += 1;
-                    continue;
-                }
-                let to_brdf = spec.exposure / (e * l.z);
-                let mut value = [0.0; 3];
-                for c in 0..3 {
-                    value[c] = px[c.min(channels - 1)] as f64 * to_brdf;
-                }
-                samples.push(Sample {
-                    l,
-                    v,
-                    fibre_azimuth: match (&tangent, desc.swatch.fibre_azimuth_deg, texel_psi) {
-                        (_, _, Some(psi)) => Some(psi.to_radians()),
-                        (Some(t), _, _) => Some((-90.0 + 180.0 * t.texel(x, y)).to_radians()),
-                        (None, Some(psi), _) => Some(psi.to_radians()),
-                        (None, None, None) => None,
-                    },
-                    map_value: topology.as_ref().map(|t| t.texel(x, y)),
-                    texel_height,
-                    value,
-                    sigma: None,
-                    weight: 1.0,
-                    origin: Origin::Pixel {
-                        image: k as u32,
-                        x: x as u32,
-                        y: y as u32,
-                    },
-                });
-            }
-        }
-    }
-    if samples.is_empty() {
-        let d = &dropped;
-        bail!(
-            "{name}: no usable pixels: {} masked or outside the ROI, {} saturated, {} with light or view at or below the horizon, {} non-finite, {} subsampled away",
-            d.masked, d.saturated, d.below_horizon, d.invalid, d.subsampled
-        );
-    }
-    Ok(Samples {
-        samples,
-        channels,
-        kind: DataKind::Capture,
-        source: path.to_path_buf(),
-        dropped,
-        skipped_examples: vec![],
-        image_size: Some((w, h)),
-    })
+    Ok(CaptureStore::load(path, subsample)?.to_samples())
 }
 
 #[cfg(test)]

@@ -1,6 +1,7 @@
 //! Loaders: files in, validated [`samples::Samples`] out. No model code here.
 
 pub mod capture;
+pub mod capture_store;
 pub mod gonio;
 pub mod image_io;
 pub mod merl;
@@ -53,6 +54,13 @@ pub fn input_files(path: &Path) -> Vec<std::path::PathBuf> {
         }
     }
     out
+}
+
+/// Whether `path` names an image capture description (`.toml`).
+pub fn is_capture(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
 }
 
 /// Load a goniometric CSV (`.csv`), an image capture description (`.toml`) or an RGL measured

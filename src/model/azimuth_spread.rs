@@ -152,6 +152,35 @@ impl ShadingModel for AzimuthSpread {
         }))
     }
 
+    fn basis_many_at_height(
+        &self,
+        pairs: &[DirectionPair],
+        height: f64,
+        out: &mut [Basis],
+    ) -> bool {
+        if !self.inner.id().has_topology() {
+            return false;
+        }
+        if self.adaptive {
+            for (p, o) in pairs.iter().zip(out.iter_mut()) {
+                *o = self.basis_at_height(p, height).unwrap_or_default();
+            }
+            return true;
+        }
+        out.iter_mut().for_each(|o| *o = Basis::default());
+        let mut rotated = Vec::with_capacity(pairs.len());
+        let mut part = vec![Basis::default(); pairs.len()];
+        for &(c, s, w) in &self.nodes {
+            rotated.clear();
+            rotated.extend(pairs.iter().map(|p| Self::rotate(p, c, s)));
+            self.inner.basis_many_at_height(&rotated, height, &mut part);
+            for (o, b) in out.iter_mut().zip(&part) {
+                *o = *o + b.scaled(w);
+            }
+        }
+        true
+    }
+
     fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
         if self.adaptive {
             for (p, o) in pairs.iter().zip(out.iter_mut()) {

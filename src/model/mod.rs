@@ -276,6 +276,26 @@ pub trait ShadingModel: Send + Sync {
             Some(Basis::default())
         }
     }
+
+    /// [`ShadingModel::basis_at_height`] of every pair at one height, into `out` (same
+    /// length); `false`, `out` untouched, for models without a topology. Equal to calling it
+    /// pair by pair, bit for bit; the cross-section rungs batch the pairs (one texel seen in
+    /// many images is one pattern and many pairs).
+    fn basis_many_at_height(
+        &self,
+        pairs: &[DirectionPair],
+        height: f64,
+        out: &mut [Basis],
+    ) -> bool {
+        assert_eq!(pairs.len(), out.len());
+        if !self.id().has_topology() {
+            return false;
+        }
+        for (p, o) in pairs.iter().zip(out.iter_mut()) {
+            *o = self.basis_at_height(p, height).unwrap_or_default();
+        }
+        true
+    }
 }
 
 /// A BRDF per channel (1/sr) as a function of the swatch-frame directions (l, v); `None` where
@@ -297,6 +317,17 @@ impl<T: BasisTransform> Transformed<T> {
     pub fn with(inner: Box<dyn ShadingModel>, transform: T) -> Self {
         Self { inner, transform }
     }
+
+    /// The transform on the inner rung's bases `out` of `pairs` (zero below the horizon).
+    fn apply_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
+        for (p, o) in pairs.iter().zip(out.iter_mut()) {
+            *o = if p.above_horizon() {
+                self.transform.apply(p, *o)
+            } else {
+                Basis::default()
+            };
+        }
+    }
 }
 
 impl<T: BasisTransform> ShadingModel for Transformed<T> {
@@ -316,12 +347,50 @@ impl<T: BasisTransform> ShadingModel for Transformed<T> {
 
     fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
         self.inner.basis_many(pairs, out);
-        for (p, o) in pairs.iter().zip(out.iter_mut()) {
-            *o = if p.above_horizon() {
-                self.transform.apply(p, *o)
-            } else {
-                Basis::default()
-            };
+        self.apply_many(pairs, out);
+    }
+
+    fn basis_many_at_height(
+        &self,
+        pairs: &[DirectionPair],
+        height: f64,
+        out: &mut [Basis],
+    ) -> bool {
+        if !self.inner.basis_many_at_height(pairs, height, out) {
+            return false;
+        }
+        self.apply_many(pairs, out);
+        true
+    }
+}
+
+/// [`ShadingModel::basis_at_height`] of each pair at its own height, into `out`: the pairs of
+/// equal heights batched through [`ShadingModel::basis_many_at_height`] (a capture's texel is
+/// seen in many images; 8- and 16-bit maps repeat heights). Equal to pair by pair, bit for bit.
+/// For models without a topology, the plain basis.
+pub fn bases_at_heights(
+    m: &dyn ShadingModel,
+    pairs: &[DirectionPair],
+    heights: &[f64],
+    out: &mut [Basis],
+) {
+    assert_eq!(pairs.len(), heights.len());
+    assert_eq!(pairs.len(), out.len());
+    if !m.id().has_topology() {
+        m.basis_many(pairs, out);
+        return;
+    }
+    let mut order: Vec<usize> = (0..pairs.len()).collect();
+    order.sort_by_key(|&i| heights[i].to_bits());
+    let (mut run_pairs, mut run_out) = (Vec::new(), Vec::new());
+    for run in order.chunk_by(|&a, &b| heights[a].to_bits() == heights[b].to_bits()) {
+        run_pairs.clear();
+        run_pairs.extend(run.iter().map(|&i| pairs[i]));
+        run_out.clear();
+        run_out.resize(run.len(), Basis::default());
+        m.basis_many_at_height(&run_pairs, heights[run[0]], &mut run_out);
+        for (&i, b) in run.iter().zip(&run_out) {
+            out[i] = *b;
         }
     }
 }

@@ -467,11 +467,20 @@ impl ShadingModel for VaryingTopology {
     }
 
     fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        let pattern = Pattern::new(self.spacing, elevation_from_height(height, self.spacing));
         let mut out = [Basis::default()];
-        self.section
-            .bases(std::slice::from_ref(pair), &[(pattern, 1.0)], &mut out);
+        self.basis_many_at_height(std::slice::from_ref(pair), height, &mut out);
         Some(out[0])
+    }
+
+    fn basis_many_at_height(
+        &self,
+        pairs: &[DirectionPair],
+        height: f64,
+        out: &mut [Basis],
+    ) -> bool {
+        let pattern = Pattern::new(self.spacing, elevation_from_height(height, self.spacing));
+        self.section.bases(pairs, &[(pattern, 1.0)], out);
+        true
     }
 }
 

@@ -1,0 +1,468 @@
+//! An image capture's pixels held compactly and grouped by texel: what lets a fit work at camera
+//! resolution (8 images x 1 Mpx and beyond).
+//!
+//! The images are decoded one at a time; of each, only the raw value of every kept pixel stays,
+//! as f32 in a texel-major array `[texel][image][channel]` (NaN: the texel has no sample in
+//! that image), so a texel's pixels lie side by side. Everything else a [`Sample`] holds is
+//! computed on demand, in f64 and exactly as the loader always did: the light and view
+//! directions and the irradiance from the image's geometry and the pixel's position, the BRDF
+//! value from the raw value, the exposure and the irradiance, and the texel's topology, height
+//! and fibre azimuth from the capture's maps (kept as loaded, one f32 per pixel). Storage:
+//! 4 B per channel and pixel value, 8 B per texel, 4 B per pixel for the texel index, and the
+//! maps the capture gives (4 B per pixel each; a view map 12 B per pixel and image), where a
+//! vector of [`Sample`]s took ~160 B per pixel value and a fit ~1000 B
+//! (`CaptureStore::bytes`; `tests/capture_store.rs` keeps it from regressing).
+//!
+//! Precision: the raw values are the decoded image's own f32 (PNG codes and EXR half/float
+//! values are exact in f32), so nothing is lost: samples made from the store equal, bit for
+//! bit, those of the loader before the store existed.
+
+use super::capture::{
+    check_image_spec, check_no_negatives, check_size, light_at, pixel_position, resolve, view_at,
+    Camera, CaptureFile, Subsample,
+};
+use super::image_io::{self, LinearImage};
+use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
+use crate::model::frame::Vec3;
+use crate::model::topology::TopologyMap;
+use anyhow::{bail, Result};
+use std::path::{Path, PathBuf};
+
+/// No texel at this pixel (outside the ROI or masked, or no usable sample).
+const NO_TEXEL: u32 = u32::MAX;
+
+/// A capture's kept pixels, grouped by texel (texels row-major).
+pub struct CaptureStore {
+    pub source: PathBuf,
+    pub width: usize,
+    pub height: usize,
+    /// 1 (grey) or 3 (RGB).
+    pub channels: usize,
+    pub dropped: Dropped,
+    desc: CaptureFile,
+    /// (x, y) of every texel with at least one sample, row-major.
+    texels: Vec<(u32, u32)>,
+    /// Texel index of every pixel (row-major), [`NO_TEXEL`] where there is none.
+    index: Vec<u32>,
+    /// Raw pixel values `[texel][image][channel]`; NaN where the texel has no sample.
+    values: Vec<f32>,
+    topology: Option<TopologyMap>,
+    tangent: Option<TopologyMap>,
+    height_map: Option<LinearImage>,
+    azimuth_map: Option<LinearImage>,
+    view_maps: Vec<Option<LinearImage>>,
+}
+
+impl CaptureStore {
+    /// Load the capture described by the TOML at `path`, keeping the pixels `subsample` keeps.
+    pub fn load(path: &Path, subsample: Subsample) -> Result<Self> {
+        let desc = CaptureFile::load(path)?;
+        let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+        let name = path.display().to_string();
+        check_description(&name, &desc, subsample)?;
+        let first = read_image(&base, &desc.images[0])?;
+        let (w, h, channels) = (first.width, first.height, first.channels);
+        let load_map = |p: &Option<PathBuf>, what: &str| -> Result<Option<TopologyMap>> {
+            match p {
+                Some(p) => {
+                    let full = resolve(&base, p);
+                    let m = TopologyMap::load_as(&full, what)?;
+                    check_size(what, &full, (m.width, m.height), (w, h))?;
+                    Ok(Some(m))
+                }
+                None => Ok(None),
+            }
+        };
+        let topology = load_map(&desc.swatch.topology_map, "topology map")?;
+        let height_map = load_unit_map(
+            &base,
+            &desc.swatch.height_map,
+            "height map (fibre radii)",
+            (0.0, 20.0),
+            (w, h),
+        )?;
+        let azimuth_map = load_unit_map(
+            &base,
+            &desc.swatch.fibre_azimuth_map,
+            "fibre azimuth map (degrees)",
+            (-90.0, 90.0),
+            (w, h),
+        )?;
+        let tangent = load_map(&desc.swatch.tangent_map, "tangent map")?;
+        let mask = load_map(&desc.swatch.mask, "mask")?;
+        let view_maps: Vec<Option<LinearImage>> = desc
+            .images
+            .iter()
+            .map(|spec| match &spec.camera {
+                Camera::ViewMap { file } => {
+                    let full = resolve(&base, file);
+                    let m = image_io::read(&full, None, None)?;
+                    check_size("view map", &full, (m.width, m.height), (w, h))?;
+                    if m.channels != 3 {
+                        bail!(
+                            "{}: a view map needs R, G, B channels holding x, y, z",
+                            full.display()
+                        );
+                    }
+                    Ok(Some(m))
+                }
+                _ => Ok(None),
+            })
+            .collect::<Result<_>>()?;
+        let roi = desc.swatch.roi.unwrap_or([0, 0, w, h]);
+        if roi[0] >= roi[2] || roi[1] >= roi[3] || roi[2] > w || roi[3] > h {
+            bail!("{name}: swatch.roi = {roi:?} is not a rectangle inside the {w}x{h} image");
+        }
+        let images = desc.images.len();
+        // the candidate texels: inside the ROI and the mask
+        let mut index = vec![NO_TEXEL; w * h];
+        let mut texels = Vec::new();
+        for y in roi[1]..roi[3] {
+            for x in roi[0]..roi[2] {
+                if mask.as_ref().is_some_and(|m| m.texel(x, y) == 0.0) {
+                    continue;
+                }
+                index[y * w + x] = texels.len() as u32;
+                texels.push((x as u32, y as u32));
+            }
+        }
+        let mut dropped = Dropped {
+            masked: ((w * h - texels.len()) * images) as u64,
+            ..Dropped::default()
+        };
+        let mut values = vec![f32::NAN; texels.len() * images * channels];
+        let mut store = Self {
+            source: path.to_path_buf(),
+            width: w,
+            height: h,
+            channels,
+            dropped: Dropped::default(),
+            desc,
+            texels,
+            index,
+            values: vec![],
+            topology,
+            tangent,
+            height_map,
+            azimuth_map,
+            view_maps,
+        };
+        let mut img = Some(first);
+        for k in 0..images {
+            let img_k = match img.take() {
+                Some(i) => i,
+                None => read_image(&base, &store.desc.images[k])?,
+            };
+            let spec = &store.desc.images[k];
+            check_size(
+                "image",
+                &resolve(&base, &spec.file),
+                (img_k.width, img_k.height),
+                (w, h),
+            )?;
+            if img_k.channels != channels {
+                bail!(
+                    "{}: has {} channels, the first image {channels}; all images must match",
+                    spec.file.display(),
+                    img_k.channels
+                );
+            }
+            for (t, &(x, y)) in store.texels.iter().enumerate() {
+                let (x, y) = (x as usize, y as usize);
+                if !subsample.keeps(k, x, y) {
+                    dropped.subsampled += 1;
+                    continue;
+                }
+                if img_k.saturated[y * w + x] {
+                    dropped.saturated += 1;
+                    continue;
+                }
+                let px = img_k.pixel(x, y);
+                let map_nan =
+                    |m: &Option<LinearImage>| m.as_ref().is_some_and(|m| m.pixel(x, y)[0].is_nan());
+                if px.iter().any(|v| !v.is_finite())
+                    || map_nan(&store.height_map)
+                    || map_nan(&store.azimuth_map)
+                {
+                    dropped.invalid += 1;
+                    continue;
+                }
+                match store.geometry(k, x, y) {
+                    None => dropped.invalid += 1,
+                    Some((l, v, e)) if l.z <= 0.0 || v.z <= 0.0 || !(e > 0.0) => {
+                        dropped.below_horizon += 1
+                    }
+                    Some(_) => {
+                        let i = (t * images + k) * channels;
+                        values[i..i + channels].copy_from_slice(px);
+                    }
+                }
+            }
+        }
+        // keep the texels with a sample
+        let per_texel = images * channels;
+        let keep: Vec<bool> = values
+            .chunks(per_texel)
+            .map(|c| c.iter().any(|v| !v.is_nan()))
+            .collect();
+        if !keep.iter().any(|&k| k) {
+            let d = &dropped;
+            bail!(
+                "{name}: no usable pixels: {} masked or outside the ROI, {} saturated, {} with light or view at or below the horizon, {} non-finite, {} subsampled away",
+                d.masked, d.saturated, d.below_horizon, d.invalid, d.subsampled
+            );
+        }
+        if keep.iter().any(|&k| !k) {
+            let mut kept_values = Vec::with_capacity(values.len());
+            let mut kept_texels = Vec::new();
+            store.index.fill(NO_TEXEL);
+            for (t, chunk) in values.chunks(per_texel).enumerate() {
+                if keep[t] {
+                    let (x, y) = store.texels[t];
+                    store.index[y as usize * w + x as usize] = kept_texels.len() as u32;
+                    kept_texels.push((x, y));
+                    kept_values.extend_from_slice(chunk);
+                }
+            }
+            store.texels = kept_texels;
+            values = kept_values;
+        }
+        values.shrink_to_fit();
+        store.values = values;
+        store.dropped = dropped;
+        Ok(store)
+    }
+
+    /// Light direction, view direction and perpendicular irradiance of image `k` at pixel
+    /// (x, y); `None` where a view map has no direction.
+    fn geometry(&self, k: usize, x: usize, y: usize) -> Option<(Vec3, Vec3, f64)> {
+        let spec = &self.desc.images[k];
+        let p = pixel_position(self.desc.swatch.size_mm, self.width, self.height, x, y);
+        let (l, e) = light_at(&spec.light, &p);
+        let v = match &self.view_maps[k] {
+            Some(m) => {
+                let d = m.pixel(x, y);
+                let v = Vec3::new(d[0] as f64, d[1] as f64, d[2] as f64);
+                let n = v.norm();
+                if !(n > 0.0) {
+                    return None;
+                }
+                v / n
+            }
+            None => view_at(&spec.camera, &p).expect("non-map camera"),
+        };
+        Some((l, v, e))
+    }
+
+    /// Number of images.
+    pub fn images(&self) -> usize {
+        self.desc.images.len()
+    }
+
+    /// (x, y) of every texel with a sample, row-major.
+    pub fn texels(&self) -> &[(u32, u32)] {
+        &self.texels
+    }
+
+    /// The texel at pixel (x, y), if any.
+    pub fn texel_at(&self, x: i64, y: i64) -> Option<usize> {
+        if x < 0 || y < 0 || x as usize >= self.width || y as usize >= self.height {
+            return None;
+        }
+        let t = self.index[y as usize * self.width + x as usize];
+        (t != NO_TEXEL).then_some(t as usize)
+    }
+
+    /// Number of samples (pixel values kept).
+    pub fn sample_count(&self) -> usize {
+        self.values
+            .chunks(self.channels)
+            .filter(|c| !c[0].is_nan())
+            .count()
+    }
+
+    /// Bytes the store holds: pixel values, texels, texel index and maps.
+    pub fn bytes(&self) -> usize {
+        let image = |m: &Option<LinearImage>| {
+            m.as_ref()
+                .map_or(0, |m| m.data.len() * 4 + m.saturated.len())
+        };
+        let map = |m: &Option<TopologyMap>| m.as_ref().map_or(0, |m| m.values.len() * 4);
+        self.values.capacity() * 4
+            + self.texels.capacity() * 8
+            + self.index.capacity() * 4
+            + map(&self.topology)
+            + map(&self.tangent)
+            + image(&self.height_map)
+            + image(&self.azimuth_map)
+            + self.view_maps.iter().map(image).sum::<usize>()
+    }
+
+    /// The sample of texel `t` in image `k`, if the texel has one there.
+    pub fn sample(&self, t: usize, k: usize) -> Option<Sample> {
+        let ch = self.channels;
+        let i = (t * self.images() + k) * ch;
+        let px = &self.values[i..i + ch];
+        if px[0].is_nan() {
+            return None;
+        }
+        let (x, y) = (self.texels[t].0 as usize, self.texels[t].1 as usize);
+        let (l, v, e) = self
+            .geometry(k, x, y)
+            .expect("kept samples have a geometry");
+        let spec = &self.desc.images[k];
+        let to_brdf = spec.exposure / (e * l.z);
+        let mut value = [0.0; 3];
+        for (c, out) in value.iter_mut().enumerate() {
+            *out = px[c.min(ch - 1)] as f64 * to_brdf;
+        }
+        let texel_height = self.height_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
+        let texel_psi = self.azimuth_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
+        Some(Sample {
+            l,
+            v,
+            fibre_azimuth: match (&self.tangent, self.desc.swatch.fibre_azimuth_deg, texel_psi) {
+                (_, _, Some(psi)) => Some(psi.to_radians()),
+                (Some(t), _, _) => Some((-90.0 + 180.0 * t.texel(x, y)).to_radians()),
+                (None, Some(psi), _) => Some(psi.to_radians()),
+                (None, None, None) => None,
+            },
+            map_value: self.topology.as_ref().map(|t| t.texel(x, y)),
+            texel_height,
+            value,
+            sigma: None,
+            weight: 1.0,
+            origin: Origin::Pixel {
+                image: k as u32,
+                x: x as u32,
+                y: y as u32,
+            },
+        })
+    }
+
+    /// The samples of texel `t`, image by image.
+    pub fn texel_samples(&self, t: usize) -> Vec<Sample> {
+        (0..self.images())
+            .filter_map(|k| self.sample(t, k))
+            .collect()
+    }
+
+    /// The samples of the texels `ids` (ascending), image by image as the loader orders them.
+    pub fn samples_of(&self, ids: &[usize]) -> Samples {
+        let samples = (0..self.images())
+            .flat_map(|k| ids.iter().filter_map(move |&t| self.sample(t, k)))
+            .collect();
+        Samples {
+            samples,
+            channels: self.channels,
+            kind: DataKind::Capture,
+            source: self.source.clone(),
+            dropped: self.dropped.clone(),
+            skipped_examples: vec![],
+            image_size: Some((self.width, self.height)),
+        }
+    }
+
+    /// Every sample, image by image, rows from the top.
+    pub fn to_samples(&self) -> Samples {
+        let all: Vec<usize> = (0..self.texels.len()).collect();
+        self.samples_of(&all)
+    }
+
+    /// A seeded sample of `n` texels (all of them when there are no more), ascending.
+    pub fn sample_texels(&self, n: usize, seed: u64) -> Vec<usize> {
+        use rand::seq::SliceRandom;
+        use rand::SeedableRng;
+        let mut ids: Vec<usize> = (0..self.texels.len()).collect();
+        if n < ids.len() {
+            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+            ids.shuffle(&mut rng);
+            ids.truncate(n);
+            ids.sort_unstable();
+        }
+        ids
+    }
+}
+
+/// Image `spec`, checked for negative values.
+fn read_image(base: &Path, spec: &super::capture::ImageSpec) -> Result<LinearImage> {
+    let full = resolve(base, &spec.file);
+    let img = image_io::read(&full, spec.encoding, spec.saturation)?;
+    check_no_negatives(&full, &img)?;
+    Ok(img)
+}
+
+/// The description's own checks: images, swatch size, fibre direction and topology given once,
+/// subsampling, each image's geometry.
+fn check_description(name: &str, desc: &CaptureFile, subsample: Subsample) -> Result<()> {
+    if desc.images.is_empty() {
+        bail!("{name}: no [[images]]");
+    }
+    let [w_mm, h_mm] = desc.swatch.size_mm;
+    if !(w_mm > 0.0 && h_mm > 0.0 && w_mm.is_finite() && h_mm.is_finite()) {
+        bail!("{name}: swatch.size_mm must be two positive lengths in millimetres");
+    }
+    let sw = &desc.swatch;
+    if [
+        sw.fibre_azimuth_deg.is_some(),
+        sw.tangent_map.is_some(),
+        sw.fibre_azimuth_map.is_some(),
+    ]
+    .iter()
+    .filter(|x| **x)
+    .count()
+        > 1
+    {
+        bail!("{name}: swatch.fibre_azimuth_deg, swatch.tangent_map and swatch.fibre_azimuth_map each give the fibre direction: give one, not both");
+    }
+    if sw.topology_map.is_some() && sw.height_map.is_some() {
+        bail!("{name}: give swatch.topology_map or swatch.height_map, not both");
+    }
+    if let Some(psi) = desc.swatch.fibre_azimuth_deg {
+        if !(-90.0..=90.0).contains(&psi) {
+            bail!("{name}: swatch.fibre_azimuth_deg = {psi} is outside [-90, 90] degrees");
+        }
+    }
+    if subsample.stride == 0 || !(subsample.fraction > 0.0 && subsample.fraction <= 1.0) {
+        bail!("subsampling: stride must be >= 1 and fraction in (0, 1]");
+    }
+    for (k, spec) in desc.images.iter().enumerate() {
+        check_image_spec(name, k, spec)?;
+    }
+    Ok(())
+}
+
+/// A map in physical units (recovered by `fit --maps`), one channel, values in `range` or NaN.
+fn load_unit_map(
+    base: &Path,
+    p: &Option<PathBuf>,
+    what: &str,
+    (lo, hi): (f32, f32),
+    (w, h): (usize, usize),
+) -> Result<Option<LinearImage>> {
+    let Some(p) = p else { return Ok(None) };
+    let full = resolve(base, p);
+    let m = image_io::read(&full, None, None)?;
+    check_size(what, &full, (m.width, m.height), (w, h))?;
+    if m.channels != 1 {
+        bail!(
+            "{}: a {what} has one channel, this has {}",
+            full.display(),
+            m.channels
+        );
+    }
+    if let Some(i) = m
+        .data
+        .iter()
+        .position(|v| !v.is_nan() && !(lo..=hi).contains(v))
+    {
+        bail!(
+            "{}: texel ({}, {}) has value {}; {what} values must lie in [{lo}, {hi}] (NaN: no texel)",
+            full.display(),
+            i % w,
+            i / w,
+            m.data[i]
+        );
+    }
+    Ok(Some(m))
+}
