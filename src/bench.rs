@@ -9,6 +9,7 @@
 //! and parameter error against the truth of a shipped capture at several subsampling fractions
 //! and quadrature orders.
 
+pub mod camera;
 pub mod felt;
 pub mod maps;
 pub mod robustness;

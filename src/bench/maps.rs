@@ -14,7 +14,7 @@ use std::path::Path;
 use std::time::Instant;
 
 /// (light theta, phi; camera theta, phi) in degrees of every image the cases draw from.
-const IMAGES: [[f64; 4]; 8] = [
+pub const EIGHT_IMAGES: [[f64; 4]; 8] = [
     [30.0, 110.0, 0.0, 0.0],
     [60.0, 100.0, 30.0, 290.0],
     [45.0, 20.0, 45.0, 200.0],
@@ -46,22 +46,22 @@ pub fn cases() -> Vec<Case> {
         Case {
             name: "8 images",
             what: "lights 20-70 deg from 8 azimuths, views 0-60 deg",
-            images: IMAGES.to_vec(),
+            images: EIGHT_IMAGES.to_vec(),
         },
         Case {
             name: "6 images",
             what: "the first 6 of those",
-            images: IMAGES[..6].to_vec(),
+            images: EIGHT_IMAGES[..6].to_vec(),
         },
         Case {
             name: "4 images",
             what: "the first 4",
-            images: IMAGES[..4].to_vec(),
+            images: EIGHT_IMAGES[..4].to_vec(),
         },
         Case {
             name: "3 images",
             what: "the first 3",
-            images: IMAGES[..3].to_vec(),
+            images: EIGHT_IMAGES[..3].to_vec(),
         },
         Case {
             name: "near normal",
@@ -125,7 +125,7 @@ pub struct Pictures {
     pub z_height: Vec<f64>,
 }
 
-fn stats(err: &[f64], z: &[f64]) -> (f64, f64, f64, f64) {
+pub(crate) fn stats(err: &[f64], z: &[f64]) -> (f64, f64, f64, f64) {
     let rms = |v: &[f64]| (v.iter().map(|x| x * x).sum::<f64>() / v.len() as f64).sqrt();
     let mut a: Vec<f64> = z.iter().map(|x| x.abs()).collect();
     a.sort_by(f64::total_cmp);

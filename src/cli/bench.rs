@@ -44,6 +44,11 @@ pub struct BenchArgs {
     /// light/view sets): writes OUT/maps_accuracy.md, .csv and .png
     #[arg(long)]
     pub maps: bool,
+    /// Instead: captures at camera resolution (a synthetic RGB capture of 8 images x N x N
+    /// pixels; the global fit and maps + globals run as `fibrefit fit` child processes, their
+    /// wall time, CPU time and peak memory measured): writes OUT/camera_resolution.md and .csv
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "1024")]
+    pub camera: Option<usize>,
     /// Only these cases of the robustness study (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
@@ -95,6 +100,36 @@ fn robustness(args: &BenchArgs) -> Result<()> {
 pub fn run(args: &BenchArgs) -> Result<()> {
     if args.robustness {
         return robustness(args);
+    }
+    if let Some(size) = args.camera {
+        if size < 8 {
+            bail!("--camera {size}: the capture needs at least 8 x 8 pixels");
+        }
+        let t = Instant::now();
+        let bar = crate::progress::bar(2, "camera", args.quiet);
+        let scratch = tempfile::tempdir()?;
+        let exe = std::env::current_exe()?;
+        let run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;
+        bar.finish_and_clear();
+        let command = match size {
+            1024 => "fibrefit bench --camera".to_string(),
+            n => format!("fibrefit bench --camera {n}"),
+        };
+        crate::export::camera_report::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
+        if !args.quiet {
+            for r in &run.rows {
+                eprintln!(
+                    "{}: {:.1} s wall, {:.1} s CPU, {:.0} MB peak ({})",
+                    r.job,
+                    r.wall_seconds,
+                    r.cpu_seconds,
+                    r.peak_mb,
+                    if r.met { "goal met" } else { "GOAL MISSED" }
+                );
+            }
+            eprintln!("wrote {}", args.out.join("camera_resolution.md").display());
+        }
+        return Ok(());
     }
     if args.maps {
         let t = Instant::now();

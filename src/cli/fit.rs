@@ -229,7 +229,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 })?;
             let mut global = st.outcome;
             global.warnings.extend(st.warnings.iter().cloned());
-            (global, Some(st.costs))
+            (global, Some((st.costs, st.texel_variance)))
         }
         false => (
             fit::fit_with_hints(&samples, &cfg, args.quiet || args.json, &hints)
@@ -363,8 +363,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
         report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
     }
     let mut result = result;
-    if let Some(costs) = &stage_costs {
-        let method = super::map_tiles::method(&cfg, costs);
+    if let Some((costs, texel_variance)) = &stage_costs {
+        let method = super::map_tiles::method(&cfg, costs, *texel_variance);
         if args.map_globals {
             result.maps = Some(serde_json::json!({
                 "stage": "globals",
@@ -387,10 +387,11 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 &cfg.maps,
                 &globals,
                 (0, h as u32),
+                *texel_variance,
                 args.quiet || args.json,
             )?;
             let (maps, variance, warns) = fit::maps::finish_maps(
-                std::slice::from_ref(&part),
+                vec![part],
                 w,
                 h,
                 channels,

@@ -59,8 +59,9 @@ fn parse_tile(text: &str) -> Result<(u32, u32)> {
 }
 
 /// The `method` block of a result's `maps`.
-pub fn method(cfg: &FitConfig, costs: &[f64]) -> serde_json::Value {
+pub fn method(cfg: &FitConfig, costs: &[f64], texel_variance: f64) -> serde_json::Value {
     serde_json::json!({
+        "texel_variance": texel_variance,
         "global_stage_rounds": costs.len().saturating_sub(1),
         "global_stage_cost_per_round": costs,
         "global_texels": cfg.maps.global_texels,
@@ -119,7 +120,11 @@ pub fn run_tile(args: &FitArgs, cfg: FitConfig, tile: &str, inputs: &[PathBuf]) 
         crate::fit::score::result_from_value(&g, &globals.display().to_string(), channels)?.set;
     let (w, h) = (store.width, store.height);
     let rows = tile_rows(i, n, h);
-    let part = maps::texel_stage(&store, &cfg, &cfg.maps, &set, rows, args.quiet)?;
+    // the global stage's expected residual variance (older globals: none, every minimum kept)
+    let hint = g["maps"]["method"]["texel_variance"]
+        .as_f64()
+        .unwrap_or(f64::INFINITY);
+    let part = maps::texel_stage(&store, &cfg, &cfg.maps, &set, rows, hint, args.quiet)?;
     let global_free = g["statistics"]["free_parameters"].as_u64().unwrap_or(0) as usize;
     let t = TileFile {
         schema: TILE_SCHEMA.into(),
@@ -267,7 +272,7 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
         crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Shape::Spacing));
     let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
     let (maps, variance, warns) =
-        maps::finish_maps(&parts, width, height, channels, &req, global_free, h_max)?;
+        maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;
     let method = g["maps"]["method"].clone();
     let mut desc = crate::export::maps_out::write(&args.maps, &req.requested(), &maps)?;
     desc["method"] = method;

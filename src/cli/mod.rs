@@ -7,6 +7,7 @@ pub mod eval;
 pub mod fit;
 pub mod inspect;
 pub mod map_tiles;
+pub mod render;
 pub mod score;
 pub mod synth;
 
@@ -42,6 +43,8 @@ pub enum Command {
     Bench(bench::BenchArgs),
     /// Render synthetic measurements (gonio CSV, image captures) from known parameters.
     Synth(synth::SynthArgs),
+    /// Render a material on an object (torus, sphere, swatch) as an image and its AOVs.
+    Render(render::RenderArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),
 }
@@ -71,6 +74,7 @@ where
         Command::Synth(args) => synth::run(&args),
         Command::Bench(args) => bench::run(&args),
         Command::MergeMaps(args) => map_tiles::run_merge(&args),
+        Command::Render(args) => render::run(&args),
     }
 }
 

@@ -266,6 +266,11 @@ impl AtomicFile {
         self.file.as_mut().expect("open until commit")
     }
 
+    /// The temporary file itself, for encoders that seek.
+    pub fn file(&mut self) -> &mut File {
+        self.file.as_mut().expect("open until commit")
+    }
+
     pub fn commit(mut self) -> Result<()> {
         let mut file = self.file.take().expect("open until commit");
         let fail = |e: std::io::Error| {

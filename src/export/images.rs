@@ -5,24 +5,21 @@ use anyhow::{anyhow, Result};
 use exr::prelude::*;
 use std::path::Path;
 
-/// Write interleaved linear `data` (1 or 3 channels) as a float EXR (channels Y or R, G, B).
-pub fn write_exr(
-    path: &Path,
-    width: usize,
-    height: usize,
-    channels: usize,
-    data: &[f32],
-) -> Result<()> {
+type ExrImage = Image<Layer<AnyChannels<FlatSamples>>>;
+
+/// Interleaved linear `data` (1, 3 or 4 channels: Y; R, G, B; R, G, B, A) as a float EXR image.
+fn exr_image(width: usize, height: usize, channels: usize, data: &[f32]) -> ExrImage {
     let plane = |c: usize| -> Vec<f32> { data.iter().skip(c).step_by(channels).copied().collect() };
-    let list: Vec<AnyChannel<FlatSamples>> = if channels == 1 {
-        vec![AnyChannel::new("Y", FlatSamples::F32(plane(0)))]
-    } else {
-        ["R", "G", "B"]
-            .iter()
-            .enumerate()
-            .map(|(c, n)| AnyChannel::new(*n, FlatSamples::F32(plane(c))))
-            .collect()
+    let names: &[&str] = match channels {
+        1 => &["Y"],
+        3 => &["R", "G", "B"],
+        _ => &["R", "G", "B", "A"],
     };
+    let list: Vec<AnyChannel<FlatSamples>> = names
+        .iter()
+        .enumerate()
+        .map(|(c, n)| AnyChannel::new(*n, FlatSamples::F32(plane(c))))
+        .collect();
     let layer = Layer::new(
         (width, height),
         LayerAttributes::named("fibrefit"),
@@ -30,9 +27,38 @@ pub fn write_exr(
         AnyChannels::sort(list.into()),
     );
     Image::from_layer(layer)
+}
+
+/// Write interleaved linear `data` (1, 3 or 4 channels) as a float EXR (channels Y; R, G, B;
+/// R, G, B, A).
+pub fn write_exr(
+    path: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[f32],
+) -> Result<()> {
+    exr_image(width, height, channels, data)
         .write()
         .to_file(path)
         .map_err(|e| anyhow!("{}: cannot write EXR: {e}", path.display()))
+}
+
+/// [`write_exr`] into an open file (an [`super::atomic::AtomicFile`]'s); `name` for errors.
+pub fn write_exr_into(
+    file: &mut std::fs::File,
+    name: &Path,
+    width: usize,
+    height: usize,
+    channels: usize,
+    data: &[f32],
+) -> Result<()> {
+    let mut w = std::io::BufWriter::new(file);
+    exr_image(width, height, channels, data)
+        .write()
+        .to_buffered(&mut w)
+        .map_err(|e| anyhow!("{}: cannot write EXR: {e}", name.display()))?;
+    std::io::Write::flush(&mut w).map_err(|e| anyhow!("{}: cannot write EXR: {e}", name.display()))
 }
 
 /// Write linear values in [0, 1] as a 16-bit PNG with the given encoding (values above 1 clip to

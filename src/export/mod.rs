@@ -3,6 +3,7 @@
 
 pub mod atomic;
 pub mod brdf_plots;
+pub mod camera_report;
 pub mod eval_table;
 pub mod felt_report;
 pub mod images;

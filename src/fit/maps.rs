@@ -6,8 +6,10 @@
 //! 1. [`global_stage`]: on a seeded sample of texels (`[maps] global_texels`), alternate (a) per
 //!    texel, given the globals, the texel's mapped values from its own pixels (one per image):
 //!    the nonlinear ones (H in [0, H_max(d)], psi over its period) from a grid (17 heights x 12
-//!    azimuths), the best grid minima and the current values each polished by a compass search
-//!    (the cost is kinked in H where occlusion changes) and damped Gauss–Newton, the mapped
+//!    azimuths), the best grid minima and the current values each searched by compass (the cost
+//!    is kinked in H where occlusion changes) to a coarse step, on a table of model columns
+//!    shared by every texel that sees the same directions ([`ColumnTable`]), those that can
+//!    still win on to the end with the model itself and damped Gauss–Newton, the mapped
 //!    albedos solved linearly (bounded to [0, 1]) at every step; (b) the globals given the maps,
 //!    the usual bounded LM with the mapped parameters held fixed, kept only if the cost falls.
 //!    Each keeps the current values unless it finds a lower cost, so the cost never rises.
@@ -41,6 +43,10 @@ use std::sync::{Arc, Mutex};
 pub const TEXEL_STARTS: usize = 3;
 /// Heights of the per-texel grid, from 0 to H_max.
 pub const HEIGHT_GRID: usize = 17;
+/// Azimuths of the per-texel grid, every 15 degrees from -90.
+pub const PSI_GRID: usize = 12;
+/// Other minima are kept up to this many times the ambiguity margin of the expected variance.
+pub const MINIMA_MARGIN: f64 = 16.0;
 /// Compass search of a texel: every candidate to steps of this fraction of half the grid's
 /// spacing, the best on to [`COMPASS_FINE`] (H_max / 1600, 0.075 degrees), then Gauss–Newton.
 const COMPASS_COARSE: f64 = 0.125;
@@ -192,39 +198,157 @@ struct Globals<'m> {
     channels: usize,
     /// Global albedo per component index and channel (0 where absent).
     albedo: [[f64; 3]; 4],
-    /// Model columns of the per-texel grid by the texel's directions ([`GridCache`]).
-    grids: GridCache,
+    /// Model columns over (H, psi) by the texels' directions ([`ColumnTable`]).
+    tables: TableCache,
 }
 
-/// Texel grids kept at most (texels whose directions all differ, a pinhole camera's, compute
-/// their own).
-const GRID_CACHE_ENTRIES: usize = 64;
+/// Column tables kept at most, and direction sets tracked before giving up (texels whose
+/// directions all differ, a pinhole camera's or a point light's, evaluate the model exactly).
+const TABLE_ENTRIES: usize = 16;
+const TRACKED_KEYS: usize = 4096;
+/// Table nodes per grid step: 4 in H (H_max / 64), 16 in psi (0.9375 degrees).
+const TABLE_H_PER_GRID: usize = 4;
+const TABLE_PSI_PER_GRID: usize = 16;
 
-/// The model columns of a texel's grid (every grid point, every observation) depend only on
-/// its observations' light and view directions (and its fixed height or azimuth when those are
-/// not mapped): with a directional light and an orthographic camera per image, every texel sees
-/// the same directions, so the grid is computed once and each texel only solves its albedos
-/// against it.
+/// The model columns of a texel's observations over a fine (H, psi) table. They depend only on
+/// the observations' light and view directions (and the texel's height or azimuth where those
+/// are not mapped): with a directional light and an orthographic camera per image every texel
+/// sees the same directions, so one table serves them all. The grid reads its nodes; the coarse
+/// searches interpolate it (bilinear, periodic in psi); the final search and every reported
+/// value use the model itself.
+struct ColumnTable {
+    nh: usize,
+    np: usize,
+    nobs: usize,
+    cols: Vec<[f64; 4]>,
+}
+
+impl ColumnTable {
+    fn dims(free: Free) -> (usize, usize) {
+        (
+            if free.height {
+                (HEIGHT_GRID - 1) * TABLE_H_PER_GRID + 1
+            } else {
+                1
+            },
+            if free.psi {
+                PSI_GRID * TABLE_PSI_PER_GRID
+            } else {
+                1
+            },
+        )
+    }
+
+    /// (H, psi) of node (j, k); a fixed value comes from `start`.
+    fn node(
+        nh: usize,
+        np: usize,
+        g: &Globals,
+        start: &TexelValues,
+        j: usize,
+        k: usize,
+    ) -> (f64, f64) {
+        (
+            if nh > 1 {
+                g.h_max * (j as f64 / (nh - 1) as f64)
+            } else {
+                start.height
+            },
+            if np > 1 {
+                -90.0 + 180.0 * (k as f64 / np as f64)
+            } else {
+                start.psi
+            },
+        )
+    }
+
+    fn build(texel: &Texel, g: &Globals, start: &TexelValues) -> Self {
+        let (nh, np) = Self::dims(texel.free);
+        let mut cols = Vec::with_capacity(nh * np * texel.obs.len());
+        for j in 0..nh {
+            for k in 0..np {
+                let (h, psi) = Self::node(nh, np, g, start, j, k);
+                cols.extend(texel.columns(g, h, psi));
+            }
+        }
+        Self {
+            nh,
+            np,
+            nobs: texel.obs.len(),
+            cols,
+        }
+    }
+
+    fn at(&self, j: usize, k: usize) -> &[[f64; 4]] {
+        let i = (j * self.np + k) * self.nobs;
+        &self.cols[i..i + self.nobs]
+    }
+
+    /// Bilinear interpolation at (H, psi).
+    fn interpolate(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+        let (j0, t) = if self.nh > 1 {
+            let f = (h.clamp(0.0, g.h_max) / g.h_max.max(1e-300)) * (self.nh - 1) as f64;
+            let j0 = (f.floor() as usize).min(self.nh - 2);
+            (j0, f - j0 as f64)
+        } else {
+            (0, 0.0)
+        };
+        let (k0, u) = if self.np > 1 {
+            let f = (wrap_azimuth(psi) + 90.0) / 180.0 * self.np as f64;
+            let k0 = (f.floor() as usize).min(self.np - 1);
+            (k0, f - k0 as f64)
+        } else {
+            (0, 0.0)
+        };
+        let j1 = (j0 + 1).min(self.nh - 1);
+        let k1 = (k0 + 1) % self.np;
+        let (a, b, c, d) = (
+            self.at(j0, k0),
+            self.at(j0, k1),
+            self.at(j1, k0),
+            self.at(j1, k1),
+        );
+        (0..self.nobs)
+            .map(|o| {
+                std::array::from_fn(|m| {
+                    (1.0 - t) * ((1.0 - u) * a[o][m] + u * b[o][m])
+                        + t * ((1.0 - u) * c[o][m] + u * d[o][m])
+                })
+            })
+            .collect()
+    }
+}
+
+/// Column tables by direction set: a table is built the second time its directions are met
+/// (a set met once, as a pinhole camera's texels each are, is not worth one).
 #[derive(Default)]
-struct GridCache {
-    grids: Mutex<HashMap<Vec<u64>, Arc<Vec<Vec<[f64; 4]>>>>>,
+struct TableCache {
+    tables: Mutex<HashMap<Vec<u64>, Option<Arc<ColumnTable>>>>,
 }
 
-impl GridCache {
-    fn get_or(
-        &self,
-        key: Vec<u64>,
-        make: impl FnOnce() -> Vec<Vec<[f64; 4]>>,
-    ) -> Arc<Vec<Vec<[f64; 4]>>> {
-        if let Some(g) = self.grids.lock().expect("grid cache").get(&key) {
-            return g.clone();
+impl TableCache {
+    fn get(&self, key: Vec<u64>, make: impl FnOnce() -> ColumnTable) -> Option<Arc<ColumnTable>> {
+        {
+            let mut tables = self.tables.lock().expect("table cache");
+            match tables.get(&key) {
+                Some(Some(t)) => return Some(t.clone()),
+                Some(None) => {}
+                None => {
+                    if tables.len() < TRACKED_KEYS {
+                        tables.insert(key, None);
+                    }
+                    return None;
+                }
+            }
+            let built = tables.values().filter(|t| t.is_some()).count();
+            if built >= TABLE_ENTRIES {
+                return None;
+            }
         }
-        let grid = Arc::new(make());
-        let mut grids = self.grids.lock().expect("grid cache");
-        if grids.len() < GRID_CACHE_ENTRIES {
-            grids.entry(key).or_insert_with(|| grid.clone());
-        }
-        grid
+        let table = Arc::new(make());
+        let mut tables = self.tables.lock().expect("table cache");
+        let slot = tables.entry(key).or_insert(None);
+        Some(slot.get_or_insert_with(|| table.clone()).clone())
     }
 }
 
@@ -248,7 +372,7 @@ impl<'m> Globals<'m> {
             tied: set.substrate_tied,
             channels,
             albedo: globals_albedo(set),
-            grids: GridCache::default(),
+            tables: TableCache::default(),
         }
     }
 }
@@ -395,8 +519,22 @@ impl Texel {
         (r.iter().map(|x| x * x).sum(), v)
     }
 
-    /// Residuals and solved values at nonlinear values `u`.
-    fn residuals_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (Vec<f64>, TexelValues) {
+    /// [`Texel::cost_at`] with the columns interpolated in `table`.
+    fn table_cost_at(
+        &self,
+        g: &Globals,
+        base: &TexelValues,
+        u: &[f64],
+        table: &ColumnTable,
+    ) -> (f64, TexelValues) {
+        let mut v = self.at_nonlinear(g, base, u);
+        let cols = table.interpolate(g, v.height, v.psi);
+        let r = self.solve(g, &cols, &mut v);
+        (r.iter().map(|x| x * x).sum(), v)
+    }
+
+    /// `base` with the nonlinear values `u` (H clamped to [0, H_max], psi wrapped).
+    fn at_nonlinear(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> TexelValues {
         let mut v = *base;
         let mut k = 0;
         if self.free.height {
@@ -406,6 +544,12 @@ impl Texel {
         if self.free.psi {
             v.psi = wrap_azimuth(u[k]);
         }
+        v
+    }
+
+    /// Residuals and solved values at nonlinear values `u`.
+    fn residuals_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (Vec<f64>, TexelValues) {
+        let mut v = self.at_nonlinear(g, base, u);
         let cols = self.columns(g, v.height, v.psi);
         (self.solve(g, &cols, &mut v), v)
     }
@@ -431,42 +575,42 @@ impl Texel {
         if u0.is_empty() {
             return (v0, c0, vec![]);
         }
-        let hs: Vec<f64> = if self.free.height {
-            (0..HEIGHT_GRID)
-                .map(|i| g.h_max * i as f64 / (HEIGHT_GRID - 1) as f64)
-                .collect()
-        } else {
-            vec![f64::NAN]
+        let (th, tp) = ColumnTable::dims(self.free);
+        let (nh, np) = (
+            if self.free.height { HEIGHT_GRID } else { 1 },
+            if self.free.psi { PSI_GRID } else { 1 },
+        );
+        // grid point (i, j) is table node (i TABLE_H_PER_GRID, j TABLE_PSI_PER_GRID)
+        let node_of = |k: usize| {
+            (
+                (k / np) * if nh > 1 { TABLE_H_PER_GRID } else { 0 },
+                (k % np) * if np > 1 { TABLE_PSI_PER_GRID } else { 0 },
+            )
         };
-        let ps: Vec<f64> = if self.free.psi {
-            (0..12).map(|i| -90.0 + 15.0 * i as f64).collect()
-        } else {
-            vec![f64::NAN]
-        };
-        let (nh, np) = (hs.len(), ps.len());
-        // the values of grid point (i, j) as `cost_at` sets them
-        let point = |i: usize, j: usize| {
+        let point = |k: usize| {
+            let (j, l) = node_of(k);
+            let (h, psi) = ColumnTable::node(th, tp, g, start, j, l);
             let mut v = *start;
-            if self.free.height {
-                v.height = hs[i].clamp(0.0, g.h_max);
-            }
-            if self.free.psi {
-                v.psi = wrap_azimuth(ps[j]);
-            }
+            v.height = h;
+            v.psi = psi;
             v
         };
-        let columns = g.grids.get_or(self.grid_key(start), || {
-            (0..nh * np)
-                .map(|k| {
-                    let v = point(k / np, k % np);
-                    self.columns(g, v.height, v.psi)
-                })
-                .collect()
-        });
+        let table = g
+            .tables
+            .get(self.grid_key(start), || ColumnTable::build(self, g, start));
         let grid: Vec<(f64, TexelValues)> = (0..nh * np)
             .map(|k| {
-                let mut v = point(k / np, k % np);
-                let r = self.solve(g, &columns[k], &mut v);
+                let mut v = point(k);
+                let r = match &table {
+                    Some(t) => {
+                        let (j, l) = node_of(k);
+                        self.solve(g, t.at(j, l), &mut v)
+                    }
+                    None => {
+                        let cols = self.columns(g, v.height, v.psi);
+                        self.solve(g, &cols, &mut v)
+                    }
+                };
                 (r.iter().map(|x| x * x).sum(), v)
             })
             .collect();
@@ -503,7 +647,15 @@ impl Texel {
         };
         let mut minima: Vec<(TexelValues, f64)> = Vec::new();
         for (v, c) in candidates {
-            let (v, c) = self.compass(g, start, v, c, 1.0, COMPASS_COARSE);
+            // on the table where there is one, then the model's own cost there
+            let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table.as_deref());
+            let (v, c) = match table {
+                Some(_) => {
+                    let (c, v) = self.cost_at(g, start, &self.nonlinear(&v));
+                    (v, c)
+                }
+                None => (v, c),
+            };
             match minima.iter_mut().find(|m| same(&m.0, &v)) {
                 Some(m) if c < m.1 => *m = (v, c),
                 Some(_) => {}
@@ -515,7 +667,7 @@ impl Texel {
         // ambiguity margin is nine)
         let lowest = minima.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
         for m in minima.iter_mut().filter(|m| m.1 <= 2.0 * lowest) {
-            let (v, c) = self.compass(g, start, m.0, m.1, COMPASS_COARSE, COMPASS_FINE);
+            let (v, c) = self.compass(g, start, m.0, m.1, (COMPASS_COARSE, COMPASS_FINE), None);
             *m = self.gauss_newton(g, start, v, c);
         }
         minima.sort_by(|a, b| a.1.total_cmp(&b.1));
@@ -552,8 +704,8 @@ impl Texel {
         start: &TexelValues,
         v: TexelValues,
         c: f64,
-        from: f64,
-        to: f64,
+        (from, to): (f64, f64),
+        table: Option<&ColumnTable>,
     ) -> (TexelValues, f64) {
         let (mut best, mut best_cost) = (v, c);
         let mut best_u = self.nonlinear(&best);
@@ -576,7 +728,10 @@ impl Texel {
                 for sign in [1.0, -1.0] {
                     let mut u = best_u.clone();
                     u[k] += sign * scale * unit[k];
-                    let (c, v) = self.cost_at(g, start, &u);
+                    let (c, v) = match table {
+                        Some(t) => self.table_cost_at(g, start, &u, t),
+                        None => self.cost_at(g, start, &u),
+                    };
                     if c < best_cost {
                         (best_cost, best) = (c, v);
                         best_u = self.nonlinear(&v);
@@ -885,6 +1040,9 @@ pub struct GlobalStage {
     pub outcome: FitOutcome,
     /// Cost over the sampled texels: the plain global fit's, then after each round.
     pub costs: Vec<f64>,
+    /// Residual variance per pixel value over the sampled texels, every unknown counted: what
+    /// the texel stage expects of the whole capture ([`texel_stage`]'s `variance_hint`).
+    pub texel_variance: f64,
     pub warnings: Vec<String>,
 }
 
@@ -963,6 +1121,10 @@ pub fn global_stage(
         ));
     }
     let mut outcome = final_global(&sub, cfg, &set, &values, &sub_layout.members, free)?;
+    let st = &outcome.statistics;
+    let unknowns =
+        per_texel_unknowns(free, sub.channels) * sub_layout.texels.len() + st.free_parameters;
+    let texel_variance = st.chi_square / st.n.saturating_sub(unknowns).max(1) as f64;
     outcome.warnings.push(format!(
         "the global parameters come from {} sampled texels ([maps] global_texels) with their maps; their uncertainties are conditional on those maps",
         sub_layout.texels.len()
@@ -970,6 +1132,7 @@ pub fn global_stage(
     Ok(GlobalStage {
         outcome,
         costs,
+        texel_variance,
         warnings,
     })
 }
@@ -988,8 +1151,11 @@ pub struct TexelPart {
     pub values: Vec<TexelValues>,
     /// sqrt of the diagonal of (J^T J)^-1 per value (infinity where singular).
     pub unscaled_std_errors: Vec<TexelValues>,
-    /// Other minima of each texel: (cost above the best, |dH|, |dpsi| in degrees).
+    /// Other minima of each texel: (cost above the best, |dH|, |dpsi| in degrees), those
+    /// costing less than `minima_below` above the best (all when `None`).
     pub other_minima: Vec<Vec<[f64; 3]>>,
+    #[serde(default)]
+    pub minima_below: Option<f64>,
     pub residual: Vec<f64>,
     /// Per row of the part: (sum of squared weighted residuals, residual count).
     pub row_costs: Vec<(f64, usize)>,
@@ -998,14 +1164,21 @@ pub struct TexelPart {
 /// Stage 2 for the texels in rows [`rows.0`, `rows.1`) given the globals `set`, texel by
 /// texel from the compact store (no texel's samples are made before it is fitted, none kept
 /// after).
+///
+/// `variance_hint` is the residual variance the global stage expects ([`GlobalStage`]): other
+/// minima costing more than [`MINIMA_MARGIN`] x [`AMBIGUITY_DELTA`] of it above the best are
+/// not kept (at camera resolution they are most of the memory); infinity keeps every one.
 pub fn texel_stage(
     store: &CaptureStore,
     cfg: &FitConfig,
     req: &MapsConfig,
     set: &ParamSet,
     rows: (u32, u32),
+    variance_hint: f64,
     quiet: bool,
 ) -> Result<TexelPart> {
+    let minima_below = (variance_hint.is_finite() && variance_hint > 0.0)
+        .then_some(MINIMA_MARGIN * AMBIGUITY_DELTA * variance_hint);
     check_request(cfg, req)?;
     let free = free_of(req);
     let set = fix_mapped(set, req);
@@ -1062,7 +1235,7 @@ pub fn texel_stage(
                 let (v, cost, others) = problem(t, &values, smoothness).fit(&g, &start[t - t0]);
                 bar.inc(1);
                 let others = if last && kept(t) {
-                    prune_minima(&v, cost, &others)
+                    prune_minima(&v, cost, &others, minima_below.unwrap_or(f64::INFINITY))
                 } else {
                     vec![]
                 };
@@ -1106,17 +1279,25 @@ pub fn texel_stage(
             .map(|&t| std::mem::take(&mut fits[t - t0].2))
             .collect(),
         residual: details.iter().map(|d| d.1).collect(),
+        minima_below,
         row_costs,
     })
 }
 
-/// The other minima of a texel fitted to `v` at `cost` as (cost above the best, |dH|, |dpsi|
-/// in degrees), keeping only those no other one dominates (as good or better in cost and as
-/// far or farther in both H and psi): [`finish_maps`] widens the standard errors by the
-/// farthest minimum within a cost margin, which the kept ones give for any margin.
-fn prune_minima(v: &TexelValues, cost: f64, others: &[(TexelValues, f64)]) -> Vec<[f64; 3]> {
+/// The other minima of a texel fitted to `v` at `cost`, those at most `below` above it, as
+/// (cost above the best, |dH|, |dpsi| in degrees), keeping only those no other one dominates
+/// (as good or better in cost and as far or farther in both H and psi): [`finish_maps`] widens
+/// the standard errors by the farthest minimum within a cost margin, which the kept ones give
+/// for any margin.
+fn prune_minima(
+    v: &TexelValues,
+    cost: f64,
+    others: &[(TexelValues, f64)],
+    below: f64,
+) -> Vec<[f64; 3]> {
     let all: Vec<[f64; 3]> = others
         .iter()
+        .filter(|(_, c)| c - cost <= below)
         .map(|(w, c)| {
             [
                 c - cost,
@@ -1141,7 +1322,7 @@ fn prune_minima(v: &TexelValues, cost: f64, others: &[(TexelValues, f64)]) -> Ve
 /// less every unknown (each texel's and `global_free` globals'), the standard errors scaled by
 /// it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
 pub fn finish_maps(
-    parts: &[TexelPart],
+    parts: Vec<TexelPart>,
     width: usize,
     height: usize,
     channels: usize,
@@ -1150,7 +1331,7 @@ pub fn finish_maps(
     h_max: f64,
 ) -> Result<(TexelMaps, f64, Vec<String>)> {
     let free = free_of(req);
-    let mut parts: Vec<&TexelPart> = parts.iter().collect();
+    let mut parts = parts;
     parts.sort_by_key(|p| p.rows[0]);
     let mut next = 0u32;
     for p in &parts {
@@ -1191,7 +1372,12 @@ pub fn finish_maps(
         channels,
     };
     let mut ambiguous = 0;
-    for p in &parts {
+    let mut minima_cut = false;
+    // each part moved into the maps and dropped, so the maps never exist twice
+    for mut p in parts {
+        minima_cut |= p
+            .minima_below
+            .is_some_and(|b| b < AMBIGUITY_DELTA * variance);
         for k in 0..p.texels.len() {
             let u = &p.unscaled_std_errors[k];
             let mut se = TexelValues {
@@ -1213,13 +1399,18 @@ pub fn finish_maps(
                 }
             }
             ambiguous += usize::from(amb);
-            maps.texels.push(p.texels[k]);
-            maps.values.push(p.values[k]);
             maps.std_errors.push(se);
-            maps.residual.push(p.residual[k]);
         }
+        maps.texels.append(&mut p.texels);
+        maps.values.append(&mut p.values);
+        maps.residual.append(&mut p.residual);
     }
     let mut warnings = Vec::new();
+    if minima_cut {
+        warnings.push(format!(
+            "the residual variance over every pixel ({variance:.3e}) is far above what the global stage's texels gave: other minima beyond {MINIMA_MARGIN} x {AMBIGUITY_DELTA} of that were not kept, so some ambiguous texels may not be flagged; raise [maps] global_texels"
+        ));
+    }
     let undetermined = |pick: fn(&TexelValues) -> f64, half_range: f64| {
         maps.std_errors
             .iter()
@@ -1266,18 +1457,19 @@ pub fn recover(
 ) -> Result<MapOutcome> {
     let stage = global_stage(store, cfg, req, quiet)?;
     let (w, h) = (store.width, store.height);
-    let part = texel_stage(store, cfg, req, &stage.outcome.set, (0, h as u32), quiet)?;
+    let part = texel_stage(
+        store,
+        cfg,
+        req,
+        &stage.outcome.set,
+        (0, h as u32),
+        stage.texel_variance,
+        quiet,
+    )?;
     let global_free = stage.outcome.statistics.free_parameters;
     let h_max = max_height(stage.outcome.set.shape_value(Shape::Spacing));
-    let (maps, variance, mut warnings) = finish_maps(
-        std::slice::from_ref(&part),
-        w,
-        h,
-        store.channels,
-        req,
-        global_free,
-        h_max,
-    )?;
+    let (maps, variance, mut warnings) =
+        finish_maps(vec![part], w, h, store.channels, req, global_free, h_max)?;
     warnings.splice(0..0, stage.warnings.iter().cloned());
     let global = stage.outcome;
     Ok(MapOutcome {

@@ -127,11 +127,26 @@ fn bins(axis: &str, edges: &[f64], values: &[(f64, f64)], s_all: f64) -> Vec<Res
 /// Pooled noise variance of repeated direction pairs (same l and v to 1e-9), weighted like the
 /// residuals, and its degrees of freedom.
 fn repeats_variance(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> Option<(f64, usize)> {
+    // pixels of a capture repeat a direction pair only at the same place on the swatch: two
+    // texels seen from the same directions differ by their topology and fibre direction
     let key = |s: &Sample| {
         let q = |x: f64| (x * 1e9).round() as i64;
-        [q(s.l.x), q(s.l.y), q(s.l.z), q(s.v.x), q(s.v.y), q(s.v.z)]
+        let (x, y) = match s.origin {
+            Origin::Pixel { x, y, .. } => (i64::from(x), i64::from(y)),
+            Origin::Line(_) => (-1, -1),
+        };
+        [
+            q(s.l.x),
+            q(s.l.y),
+            q(s.l.z),
+            q(s.v.x),
+            q(s.v.y),
+            q(s.v.z),
+            x,
+            y,
+        ]
     };
-    let mut groups: HashMap<[i64; 6], Vec<usize>> = HashMap::new();
+    let mut groups: HashMap<[i64; 8], Vec<usize>> = HashMap::new();
     for (i, s) in samples.iter().enumerate() {
         groups.entry(key(s)).or_default().push(i);
     }

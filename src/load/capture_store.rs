@@ -28,6 +28,9 @@ use crate::model::topology::TopologyMap;
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
+/// Texels drawn together by [`CaptureStore::sample_texels`].
+pub const SAMPLE_RUN: usize = 4;
+
 /// No texel at this pixel (outside the ROI or masked, or no usable sample).
 const NO_TEXEL: u32 = u32::MAX;
 
@@ -228,6 +231,7 @@ impl CaptureStore {
             values = kept_values;
         }
         values.shrink_to_fit();
+        store.texels.shrink_to_fit();
         store.values = values;
         store.dropped = dropped;
         Ok(store)
@@ -369,17 +373,25 @@ impl CaptureStore {
         self.samples_of(&all)
     }
 
-    /// A seeded sample of `n` texels (all of them when there are no more), ascending.
+    /// A seeded sample of `n` texels (all of them when there are no more), ascending, drawn in
+    /// runs of [`SAMPLE_RUN`] neighbours along a row: the quality checks estimate the noise
+    /// from neighbouring pixels.
     pub fn sample_texels(&self, n: usize, seed: u64) -> Vec<usize> {
         use rand::seq::SliceRandom;
         use rand::SeedableRng;
-        let mut ids: Vec<usize> = (0..self.texels.len()).collect();
-        if n < ids.len() {
-            let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-            ids.shuffle(&mut rng);
-            ids.truncate(n);
-            ids.sort_unstable();
+        let all = self.texels.len();
+        if n >= all {
+            return (0..all).collect();
         }
+        let mut runs: Vec<usize> = (0..all.div_ceil(SAMPLE_RUN)).collect();
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        runs.shuffle(&mut rng);
+        let mut ids: Vec<usize> = runs
+            .iter()
+            .flat_map(|r| r * SAMPLE_RUN..((r + 1) * SAMPLE_RUN).min(all))
+            .take(n)
+            .collect();
+        ids.sort_unstable();
         ids
     }
 }

@@ -1,0 +1,347 @@
+//! `fibrefit bench --camera`: captures at camera resolution. A synthetic RGB capture of
+//! 8 images x N x N pixels (default 1024: 8.4 M pixel values of 3 channels) with known topology and
+//! tangent maps, fitted by the `fibrefit` binary as a user runs it, each run a child process
+//! whose wall time, CPU time and peak resident memory are read from `/proc`:
+//! 1. the global fit given the maps (the capture TOML names them);
+//! 2. map recovery, maps + globals (`fit --maps`, the maps left out of the TOML).
+//!
+//! Goals (issue 13, 2 cores): (1) <= 30 s and <= 1 GB; (2) <= 3 minutes and <= 1.5 GB.
+
+use crate::load::capture_store::CaptureStore;
+use crate::model::topology::TopologyMap;
+use anyhow::{bail, Context, Result};
+use std::path::Path;
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+/// (light theta, phi; camera theta, phi) in degrees, as `bench --maps`' 8-image case.
+const IMAGES: [[f64; 4]; 8] = super::maps::EIGHT_IMAGES;
+
+/// The truth the capture is rendered from (RGB albedos).
+const TRUTH: &str = r#"model = "varying-topology"
+[params]
+kd = [0.45, 0.35, 0.25]
+ks = 0.3
+exponent = 40
+spacing = 2.0
+height = 0.9
+map_scale = 0.6
+fibre_azimuth_deg = 0
+"#;
+
+/// The global fit given the maps.
+pub const FIT_GLOBAL: &str = r#"model = "varying-topology"
+metric = "linear"
+seed = 1
+[parameters]
+kd = { value = 0.5 }
+ks = { value = 0.2 }
+exponent = { value = 20, min = 1, max = 1000 }
+spacing = { value = 2.0, vary = false }
+height = { value = 0.8 }
+map_scale = { value = 0.5 }
+fibre_azimuth_deg = { value = 0, vary = false }
+"#;
+
+/// Map recovery: H and psi per texel.
+pub const FIT_MAPS: &str = r#"model = "varying-topology"
+metric = "linear"
+seed = 1
+[parameters]
+kd = { value = 0.5 }
+ks = { value = 0.2 }
+exponent = { value = 20, min = 1, max = 1000 }
+spacing = { value = 2.0, vary = false }
+height = { value = 0.8 }
+fibre_azimuth_deg = { value = 0 }
+[maps]
+height = true
+fibre_azimuth = true
+rounds = 25
+"#;
+
+/// What one child run cost.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Cost {
+    pub wall_seconds: f64,
+    pub cpu_seconds: f64,
+    pub peak_mb: f64,
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct CameraRow {
+    pub job: String,
+    pub texels: usize,
+    pub pixel_values: usize,
+    pub wall_seconds: f64,
+    pub cpu_seconds: f64,
+    pub peak_mb: f64,
+    pub bytes_per_pixel_value: f64,
+    pub goal_seconds: f64,
+    pub goal_mb: f64,
+    pub met: bool,
+    /// What came out, against the truth.
+    pub accuracy: String,
+}
+
+pub struct CameraRun {
+    pub size: usize,
+    pub rows: Vec<CameraRow>,
+    /// Bytes the compact store holds per pixel value.
+    pub store_bytes_per_value: f64,
+    pub synth_seconds: f64,
+}
+
+/// Run `cmd` to its end, reading its peak resident memory (VmHWM) and CPU time (utime + stime
+/// of every thread) from `/proc` while it runs and as it exits.
+pub fn measure(mut cmd: Command, log: &Path) -> Result<Cost> {
+    let err = std::fs::File::create(log)?;
+    let t = Instant::now();
+    let mut child = cmd
+        .stdout(Stdio::null())
+        .stderr(err)
+        .spawn()
+        .context("starting fibrefit")?;
+    let pid = child.id();
+    let (mut peak_kb, mut cpu) = (0u64, f64::NAN);
+    loop {
+        if let Ok(s) = std::fs::read_to_string(format!("/proc/{pid}/status")) {
+            if let Some(kb) = s
+                .lines()
+                .find_map(|l| l.strip_prefix("VmHWM:"))
+                .and_then(|v| v.trim().trim_end_matches("kB").trim().parse::<u64>().ok())
+            {
+                peak_kb = peak_kb.max(kb);
+            }
+        }
+        let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+        // fields after the command's closing parenthesis: state, ppid, ... utime (12th),
+        // stime (13th), in clock ticks of 1/100 s (USER_HZ)
+        let fields: Vec<&str> = stat
+            .rsplit_once(')')
+            .map(|(_, rest)| rest.split_whitespace().collect())
+            .unwrap_or_default();
+        if fields.len() > 12 {
+            let ticks = |i: usize| fields[i].parse::<f64>().unwrap_or(f64::NAN);
+            cpu = (ticks(11) + ticks(12)) / 100.0;
+            if fields[0] == "Z" {
+                break;
+            }
+        }
+        if child.try_wait()?.is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let status = child.wait()?;
+    let wall = t.elapsed().as_secs_f64();
+    if !status.success() {
+        bail!(
+            "fibrefit failed ({status}): {}",
+            std::fs::read_to_string(log).unwrap_or_default()
+        );
+    }
+    Ok(Cost {
+        wall_seconds: wall,
+        cpu_seconds: cpu,
+        peak_mb: peak_kb as f64 / 1024.0,
+    })
+}
+
+fn synth_config(size: usize) -> String {
+    let mut s = format!(
+        "{TRUTH}[topology_map]\nwidth = {size}\nheight = {size}\nseed = 3\n[capture]\nwidth = {size}\nheight = {size}\nsize_mm = [20.0, 20.0]\nformat = \"exr\"\ntangent = {{ from_deg = -30, to_deg = 40 }}\n"
+    );
+    for [lt, lp, vt, vp] in IMAGES {
+        s += &format!(
+            "[[capture.images]]\nlight = {{ type = \"directional\", theta_deg = {lt}, phi_deg = {lp}, irradiance = 1.0 }}\ncamera = {{ type = \"orthographic\", theta_deg = {vt}, phi_deg = {vp} }}\n"
+        );
+    }
+    s + "[noise]\nrelative = 0.01\nseed = 5\n"
+}
+
+/// The benchmark on an `size` x `size` capture in `scratch`, with the binary `exe`.
+pub fn run(
+    exe: &Path,
+    scratch: &Path,
+    size: usize,
+    bar: &indicatif::ProgressBar,
+) -> Result<CameraRun> {
+    let d = scratch.join("d");
+    std::fs::write(scratch.join("synth.toml"), synth_config(size))?;
+    bar.set_message("camera: rendering the capture");
+    let t = Instant::now();
+    crate::synth::run(&scratch.join("synth.toml"), &d, true)?;
+    let synth_seconds = t.elapsed().as_secs_f64();
+    let text = std::fs::read_to_string(d.join("capture.toml"))?;
+    let blind: String = text
+        .lines()
+        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    std::fs::write(d.join("blind.toml"), blind)?;
+    std::fs::write(scratch.join("global.toml"), FIT_GLOBAL)?;
+    std::fs::write(scratch.join("maps.toml"), FIT_MAPS)?;
+    let store = CaptureStore::load(&d.join("capture.toml"), Default::default())?;
+    let (texels, values) = (store.texels().len(), store.sample_count());
+    let store_bytes_per_value = store.bytes() as f64 / values as f64;
+    drop(store);
+    let mut rows = Vec::new();
+
+    bar.set_message("camera: global fit");
+    let mut cmd = Command::new(exe);
+    cmd.arg("fit")
+        .arg(d.join("capture.toml"))
+        .arg("--config")
+        .arg(scratch.join("global.toml"))
+        .arg("--out")
+        .arg(scratch.join("global.json"))
+        .arg("-q");
+    let cost = measure(cmd, &scratch.join("global.log"))?;
+    let g: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(scratch.join("global.json"))?)?;
+    let mut acc = Vec::new();
+    // per channel where the result has channels (kd here; ks is fitted per channel too)
+    for (name, truth) in [
+        ("kd", [0.45, 0.35, 0.25]),
+        ("ks", [0.3; 3]),
+        ("exponent", [40.0; 3]),
+        ("height", [0.9; 3]),
+        ("map_scale", [0.6; 3]),
+    ] {
+        let p = &g["parameters"][name];
+        let list = |x: &serde_json::Value| -> Vec<f64> {
+            match x {
+                serde_json::Value::Array(a) => a.iter().filter_map(|v| v.as_f64()).collect(),
+                v => v.as_f64().into_iter().collect(),
+            }
+        };
+        let (v, se) = (list(&p["value"]), list(&p["std_error"]));
+        let z: Vec<String> = v
+            .iter()
+            .zip(&se)
+            .zip(truth)
+            .map(|((v, se), t)| format!("{:.1}", (v - t) / se))
+            .collect();
+        let show = |x: &[f64]| {
+            x.iter()
+                .map(|v| format!("{v:.4e}"))
+                .collect::<Vec<_>>()
+                .join(", ")
+        };
+        acc.push(format!(
+            "{name} {} +- {} (z {})",
+            show(&v),
+            show(&se),
+            z.join(", ")
+        ));
+    }
+    let all = &g["statistics"]["all_pixels"];
+    acc.push(format!(
+        "every pixel: relative RMSE {:.4}, residual variance {:.3e} (sample {:.3e})",
+        all["relative_rmse"].as_f64().unwrap_or(f64::NAN),
+        all["residual_variance"].as_f64().unwrap_or(f64::NAN),
+        g["statistics"]["residual_variance"]
+            .as_f64()
+            .unwrap_or(f64::NAN)
+    ));
+    rows.push(row(
+        "global fit given the maps",
+        texels,
+        values,
+        &cost,
+        store_bytes_per_value,
+        (30.0, 1024.0),
+        acc.join("; "),
+    ));
+    bar.inc(1);
+
+    bar.set_message("camera: maps + globals");
+    let mut cmd = Command::new(exe);
+    cmd.arg("fit")
+        .arg(d.join("blind.toml"))
+        .arg("--config")
+        .arg(scratch.join("maps.toml"))
+        .arg("--out")
+        .arg(scratch.join("maps.json"))
+        .arg("--maps")
+        .arg(scratch.join("maps"))
+        .arg("-q");
+    let cost = measure(cmd, &scratch.join("maps.log"))?;
+    rows.push(row(
+        "maps (H, psi) + globals",
+        texels,
+        values,
+        &cost,
+        store_bytes_per_value,
+        (180.0, 1536.0),
+        map_accuracy(&d, &scratch.join("maps"))?,
+    ));
+    bar.inc(1);
+    Ok(CameraRun {
+        size,
+        rows,
+        store_bytes_per_value,
+        synth_seconds,
+    })
+}
+
+fn row(
+    job: &str,
+    texels: usize,
+    values: usize,
+    cost: &Cost,
+    bytes: f64,
+    (goal_seconds, goal_mb): (f64, f64),
+    accuracy: String,
+) -> CameraRow {
+    CameraRow {
+        job: job.into(),
+        texels,
+        pixel_values: values,
+        wall_seconds: cost.wall_seconds,
+        cpu_seconds: cost.cpu_seconds,
+        peak_mb: cost.peak_mb,
+        bytes_per_pixel_value: bytes,
+        goal_seconds,
+        goal_mb,
+        met: cost.wall_seconds <= goal_seconds && cost.peak_mb <= goal_mb,
+        accuracy,
+    }
+}
+
+/// RMS error of the recovered H and psi against the truth, and how the errors compare with
+/// the reported standard errors.
+fn map_accuracy(data: &Path, maps: &Path) -> Result<String> {
+    let read = |name: &str| crate::load::image_io::read(&maps.join(name), None, None);
+    let (h, hse, p, pse) = (
+        read("height.exr")?,
+        read("height_std_error.exr")?,
+        read("fibre_azimuth.exr")?,
+        read("fibre_azimuth_std_error.exr")?,
+    );
+    let topo = TopologyMap::load(&data.join("topology.png"))?;
+    let tan = TopologyMap::load_as(&data.join("tangent.png"), "tangent map")?;
+    let (mut eh, mut ep, mut zh, mut zp) = (vec![], vec![], vec![], vec![]);
+    for y in 0..h.height {
+        for x in 0..h.width {
+            let i = y * h.width + x;
+            if h.data[i].is_nan() {
+                continue;
+            }
+            let dh = h.data[i] as f64 - (0.9 + 0.6 * (2.0 * topo.texel(x, y) - 1.0));
+            let dp = crate::fit::wrap_azimuth(p.data[i] as f64 - (-90.0 + 180.0 * tan.texel(x, y)));
+            eh.push(dh);
+            ep.push(dp);
+            zh.push(dh / hse.data[i] as f64);
+            zp.push(dp / pse.data[i] as f64);
+        }
+    }
+    let (rh, _, mzh, wh) = super::maps::stats(&eh, &zh);
+    let (rp, _, mzp, wp) = super::maps::stats(&ep, &zp);
+    Ok(format!(
+        "RMS error H {rh:.4} radii (median |z| {mzh:.2}, {:.1} % within 3 se), psi {rp:.3} deg (median |z| {mzp:.2}, {:.1} % within 3 se)",
+        100.0 * wh,
+        100.0 * wp
+    ))
+}

@@ -1,0 +1,229 @@
+//! Previews of a material on an object (`fibrefit render`): an orthographic camera's rays, the
+//! nearest hit with the objects of [`objects`], and at the hit the model of the parameters in
+//! the hit's frame (x along the fibre tangent, z along the normal) at the hit's fibre height,
+//! under directional lights of given irradiance. Sits beside export: it reads a model and writes
+//! pictures, nothing fits through it.
+//!
+//! Radiance L = sum over lights of f(l, v) E max(0, n.l) per channel (1/sr x the irradiance's
+//! unit); no cast shadows between or within objects (each point sees every light above its
+//! horizon), no interreflection: the BRDF as a renderer's direct lighting shows it.
+
+pub mod objects;
+
+use crate::model::frame::{FibreFrame, Vec3};
+use crate::model::topology::{max_height, TopologyMap};
+use crate::model::{Albedos, DirectionPair, ShadingModel};
+use objects::{Object, Ray};
+use rayon::prelude::*;
+
+/// A directional light: unit direction towards it and irradiance perpendicular to it.
+#[derive(Clone, Copy, Debug)]
+pub struct Light {
+    pub direction: Vec3,
+    pub irradiance: f64,
+}
+
+/// An orthographic camera looking from `direction` (unit, towards the camera) at the origin,
+/// its image `half_width` world units either side of the centre horizontally.
+#[derive(Clone, Copy, Debug)]
+pub struct Camera {
+    pub direction: Vec3,
+    pub width: usize,
+    pub height: usize,
+    pub half_width: f64,
+}
+
+impl Camera {
+    /// Right and up unit vectors of the image plane (up towards +z where it can be).
+    fn basis(&self) -> (Vec3, Vec3) {
+        let forward = -self.direction;
+        let world_up = if self.direction.z.abs() > 0.999 {
+            Vec3::y()
+        } else {
+            Vec3::z()
+        };
+        let right = forward.cross(&world_up).normalize();
+        let up = right.cross(&forward);
+        (right, up)
+    }
+
+    /// The ray through image point (x, y) in pixels (0, 0 the top left corner).
+    pub fn ray(&self, x: f64, y: f64, distance: f64) -> Ray {
+        let (right, up) = self.basis();
+        let scale = 2.0 * self.half_width / self.width as f64;
+        let px = (x - 0.5 * self.width as f64) * scale;
+        let py = (0.5 * self.height as f64 - y) * scale;
+        Ray {
+            origin: right * px + up * py + self.direction * distance,
+            direction: -self.direction,
+        }
+    }
+}
+
+/// What shades a hit: the model, its albedos, and where the fibre height comes from.
+pub struct Material<'a> {
+    pub model: &'a dyn ShadingModel,
+    pub albedos: Albedos,
+    pub channels: usize,
+    pub spacing: f64,
+    /// H0 and the map scale s of the parameters.
+    pub height: f64,
+    pub map_scale: f64,
+    /// A topology map over the object's (u, v): H = H0 + s (2 m - 1), or added to the object's
+    /// own height (the torus) as s (2 m - 1); clamped to [0, H_max].
+    pub topology_map: Option<&'a TopologyMap>,
+}
+
+impl Material<'_> {
+    /// The fibre height at a hit, where the model has a topology and the hit fixes one;
+    /// `None`: the model's own height distribution (a constant swatch).
+    pub fn height_at(&self, hit: &objects::Hit) -> Option<f64> {
+        if !self.model.id().has_topology() {
+            return None;
+        }
+        let h_max = max_height(self.spacing);
+        let m = self.topology_map.map(|t| {
+            let (w, h) = (t.width, t.height);
+            let x = ((hit.uv[0] * w as f64) as usize).min(w - 1);
+            let y = (((1.0 - hit.uv[1]) * h as f64) as usize).min(h - 1);
+            t.texel(x, y)
+        });
+        match (hit.height, m) {
+            (Some(h), Some(m)) => Some((h + self.map_scale * (2.0 * m - 1.0)).clamp(0.0, h_max)),
+            (Some(h), None) => Some(h.clamp(0.0, h_max)),
+            (None, Some(m)) => {
+                Some((self.height + self.map_scale * (2.0 * m - 1.0)).clamp(0.0, h_max))
+            }
+            (None, None) => None,
+        }
+    }
+
+    /// Radiance per channel towards `v` at a hit under `lights`.
+    pub fn radiance(&self, hit: &objects::Hit, v: &Vec3, lights: &[Light]) -> [f64; 3] {
+        let n = hit.normal;
+        let t = hit.tangent;
+        let b = n.cross(&t);
+        let local = |d: &Vec3| Vec3::new(d.dot(&t), d.dot(&b), d.dot(&n));
+        let height = self.height_at(hit);
+        let frame = FibreFrame::from_azimuth(0.0);
+        let mut out = [0.0; 3];
+        for light in lights {
+            let cos_i = n.dot(&light.direction);
+            if cos_i <= 0.0 {
+                continue;
+            }
+            let pair = DirectionPair::new(&frame, &local(&light.direction), &local(v));
+            let basis = match height {
+                Some(h) => self.model.basis_at_height(&pair, h).unwrap_or_default(),
+                None => self.model.basis(&pair),
+            };
+            for (c, o) in out.iter_mut().enumerate() {
+                *o +=
+                    basis.brdf(&self.albedos, c.min(self.channels - 1)) * light.irradiance * cos_i;
+            }
+        }
+        out
+    }
+}
+
+/// A rendered picture and its per-pixel AOVs (from each pixel's centre ray; zero, and NaN for
+/// the height, where it misses).
+pub struct Picture {
+    pub width: usize,
+    pub height: usize,
+    /// Linear radiance, RGB, the mean over the pixel's subsamples (misses count as 0).
+    pub radiance: Vec<[f32; 3]>,
+    /// Fraction of the pixel's subsamples that hit an object.
+    pub alpha: Vec<f32>,
+    pub normal: Vec<[f32; 3]>,
+    pub tangent: Vec<[f32; 3]>,
+    pub position: Vec<[f32; 3]>,
+    /// Fibre height H used (fibre radii); NaN where none.
+    pub fibre_height: Vec<f32>,
+}
+
+/// One pixel's radiance, coverage, (normal, tangent, position) and fibre height.
+type PixelOut = ([f32; 3], f32, [[f32; 3]; 3], f32);
+
+/// The nearest hit of `ray` among `objects`.
+pub fn nearest(objects: &[Object], ray: &Ray) -> Option<objects::Hit> {
+    objects
+        .iter()
+        .filter_map(|o| o.intersect(ray))
+        .min_by(|a, b| a.t.total_cmp(&b.t))
+}
+
+/// Render `objects` with `material` under `lights` through `camera`, `supersample` x
+/// `supersample` rays per pixel.
+pub fn render(
+    objects: &[Object],
+    material: &Material,
+    lights: &[Light],
+    camera: &Camera,
+    supersample: usize,
+    bar: &indicatif::ProgressBar,
+) -> Picture {
+    let (w, h) = (camera.width, camera.height);
+    let distance = 10.0 + objects.iter().map(Object::bound).fold(0.0, f64::max);
+    let s = supersample.max(1);
+    let v = camera.direction;
+    let rows: Vec<Vec<PixelOut>> = (0..h)
+        .into_par_iter()
+        .map(|y| {
+            let row = (0..w)
+                .map(|x| {
+                    let mut sum = [0.0f64; 3];
+                    let mut hits = 0usize;
+                    for sy in 0..s {
+                        for sx in 0..s {
+                            let ray = camera.ray(
+                                x as f64 + (sx as f64 + 0.5) / s as f64,
+                                y as f64 + (sy as f64 + 0.5) / s as f64,
+                                distance,
+                            );
+                            if let Some(hit) = nearest(objects, &ray) {
+                                hits += 1;
+                                let l = material.radiance(&hit, &v, lights);
+                                for c in 0..3 {
+                                    sum[c] += l[c];
+                                }
+                            }
+                        }
+                    }
+                    let n = (s * s) as f64;
+                    let centre = nearest(
+                        objects,
+                        &camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance),
+                    );
+                    let f = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
+                    let (aov, fh) = match centre {
+                        Some(hit) => (
+                            [f(hit.normal), f(hit.tangent), f(hit.position)],
+                            material.height_at(&hit).map_or(f32::NAN, |h| h as f32),
+                        ),
+                        None => ([[0.0; 3]; 3], f32::NAN),
+                    };
+                    (
+                        sum.map(|v| (v / n) as f32),
+                        (hits as f64 / n) as f32,
+                        aov,
+                        fh,
+                    )
+                })
+                .collect();
+            bar.inc(1);
+            row
+        })
+        .collect();
+    let all: Vec<_> = rows.into_iter().flatten().collect();
+    Picture {
+        width: w,
+        height: h,
+        radiance: all.iter().map(|p| p.0).collect(),
+        alpha: all.iter().map(|p| p.1).collect(),
+        normal: all.iter().map(|p| p.2[0]).collect(),
+        tangent: all.iter().map(|p| p.2[1]).collect(),
+        position: all.iter().map(|p| p.2[2]).collect(),
+        fibre_height: all.iter().map(|p| p.3).collect(),
+    }
+}

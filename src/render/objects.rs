@@ -1,0 +1,294 @@
+//! The objects `fibrefit render` shows a material on: a sphere, a flat swatch and seed 001's
+//! torus wound with fibres (MODEL.md §7), each intersected by a ray in closed form (the torus by
+//! sphere tracing its distance function, then Newton on its quartic), and each giving at a hit
+//! the normal, the fibre tangent, the surface coordinates (u, v) in [0, 1] and, for the torus,
+//! the mathematical topology of its climbing fibres.
+
+use crate::model::frame::Vec3;
+
+/// Where a ray meets an object.
+#[derive(Clone, Copy, Debug)]
+pub struct Hit {
+    /// Distance along the (unit) ray.
+    pub t: f64,
+    pub position: Vec3,
+    /// Unit outward normal.
+    pub normal: Vec3,
+    /// Unit fibre tangent, perpendicular to the normal.
+    pub tangent: Vec3,
+    /// Surface coordinates in [0, 1] (texture lookups: u across, v up the image).
+    pub uv: [f64; 2],
+    /// The object's own fibre height H (fibre radii) where it has one (the torus's climbing).
+    pub height: Option<f64>,
+}
+
+/// A ray: origin and unit direction.
+#[derive(Clone, Copy, Debug)]
+pub struct Ray {
+    pub origin: Vec3,
+    pub direction: Vec3,
+}
+
+impl Ray {
+    pub fn at(&self, t: f64) -> Vec3 {
+        self.origin + self.direction * t
+    }
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Object {
+    /// Unit sphere at the origin; fibres along the circles of latitude about z, turned by
+    /// `psi_deg` towards the meridians (0: wound round the z axis, 90: pole to pole).
+    Sphere { psi_deg: f64 },
+    /// The square [-1, 1]^2 in the plane z = 0, normal +z; fibres at azimuth `psi_deg` from x.
+    Swatch { psi_deg: f64 },
+    /// Seed 001's torus about the z axis: tube radius r = 0.375, major radius R = 5r/3 (outer side
+    /// four times the inner side), fibres wound round the tube (spacing `spacing`), so they
+    /// climb twice from the outer to the inner side.
+    Torus { spacing: f64 },
+}
+
+/// Seed 001's torus: tube radius and major radius R = 5 r / 3.
+pub const TORUS_TUBE: f64 = 0.375;
+pub const TORUS_MAJOR: f64 = TORUS_TUBE * 5.0 / 3.0;
+
+impl Object {
+    /// Radius of a sphere about the origin that holds the object.
+    pub fn bound(&self) -> f64 {
+        match self {
+            Object::Sphere { .. } => 1.0,
+            Object::Swatch { .. } => std::f64::consts::SQRT_2,
+            Object::Torus { .. } => TORUS_MAJOR + TORUS_TUBE,
+        }
+    }
+
+    /// The nearest hit of `ray` with t > 0.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        match *self {
+            Object::Sphere { psi_deg } => sphere(ray, psi_deg),
+            Object::Swatch { psi_deg } => swatch(ray, psi_deg),
+            Object::Torus { spacing } => torus(ray, spacing),
+        }
+    }
+}
+
+/// Entry and exit of a ray through the sphere of radius `r` at the origin.
+fn sphere_span(ray: &Ray, r: f64) -> Option<(f64, f64)> {
+    let b = ray.origin.dot(&ray.direction);
+    let c = ray.origin.norm_squared() - r * r;
+    let disc = b * b - c;
+    if disc < 0.0 {
+        return None;
+    }
+    let s = disc.sqrt();
+    // the nearer root without cancellation
+    let q = -b - s;
+    let (t0, t1) = (q, c / q);
+    let (t0, t1) = if t0 <= t1 { (t0, t1) } else { (t1, t0) };
+    (t1 > 0.0).then_some((t0, t1))
+}
+
+fn sphere(ray: &Ray, psi_deg: f64) -> Option<Hit> {
+    let (t0, t1) = sphere_span(ray, 1.0)?;
+    let t = if t0 > 0.0 { t0 } else { t1 };
+    let p = ray.at(t);
+    let n = p.normalize();
+    // latitude circle about z (east) and meridian (north); at the poles any direction
+    let east = Vec3::z().cross(&n);
+    let east = if east.norm() > 1e-12 {
+        east.normalize()
+    } else {
+        Vec3::x()
+    };
+    let north = n.cross(&east);
+    let psi = psi_deg.to_radians();
+    let u = 0.5 + p.y.atan2(p.x) / std::f64::consts::TAU;
+    let v = 0.5 + n.z.clamp(-1.0, 1.0).asin() / std::f64::consts::PI;
+    Some(Hit {
+        t,
+        position: p,
+        normal: n,
+        tangent: east * psi.cos() + north * psi.sin(),
+        uv: [u, v],
+        height: None,
+    })
+}
+
+fn swatch(ray: &Ray, psi_deg: f64) -> Option<Hit> {
+    if ray.direction.z.abs() < 1e-15 {
+        return None;
+    }
+    let t = -ray.origin.z / ray.direction.z;
+    if t <= 0.0 {
+        return None;
+    }
+    let p = ray.at(t);
+    if p.x.abs() > 1.0 || p.y.abs() > 1.0 {
+        return None;
+    }
+    let psi = psi_deg.to_radians();
+    Some(Hit {
+        t,
+        position: Vec3::new(p.x, p.y, 0.0),
+        normal: Vec3::z(),
+        tangent: Vec3::new(psi.cos(), psi.sin(), 0.0),
+        uv: [0.5 * (p.x + 1.0), 0.5 * (p.y + 1.0)],
+        height: None,
+    })
+}
+
+/// Signed distance to the torus.
+fn torus_distance(p: &Vec3) -> f64 {
+    let q = (p.x * p.x + p.y * p.y).sqrt() - TORUS_MAJOR;
+    (q * q + p.z * p.z).sqrt() - TORUS_TUBE
+}
+
+/// The torus's quartic f(p) = (|p|^2 + R^2 - r^2)^2 - 4 R^2 (x^2 + y^2) and its derivative
+/// along the ray at t.
+fn torus_quartic(ray: &Ray, t: f64) -> (f64, f64) {
+    let p = ray.at(t);
+    let (rr, r2) = (TORUS_MAJOR * TORUS_MAJOR, TORUS_TUBE * TORUS_TUBE);
+    let s = p.norm_squared() + rr - r2;
+    let f = s * s - 4.0 * rr * (p.x * p.x + p.y * p.y);
+    let d = ray.direction;
+    let ds = 2.0 * p.dot(&d);
+    let df = 2.0 * s * ds - 8.0 * rr * (p.x * d.x + p.y * d.y);
+    (f, df)
+}
+
+/// The mathematical topology of seed 001's torus at tube angle v (0 on the outer side): a fibre
+/// of the outer side's width keeps its count per turn, so its width relative to the outer side
+/// is w = (R + r cos v) / (R + r) in [1/4, 1]; each completed layer of climbing halves it, so
+/// phi = acos(w 2^k) with k = 0 for w > 1/2 and 1 below (two climbs from the outer to the inner
+/// side), and H = d sin(phi) clamped to [0, H_max(d)] (MODEL.md §4, §7).
+pub fn torus_height(v: f64, spacing: f64) -> f64 {
+    let w = (TORUS_MAJOR + TORUS_TUBE * v.cos()) / (TORUS_MAJOR + TORUS_TUBE);
+    let k = if w > 0.5 { 0 } else { 1 };
+    let phi = (w * f64::from(1 << k)).min(1.0).acos();
+    (spacing * phi.sin()).clamp(0.0, crate::model::topology::max_height(spacing))
+}
+
+fn torus(ray: &Ray, spacing: f64) -> Option<Hit> {
+    let (t0, t1) = sphere_span(ray, TORUS_MAJOR + TORUS_TUBE + 1e-9)?;
+    let mut t = t0.max(0.0);
+    // sphere tracing never passes the first surface; Newton on the quartic polishes it
+    let mut found = false;
+    for _ in 0..2000 {
+        let d = torus_distance(&ray.at(t));
+        if d < 1e-10 {
+            found = true;
+            break;
+        }
+        t += d;
+        if t > t1 {
+            return None;
+        }
+    }
+    if !found {
+        return None;
+    }
+    for _ in 0..3 {
+        let (f, df) = torus_quartic(ray, t);
+        if df.abs() > 1e-300 {
+            let step = f / df;
+            if step.abs() < 1e-6 {
+                t -= step;
+            }
+        }
+    }
+    let p = ray.at(t);
+    let rho = (p.x * p.x + p.y * p.y).sqrt();
+    let u_angle = p.y.atan2(p.x);
+    let v_angle = p.z.atan2(rho - TORUS_MAJOR);
+    let centre = Vec3::new(u_angle.cos(), u_angle.sin(), 0.0) * TORUS_MAJOR;
+    let n = (p - centre).normalize();
+    // fibres wound round the tube: along d/dv
+    let tangent = Vec3::new(
+        -v_angle.sin() * u_angle.cos(),
+        -v_angle.sin() * u_angle.sin(),
+        v_angle.cos(),
+    );
+    Some(Hit {
+        t,
+        position: p,
+        normal: n,
+        tangent,
+        uv: [
+            0.5 + u_angle / std::f64::consts::TAU,
+            0.5 + v_angle / std::f64::consts::TAU,
+        ],
+        height: Some(torus_height(v_angle, spacing)),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn torus_hits_lie_on_the_torus_with_unit_perpendicular_frames() {
+        let o = Object::Torus { spacing: 2.0 };
+        let mut hits = 0;
+        for i in 0..40 {
+            for j in 0..40 {
+                let x = -1.0 + 2.0 * (i as f64 + 0.5) / 40.0;
+                let y = -1.0 + 2.0 * (j as f64 + 0.5) / 40.0;
+                let dir = Vec3::new(0.3, -0.5, -1.0).normalize();
+                let ray = Ray {
+                    origin: Vec3::new(x, y, 0.0) - dir * 5.0,
+                    direction: dir,
+                };
+                if let Some(h) = o.intersect(&ray) {
+                    hits += 1;
+                    assert!(torus_distance(&h.position).abs() < 1e-9);
+                    assert!((h.normal.norm() - 1.0).abs() < 1e-12);
+                    assert!((h.tangent.norm() - 1.0).abs() < 1e-12);
+                    assert!(h.normal.dot(&h.tangent).abs() < 1e-12);
+                    // visible from the ray's side
+                    assert!(h.normal.dot(&dir) < 1e-9);
+                }
+            }
+        }
+        assert!(hits > 300, "{hits}");
+    }
+
+    #[test]
+    fn the_torus_climbs_twice_from_the_outer_to_the_inner_side() {
+        // flat on the outer side (w = 1), fully climbed at w = 1/2, flat again just inside,
+        // fully climbed on the inner side (w = 1/4)
+        assert!(torus_height(0.0, 2.0).abs() < 1e-12);
+        let h_max = 3f64.sqrt();
+        assert!((torus_height(std::f64::consts::PI, 2.0) - h_max).abs() < 1e-9);
+        // w = 1/2 where cos v = (R + r)/(2 r) - R/r
+        let v_half =
+            ((TORUS_MAJOR + TORUS_TUBE) / (2.0 * TORUS_TUBE) - TORUS_MAJOR / TORUS_TUBE).acos();
+        assert!((torus_height(v_half - 1e-9, 2.0) - h_max).abs() < 1e-6);
+        assert!(torus_height(v_half + 1e-6, 2.0) < 0.01);
+    }
+
+    #[test]
+    fn sphere_and_swatch_frames() {
+        let down = Vec3::new(0.0, 0.0, -1.0);
+        let h = Object::Sphere { psi_deg: 0.0 }
+            .intersect(&Ray {
+                origin: Vec3::new(0.6, 0.0, 5.0),
+                direction: down,
+            })
+            .unwrap();
+        assert!((h.position - Vec3::new(0.6, 0.0, 0.8)).norm() < 1e-12);
+        assert!((h.tangent - Vec3::y()).norm() < 1e-12);
+        let s = Object::Swatch { psi_deg: 90.0 }
+            .intersect(&Ray {
+                origin: Vec3::new(0.2, 0.3, 2.0),
+                direction: down,
+            })
+            .unwrap();
+        assert!((s.t - 2.0).abs() < 1e-12 && (s.tangent - Vec3::y()).norm() < 1e-12);
+        assert!(Object::Swatch { psi_deg: 0.0 }
+            .intersect(&Ray {
+                origin: Vec3::new(1.2, 0.0, 2.0),
+                direction: down
+            })
+            .is_none());
+    }
+}

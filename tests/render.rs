@@ -1,0 +1,241 @@
+//! `fibrefit render`: a Lambert sphere's pixels are kd/pi E max(0, n.l) at the normal the AOV
+//! gives; a varying-topology torus's pixels are what `fibrefit eval` gives at that pixel's
+//! light, view, fibre tangent and height; nothing is drawn outside the object; seed 001's grid;
+//! bad input refused with nothing written.
+
+use assert_cmd::Command;
+use fibrefit::load::image_io;
+use std::path::Path;
+
+fn fibrefit() -> Command {
+    Command::cargo_bin("fibrefit").expect("binary built")
+}
+
+fn dir_of(theta: f64, phi: f64) -> [f64; 3] {
+    let (t, p) = (theta.to_radians(), phi.to_radians());
+    [t.sin() * p.cos(), t.sin() * p.sin(), t.cos()]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// Alpha channel of a rendered EXR.
+fn alpha(path: &Path) -> Vec<f32> {
+    let img = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
+    let a = img
+        .layer_data
+        .channel_data
+        .list
+        .iter()
+        .find(|c| c.name.to_string() == "A")
+        .expect("an alpha channel");
+    a.sample_data.values_as_f32().collect()
+}
+
+fn vec3(img: &image_io::LinearImage, i: usize) -> [f64; 3] {
+    let p = &img.data[3 * i..3 * i + 3];
+    [p[0] as f64, p[1] as f64, p[2] as f64]
+}
+
+#[test]
+fn a_lambert_sphere_is_kd_over_pi_times_the_cosine_at_its_normals() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("p.toml"),
+        "model = \"lambert\"\nkd = [0.6, 0.4, 0.2]\n",
+    )
+    .unwrap();
+    fibrefit()
+        .current_dir(dir.path())
+        .args(["render", "--params", "p.toml", "--object", "sphere"])
+        .args([
+            "--light", "30,60", "--camera", "20,200", "--size", "48", "40",
+        ])
+        .args([
+            "--supersample",
+            "1",
+            "--out",
+            "s.exr",
+            "--aovs",
+            "aov",
+            "-q",
+        ])
+        .assert()
+        .success();
+    let img = image_io::read(&dir.path().join("s.exr"), None, None).unwrap();
+    let normal = image_io::read(&dir.path().join("aov/normal.exr"), None, None).unwrap();
+    let a = alpha(&dir.path().join("s.exr"));
+    assert_eq!((img.width, img.height), (48, 40));
+    assert!(
+        !dir.path().join("aov/height.exr").exists(),
+        "lambert has no height"
+    );
+    let l = dir_of(30.0, 60.0);
+    let (mut inside, mut outside) = (0, 0);
+    for y in 1..39 {
+        for x in 1..47 {
+            let i = y * 48 + x;
+            let interior = [i - 1, i + 1, i - 48, i + 48, i]
+                .iter()
+                .all(|&j| a[j] == 1.0);
+            if a[i] == 0.0 {
+                outside += 1;
+                assert_eq!(&img.data[3 * i..3 * i + 3], &[0.0, 0.0, 0.0]);
+                assert_eq!(vec3(&normal, i), [0.0; 3]);
+                continue;
+            }
+            if !interior {
+                continue;
+            }
+            inside += 1;
+            let n = vec3(&normal, i);
+            let cos = dot(n, l).max(0.0);
+            for (c, kd) in [0.6, 0.4, 0.2].iter().enumerate() {
+                let want = kd / std::f64::consts::PI * cos;
+                let got = img.data[3 * i + c] as f64;
+                assert!(
+                    (got - want).abs() <= 2e-6 * (1.0 + want),
+                    "pixel ({x}, {y}) channel {c}: {got} vs {want}"
+                );
+            }
+        }
+    }
+    assert!(inside > 800 && outside > 200, "{inside} {outside}");
+}
+
+#[test]
+fn a_fibre_torus_pixel_is_eval_at_its_own_light_view_tangent_and_height() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("p.toml"),
+        "model = \"varying-topology\"\nkd = 0.5\nks = 0.4\nexponent = 30\nspacing = 2.0\n",
+    )
+    .unwrap();
+    fibrefit()
+        .current_dir(d)
+        .args(["render", "--params", "p.toml", "--object", "torus"])
+        .args([
+            "--light", "40,120", "--camera", "50,270", "--size", "40", "40",
+        ])
+        .args([
+            "--supersample",
+            "1",
+            "--out",
+            "t.exr",
+            "--aovs",
+            "aov",
+            "-q",
+        ])
+        .assert()
+        .success();
+    let img = image_io::read(&d.join("t.exr"), None, None).unwrap();
+    let read = |n: &str| image_io::read(&d.join("aov").join(n), None, None).unwrap();
+    let (normal, tangent, height) = (read("normal.exr"), read("tangent.exr"), read("height.exr"));
+    let a = alpha(&d.join("t.exr"));
+    let (l, v) = (dir_of(40.0, 120.0), dir_of(50.0, 270.0));
+    // the pixels' local directions as eval queries (fibres along x of the local frame)
+    let mut csv = String::from("theta_i,phi_i,theta_o,phi_o,height\n");
+    let mut pixels = Vec::new();
+    for (i, &ai) in a.iter().enumerate() {
+        if ai != 1.0 {
+            assert!(height.data[i].is_nan() || ai > 0.0);
+            continue;
+        }
+        let (n, t) = (vec3(&normal, i), vec3(&tangent, i));
+        let b = [
+            n[1] * t[2] - n[2] * t[1],
+            n[2] * t[0] - n[0] * t[2],
+            n[0] * t[1] - n[1] * t[0],
+        ];
+        let local = |w: [f64; 3]| {
+            let (x, y, z) = (dot(w, t), dot(w, b), dot(w, n));
+            let r = (x * x + y * y + z * z).sqrt();
+            (
+                (z / r).clamp(-1.0, 1.0).acos().to_degrees(),
+                y.atan2(x).to_degrees(),
+            )
+        };
+        let ((ti, pi), (to, po)) = (local(l), local(v));
+        if ti >= 89.0 || to >= 89.0 {
+            continue;
+        }
+        csv += &format!("{ti},{pi},{to},{po},{}\n", height.data[i]);
+        pixels.push(i);
+    }
+    assert!(pixels.len() > 300, "{}", pixels.len());
+    std::fs::write(d.join("q.csv"), csv).unwrap();
+    fibrefit()
+        .current_dir(d)
+        .args([
+            "eval",
+            "--params",
+            "p.toml",
+            "--queries",
+            "q.csv",
+            "--out",
+            "e.csv",
+            "-q",
+        ])
+        .assert()
+        .success();
+    let mut rd = csv::Reader::from_path(d.join("e.csv")).unwrap();
+    let heads = rd.headers().unwrap().clone();
+    let col = heads.iter().position(|h| h == "intensity").unwrap();
+    let mut worst: f64 = 0.0;
+    for (row, &i) in rd.records().zip(&pixels) {
+        let want: f64 = row.unwrap()[col].parse().unwrap();
+        let got = img.data[3 * i] as f64;
+        // the AOVs are f32: their rounding moves a sharp lobe by ~1e-6 relative
+        worst = worst.max((got - want).abs() / want.abs().max(1e-3));
+    }
+    assert!(worst < 1e-4, "worst relative difference {worst}");
+}
+
+#[test]
+fn seed_001_grid_and_bad_input() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    fibrefit()
+        .current_dir(d)
+        .args(["render", "--seed001", "--out", "grid.png", "-q"])
+        .assert()
+        .success();
+    let grid = image::open(d.join("grid.png")).unwrap();
+    assert_eq!((grid.width(), grid.height()), (512, 1024));
+    std::fs::write(d.join("p.toml"), "model = \"lambert\"\nkd = 0.5\n").unwrap();
+    for (args, says) in [
+        (vec!["--light", "abc"], "THETA,PHI"),
+        (vec!["--light", "200,0"], "outside [0, 180]"),
+        (vec!["--object", "cube"], "torus, sphere or swatch"),
+        (vec!["--supersample", "0"], "--supersample"),
+    ] {
+        let out = fibrefit()
+            .current_dir(d)
+            .args(["render", "--params", "p.toml", "--out", "x.png"])
+            .args(&args)
+            .assert()
+            .code(2);
+        let err = String::from_utf8_lossy(&out.get_output().stderr).to_string();
+        assert!(err.contains(says), "{args:?}: {err}");
+        assert!(!d.join("x.png").exists());
+    }
+    let out = fibrefit()
+        .current_dir(d)
+        .args(["render", "--params", "p.toml", "--out", "x.jpg"])
+        .assert()
+        .code(2);
+    assert!(String::from_utf8_lossy(&out.get_output().stderr).contains(".exr or .png"));
+    assert!(!d.join("x.jpg").exists());
+    // an output never replaces an input
+    fibrefit()
+        .current_dir(d)
+        .args(["render", "--params", "p.toml", "--out", "p.toml"])
+        .assert()
+        .code(2);
+    assert_eq!(
+        std::fs::read_to_string(d.join("p.toml")).unwrap(),
+        "model = \"lambert\"\nkd = 0.5\n"
+    );
+}
