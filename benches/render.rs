@@ -22,6 +22,8 @@ fn torus(c: &mut Criterion) {
         height: 0.0,
         map_scale: 0.0,
         topology_map: None,
+        texel_maps: None,
+        fibre_azimuth_deg: 0.0,
     };
     let lights = [Light {
         direction: direction_from_angles(40f64.to_radians(), 120f64.to_radians()),
@@ -29,6 +31,7 @@ fn torus(c: &mut Criterion) {
     }];
     let camera = Camera {
         direction: direction_from_angles(50f64.to_radians(), 270f64.to_radians()),
+        target: fibrefit::model::frame::Vec3::zeros(),
         width: 1024,
         height: 1024,
         half_width: 1.05,

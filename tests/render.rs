@@ -208,7 +208,7 @@ fn seed_001_grid_and_bad_input() {
     for (args, says) in [
         (vec!["--light", "abc"], "THETA,PHI"),
         (vec!["--light", "200,0"], "outside [0, 180]"),
-        (vec!["--object", "cube"], "torus, sphere or swatch"),
+        (vec!["--object", "cube"], "torus, sphere, swatch or a mesh"),
         (vec!["--supersample", "0"], "--supersample"),
     ] {
         let out = fibrefit()
@@ -238,4 +238,164 @@ fn seed_001_grid_and_bad_input() {
         std::fs::read_to_string(d.join("p.toml")).unwrap(),
         "model = \"lambert\"\nkd = 0.5\n"
     );
+}
+
+#[test]
+fn a_mesh_takes_its_fibres_from_its_curvature() {
+    // an open cylinder about z as OBJ: k1 runs round it, so the tangent AOV is horizontal
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (nu, nv) = (64, 16);
+    let mut obj = String::new();
+    for j in 0..=nv {
+        for i in 0..nu {
+            let ph = std::f64::consts::TAU * i as f64 / nu as f64;
+            obj += &format!(
+                "v {} {} {}\n",
+                ph.cos(),
+                ph.sin(),
+                2.0 * j as f64 / nv as f64 - 1.0
+            );
+        }
+    }
+    for j in 0..nv {
+        for i in 0..nu {
+            let id = |i: usize, j: usize| j * nu + (i % nu) + 1;
+            obj += &format!(
+                "f {} {} {} {}\n",
+                id(i, j),
+                id(i + 1, j),
+                id(i + 1, j + 1),
+                id(i, j + 1)
+            );
+        }
+    }
+    std::fs::write(d.join("cyl.obj"), obj).unwrap();
+    std::fs::write(
+        d.join("p.toml"),
+        "model = \"poulin-fournier\"\nkd = 0.5\nks = 0.4\nexponent = 30\nspacing = 2.0\n",
+    )
+    .unwrap();
+    fibrefit()
+        .current_dir(d)
+        .args([
+            "render",
+            "--params",
+            "p.toml",
+            "--object",
+            "cyl.obj",
+            "--tangents",
+            "curvature",
+        ])
+        .args([
+            "--camera",
+            "80,270",
+            "--size",
+            "40",
+            "40",
+            "--supersample",
+            "1",
+        ])
+        .args(["--out", "c.exr", "--aovs", "aov", "-q"])
+        .assert()
+        .success();
+    let read = |n: &str| image_io::read(&d.join("aov").join(n), None, None).unwrap();
+    let (normal, tangent, position) = (
+        read("normal.exr"),
+        read("tangent.exr"),
+        read("position.exr"),
+    );
+    let mut checked = 0;
+    for i in 0..40 * 40 {
+        let (n, t, p) = (vec3(&normal, i), vec3(&tangent, i), vec3(&position, i));
+        if dot(n, n) == 0.0 || p[2].abs() > 0.7 {
+            continue;
+        }
+        assert!(t[2].abs() < 0.02, "pixel {i}: tangent {t:?} at {p:?}");
+        assert!(dot(t, n).abs() < 1e-5 && (dot(t, t) - 1.0).abs() < 1e-5);
+        checked += 1;
+    }
+    assert!(checked > 200, "{checked}");
+    // a field the mesh cannot give is refused
+    fibrefit()
+        .current_dir(d)
+        .args([
+            "render",
+            "--params",
+            "p.toml",
+            "--object",
+            "cyl.obj",
+            "--tangents",
+            "uv",
+        ])
+        .args(["--out", "u.png"])
+        .assert()
+        .code(2);
+    assert!(!d.join("u.png").exists());
+}
+
+#[test]
+fn recovered_maps_set_each_texels_height_and_fibre_direction() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    // 8 x 4 texels: H = 0.2 x + 0.1, psi = 10 y - 20 degrees
+    let (w, h) = (8, 4);
+    let hmap: Vec<f32> = (0..w * h).map(|i| 0.2 * (i % w) as f32 + 0.1).collect();
+    let pmap: Vec<f32> = (0..w * h).map(|i| 10.0 * (i / w) as f32 - 20.0).collect();
+    std::fs::create_dir_all(d.join("maps")).unwrap();
+    fibrefit::export::images::write_exr(&d.join("maps/height.exr"), w, h, 1, &hmap).unwrap();
+    fibrefit::export::images::write_exr(&d.join("maps/fibre_azimuth.exr"), w, h, 1, &pmap).unwrap();
+    std::fs::write(
+        d.join("p.toml"),
+        "model = \"varying-topology\"\nkd = 0.5\nks = 0.4\nexponent = 30\nspacing = 2.0\nfibre_azimuth_deg = 0\n",
+    )
+    .unwrap();
+    fibrefit()
+        .current_dir(d)
+        .args([
+            "render", "--params", "p.toml", "--object", "swatch", "--maps", "maps",
+        ])
+        .args([
+            "--camera",
+            "0,0",
+            "--size",
+            "64",
+            "64",
+            "--supersample",
+            "1",
+        ])
+        .args(["--out", "s.exr", "--aovs", "aov", "-q"])
+        .assert()
+        .success();
+    let read = |n: &str| image_io::read(&d.join("aov").join(n), None, None).unwrap();
+    let (height, tangent, position) = (
+        read("height.exr"),
+        read("tangent.exr"),
+        read("position.exr"),
+    );
+    let mut checked = 0;
+    for i in 0..64 * 64 {
+        let p = vec3(&position, i);
+        if height.data[i].is_nan() {
+            continue;
+        }
+        // the swatch's (u, v) = ((x + 1)/2, (y + 1)/2), v up the map
+        let (u, v) = ((p[0] + 1.0) / 2.0, (p[1] + 1.0) / 2.0);
+        let tx = ((u * w as f64) as usize).min(w - 1);
+        let ty = (((1.0 - v) * h as f64) as usize).min(h - 1);
+        if (u * w as f64).fract().min(1.0 - (u * w as f64).fract()) < 0.05
+            || (v * h as f64).fract().min(1.0 - (v * h as f64).fract()) < 0.05
+        {
+            continue; // on a texel border, either texel is right
+        }
+        assert_eq!(height.data[i], hmap[ty * w + tx], "pixel {i} at {p:?}");
+        let t = vec3(&tangent, i);
+        let psi = t[1].atan2(t[0]).to_degrees();
+        assert!(
+            (psi - pmap[ty * w + tx] as f64).abs() < 1e-4,
+            "{psi} at {p:?}"
+        );
+        checked += 1;
+    }
+    assert!(checked > 1000, "{checked}");
 }

@@ -10,6 +10,7 @@ pub mod map_tiles;
 pub mod render;
 pub mod score;
 pub mod synth;
+pub mod tangents;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -45,6 +46,8 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Render a material on an object (torus, sphere, swatch) as an image and its AOVs.
     Render(render::RenderArgs),
+    /// Principal curvature directions of a mesh (seed 004's tangent field) as CSV or glTF.
+    Tangents(tangents::TangentsArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),
 }
@@ -75,6 +78,7 @@ where
         Command::Bench(args) => bench::run(&args),
         Command::MergeMaps(args) => map_tiles::run_merge(&args),
         Command::Render(args) => render::run(&args),
+        Command::Tangents(args) => tangents::run(&args),
     }
 }
 

@@ -6,6 +6,7 @@ use crate::model::frame::{direction_from_angles, Vec3};
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::topology::TopologyMap;
 use crate::model::{self, ModelId};
+use crate::render::mesh_object::{MeshObject, TangentSource};
 use crate::render::objects::Object;
 use crate::render::{self, Camera, Light, Material, Picture};
 use anyhow::{anyhow, bail, Context, Result};
@@ -33,9 +34,13 @@ pub struct RenderArgs {
     /// Model id [default: the parameter file's `model`]
     #[arg(long, value_name = "ID")]
     pub model: Option<String>,
-    /// torus, sphere or swatch
+    /// torus, sphere, swatch or a triangle mesh MESH.obj
     #[arg(long, value_name = "OBJECT", default_value = "torus")]
     pub object: String,
+    /// Meshes: the fibre tangent field: curvature (k1's direction, seed 004), uv (dp/du of the
+    /// texture coordinates) or constant (fibre_azimuth_deg from x, projected on the surface)
+    #[arg(long, value_name = "FIELD", default_value = "curvature")]
+    pub tangents: String,
     /// A directional light of unit irradiance from THETA,PHI degrees (repeatable)
     /// [default: 40,120]
     #[arg(long, value_name = "THETA,PHI", allow_hyphen_values = true)]
@@ -58,6 +63,10 @@ pub struct RenderArgs {
     /// object's pixels to 0.9)
     #[arg(long, value_name = "E|auto", default_value = "auto")]
     pub exposure: String,
+    /// Per-texel maps from `fit --maps` (height.exr, fibre_azimuth.exr, kd.exr, ks.exr) over
+    /// the object's (u, v) [default: the maps a fitted result names, found beside it]
+    #[arg(long, value_name = "DIR")]
+    pub maps: Option<PathBuf>,
     /// Also write the per-pixel AOVs into DIR
     #[arg(long, value_name = "DIR")]
     pub aovs: Option<PathBuf>,
@@ -92,7 +101,7 @@ fn direction(text: &str, what: &str) -> Result<Vec3> {
     ))
 }
 
-fn object(name: &str, params: &ModelParams) -> Result<Object> {
+fn object(name: &str, tangents: &str, params: &ModelParams) -> Result<Object> {
     let psi = params.fibre_azimuth.to_degrees();
     Ok(match name {
         "torus" => Object::Torus {
@@ -100,7 +109,17 @@ fn object(name: &str, params: &ModelParams) -> Result<Object> {
         },
         "sphere" => Object::Sphere { psi_deg: psi },
         "swatch" => Object::Swatch { psi_deg: psi },
-        o => bail!("--object {o}: expected torus, sphere or swatch"),
+        o if o.to_ascii_lowercase().ends_with(".obj") => {
+            let source = match tangents {
+                "curvature" => TangentSource::Curvature,
+                "uv" => TangentSource::Uv,
+                "constant" => TangentSource::Constant { psi_deg: psi },
+                t => bail!("--tangents {t}: expected curvature, uv or constant"),
+            };
+            let mesh = crate::load::mesh::load_obj(Path::new(o))?;
+            Object::Mesh(std::sync::Arc::new(MeshObject::new(mesh, source, psi)?))
+        }
+        o => bail!("--object {o}: expected torus, sphere, swatch or a mesh file MESH.obj"),
     })
 }
 
@@ -265,7 +284,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             eprintln!("warning: {}: {w}", params_path.display());
         }
     }
-    let obj = object(&args.object, &params)?;
+    let obj = object(&args.object, &args.tangents, &params)?;
     let lights = lights_of(&args.light)?;
     let (w, h) = (args.size[0], args.size[1]);
     if w == 0 || h == 0 || w * h > 64 << 20 {
@@ -273,12 +292,22 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     }
     let camera = Camera {
         direction: direction(&args.camera, "--camera")?,
+        target: obj.centre(),
         width: w,
         height: h,
         half_width: obj.bound() * 1.05 * (w as f64 / h as f64).max(1.0),
     };
     // outputs checked before the work; none replaces an input
     let mut inputs = vec![params_path.clone()];
+    if args.object.to_ascii_lowercase().ends_with(".obj") {
+        inputs.push(PathBuf::from(&args.object));
+    }
+    let maps = maps_dir(args, params_path)?;
+    if let Some(dir) = &maps {
+        for f in ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"] {
+            inputs.push(dir.join(f));
+        }
+    }
     inputs.extend(raw.topology_map.iter().cloned());
     refuse_inputs(&args.out, &inputs, "--out")?;
     if let Some(dir) = &args.aovs {
@@ -286,6 +315,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             refuse_inputs(&dir.join(f), &inputs, "--aovs")?;
         }
     }
+    let texel_maps = match &maps {
+        Some(dir) => Some(
+            crate::load::texel_maps::TexelMapsIn::load(dir, None)
+                .map_err(|e| anyhow!("--maps: {e:#}"))?,
+        ),
+        None => None,
+    };
     let shading = model::build(id, &params)?;
     let map = params.topology.map.clone();
     let material = Material {
@@ -296,6 +332,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         height: params.topology.height,
         map_scale: params.topology.map_scale,
         topology_map: map.as_deref(),
+        texel_maps: texel_maps.as_ref(),
+        fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
     };
     let bar = crate::progress::bar(h as u64, "render", args.quiet);
     let pic = render::render(&[obj], &material, &lights, &camera, args.supersample, &bar);
@@ -311,6 +349,38 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The maps directory: --maps, else the one a `fit --maps` result names (relative to the
+/// result file, then to the working directory), with a warning when it cannot be found.
+fn maps_dir(args: &RenderArgs, params: &Path) -> Result<Option<PathBuf>> {
+    if let Some(d) = &args.maps {
+        return Ok(Some(d.clone()));
+    }
+    let is_json = params
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if !is_json {
+        return Ok(None);
+    }
+    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(params)?)
+        .map_err(|e| anyhow!("{}: {e}", params.display()))?;
+    let Some(named) = v["maps"]["directory"].as_str() else {
+        return Ok(None);
+    };
+    let beside = params.parent().unwrap_or(Path::new(".")).join(named);
+    for d in [beside, PathBuf::from(named)] {
+        if d.is_dir() {
+            return Ok(Some(d));
+        }
+    }
+    if !args.quiet {
+        eprintln!(
+            "warning: {} names the maps directory {named}, which is not beside it nor in the working directory: rendering without the maps (give --maps DIR)",
+            params.display()
+        );
+    }
+    Ok(None)
 }
 
 fn lights_of(specs: &[String]) -> Result<Vec<Light>> {
@@ -375,10 +445,13 @@ fn seed001(args: &RenderArgs) -> Result<()> {
             height: 0.0,
             map_scale: if with_map { 0.25 } else { 0.0 },
             topology_map: with_map.then_some(&map),
+            texel_maps: None,
+            fibre_azimuth_deg: 0.0,
         };
         for lights in &lightings {
             let camera = Camera {
                 direction: direction(&args.camera, "--camera")?,
+                target: Vec3::zeros(),
                 width: size,
                 height: size,
                 half_width: (crate::render::objects::TORUS_MAJOR

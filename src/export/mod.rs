@@ -6,6 +6,7 @@ pub mod brdf_plots;
 pub mod camera_report;
 pub mod eval_table;
 pub mod felt_report;
+pub mod gltf_out;
 pub mod images;
 pub mod maps_out;
 pub mod maps_report;

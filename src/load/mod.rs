@@ -5,10 +5,12 @@ pub mod capture_store;
 pub mod gonio;
 pub mod image_io;
 pub mod merl;
+pub mod mesh;
 pub mod queries;
 pub mod rgl;
 pub mod samples;
 pub mod summary;
+pub mod texel_maps;
 
 use crate::model::frame::Vec3;
 use anyhow::{bail, Result};

@@ -8,8 +8,11 @@
 //! unit); no cast shadows between or within objects (each point sees every light above its
 //! horizon), no interreflection: the BRDF as a renderer's direct lighting shows it.
 
+pub mod curvature;
+pub mod mesh_object;
 pub mod objects;
 
+use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{FibreFrame, Vec3};
 use crate::model::topology::{max_height, TopologyMap};
 use crate::model::{Albedos, DirectionPair, ShadingModel};
@@ -23,11 +26,12 @@ pub struct Light {
     pub irradiance: f64,
 }
 
-/// An orthographic camera looking from `direction` (unit, towards the camera) at the origin,
-/// its image `half_width` world units either side of the centre horizontally.
+/// An orthographic camera looking from `direction` (unit, towards the camera) at `target`, its
+/// image `half_width` world units either side of the centre horizontally.
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
     pub direction: Vec3,
+    pub target: Vec3,
     pub width: usize,
     pub height: usize,
     pub half_width: f64,
@@ -54,7 +58,7 @@ impl Camera {
         let px = (x - 0.5 * self.width as f64) * scale;
         let py = (0.5 * self.height as f64 - y) * scale;
         Ray {
-            origin: right * px + up * py + self.direction * distance,
+            origin: self.target + right * px + up * py + self.direction * distance,
             direction: -self.direction,
         }
     }
@@ -72,9 +76,50 @@ pub struct Material<'a> {
     /// A topology map over the object's (u, v): H = H0 + s (2 m - 1), or added to the object's
     /// own height (the torus) as s (2 m - 1); clamped to [0, H_max].
     pub topology_map: Option<&'a TopologyMap>,
+    /// Per-texel maps recovered by `fit --maps`, over the object's (u, v): a texel's height
+    /// replaces the topology, its fibre azimuth turns the object's tangent by the difference
+    /// from `fibre_azimuth_deg`, its kd and ks replace the albedos.
+    pub texel_maps: Option<&'a TexelMapsIn>,
+    /// The parameters' fibre azimuth psi, degrees.
+    pub fibre_azimuth_deg: f64,
 }
 
 impl Material<'_> {
+    /// The hit with the texel maps' fibre azimuth applied to its tangent.
+    pub fn mapped(&self, hit: &objects::Hit) -> objects::Hit {
+        let mut h = *hit;
+        if let Some(m) = self.texel_maps {
+            let (x, y) = m.texel(hit.uv);
+            if let Some(psi) = TexelMapsIn::at(&m.psi, x, y, 0) {
+                let a = (psi - self.fibre_azimuth_deg).to_radians();
+                h.tangent = hit.tangent * a.cos() + hit.normal.cross(&hit.tangent) * a.sin();
+            }
+        }
+        h
+    }
+
+    /// The albedos at a hit: the texel maps' kd and ks where they have them (the substrate
+    /// follows kd when it is tied to it).
+    fn albedos_at(&self, hit: &objects::Hit) -> Albedos {
+        let mut a = self.albedos;
+        if let Some(m) = self.texel_maps {
+            let (x, y) = m.texel(hit.uv);
+            let tied = a.substrate == a.diffuse;
+            for c in 0..3 {
+                if let Some(k) = TexelMapsIn::at(&m.kd, x, y, c) {
+                    a.diffuse[c] = k;
+                    if tied {
+                        a.substrate[c] = k;
+                    }
+                }
+                if let Some(k) = TexelMapsIn::at(&m.ks, x, y, c) {
+                    a.specular[c] = k;
+                }
+            }
+        }
+        a
+    }
+
     /// The fibre height at a hit, where the model has a topology and the hit fixes one;
     /// `None`: the model's own height distribution (a constant swatch).
     pub fn height_at(&self, hit: &objects::Hit) -> Option<f64> {
@@ -82,6 +127,12 @@ impl Material<'_> {
             return None;
         }
         let h_max = max_height(self.spacing);
+        if let Some(m) = self.texel_maps {
+            let (x, y) = m.texel(hit.uv);
+            if let Some(h) = TexelMapsIn::at(&m.height, x, y, 0) {
+                return Some(h.clamp(0.0, h_max));
+            }
+        }
         let m = self.topology_map.map(|t| {
             let (w, h) = (t.width, t.height);
             let x = ((hit.uv[0] * w as f64) as usize).min(w - 1);
@@ -100,6 +151,8 @@ impl Material<'_> {
 
     /// Radiance per channel towards `v` at a hit under `lights`.
     pub fn radiance(&self, hit: &objects::Hit, v: &Vec3, lights: &[Light]) -> [f64; 3] {
+        let hit = &self.mapped(hit);
+        let albedos = self.albedos_at(hit);
         let n = hit.normal;
         let t = hit.tangent;
         let b = n.cross(&t);
@@ -118,8 +171,7 @@ impl Material<'_> {
                 None => self.model.basis(&pair),
             };
             for (c, o) in out.iter_mut().enumerate() {
-                *o +=
-                    basis.brdf(&self.albedos, c.min(self.channels - 1)) * light.irradiance * cos_i;
+                *o += basis.brdf(&albedos, c.min(self.channels - 1)) * light.irradiance * cos_i;
             }
         }
         out
@@ -164,7 +216,11 @@ pub fn render(
     bar: &indicatif::ProgressBar,
 ) -> Picture {
     let (w, h) = (camera.width, camera.height);
-    let distance = 10.0 + objects.iter().map(Object::bound).fold(0.0, f64::max);
+    let distance = 10.0
+        + objects
+            .iter()
+            .map(|o| o.bound() + (o.centre() - camera.target).norm())
+            .fold(0.0, f64::max);
     let s = supersample.max(1);
     let v = camera.direction;
     let rows: Vec<Vec<PixelOut>> = (0..h)
@@ -196,7 +252,7 @@ pub fn render(
                         &camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance),
                     );
                     let f = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
-                    let (aov, fh) = match centre {
+                    let (aov, fh) = match centre.map(|h| material.mapped(&h)) {
                         Some(hit) => (
                             [f(hit.normal), f(hit.tangent), f(hit.position)],
                             material.height_at(&hit).map_or(f32::NAN, |h| h as f32),

@@ -35,7 +35,7 @@ impl Ray {
     }
 }
 
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug)]
 pub enum Object {
     /// Unit sphere at the origin; fibres along the circles of latitude about z, turned by
     /// `psi_deg` towards the meridians (0: wound round the z axis, 90: pole to pole).
@@ -46,6 +46,8 @@ pub enum Object {
     /// four times the inner side), fibres wound round the tube (spacing `spacing`), so they
     /// climb twice from the outer to the inner side.
     Torus { spacing: f64 },
+    /// A triangle mesh ([`super::mesh_object`]).
+    Mesh(std::sync::Arc<super::mesh_object::MeshObject>),
 }
 
 /// Seed 001's torus: tube radius and major radius R = 5 r / 3.
@@ -53,12 +55,21 @@ pub const TORUS_TUBE: f64 = 0.375;
 pub const TORUS_MAJOR: f64 = TORUS_TUBE * 5.0 / 3.0;
 
 impl Object {
-    /// Radius of a sphere about the origin that holds the object.
+    /// Radius of a sphere about [`Object::centre`] that holds the object.
     pub fn bound(&self) -> f64 {
         match self {
             Object::Sphere { .. } => 1.0,
             Object::Swatch { .. } => std::f64::consts::SQRT_2,
             Object::Torus { .. } => TORUS_MAJOR + TORUS_TUBE,
+            Object::Mesh(m) => m.radius,
+        }
+    }
+
+    /// Centre of the object's bounding sphere (the origin but for meshes).
+    pub fn centre(&self) -> Vec3 {
+        match self {
+            Object::Mesh(m) => m.centre,
+            _ => Vec3::zeros(),
         }
     }
 
@@ -68,6 +79,7 @@ impl Object {
             Object::Sphere { psi_deg } => sphere(ray, psi_deg),
             Object::Swatch { psi_deg } => swatch(ray, psi_deg),
             Object::Torus { spacing } => torus(ray, spacing),
+            Object::Mesh(ref m) => m.intersect(ray),
         }
     }
 }

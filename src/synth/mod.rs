@@ -22,6 +22,7 @@ use crate::export::atomic::AtomicFile;
 use crate::export::images;
 use crate::load::capture::{self, Camera, CaptureFile, ImageSpec, Light, Swatch};
 use crate::load::image_io::Encoding;
+use crate::load::texel_maps::TexelMapsIn as UnitMaps;
 use crate::model::frame::{direction_from_angles, FibreFrame};
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::topology::TopologyMap;
@@ -121,64 +122,6 @@ pub struct CaptureSpec {
     /// take the global value), registered to the capture's pixels.
     pub maps: Option<PathBuf>,
     pub images: Vec<SynthImage>,
-}
-
-/// Per-texel maps read from a `fit --maps` directory.
-struct UnitMaps {
-    height: Option<crate::load::image_io::LinearImage>,
-    psi: Option<crate::load::image_io::LinearImage>,
-    kd: Option<crate::load::image_io::LinearImage>,
-    ks: Option<crate::load::image_io::LinearImage>,
-}
-
-impl UnitMaps {
-    fn load(dir: &Path, w: usize, h: usize) -> Result<Self> {
-        if !dir.is_dir() {
-            bail!("capture.maps = {}: not a directory", dir.display());
-        }
-        let read = |name: &str| -> Result<Option<crate::load::image_io::LinearImage>> {
-            let p = dir.join(name);
-            if !p.exists() {
-                return Ok(None);
-            }
-            let m = crate::load::image_io::read(&p, None, None)?;
-            if (m.width, m.height) != (w, h) {
-                bail!(
-                    "{}: is {}x{} but the capture is {w}x{h}; maps must be registered to it",
-                    p.display(),
-                    m.width,
-                    m.height
-                );
-            }
-            Ok(Some(m))
-        };
-        let maps = Self {
-            height: read("height.exr")?,
-            psi: read("fibre_azimuth.exr")?,
-            kd: read("kd.exr")?,
-            ks: read("ks.exr")?,
-        };
-        if maps.height.is_none() && maps.psi.is_none() && maps.kd.is_none() && maps.ks.is_none() {
-            bail!(
-                "capture.maps = {}: no height.exr, fibre_azimuth.exr, kd.exr or ks.exr in it",
-                dir.display()
-            );
-        }
-        Ok(maps)
-    }
-
-    /// The map's value at (x, y), channel c (clamped to its channels), unless NaN.
-    fn at(
-        m: &Option<crate::load::image_io::LinearImage>,
-        x: usize,
-        y: usize,
-        c: usize,
-    ) -> Option<f64> {
-        let m = m.as_ref()?;
-        let px = m.pixel(x, y);
-        let v = px[c.min(px.len() - 1)] as f64;
-        (!v.is_nan()).then_some(v)
-    }
 }
 
 fn default_format() -> String {
@@ -711,7 +654,10 @@ fn render_capture(
         }
     }
     let unit_maps = match &c.maps {
-        Some(dir) => Some(UnitMaps::load(dir, w, h)?),
+        Some(dir) => Some(
+            UnitMaps::load(dir, Some((w, h)))
+                .map_err(|e| anyhow!("capture.maps = {}: {e:#}", dir.display()))?,
+        ),
         None => None,
     };
     if let Some(m) = &unit_maps {
