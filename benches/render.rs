@@ -25,7 +25,7 @@ fn torus(c: &mut Criterion) {
         texel_maps: None,
         fibre_azimuth_deg: 0.0,
     };
-    let lights = [Light {
+    let lights = [Light::Directional {
         direction: direction_from_angles(40f64.to_radians(), 120f64.to_radians()),
         irradiance: 1.0,
     }];
@@ -35,6 +35,7 @@ fn torus(c: &mut Criterion) {
         width: 1024,
         height: 1024,
         half_width: 1.05,
+        pinhole: None,
     };
     let bar = indicatif::ProgressBar::hidden();
     let mut g = c.benchmark_group("render");

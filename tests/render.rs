@@ -399,3 +399,72 @@ fn recovered_maps_set_each_texels_height_and_fibre_direction() {
     }
     assert!(checked > 1000, "{checked}");
 }
+
+#[test]
+fn a_scene_with_a_point_light_and_a_pinhole_camera() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(d.join("p.toml"), "model = \"lambert\"\nkd = 0.5\n").unwrap();
+    std::fs::write(
+        d.join("scene.toml"),
+        r#"size = [48, 32]
+supersample = 1
+exposure = 2.0
+[camera]
+type = "pinhole"
+position = [0, -6, 3]
+look_at = [0, 0, 0]
+fov_deg = 35
+[[lights]]
+type = "point"
+position = [2, -2, 3]
+intensity = 7
+[[objects]]
+type = "sphere"
+offset = [0.5, 0, 0]
+scale = 0.8
+"#,
+    )
+    .unwrap();
+    fibrefit()
+        .current_dir(d)
+        .args(["render", "--params", "p.toml", "--scene", "scene.toml"])
+        .args(["--out", "s.exr", "--aovs", "aov", "-q"])
+        .assert()
+        .success();
+    let img = image_io::read(&d.join("s.exr"), None, None).unwrap();
+    let read = |n: &str| image_io::read(&d.join("aov").join(n), None, None).unwrap();
+    let (normal, position) = (read("normal.exr"), read("position.exr"));
+    assert_eq!((img.width, img.height), (48, 32));
+    let a = alpha(&d.join("s.exr"));
+    let mut checked = 0;
+    for (i, &ai) in a.iter().enumerate() {
+        if ai != 1.0 {
+            continue;
+        }
+        let (n, p) = (vec3(&normal, i), vec3(&position, i));
+        // on the moved and scaled sphere
+        let r = [p[0] - 0.5, p[1], p[2]];
+        assert!((dot(r, r).sqrt() - 0.8).abs() < 1e-5, "{p:?}");
+        let l = [2.0 - p[0], -2.0 - p[1], 3.0 - p[2]];
+        let r2 = dot(l, l);
+        let cos = (dot(n, l) / r2.sqrt()).max(0.0);
+        let want = 0.5 / std::f64::consts::PI * 7.0 / r2 * cos;
+        let got = img.data[3 * i] as f64;
+        assert!((got - want).abs() <= 1e-5 * (1.0 + want), "{got} vs {want}");
+        checked += 1;
+    }
+    assert!(checked > 150, "{checked}");
+    // a scene that is wrong names itself and the field
+    std::fs::write(d.join("bad.toml"), "[camera]\ntype = \"pinhole\"\nposition = [0, 0, 1]\nfov_deg = 400\n[[lights]]\ntype = \"point\"\nposition = [0, 0, 1]\nintensity = 1\n[[objects]]\ntype = \"sphere\"\n").unwrap();
+    let out = fibrefit()
+        .current_dir(d)
+        .args([
+            "render", "--params", "p.toml", "--scene", "bad.toml", "--out", "b.png",
+        ])
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&out.get_output().stderr).to_string();
+    assert!(err.contains("bad.toml") && err.contains("fov_deg"), "{err}");
+    assert!(!d.join("b.png").exists());
+}

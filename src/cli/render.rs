@@ -8,6 +8,7 @@ use crate::model::topology::TopologyMap;
 use crate::model::{self, ModelId};
 use crate::render::mesh_object::{MeshObject, TangentSource};
 use crate::render::objects::Object;
+use crate::render::scene::{Scene, SceneFile};
 use crate::render::{self, Camera, Light, Material, Picture};
 use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
@@ -63,6 +64,11 @@ pub struct RenderArgs {
     /// object's pixels to 0.9)
     #[arg(long, value_name = "E|auto", default_value = "auto")]
     pub exposure: String,
+    /// A scene file (objects moved and scaled, directional and point lights, orthographic or
+    /// pinhole camera, size, supersampling, exposure; see README) in place of --object,
+    /// --tangents, --light, --camera, --size and --supersample
+    #[arg(long, value_name = "FILE")]
+    pub scene: Option<PathBuf>,
     /// Per-texel maps from `fit --maps` (height.exr, fibre_azimuth.exr, kd.exr, ks.exr) over
     /// the object's (u, v) [default: the maps a fitted result names, found beside it]
     #[arg(long, value_name = "DIR")]
@@ -284,24 +290,15 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             eprintln!("warning: {}: {w}", params_path.display());
         }
     }
-    let obj = object(&args.object, &args.tangents, &params)?;
-    let lights = lights_of(&args.light)?;
-    let (w, h) = (args.size[0], args.size[1]);
-    if w == 0 || h == 0 || w * h > 64 << 20 {
-        bail!("--size {w} {h}: expected 1 to 64 M pixels");
-    }
-    let camera = Camera {
-        direction: direction(&args.camera, "--camera")?,
-        target: obj.centre(),
-        width: w,
-        height: h,
-        half_width: obj.bound() * 1.05 * (w as f64 / h as f64).max(1.0),
+    let scene = match &args.scene {
+        Some(path) => {
+            SceneFile::load(path)?.build(path, params.fibre_azimuth.to_degrees(), params.spacing)?
+        }
+        None => flags_scene(args, &params)?,
     };
     // outputs checked before the work; none replaces an input
     let mut inputs = vec![params_path.clone()];
-    if args.object.to_ascii_lowercase().ends_with(".obj") {
-        inputs.push(PathBuf::from(&args.object));
-    }
+    inputs.extend(scene.inputs.iter().cloned());
     let maps = maps_dir(args, params_path)?;
     if let Some(dir) = &maps {
         for f in ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"] {
@@ -335,10 +332,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         texel_maps: texel_maps.as_ref(),
         fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
     };
-    let bar = crate::progress::bar(h as u64, "render", args.quiet);
-    let pic = render::render(&[obj], &material, &lights, &camera, args.supersample, &bar);
+    let bar = crate::progress::bar(scene.camera.height as u64, "render", args.quiet);
+    let pic = render::render(
+        &scene.objects,
+        &material,
+        &scene.lights,
+        &scene.camera,
+        scene.supersample,
+        &bar,
+    );
     bar.finish_and_clear();
-    let exposure = write_picture(&args.out, &pic, &args.exposure)?;
+    let exposure = write_picture(
+        &args.out,
+        &pic,
+        scene.exposure.as_deref().unwrap_or(&args.exposure),
+    )?;
     if let Some(dir) = &args.aovs {
         write_aovs(dir, &pic, id.has_topology())?;
     }
@@ -383,6 +391,38 @@ fn maps_dir(args: &RenderArgs, params: &Path) -> Result<Option<PathBuf>> {
     Ok(None)
 }
 
+/// The scene the flags describe: one object at the origin, directional lights of unit
+/// irradiance, an orthographic camera.
+fn flags_scene(args: &RenderArgs, params: &ModelParams) -> Result<Scene> {
+    let obj = object(&args.object, &args.tangents, params)?;
+    let lights = lights_of(&args.light)?;
+    let (w, h) = (args.size[0], args.size[1]);
+    if w == 0 || h == 0 || w * h > 64 << 20 {
+        bail!("--size {w} {h}: expected 1 to 64 M pixels");
+    }
+    let camera = Camera {
+        direction: direction(&args.camera, "--camera")?,
+        target: obj.centre(),
+        width: w,
+        height: h,
+        half_width: obj.bound() * 1.05 * (w as f64 / h as f64).max(1.0),
+        pinhole: None,
+    };
+    let inputs = if args.object.to_ascii_lowercase().ends_with(".obj") {
+        vec![PathBuf::from(&args.object)]
+    } else {
+        vec![]
+    };
+    Ok(Scene {
+        objects: vec![obj],
+        lights,
+        camera,
+        supersample: args.supersample,
+        exposure: None,
+        inputs,
+    })
+}
+
 fn lights_of(specs: &[String]) -> Result<Vec<Light>> {
     let specs: Vec<String> = if specs.is_empty() {
         vec!["40,120".into()]
@@ -392,7 +432,7 @@ fn lights_of(specs: &[String]) -> Result<Vec<Light>> {
     specs
         .iter()
         .map(|s| {
-            Ok(Light {
+            Ok(Light::Directional {
                 direction: direction(s, "--light")?,
                 irradiance: 1.0,
             })
@@ -457,6 +497,7 @@ fn seed001(args: &RenderArgs) -> Result<()> {
                 half_width: (crate::render::objects::TORUS_MAJOR
                     + crate::render::objects::TORUS_TUBE)
                     * 1.05,
+                pinhole: None,
             };
             let pic = render::render(
                 &[Object::Torus { spacing: 2.0 }],

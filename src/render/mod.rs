@@ -11,6 +11,7 @@
 pub mod curvature;
 pub mod mesh_object;
 pub mod objects;
+pub mod scene;
 
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{FibreFrame, Vec3};
@@ -19,15 +20,37 @@ use crate::model::{Albedos, DirectionPair, ShadingModel};
 use objects::{Object, Ray};
 use rayon::prelude::*;
 
-/// A directional light: unit direction towards it and irradiance perpendicular to it.
 #[derive(Clone, Copy, Debug)]
-pub struct Light {
-    pub direction: Vec3,
-    pub irradiance: f64,
+pub enum Light {
+    /// A distant light: unit direction towards it and irradiance E perpendicular to it.
+    Directional { direction: Vec3, irradiance: f64 },
+    /// A point light: position and radiant intensity I; E = I / r^2 (r in scene units).
+    Point { position: Vec3, intensity: f64 },
 }
 
-/// An orthographic camera looking from `direction` (unit, towards the camera) at `target`, its
-/// image `half_width` world units either side of the centre horizontally.
+impl Light {
+    /// Unit direction towards the light and its perpendicular irradiance at `p`.
+    pub fn at(&self, p: &Vec3) -> (Vec3, f64) {
+        match *self {
+            Light::Directional {
+                direction,
+                irradiance,
+            } => (direction, irradiance),
+            Light::Point {
+                position,
+                intensity,
+            } => {
+                let d = position - p;
+                let r2 = d.norm_squared().max(1e-300);
+                (d / r2.sqrt(), intensity / r2)
+            }
+        }
+    }
+}
+
+/// A camera looking from `direction` (unit, towards the camera) at `target`: orthographic, its
+/// image `half_width` world units either side of the centre horizontally; or, with `pinhole`,
+/// a pinhole at that position with that horizontal field of view (degrees).
 #[derive(Clone, Copy, Debug)]
 pub struct Camera {
     pub direction: Vec3,
@@ -35,6 +58,7 @@ pub struct Camera {
     pub width: usize,
     pub height: usize,
     pub half_width: f64,
+    pub pinhole: Option<(Vec3, f64)>,
 }
 
 impl Camera {
@@ -54,12 +78,24 @@ impl Camera {
     /// The ray through image point (x, y) in pixels (0, 0 the top left corner).
     pub fn ray(&self, x: f64, y: f64, distance: f64) -> Ray {
         let (right, up) = self.basis();
-        let scale = 2.0 * self.half_width / self.width as f64;
-        let px = (x - 0.5 * self.width as f64) * scale;
-        let py = (0.5 * self.height as f64 - y) * scale;
-        Ray {
-            origin: self.target + right * px + up * py + self.direction * distance,
-            direction: -self.direction,
+        let (cx, cy) = (x - 0.5 * self.width as f64, 0.5 * self.height as f64 - y);
+        match self.pinhole {
+            Some((position, fov_deg)) => {
+                let scale = 2.0 * (0.5 * fov_deg.to_radians()).tan() / self.width as f64;
+                Ray {
+                    origin: position,
+                    direction: (-self.direction + (right * cx + up * cy) * scale).normalize(),
+                }
+            }
+            None => {
+                let scale = 2.0 * self.half_width / self.width as f64;
+                Ray {
+                    origin: self.target
+                        + (right * cx + up * cy) * scale
+                        + self.direction * distance,
+                    direction: -self.direction,
+                }
+            }
         }
     }
 }
@@ -161,17 +197,18 @@ impl Material<'_> {
         let frame = FibreFrame::from_azimuth(0.0);
         let mut out = [0.0; 3];
         for light in lights {
-            let cos_i = n.dot(&light.direction);
+            let (l, irradiance) = light.at(&hit.position);
+            let cos_i = n.dot(&l);
             if cos_i <= 0.0 {
                 continue;
             }
-            let pair = DirectionPair::new(&frame, &local(&light.direction), &local(v));
+            let pair = DirectionPair::new(&frame, &local(&l), &local(v));
             let basis = match height {
                 Some(h) => self.model.basis_at_height(&pair, h).unwrap_or_default(),
                 None => self.model.basis(&pair),
             };
             for (c, o) in out.iter_mut().enumerate() {
-                *o += basis.brdf(&albedos, c.min(self.channels - 1)) * light.irradiance * cos_i;
+                *o += basis.brdf(&albedos, c.min(self.channels - 1)) * irradiance * cos_i;
             }
         }
         out
@@ -222,7 +259,6 @@ pub fn render(
             .map(|o| o.bound() + (o.centre() - camera.target).norm())
             .fold(0.0, f64::max);
     let s = supersample.max(1);
-    let v = camera.direction;
     let rows: Vec<Vec<PixelOut>> = (0..h)
         .into_par_iter()
         .map(|y| {
@@ -239,7 +275,7 @@ pub fn render(
                             );
                             if let Some(hit) = nearest(objects, &ray) {
                                 hits += 1;
-                                let l = material.radiance(&hit, &v, lights);
+                                let l = material.radiance(&hit, &-ray.direction, lights);
                                 for c in 0..3 {
                                     sum[c] += l[c];
                                 }

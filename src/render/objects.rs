@@ -48,6 +48,12 @@ pub enum Object {
     Torus { spacing: f64 },
     /// A triangle mesh ([`super::mesh_object`]).
     Mesh(std::sync::Arc<super::mesh_object::MeshObject>),
+    /// An object scaled by `scale` and moved by `offset` (world = offset + scale object).
+    Placed {
+        inner: Box<Object>,
+        offset: Vec3,
+        scale: f64,
+    },
 }
 
 /// Seed 001's torus: tube radius and major radius R = 5 r / 3.
@@ -62,6 +68,7 @@ impl Object {
             Object::Swatch { .. } => std::f64::consts::SQRT_2,
             Object::Torus { .. } => TORUS_MAJOR + TORUS_TUBE,
             Object::Mesh(m) => m.radius,
+            Object::Placed { inner, scale, .. } => inner.bound() * scale,
         }
     }
 
@@ -69,6 +76,11 @@ impl Object {
     pub fn centre(&self) -> Vec3 {
         match self {
             Object::Mesh(m) => m.centre,
+            Object::Placed {
+                inner,
+                offset,
+                scale,
+            } => offset + inner.centre() * *scale,
             _ => Vec3::zeros(),
         }
     }
@@ -80,6 +92,21 @@ impl Object {
             Object::Swatch { psi_deg } => swatch(ray, psi_deg),
             Object::Torus { spacing } => torus(ray, spacing),
             Object::Mesh(ref m) => m.intersect(ray),
+            Object::Placed {
+                ref inner,
+                offset,
+                scale,
+            } => {
+                let local = Ray {
+                    origin: (ray.origin - offset) / scale,
+                    direction: ray.direction,
+                };
+                inner.intersect(&local).map(|h| Hit {
+                    t: h.t * scale,
+                    position: offset + h.position * scale,
+                    ..h
+                })
+            }
         }
     }
 }
