@@ -24,6 +24,7 @@ fn torus(c: &mut Criterion) {
         topology_map: None,
         texel_maps: None,
         fibre_azimuth_deg: 0.0,
+        ward_curvature: None,
     };
     let lights = [Light::Directional {
         direction: direction_from_angles(40f64.to_radians(), 120f64.to_radians()),

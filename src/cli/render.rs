@@ -73,6 +73,10 @@ pub struct RenderArgs {
     /// the object's (u, v) [default: the maps a fitted result names, found beside it]
     #[arg(long, value_name = "DIR")]
     pub maps: Option<PathBuf>,
+    /// Ward on a mesh with curvature tangents: its alphas follow the curvature (seed 004):
+    /// alpha_x = F |k1|, alpha_y = F |k2|, clamped to [0.01, 1] (F in the mesh's length unit)
+    #[arg(long, value_name = "F")]
+    pub ward_curvature_alpha: Option<f64>,
     /// Also write the per-pixel AOVs into DIR
     #[arg(long, value_name = "DIR")]
     pub aovs: Option<PathBuf>,
@@ -312,6 +316,18 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             refuse_inputs(&dir.join(f), &inputs, "--aovs")?;
         }
     }
+    if let Some(f) = args.ward_curvature_alpha {
+        if id != ModelId::Ward {
+            bail!("--ward-curvature-alpha: the Ward rung's alphas; this is `{id}`");
+        }
+        if !(f.is_finite() && f > 0.0) {
+            bail!("--ward-curvature-alpha {f}: expected a finite positive factor");
+        }
+        let mesh = args.object.to_ascii_lowercase().ends_with(".obj");
+        if args.scene.is_none() && !(mesh && args.tangents == "curvature") {
+            bail!("--ward-curvature-alpha: needs a mesh (--object MESH.obj) with --tangents curvature");
+        }
+    }
     let texel_maps = match &maps {
         Some(dir) => Some(
             crate::load::texel_maps::TexelMapsIn::load(dir, None)
@@ -331,6 +347,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         topology_map: map.as_deref(),
         texel_maps: texel_maps.as_ref(),
         fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
+        ward_curvature: args.ward_curvature_alpha,
     };
     let bar = crate::progress::bar(scene.camera.height as u64, "render", args.quiet);
     let pic = render::render(
@@ -487,6 +504,7 @@ fn seed001(args: &RenderArgs) -> Result<()> {
             topology_map: with_map.then_some(&map),
             texel_maps: None,
             fibre_azimuth_deg: 0.0,
+            ward_curvature: None,
         };
         for lights in &lightings {
             let camera = Camera {

@@ -237,6 +237,7 @@ impl MeshObject {
             ]
         });
         let constant = |psi: f64| Vec3::new(psi.to_radians().cos(), psi.to_radians().sin(), 0.0);
+        let mut curvature = None;
         let raw = match self.tangents {
             TangentSource::Constant { psi_deg } => constant(psi_deg),
             TangentSource::Uv => {
@@ -257,6 +258,14 @@ impl MeshObject {
                 if defined.is_empty() {
                     constant(self.fallback_psi_deg)
                 } else {
+                    curvature = Some([0, 1].map(|k| {
+                        (0..3)
+                            .map(|c| {
+                                let v = &curv[ids[c]];
+                                w[c] * if k == 0 { v.k1.abs() } else { v.k2.abs() }
+                            })
+                            .sum::<f64>()
+                    }));
                     let dirs = consistent_on_face(
                         [0, 1, 2]
                             .map(|k| curv[ids[defined[k.min(defined.len() - 1)]]].k1_direction),
@@ -285,6 +294,7 @@ impl MeshObject {
             tangent: tangent.normalize(),
             uv: uv.unwrap_or([0.5, 0.5]),
             height: None,
+            curvature,
         }
     }
 }

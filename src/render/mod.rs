@@ -118,6 +118,9 @@ pub struct Material<'a> {
     pub texel_maps: Option<&'a TexelMapsIn>,
     /// The parameters' fibre azimuth psi, degrees.
     pub fibre_azimuth_deg: f64,
+    /// Ward only: alpha_x = f |k1|, alpha_y = f |k2| (clamped to [0.01, 1]) where the hit has
+    /// curvatures (seed 004); the plain Ward lobe there.
+    pub ward_curvature: Option<f64>,
 }
 
 impl Material<'_> {
@@ -203,9 +206,13 @@ impl Material<'_> {
                 continue;
             }
             let pair = DirectionPair::new(&frame, &local(&l), &local(v));
-            let basis = match height {
-                Some(h) => self.model.basis_at_height(&pair, h).unwrap_or_default(),
-                None => self.model.basis(&pair),
+            let basis = match (height, self.ward_curvature.zip(hit.curvature)) {
+                (_, Some((f, [k1, k2]))) => {
+                    let alpha = |k: f64| (f * k).clamp(0.01, 1.0);
+                    crate::model::ward::Ward::new(alpha(k1), alpha(k2)).basis(&pair)
+                }
+                (Some(h), None) => self.model.basis_at_height(&pair, h).unwrap_or_default(),
+                (None, None) => self.model.basis(&pair),
             };
             for (c, o) in out.iter_mut().enumerate() {
                 *o += basis.brdf(&albedos, c.min(self.channels - 1)) * irradiance * cos_i;

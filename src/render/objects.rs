@@ -20,6 +20,9 @@ pub struct Hit {
     pub uv: [f64; 2],
     /// The object's own fibre height H (fibre radii) where it has one (the torus's climbing).
     pub height: Option<f64>,
+    /// Principal curvature magnitudes (|k1|, |k2|) where the object's tangents follow its
+    /// curvature (meshes), for Ward alphas that follow them (seed 004).
+    pub curvature: Option<[f64; 2]>,
 }
 
 /// A ray: origin and unit direction.
@@ -150,6 +153,7 @@ fn sphere(ray: &Ray, psi_deg: f64) -> Option<Hit> {
         tangent: east * psi.cos() + north * psi.sin(),
         uv: [u, v],
         height: None,
+        curvature: None,
     })
 }
 
@@ -173,6 +177,7 @@ fn swatch(ray: &Ray, psi_deg: f64) -> Option<Hit> {
         tangent: Vec3::new(psi.cos(), psi.sin(), 0.0),
         uv: [0.5 * (p.x + 1.0), 0.5 * (p.y + 1.0)],
         height: None,
+        curvature: None,
     })
 }
 
@@ -257,6 +262,7 @@ fn torus(ray: &Ray, spacing: f64) -> Option<Hit> {
             0.5 + v_angle / std::f64::consts::TAU,
         ],
         height: Some(torus_height(v_angle, spacing)),
+        curvature: None,
     })
 }
 
