@@ -22,14 +22,7 @@ fn capture(dir: &std::path::Path) -> std::path::PathBuf {
     s += "[noise]\nrelative = 0.01\nseed = 5\n";
     std::fs::write(dir.join("synth.toml"), s).unwrap();
     fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("d"), true).unwrap();
-    let text = std::fs::read_to_string(dir.join("d/capture.toml")).unwrap();
-    let blind: String = text
-        .lines()
-        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    std::fs::write(dir.join("d/blind.toml"), blind).unwrap();
-    dir.join("d/blind.toml")
+    fibrefit::bench::maps::write_blind(&dir.join("d")).unwrap()
 }
 
 fn camera(c: &mut Criterion) {

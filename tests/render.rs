@@ -20,6 +20,35 @@ fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// An open cylinder of radius 1 about z, z in [-1, 1], as OBJ: `nu` quads round, `nv` along.
+fn cylinder_obj(nu: usize, nv: usize) -> String {
+    let mut obj = String::new();
+    for j in 0..=nv {
+        for i in 0..nu {
+            let ph = std::f64::consts::TAU * i as f64 / nu as f64;
+            obj += &format!(
+                "v {} {} {}\n",
+                ph.cos(),
+                ph.sin(),
+                2.0 * j as f64 / nv as f64 - 1.0
+            );
+        }
+    }
+    let id = |i: usize, j: usize| j * nu + (i % nu) + 1;
+    for j in 0..nv {
+        for i in 0..nu {
+            obj += &format!(
+                "f {} {} {} {}\n",
+                id(i, j),
+                id(i + 1, j),
+                id(i + 1, j + 1),
+                id(i, j + 1)
+            );
+        }
+    }
+    obj
+}
+
 /// Alpha channel of a rendered EXR.
 fn alpha(path: &Path) -> Vec<f32> {
     let img = exr::prelude::read_first_flat_layer_from_file(path).unwrap();
@@ -245,32 +274,7 @@ fn a_mesh_takes_its_fibres_from_its_curvature() {
     // an open cylinder about z as OBJ: k1 runs round it, so the tangent AOV is horizontal
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let (nu, nv) = (64, 16);
-    let mut obj = String::new();
-    for j in 0..=nv {
-        for i in 0..nu {
-            let ph = std::f64::consts::TAU * i as f64 / nu as f64;
-            obj += &format!(
-                "v {} {} {}\n",
-                ph.cos(),
-                ph.sin(),
-                2.0 * j as f64 / nv as f64 - 1.0
-            );
-        }
-    }
-    for j in 0..nv {
-        for i in 0..nu {
-            let id = |i: usize, j: usize| j * nu + (i % nu) + 1;
-            obj += &format!(
-                "f {} {} {} {}\n",
-                id(i, j),
-                id(i + 1, j),
-                id(i + 1, j + 1),
-                id(i, j + 1)
-            );
-        }
-    }
-    std::fs::write(d.join("cyl.obj"), obj).unwrap();
+    std::fs::write(d.join("cyl.obj"), cylinder_obj(64, 16)).unwrap();
     std::fs::write(
         d.join("p.toml"),
         "model = \"poulin-fournier\"\nkd = 0.5\nks = 0.4\nexponent = 30\nspacing = 2.0\n",
@@ -475,32 +479,7 @@ fn ward_alphas_follow_the_curvature_of_a_mesh() {
     // Ward with alpha_x = 0.3 (across the axis, the tangent) and alpha_y = 0.01 (the floor)
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
-    let (nu, nv) = (96, 8);
-    let mut obj = String::new();
-    for j in 0..=nv {
-        for i in 0..nu {
-            let ph = std::f64::consts::TAU * i as f64 / nu as f64;
-            obj += &format!(
-                "v {} {} {}\n",
-                ph.cos(),
-                ph.sin(),
-                2.0 * j as f64 / nv as f64 - 1.0
-            );
-        }
-    }
-    for j in 0..nv {
-        for i in 0..nu {
-            let id = |i: usize, j: usize| j * nu + (i % nu) + 1;
-            obj += &format!(
-                "f {} {} {} {}\n",
-                id(i, j),
-                id(i + 1, j),
-                id(i + 1, j + 1),
-                id(i, j + 1)
-            );
-        }
-    }
-    std::fs::write(d.join("cyl.obj"), obj).unwrap();
+    std::fs::write(d.join("cyl.obj"), cylinder_obj(96, 8)).unwrap();
     std::fs::write(
         d.join("w.toml"),
         "model = \"ward\"\nrho_d = 0.2\nrho_s = 0.3\nalpha_x = 0.05\nalpha_y = 0.05\n",

@@ -173,13 +173,7 @@ pub fn run(
     let t = Instant::now();
     crate::synth::run(&scratch.join("synth.toml"), &d, true)?;
     let synth_seconds = t.elapsed().as_secs_f64();
-    let text = std::fs::read_to_string(d.join("capture.toml"))?;
-    let blind: String = text
-        .lines()
-        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    std::fs::write(d.join("blind.toml"), blind)?;
+    super::maps::write_blind(&d)?;
     std::fs::write(scratch.join("global.toml"), FIT_GLOBAL)?;
     std::fs::write(scratch.join("maps.toml"), FIT_MAPS)?;
     let store = CaptureStore::load(&d.join("capture.toml"), Default::default())?;

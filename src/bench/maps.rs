@@ -133,6 +133,20 @@ pub(crate) fn stats(err: &[f64], z: &[f64]) -> (f64, f64, f64, f64) {
     (rms(err), rms(z), a[a.len() / 2], within)
 }
 
+/// `blind.toml` beside a synthetic capture's `capture.toml`: the capture without its topology
+/// and tangent maps (what map recovery recovers); returns its path.
+pub fn write_blind(capture_dir: &Path) -> Result<std::path::PathBuf> {
+    let text = std::fs::read_to_string(capture_dir.join("capture.toml"))?;
+    let blind: String = text
+        .lines()
+        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let path = capture_dir.join("blind.toml");
+    std::fs::write(&path, blind)?;
+    Ok(path)
+}
+
 /// A case's row, its recovered maps and the true (H, psi) of each texel.
 type Measured = (MapRow, TexelMaps, Vec<(f64, f64)>);
 
@@ -141,15 +155,7 @@ fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
     std::fs::create_dir_all(&dir)?;
     std::fs::write(dir.join("synth.toml"), synth_config(&case.images))?;
     crate::synth::run(&dir.join("synth.toml"), &dir.join("d"), true)?;
-    // the capture without its maps: they are what is recovered
-    let text = std::fs::read_to_string(dir.join("d/capture.toml"))?;
-    let blind: String = text
-        .lines()
-        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    std::fs::write(dir.join("d/blind.toml"), blind)?;
-    let store = CaptureStore::load(&dir.join("d/blind.toml"), Default::default())?;
+    let store = CaptureStore::load(&write_blind(&dir.join("d"))?, Default::default())?;
     let cfg: FitConfig = toml::from_str(FIT)?;
     let t = Instant::now();
     let o = maps::recover(&store, &cfg, &cfg.maps, true)?;

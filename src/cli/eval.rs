@@ -64,26 +64,36 @@ pub struct EvalArgs {
     pub quiet: bool,
 }
 
-pub fn run(args: &EvalArgs) -> Result<()> {
-    let raw = RawParams::load(&args.params)?;
-    let id_text = args
-        .model
-        .clone()
+/// A parameter file (TOML, JSON or a fitted result) with its rung (`model`, else the file's),
+/// validated; its warnings printed unless `quiet`.
+pub(crate) fn load_params(
+    path: &std::path::Path,
+    model: Option<&str>,
+    quiet: bool,
+) -> Result<(RawParams, ModelId, ModelParams)> {
+    let raw = RawParams::load(path)?;
+    let id_text = model
+        .map(str::to_string)
         .or_else(|| raw.model.clone())
         .ok_or_else(|| {
             anyhow!(
                 "no model given: pass --model ID or set `model` in {}",
-                args.params.display()
+                path.display()
             )
         })?;
     let id: ModelId = id_text.parse().map_err(|e: String| anyhow!(e))?;
     let (params, warnings) =
-        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", args.params.display()))?;
-    if !args.quiet {
+        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", path.display()))?;
+    if !quiet {
         for w in &warnings {
-            eprintln!("warning: {}: {w}", args.params.display());
+            eprintln!("warning: {}: {w}", path.display());
         }
     }
+    Ok((raw, id, params))
+}
+
+pub fn run(args: &EvalArgs) -> Result<()> {
+    let (raw, id, params) = load_params(&args.params, args.model.as_deref(), args.quiet)?;
     let shading = model::build(id, &params)?;
     let queries = queries::load(&args.queries)?;
     if queries.rows.iter().any(|q| q.height.is_some()) {

@@ -275,25 +275,8 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .params
         .as_ref()
         .expect("clap: --params unless --seed001");
-    let raw = RawParams::load(params_path)?;
-    let id_text = args
-        .model
-        .clone()
-        .or_else(|| raw.model.clone())
-        .ok_or_else(|| {
-            anyhow!(
-                "no model given: pass --model ID or set `model` in {}",
-                params_path.display()
-            )
-        })?;
-    let id: ModelId = id_text.parse().map_err(|e: String| anyhow!(e))?;
-    let (params, warnings) =
-        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", params_path.display()))?;
-    if !args.quiet {
-        for w in &warnings {
-            eprintln!("warning: {}: {w}", params_path.display());
-        }
-    }
+    let (raw, id, params) =
+        super::eval::load_params(params_path, args.model.as_deref(), args.quiet)?;
     let scene = match &args.scene {
         Some(path) => {
             SceneFile::load(path)?.build(path, params.fibre_azimuth.to_degrees(), params.spacing)?

@@ -90,6 +90,27 @@ impl AzimuthSpread {
         }
     }
 
+    /// `out` = the weighted sum over the nodes of `inner_many` (the inner rung's batch
+    /// evaluation) at the pairs turned by each node's angle.
+    fn sum_over_nodes(
+        &self,
+        pairs: &[DirectionPair],
+        out: &mut [Basis],
+        inner_many: impl Fn(&[DirectionPair], &mut [Basis]),
+    ) {
+        out.iter_mut().for_each(|o| *o = Basis::default());
+        let mut rotated = Vec::with_capacity(pairs.len());
+        let mut part = vec![Basis::default(); pairs.len()];
+        for &(c, s, w) in &self.nodes {
+            rotated.clear();
+            rotated.extend(pairs.iter().map(|p| Self::rotate(p, c, s)));
+            inner_many(&rotated, &mut part);
+            for (o, b) in out.iter_mut().zip(&part) {
+                *o = *o + b.scaled(w);
+            }
+        }
+    }
+
     /// The pair seen by fibres turned by delta (cos c, sin s) about N.
     fn rotate(pair: &DirectionPair, c: f64, s: f64) -> DirectionPair {
         let r = |d: &super::frame::Local| [d.t * c + d.b * s, -d.t * s + d.b * c, d.n];
@@ -167,17 +188,9 @@ impl ShadingModel for AzimuthSpread {
             }
             return true;
         }
-        out.iter_mut().for_each(|o| *o = Basis::default());
-        let mut rotated = Vec::with_capacity(pairs.len());
-        let mut part = vec![Basis::default(); pairs.len()];
-        for &(c, s, w) in &self.nodes {
-            rotated.clear();
-            rotated.extend(pairs.iter().map(|p| Self::rotate(p, c, s)));
-            self.inner.basis_many_at_height(&rotated, height, &mut part);
-            for (o, b) in out.iter_mut().zip(&part) {
-                *o = *o + b.scaled(w);
-            }
-        }
+        self.sum_over_nodes(pairs, out, |rotated, part| {
+            self.inner.basis_many_at_height(rotated, height, part);
+        });
         true
     }
 
@@ -188,16 +201,8 @@ impl ShadingModel for AzimuthSpread {
             }
             return;
         }
-        out.iter_mut().for_each(|o| *o = Basis::default());
-        let mut rotated = Vec::with_capacity(pairs.len());
-        let mut part = vec![Basis::default(); pairs.len()];
-        for &(c, s, w) in &self.nodes {
-            rotated.clear();
-            rotated.extend(pairs.iter().map(|p| Self::rotate(p, c, s)));
-            self.inner.basis_many(&rotated, &mut part);
-            for (o, b) in out.iter_mut().zip(&part) {
-                *o = *o + b.scaled(w);
-            }
-        }
+        self.sum_over_nodes(pairs, out, |rotated, part| {
+            self.inner.basis_many(rotated, part)
+        });
     }
 }
