@@ -79,16 +79,14 @@ rounds = 25
 
 /// A synthetic capture in `dir`, and a copy of its capture TOML without the maps (the unknowns).
 fn capture(dir: &Path) -> std::path::PathBuf {
-    std::fs::write(dir.join("synth.toml"), SYNTH).unwrap();
+    capture_of(dir, SYNTH)
+}
+
+/// The capture the synth config `synth` describes, without its maps.
+fn capture_of(dir: &Path, synth: &str) -> std::path::PathBuf {
+    std::fs::write(dir.join("synth.toml"), synth).unwrap();
     fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("d"), true).unwrap();
-    let text = std::fs::read_to_string(dir.join("d/capture.toml")).unwrap();
-    let blind: String = text
-        .lines()
-        .filter(|l| !l.starts_with("tangent_map") && !l.starts_with("topology_map"))
-        .map(|l| format!("{l}\n"))
-        .collect();
-    std::fs::write(dir.join("d/blind.toml"), blind).unwrap();
-    dir.join("d/blind.toml")
+    fibrefit::bench::maps::write_blind(&dir.join("d")).unwrap()
 }
 
 fn sorted(mut v: Vec<f64>) -> Vec<f64> {
@@ -459,4 +457,52 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
     assert_eq!(o.status.code(), Some(2));
     assert!(String::from_utf8_lossy(&o.stderr).contains("other globals"));
     assert!(!d.join("never.json").exists() && !d.join("never_maps").exists());
+}
+
+#[test]
+fn globals_that_trade_off_with_the_maps_are_said_to() {
+    // light and view within 10 deg of the normal: kd, ks, the exponent and the heights trade
+    // off (reports/maps_accuracy.md, "near normal")
+    let near_normal = SYNTH
+        .split("[[capture.images]]")
+        .next()
+        .unwrap()
+        .to_string()
+        + &[[5, 0, 0, 0], [10, 90, 5, 270], [10, 180, 5, 0], [10, 270, 5, 90], [8, 45, 8, 225], [8, 135, 8, 315]]
+            .iter()
+            .map(|[lt, lp, vt, vp]| {
+                format!(
+                    "[[capture.images]]\nlight = {{ type = \"directional\", theta_deg = {lt}, phi_deg = {lp}, irradiance = 1.0 }}\ncamera = {{ type = \"orthographic\", theta_deg = {vt}, phi_deg = {vp} }}\n"
+                )
+            })
+            .collect::<String>()
+        + "[noise]\nrelative = 0.01\nseed = 5\n";
+    let fit_toml = FIT.replace("kd = true\n", "");
+    let mut widened = Vec::new();
+    for (name, synth) in [("near", near_normal.as_str()), ("eight", SYNTH)] {
+        let dir = tempfile::tempdir().unwrap();
+        let blind = capture_of(dir.path(), synth);
+        std::fs::write(dir.path().join("fit.toml"), &fit_toml).unwrap();
+        fibrefit()
+            .arg("fit")
+            .arg(&blind)
+            .arg("--config")
+            .arg(dir.path().join("fit.toml"))
+            .arg("--out")
+            .arg(dir.path().join("r.json"))
+            .arg("--maps")
+            .arg(dir.path().join("m"))
+            .arg("-q")
+            .assert()
+            .success();
+        let r: serde_json::Value =
+            serde_json::from_slice(&std::fs::read(dir.path().join("r.json")).unwrap()).unwrap();
+        let said = r["warnings"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .any(|w| w.as_str().unwrap().contains("trade off with the maps"));
+        widened.push((name, said));
+    }
+    assert_eq!(widened, [("near", true), ("eight", false)]);
 }

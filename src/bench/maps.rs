@@ -183,7 +183,18 @@ fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
     let (rh, rzh, mzh, wh) = stats(&eh, &zh);
     let (rp, rzp, mzp, wp) = stats(&ep, &zp);
     let mut warnings = o.warnings.clone();
-    warnings.retain(|w| w.contains("undetermined") || w.contains("another minimum"));
+    warnings.retain(|w| {
+        w.contains("undetermined") || w.contains("another minimum") || w.contains("trade off")
+    });
+    // what the quality checks of the global fit found
+    warnings.extend(
+        o.global
+            .quality
+            .warnings
+            .iter()
+            .filter(|w| w.contains("does not fit within the noise"))
+            .cloned(),
+    );
     Ok((
         MapRow {
             case: case.name.into(),
