@@ -199,9 +199,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
         true => Some(CaptureStore::load(&args.data, opts.subsample)?),
         false => None,
     };
-    let samples = match &store {
-        Some(st) => st.samples_of(&fit_texel_sample(st, &cfg)),
-        None => load_data(&args.data, &opts)?,
+    let fit_texels = store.as_ref().map(|st| fit_texel_sample(st, &cfg));
+    let samples = match (&store, &fit_texels) {
+        (Some(st), Some(ids)) => st.samples_of(ids),
+        _ => load_data(&args.data, &opts)?,
     };
     let selection = if cfg.model == "auto" {
         let s = crate::fit::selection::select(&samples, &cfg)?;
@@ -240,8 +241,8 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let channels = samples.channels;
     // a fit on a sample of a capture's texels, checked on every pixel
     let mut all_pixels = None;
-    if let (Some(st), None) = (&store, &stage_costs) {
-        let fitted_texels = fit_texel_sample(st, &cfg).len();
+    if let (Some(st), Some(ids), None) = (&store, &fit_texels, &stage_costs) {
+        let fitted_texels = ids.len();
         if fitted_texels < st.texels().len() {
             let all = fit::all_pixels::statistics(st, &cfg, &outcome, args.quiet || args.json)?;
             if let Some(w) =

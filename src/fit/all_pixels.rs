@@ -4,7 +4,6 @@
 //! beside the sample's, so a sample that does not represent the capture is found out.
 
 use super::config::FitConfig;
-use super::problem::FitProblem;
 use super::FitOutcome;
 use crate::load::capture_store::CaptureStore;
 use anyhow::Result;
@@ -48,16 +47,7 @@ pub fn statistics(
         .iter()
         .map(|ids| -> Result<_> {
             let samples = store.samples_of(ids);
-            let p = FitProblem::new(
-                samples.samples.iter().collect(),
-                outcome.set.clone(),
-                cfg.metric,
-                cfg.knobs.quadrature_order,
-                cfg.knobs.histogram_bins,
-                outcome.map.clone(),
-                cfg.optimizer.separable,
-            )
-            .with_azimuth_nodes(cfg.knobs.azimuth_nodes);
+            let p = super::selection::problem_at(outcome, cfg, &samples);
             let cols = p.columns(&outcome.set)?;
             let r = p.residuals(&cols, &outcome.set);
             let model = p.model_values(&cols, &outcome.set);

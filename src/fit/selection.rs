@@ -51,13 +51,10 @@ fn subset(s: &Samples, idx: &[usize]) -> Samples {
     }
 }
 
-/// The fitted model's values (per sample and channel) on `samples`, and the problem it used.
-pub fn model_values_on<'a>(
-    o: &FitOutcome,
-    cfg: &FitConfig,
-    samples: &'a Samples,
-) -> Result<(FitProblem<'a>, Vec<[f64; 3]>)> {
-    let p = FitProblem::new(
+/// The least-squares problem of `samples` at the fitted outcome `o` (its set and topology map)
+/// with the knobs of `cfg`: how a fit is evaluated on other samples.
+pub fn problem_at<'a>(o: &FitOutcome, cfg: &FitConfig, samples: &'a Samples) -> FitProblem<'a> {
+    FitProblem::new(
         samples.samples.iter().collect(),
         o.set.clone(),
         cfg.metric,
@@ -66,7 +63,16 @@ pub fn model_values_on<'a>(
         o.map.clone(),
         cfg.optimizer.separable,
     )
-    .with_azimuth_nodes(cfg.knobs.azimuth_nodes);
+    .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
+}
+
+/// The fitted model's values (per sample and channel) on `samples`, and the problem it used.
+pub fn model_values_on<'a>(
+    o: &FitOutcome,
+    cfg: &FitConfig,
+    samples: &'a Samples,
+) -> Result<(FitProblem<'a>, Vec<[f64; 3]>)> {
+    let p = problem_at(o, cfg, samples);
     let cols = p.columns(&o.set)?;
     let values = p.model_values(&cols, &o.set);
     Ok((p, values))
