@@ -46,6 +46,34 @@ pub fn density(delta: f64, sigma: f64) -> f64 {
         * norm
 }
 
+/// The nodes of the spread's midpoint rule: (cos delta, sin delta, weight) with delta the turn
+/// from the fibre direction psi (radians), weights summing to 1. `nodes` nodes over the law's
+/// support (+-4 sigma, or the whole period once that is wider); in the isotropic limit the nodes
+/// sit at absolute azimuths, so delta = x - psi.
+pub fn spread_nodes(sigma_deg: f64, nodes: usize, psi: f64) -> Vec<(f64, f64, f64)> {
+    let sigma = sigma_deg.to_radians();
+    let n = nodes.max(1);
+    let isotropic = sigma_deg >= ISOTROPIC_DEG;
+    let half = if isotropic {
+        FRAC_PI_2
+    } else {
+        (4.0 * sigma).min(FRAC_PI_2)
+    };
+    let mut raw: Vec<(f64, f64)> = (0..n)
+        .map(|j| {
+            let x = -half + (j as f64 + 0.5) * 2.0 * half / n as f64;
+            // isotropic: absolute azimuths x, i.e. delta = x - psi from the fibres
+            let delta = if isotropic { x - psi } else { x };
+            (delta, density(x, sigma))
+        })
+        .collect();
+    let total: f64 = raw.iter().map(|r| r.1).sum();
+    raw.iter_mut().for_each(|r| r.1 /= total);
+    raw.into_iter()
+        .map(|(d, w)| (d.cos(), d.sin(), w))
+        .collect()
+}
+
 pub struct AzimuthSpread {
     inner: Box<dyn ShadingModel>,
     sigma: f64,
@@ -60,32 +88,11 @@ impl AzimuthSpread {
     /// (radians; it fixes the absolute node positions of the isotropic limit) with `nodes` nodes,
     /// or adaptively when `inner` is the reference.
     pub fn new(inner: Box<dyn ShadingModel>, sigma_deg: f64, nodes: usize, psi: f64) -> Self {
-        let sigma = sigma_deg.to_radians();
-        let n = nodes.max(1);
-        let isotropic = sigma_deg >= ISOTROPIC_DEG;
-        let half = if isotropic {
-            FRAC_PI_2
-        } else {
-            (4.0 * sigma).min(FRAC_PI_2)
-        };
-        let mut raw: Vec<(f64, f64)> = (0..n)
-            .map(|j| {
-                let x = -half + (j as f64 + 0.5) * 2.0 * half / n as f64;
-                // isotropic: absolute azimuths x, i.e. delta = x - psi from the fibres
-                let delta = if isotropic { x - psi } else { x };
-                (delta, density(x, sigma))
-            })
-            .collect();
-        let total: f64 = raw.iter().map(|r| r.1).sum();
-        raw.iter_mut().for_each(|r| r.1 /= total);
         let adaptive = inner.id() == ModelId::Reference;
         Self {
             inner,
-            sigma,
-            nodes: raw
-                .into_iter()
-                .map(|(d, w)| (d.cos(), d.sin(), w))
-                .collect(),
+            sigma: sigma_deg.to_radians(),
+            nodes: spread_nodes(sigma_deg, nodes, psi),
             adaptive,
         }
     }

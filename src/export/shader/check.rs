@@ -1,0 +1,236 @@
+//! The exported shader against the Rust model: the cases (random pairs in random frames, the
+//! extremes, texel heights and azimuth offsets) and the comparison.
+
+use super::gpu::{Case, Output};
+use crate::model::frame::{DirectionPair, Local, Vec3};
+use crate::model::{Albedos, Basis, ShadingModel};
+
+/// Deterministic xorshift (the cases are the same on every run).
+struct Rng(u64);
+
+impl Rng {
+    fn uniform(&mut self) -> f64 {
+        self.0 ^= self.0 << 13;
+        self.0 ^= self.0 >> 7;
+        self.0 ^= self.0 << 17;
+        (self.0 >> 11) as f64 / (1u64 << 53) as f64
+    }
+
+    fn unit(&mut self) -> Vec3 {
+        let z = 2.0 * self.uniform() - 1.0;
+        let r = (1.0 - z * z).max(0.0).sqrt();
+        let p = std::f64::consts::TAU * self.uniform();
+        Vec3::new(r * p.cos(), r * p.sin(), z)
+    }
+}
+
+fn f32s(v: &Vec3) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+/// A random orthonormal frame (n, t).
+fn frame(rng: &mut Rng) -> (Vec3, Vec3) {
+    let n = rng.unit();
+    let a = rng.unit();
+    let t = (a - n * a.dot(&n)).normalize();
+    (n, t)
+}
+
+/// Local (t, b, n) components to world directions of the frame (n, t).
+fn world(local: [f64; 3], n: &Vec3, t: &Vec3) -> Vec3 {
+    let b = n.cross(t);
+    (t * local[0] + b * local[1] + n * local[2]).normalize()
+}
+
+/// Local directions at the extremes the Rust tests cover: along and across the fibre, grazing
+/// (1e-3 and 1e-6 above the horizon), at and below the horizon, the normal, mirror pairs.
+fn extreme_locals() -> Vec<[f64; 3]> {
+    let g = |x: f64, y: f64, z: f64| {
+        let n = (x * x + y * y + z * z).sqrt();
+        [x / n, y / n, z / n]
+    };
+    vec![
+        [0.0, 0.0, 1.0],
+        g(1.0, 0.0, 1e-3),
+        g(1.0, 0.0, 1e-6),
+        g(0.0, 1.0, 1e-3),
+        g(0.0, -1.0, 1e-6),
+        g(0.0, 1.0, 0.0),
+        g(0.6, 0.8, 0.0),
+        g(0.3, 0.2, -0.5),
+        g(1.0, 0.0, 1.0),
+        g(0.0, 1.0, 1.0),
+        g(-0.7, 0.1, 0.2),
+        g(0.2, -0.9, 0.05),
+        g(0.5, 0.5, 0.7),
+        g(-0.5, 0.5, 0.3),
+    ]
+}
+
+/// `random` random pairs (uniform over the upper hemisphere, random frames, a third of them at
+/// a random texel height in [0, `max_height`] and azimuth offset) and every pair of the extremes
+/// (with their mirrors and their T -> -T twins), deterministic from `seed`.
+pub fn cases(random: usize, seed: u64, max_height: f64) -> Vec<Case> {
+    let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
+    let mut out = Vec::with_capacity(random + 600);
+    for i in 0..random {
+        let (n, t) = frame(&mut rng);
+        let up = |rng: &mut Rng| {
+            let z: f64 = rng.uniform();
+            let r = (1.0 - z * z).sqrt();
+            let p = std::f64::consts::TAU * rng.uniform();
+            [r * p.cos(), r * p.sin(), z]
+        };
+        let (l, v) = (up(&mut rng), up(&mut rng));
+        let at = (i % 3 == 2).then(|| {
+            (
+                (rng.uniform() * max_height) as f32,
+                ((rng.uniform() - 0.5) * std::f64::consts::PI) as f32,
+            )
+        });
+        out.push(Case {
+            l: f32s(&world(l, &n, &t)),
+            v: f32s(&world(v, &n, &t)),
+            n: f32s(&n),
+            t: f32s(&t),
+            at,
+        });
+    }
+    let ext = extreme_locals();
+    let z = Vec3::new(0.0, 0.0, 1.0);
+    let x = Vec3::new(1.0, 0.0, 0.0);
+    for (k, l) in ext.iter().enumerate() {
+        let mirror = [-l[0], -l[1], l[2]];
+        for v in ext.iter().chain(std::iter::once(&mirror)) {
+            for flip in [false, true] {
+                let t = if flip { -x } else { x };
+                let at = (k % 2 == 1).then_some((max_height as f32, 0.0));
+                out.push(Case {
+                    l: f32s(&world(*l, &z, &x)),
+                    v: f32s(&world(*v, &z, &x)),
+                    n: f32s(&z),
+                    t: f32s(&t),
+                    at,
+                });
+            }
+        }
+    }
+    out
+}
+
+/// The Rust model's basis at a case, from the case's f32 values (in f64), the same frame
+/// construction as the shader's.
+pub fn rust_basis(model: &dyn ShadingModel, c: &Case) -> Basis {
+    let v3 = |a: [f32; 3]| Vec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+    let (l, v, n, t) = (v3(c.l), v3(c.v), v3(c.n), v3(c.t));
+    let tp = (t - n * t.dot(&n)).normalize();
+    let mut tt = tp;
+    let mut bt = n.cross(&tp);
+    if let Some((_, off)) = c.at {
+        let (s, co) = (off as f64).sin_cos();
+        let t2 = tt * co + bt * s;
+        bt = bt * co - tt * s;
+        tt = t2;
+    }
+    let local = |w: &Vec3| Local {
+        t: w.dot(&tt),
+        b: w.dot(&bt),
+        n: w.dot(&n),
+    };
+    let pair = DirectionPair {
+        l: local(&l),
+        v: local(&v),
+    };
+    match c.at {
+        Some((h, _)) => model
+            .basis_at_height(&pair, h as f64)
+            .unwrap_or_else(|| model.basis(&pair)),
+        None => model.basis(&pair),
+    }
+}
+
+/// How far the shader is from the Rust model over a set of cases.
+#[derive(Clone, Debug, Default)]
+pub struct Agreement {
+    pub cases: usize,
+    /// Largest and 99th-percentile relative error of the BRDF and of each basis component, each
+    /// value compared relative to max(|Rust value|, `floor`).
+    pub max_relative: f64,
+    pub p99_relative: f64,
+    /// The floor: 1e-4 of the largest Rust value of that quantity over the cases (values far
+    /// below the peak are compared in absolute terms at that level).
+    pub floor_fraction: f64,
+    /// The worst case: its index, the Rust and the shader value.
+    pub worst: (usize, f64, f64),
+    /// Cases where the shader returned a non-finite or negative value.
+    pub non_finite: usize,
+    pub negative: usize,
+}
+
+/// Compare shader `outputs` with the Rust model at `cases`.
+pub fn compare(
+    model: &dyn ShadingModel,
+    albedos: &Albedos,
+    channels: usize,
+    cases: &[Case],
+    outputs: &[Output],
+) -> Agreement {
+    const FLOOR: f64 = 1e-4;
+    // per case: 3 BRDF channels and 4 basis components (Rust, shader)
+    let mut values: Vec<[(f64, f64); 7]> = Vec::with_capacity(cases.len());
+    for (c, o) in cases.iter().zip(outputs) {
+        let b = rust_basis(model, c);
+        let rb = [b.diffuse, b.specular, b.substrate, b.fuzz];
+        let mut row = [(0.0, 0.0); 7];
+        for ch in 0..3 {
+            row[ch] = (b.brdf(albedos, ch.min(channels - 1)), o.brdf[ch] as f64);
+        }
+        for k in 0..4 {
+            row[3 + k] = (rb[k], o.basis[k] as f64);
+        }
+        values.push(row);
+    }
+    let mut peak = [0.0f64; 7];
+    for row in &values {
+        for k in 0..7 {
+            peak[k] = peak[k].max(row[k].0.abs());
+        }
+    }
+    let mut a = Agreement {
+        cases: cases.len(),
+        floor_fraction: FLOOR,
+        ..Default::default()
+    };
+    let mut errors = Vec::with_capacity(values.len());
+    for (i, row) in values.iter().enumerate() {
+        let mut worst: f64 = 0.0;
+        for k in 0..7 {
+            let (r, g) = row[k];
+            if !g.is_finite() {
+                a.non_finite += 1;
+                worst = f64::INFINITY;
+                continue;
+            }
+            if g < 0.0 {
+                a.negative += 1;
+            }
+            let e = (g - r).abs() / r.abs().max(FLOOR * peak[k]).max(f64::MIN_POSITIVE);
+            if e > worst {
+                worst = e;
+            }
+            if e > a.max_relative || !a.max_relative.is_finite() {
+                a.max_relative = a.max_relative.max(e);
+                if e >= a.max_relative {
+                    a.worst = (i, r, g);
+                }
+            }
+        }
+        errors.push(worst);
+    }
+    errors.sort_by(f64::total_cmp);
+    if !errors.is_empty() {
+        a.p99_relative = errors[(errors.len() * 99 / 100).min(errors.len() - 1)];
+        a.max_relative = *errors.last().unwrap_or(&0.0);
+    }
+    a
+}

@@ -1,0 +1,439 @@
+// @section common
+// ---------------------------------------------------------------------------------------------
+// fibrefit shading library (WGSL master; GLSL, HLSL and MSL are translated from it by naga).
+// Every name starts with fibrefit_ / Fibrefit / FIBREFIT_. f32 throughout. Local frame
+// components of a direction are (t, b, n) = (along the fibre, along N x T, along N).
+// ---------------------------------------------------------------------------------------------
+
+const FIBREFIT_PI: f32 = 3.14159265358979;
+const FIBREFIT_FRAC_1_PI: f32 = 0.318309886183791;
+
+// The directions in the fibre frame (T, B = N x T, N) of a renderer's unit vectors; the tangent
+// is made perpendicular to n and turned by `azimuth_offset` (radians, from T towards B).
+struct FibrefitLocal {
+    l: vec3<f32>,
+    v: vec3<f32>,
+}
+
+fn fibrefit_local(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, azimuth_offset: f32) -> FibrefitLocal {
+    var tp = t - n * dot(t, n);
+    let len = length(tp);
+    if (!(len > 1e-12)) {
+        // no tangent in the plane: any perpendicular (the result is then that of an arbitrary
+        // fibre direction)
+        if (abs(n.x) < 0.9) {
+            tp = cross(n, vec3<f32>(1.0, 0.0, 0.0));
+        } else {
+            tp = cross(n, vec3<f32>(0.0, 1.0, 0.0));
+        }
+    }
+    tp = normalize(tp);
+    var bt = cross(n, tp);
+    if (azimuth_offset != 0.0) {
+        let c = cos(azimuth_offset);
+        let s = sin(azimuth_offset);
+        let t2 = tp * c + bt * s;
+        bt = bt * c - tp * s;
+        tp = t2;
+    }
+    return FibrefitLocal(
+        vec3<f32>(dot(l, tp), dot(l, bt), dot(l, n)),
+        vec3<f32>(dot(v, tp), dot(v, bt), dot(v, n))
+    );
+}
+
+// Elementary functions written out: drivers' asin, acos, atan2 and log2 vary (one CPU Vulkan
+// driver measured 4e-4 absolute for asin and 2e-2 relative for log2 near 1); these are within a
+// few f32 ulp everywhere the model calls them.
+
+// atan(x) for |x| <= 1 (Cephes atanf: reduction at tan(pi/8), minimax on [0, tan(pi/8)]).
+fn fibrefit_atan_unit(x: f32) -> f32 {
+    let a = abs(x);
+    var y = 0.0;
+    var z = a;
+    if (a > 0.41421356) {
+        y = 0.78539816;
+        z = (a - 1.0) / (a + 1.0);
+    }
+    let z2 = z * z;
+    let r = (((8.05374449538e-2 * z2 - 1.38776856032e-1) * z2 + 1.99777106478e-1) * z2
+        - 3.33329491539e-1) * z2 * z + z;
+    return sign(x) * (y + r);
+}
+
+// atan2(y, x) for x >= 0 (every call in the model: angles from N in the right half plane).
+fn fibrefit_atan2_right(y: f32, x: f32) -> f32 {
+    if (abs(y) <= x) {
+        if (x == 0.0) {
+            return 0.0;
+        }
+        return fibrefit_atan_unit(y / x);
+    }
+    return sign(y) * 1.57079633 - fibrefit_atan_unit(x / y);
+}
+
+// asin(s), s in [-1, 1]; 1 - s^2 as (1 - s)(1 + s), exact near +-1.
+fn fibrefit_asin(s: f32) -> f32 {
+    let c = clamp(s, -1.0, 1.0);
+    return fibrefit_atan2_right(c, sqrt((1.0 - c) * (1.0 + c)));
+}
+
+// acos(c), c in [0, 1].
+fn fibrefit_acos_positive(c: f32) -> f32 {
+    let x = clamp(c, 0.0, 1.0);
+    return fibrefit_atan2_right(sqrt((1.0 - x) * (1.0 + x)), x);
+}
+
+// ln(x) for x > 0 normal: x = 2^k m, m in [sqrt(1/2), sqrt(2)), ln m = 2 atanh(f / (2 + f)).
+fn fibrefit_ln(x: f32) -> f32 {
+    let bits = bitcast<u32>(x);
+    var k = f32(i32((bits >> 23u) & 0xffu) - 127);
+    var m = bitcast<f32>((bits & 0x007fffffu) | 0x3f800000u);
+    if (m > 1.41421356) {
+        m = 0.5 * m;
+        k = k + 1.0;
+    }
+    let f = m - 1.0;
+    let s = f / (2.0 + f);
+    let z = s * s;
+    let r = 2.0 * s * (1.0 + z * (1.0 / 3.0 + z * (1.0 / 5.0 + z * (1.0 / 7.0 + z * (1.0 / 9.0)))));
+    return k * 0.693147181 + r;
+}
+
+// x^e for x >= 0, e >= 1 (0 at x = 0, where pow is undefined in some languages).
+fn fibrefit_pow(x: f32, e: f32) -> f32 {
+    if (x < 1e-30) {
+        return 0.0;
+    }
+    return exp(e * fibrefit_ln(x));
+}
+
+// Schlick's factor at cos theta_d = l.h for index of refraction `ior` (0: off, factor 1).
+fn fibrefit_schlick(l: vec3<f32>, v: vec3<f32>, ior: f32) -> f32 {
+    if (ior <= 0.0) {
+        return 1.0;
+    }
+    let h = l + v;
+    let norm = length(h);
+    var c = 0.0;
+    if (norm > 0.0) {
+        c = clamp(dot(l, h) / norm, 0.0, 1.0);
+    }
+    let f0 = ((ior - 1.0) / (ior + 1.0)) * ((ior - 1.0) / (ior + 1.0));
+    let m = 1.0 - c;
+    let m2 = m * m;
+    return f0 + (1.0 - f0) * (m2 * m2 * m);
+}
+
+// The fuzz layer: (attenuation A of the rung, single-scattering column P); depth 0: (1, 0).
+fn fibrefit_fuzz(l: vec3<f32>, v: vec3<f32>, depth: f32, g: f32) -> vec2<f32> {
+    let mi = l.z;
+    let mo = v.z;
+    if (!(mi > 0.0 && mo > 0.0) || depth <= 0.0) {
+        return vec2<f32>(1.0, 0.0);
+    }
+    let a = exp(-depth * (1.0 / mi + 1.0 / mo));
+    let cos_a = clamp(-dot(l, v), -1.0, 1.0);
+    let d = max(1.0 + g * g - 2.0 * g * cos_a, 1e-30);
+    let p = (1.0 - g * g) / (4.0 * FIBREFIT_PI * d * sqrt(d));
+    return vec2<f32>(a, p * (1.0 - a) / (4.0 * (mi + mo)));
+}
+
+// @section lambert
+fn fibrefit_lambert(l: vec3<f32>, v: vec3<f32>) -> vec4<f32> {
+    return vec4<f32>(FIBREFIT_FRAC_1_PI, 0.0, 0.0, 0.0);
+}
+
+// @section max_normal
+// Banks / Heidrich-Seidel: the brightest normal (MODEL.md, max-normal).
+fn fibrefit_max_normal(l: vec3<f32>, v: vec3<f32>, exponent: f32) -> vec4<f32> {
+    let lp = sqrt(l.y * l.y + l.z * l.z);
+    let vp = sqrt(v.y * v.y + v.z * v.z);
+    let lobe = max(lp * vp - l.x * v.x, 0.0);
+    return vec4<f32>(FIBREFIT_FRAC_1_PI * lp / l.z, fibrefit_pow(lobe, exponent) / l.z, 0.0, 0.0);
+}
+
+// @section hast_diffuse
+// Hast's diffuse in the stable form Phi = (|l_p| + N.l) / pi.
+fn fibrefit_hast_diffuse(l: vec3<f32>, v: vec3<f32>) -> vec4<f32> {
+    let phi = FIBREFIT_FRAC_1_PI * (sqrt(l.y * l.y + l.z * l.z) + l.z);
+    return vec4<f32>(FIBREFIT_FRAC_1_PI * phi / l.z, 0.0, 0.0, 0.0);
+}
+
+// @section ward
+// Ward 1992, normalised (alpha_x along the fibre, alpha_y across).
+fn fibrefit_ward(l: vec3<f32>, v: vec3<f32>, ax: f32, ay: f32) -> vec4<f32> {
+    let h = l + v;
+    let e = ((h.x / ax) * (h.x / ax) + (h.y / ay) * (h.y / ay)) / (h.z * h.z);
+    let lobe = exp(-e) / (4.0 * FIBREFIT_PI * ax * ay * sqrt(l.z * v.z));
+    return vec4<f32>(FIBREFIT_FRAC_1_PI, lobe, 0.0, 0.0);
+}
+
+// @section cross_section
+// The periodic fibre cross-section (MODEL.md section 2; src/model/cross_section.rs): exact
+// visible-and-lit arcs of the two fibres of a period, closed-form diffuse, Gauss-Legendre lobe.
+
+// A direction projected into the cross-section plane.
+struct FibrefitProj {
+    alpha: f32,
+    s: f32,
+    c: f32,
+    len: f32,
+    tn: f32,
+    sec: f32,
+}
+
+fn fibrefit_project(w: vec3<f32>) -> FibrefitProj {
+    let len = sqrt(w.y * w.y + w.z * w.z);
+    return FibrefitProj(fibrefit_atan2_right(w.y, w.z), w.y / len, w.z / len, len, w.y / w.z, len / w.z);
+}
+
+// The gaps, in s = sin(th - alpha), that every occluder of the infinite pattern leaves on one
+// fibre's front arc seen along a direction (sin sa, cos ca of its angle); `other_row` is the
+// other row's axis height above this fibre's (+H even, -H odd). Up to four gaps.
+struct FibrefitGaps {
+    e: array<vec2<f32>, 4>,
+    n: u32,
+}
+
+fn fibrefit_gaps(sa: f32, ca: f32, step: f32, other_row: f32) -> FibrefitGaps {
+    let none = vec2<f32>(3.0, 3.0);
+    var sh = array<vec2<f32>, 3>(none, none, none);
+    let ds = 2.0 * step * ca;
+    let da = 2.0 * step * sa;
+    // own row: the nearest member ahead shadows (ds - 1, ds + 1) or its mirror; farther ones
+    // continue the run past +-1 while ds < 2
+    if (ds < 2.0 && da != 0.0) {
+        if (da > 0.0) {
+            sh[0] = vec2<f32>(ds - 1.0, 1.0);
+        } else {
+            sh[0] = vec2<f32>(-1.0, 1.0 - ds);
+        }
+    }
+    // other row: members m at s0 + m ds, a0 + m da
+    let s0 = step * ca - other_row * sa;
+    let a0 = step * sa + other_row * ca;
+    var lo = ceil((-2.0 - s0) / ds);
+    var hi = floor((2.0 - s0) / ds);
+    if (da > 0.0) {
+        lo = max(lo, floor(-a0 / da) + 1.0);
+    }
+    if (da < 0.0) {
+        hi = min(hi, ceil(-a0 / da) - 1.0);
+    }
+    if ((da != 0.0 || a0 > 0.0) && lo <= hi) {
+        let s = s0 + lo * ds;
+        if (ds <= 2.0) {
+            sh[1] = vec2<f32>(s - 1.0, s0 + hi * ds + 1.0);
+        } else {
+            sh[1] = vec2<f32>(s - 1.0, s + 1.0);
+            if (hi > lo) {
+                sh[2] = vec2<f32>(s + ds - 1.0, s + ds + 1.0);
+            }
+        }
+    }
+    // sort by start, then the complement of the union in (-1, 1)
+    for (var i = 0u; i < 2u; i++) {
+        for (var j = 0u; j < 2u - i; j++) {
+            if (sh[j + 1u].x < sh[j].x) {
+                let x = sh[j];
+                sh[j] = sh[j + 1u];
+                sh[j + 1u] = x;
+            }
+        }
+    }
+    var out: FibrefitGaps;
+    out.n = 0u;
+    var cursor = -1.0;
+    for (var k = 0u; k < 3u; k++) {
+        let a = min(sh[k].x, 1.0);
+        if (a > cursor) {
+            out.e[out.n] = vec2<f32>(cursor, a);
+            out.n++;
+        }
+        cursor = max(cursor, sh[k].y);
+    }
+    if (1.0 > cursor) {
+        out.e[out.n] = vec2<f32>(cursor, 1.0);
+        out.n++;
+    }
+    return out;
+}
+
+// Integral over [t0, t1] of cos(th - a) cos(th - b), long or short form (no cancellation next
+// to the terminator).
+fn fibrefit_diffuse_kernel(t0: f32, t1: f32, a: f32, b: f32, cos_ab: f32) -> f32 {
+    let d = t1 - t0;
+    let u = t0 + t1 - a - b;
+    if (d > 0.5) {
+        return 0.5 * (d * cos_ab + cos(u) * sin(d));
+    }
+    let m = 0.5 * (t0 + t1);
+    let d2 = d * d;
+    let d_minus_sin = d * d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0 - d2 / 362880.0)));
+    return max(d * cos(m - a) * cos(m - b) - 0.5 * cos(u) * d_minus_sin, 0.0);
+}
+
+fn fibrefit_wrap(x: f32, p: f32, inv_p: f32) -> f32 {
+    let r = x - p * floor(x * inv_p);
+    if (r >= p || r < 0.0) {
+        return 0.0;
+    }
+    return r;
+}
+
+// Fraction of the substrate strip of one period seen along v and lit along l.
+fn fibrefit_substrate(l: FibrefitProj, v: FibrefitProj, step: f32, rise: f32) -> f32 {
+    let p = 2.0 * step;
+    let inv_p = 1.0 / p;
+    let wl = 2.0 * l.sec;
+    let wv = 2.0 * v.sec;
+    if (max(wl, wv) >= p) {
+        return 0.0;
+    }
+    let a0 = vec2<f32>(-l.tn - l.sec, wl);
+    let a1 = vec2<f32>(step - (1.0 + rise) * l.tn - l.sec, wl);
+    let a2 = vec2<f32>(-v.tn - v.sec, wv);
+    let a3 = vec2<f32>(step - (1.0 + rise) * v.tn - v.sec, wv);
+    var origin = a2.x;
+    var width = wv;
+    var first = a0;
+    var second = a1;
+    if (wl >= wv) {
+        origin = a0.x;
+        width = wl;
+        first = a1;
+        second = a2;
+    }
+    var x = array<vec2<f32>, 3>(first, second, a3);
+    for (var k = 0u; k < 3u; k++) {
+        let r = fibrefit_wrap(x[k].x - origin, p, inv_p);
+        x[k] = vec2<f32>(r, min(r + x[k].y, p));
+    }
+    for (var i = 0u; i < 2u; i++) {
+        for (var j = 0u; j < 2u - i; j++) {
+            if (x[j + 1u].x < x[j].x) {
+                let y = x[j];
+                x[j] = x[j + 1u];
+                x[j + 1u] = y;
+            }
+        }
+    }
+    var cursor = width;
+    var open = 0.0;
+    for (var k = 0u; k < 3u; k++) {
+        open += max(x[k].x - cursor, 0.0);
+        cursor = max(cursor, x[k].y);
+    }
+    open += max(p - cursor, 0.0);
+    return open * inv_p;
+}
+
+// Everything of a light/view pair that does not depend on the pattern.
+struct FibrefitPair {
+    l: FibrefitProj,
+    v: FibrefitProj,
+    cos_lv: f32,
+    cos_delta: f32,
+    sigma: f32,
+    k2: f32,
+    // the lobe window [x, y] in th; z > 0 when there is one
+    window: vec3<f32>,
+}
+
+fn fibrefit_pair(l: vec3<f32>, v: vec3<f32>, lobe_floor: f32) -> FibrefitPair {
+    let lp = fibrefit_project(l);
+    let vp = fibrefit_project(v);
+    let cos_lv = dot(l, v);
+    let cos_delta = lp.c * vp.c + lp.s * vp.s;
+    let k = lp.len * vp.len;
+    let peak = k * (cos_delta + 1.0) - cos_lv;
+    let c = (lobe_floor * peak + cos_lv) / k - cos_delta;
+    let cc = clamp(c, -1.0, 1.0);
+    let half = fibrefit_atan2_right(sqrt(1.0 - cc), sqrt(1.0 + cc));
+    let sigma = lp.alpha + vp.alpha;
+    var has = 0.0;
+    if (peak > 0.0 && k > 0.0 && c < 1.0) {
+        has = 1.0;
+    }
+    return FibrefitPair(lp, vp, cos_lv, cos_delta, sigma, 2.0 * k,
+        vec3<f32>(0.5 * sigma - half, 0.5 * sigma + half, has));
+}
+
+// The lobe integral over [a, b]: (b - a)/2 sum w max(0, r.v)^e cc at the Gauss-Legendre nodes.
+fn fibrefit_lobe(a: f32, b: f32, sp: FibrefitPair, exponent: f32) -> f32 {
+    let half = 0.5 * (b - a);
+    let tms = (a + b) - sp.sigma;
+    var nodes = FIBREFIT_GAUSS_LEGENDRE;
+    var acc = 0.0;
+    for (var i = 0u; i < FIBREFIT_QUADRATURE_ORDER; i++) {
+        let u = 2.0 * half * nodes[i].x + tms;
+        let cc = 0.5 * (sp.cos_delta + cos(u));
+        let rv = sp.k2 * cc - sp.cos_lv;
+        if (rv > 0.0) {
+            acc += nodes[i].y * fibrefit_pow(rv, exponent) * cc;
+        }
+    }
+    return half * acc;
+}
+
+// (diffuse, specular, substrate) of one pattern of spacing d and odd-fibre height H, weight w.
+fn fibrefit_pattern(sp: FibrefitPair, spacing: f32, height: f32, weight: f32, exponent: f32) -> vec3<f32> {
+    let phi = min(fibrefit_asin(clamp(height / spacing, 0.0, 1.0)), fibrefit_acos_positive(1.0 / spacing));
+    let step = spacing * cos(phi);
+    let rise = spacing * sin(phi);
+    let denom = 2.0 * step * sp.l.c * sp.v.c;
+    if (!(denom > 0.0)) {
+        return vec3<f32>(0.0);
+    }
+    let norm = (exponent + 2.0) / (2.0 * FIBREFIT_PI);
+    var diffuse = 0.0;
+    var specular = 0.0;
+    var fibres = 2u;
+    var count = 1.0;
+    if (rise == 0.0) {
+        // the odd row is the even row moved by one step: one fibre, counted twice
+        fibres = 1u;
+        count = 2.0;
+    }
+    for (var f = 0u; f < fibres; f++) {
+        var other = rise;
+        if (f == 1u) {
+            other = -rise;
+        }
+        let seen = fibrefit_gaps(sp.v.s, sp.v.c, step, other);
+        let lit = fibrefit_gaps(sp.l.s, sp.l.c, step, other);
+        let factor = weight * count * norm / denom;
+        var i = 0u;
+        var j = 0u;
+        loop {
+            if (i >= seen.n || j >= lit.n) {
+                break;
+            }
+            let xa = sp.v.alpha + fibrefit_asin(seen.e[i].x);
+            let xb = sp.v.alpha + fibrefit_asin(seen.e[i].y);
+            let ya = sp.l.alpha + fibrefit_asin(lit.e[j].x);
+            let yb = sp.l.alpha + fibrefit_asin(lit.e[j].y);
+            let lo = max(xa, ya);
+            let hi = min(xb, yb);
+            if (hi > lo) {
+                diffuse += count * fibrefit_diffuse_kernel(lo, hi, sp.l.alpha, sp.v.alpha, sp.cos_delta);
+                if (sp.window.z > 0.0) {
+                    let wa = max(lo, sp.window.x);
+                    let wb = min(hi, sp.window.y);
+                    if (wb > wa) {
+                        specular += factor * fibrefit_lobe(wa, wb, sp, exponent);
+                    }
+                }
+            }
+            if (xb < yb) {
+                i++;
+            } else {
+                j++;
+            }
+        }
+    }
+    let substrate = fibrefit_substrate(sp.l, sp.v, step, rise);
+    return vec3<f32>(weight * FIBREFIT_FRAC_1_PI * diffuse / denom, specular,
+        weight * FIBREFIT_FRAC_1_PI * substrate);
+}

@@ -1,0 +1,545 @@
+//! The fitted model as shader code: one WGSL source (`fibrefit.wgsl`, written once for every
+//! rung) with the fitted parameters baked in, translated by naga to GLSL, HLSL and MSL.
+//!
+//! The file a user gets is a library: functions, one struct and constants, every name prefixed
+//! `fibrefit_` / `Fibrefit` / `FIBREFIT_`, no entry points and no bindings. Its documented entry
+//! points are written in [`HEADER`]. [`gpu`] runs it as a compute shader to prove it equal to the
+//! Rust model.
+
+pub mod check;
+pub mod gpu;
+
+use crate::model::azimuth_spread::spread_nodes;
+use crate::model::quadrature::GaussLegendre;
+use crate::model::topology::max_height;
+use crate::model::{ModelId, ModelParams};
+use anyhow::{anyhow, bail, Result};
+use std::fmt::Write as _;
+
+/// The master source, in sections (`// @section NAME`).
+const MASTER: &str = include_str!("fibrefit.wgsl");
+
+/// Shader languages `export --shader` writes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Language {
+    Wgsl,
+    Glsl,
+    Hlsl,
+    Msl,
+}
+
+impl std::str::FromStr for Language {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        Ok(match s {
+            "wgsl" => Language::Wgsl,
+            "glsl" => Language::Glsl,
+            "hlsl" => Language::Hlsl,
+            "msl" => Language::Msl,
+            _ => return Err(format!("unknown shader language '{s}'; expected one of: wgsl, glsl, hlsl, msl")),
+        })
+    }
+}
+
+impl Language {
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Language::Wgsl => "wgsl",
+            Language::Glsl => "glsl",
+            Language::Hlsl => "hlsl",
+            Language::Msl => "msl",
+        }
+    }
+}
+
+/// The documentation at the top of every exported file (comment syntax is the same in all four
+/// languages).
+const HEADER: &str = "\
+// Entry points (WGSL spelling; the translations keep the names and argument order):
+//
+//   fn fibrefit_brdf(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>) -> vec3<f32>
+//       The BRDF in 1/sr per channel (grey results repeat the value). l, v: unit directions
+//       towards the light and the viewer; n: the macro normal; t: the fibre tangent; any
+//       orthonormal frame (t is made perpendicular to n). 0 at and below either horizon.
+//       Shaded radiance = fibrefit_brdf(l, v, n, t) * irradiance * dot(n, l).
+//   fn fibrefit_brdf_at(l, v, n, t, height: f32, azimuth_offset: f32) -> vec3<f32>
+//       The same at one texel: `height` H of the climbing fibres in fibre radii (clamped to
+//       [0, FIBREFIT_MAX_HEIGHT]; rungs without a topology ignore it) and the fibre direction
+//       turned by `azimuth_offset` radians about n, from t towards n x t (a texel's fitted
+//       fibre azimuth minus FIBREFIT_FIBRE_AZIMUTH_DEG in radians). A topology map value m in
+//       [0, 1] gives its height by fibrefit_height_from_map(m).
+//   fn fibrefit_basis(l, v, n, t) -> vec4<f32>
+//   fn fibrefit_basis_at(l, v, n, t, height, azimuth_offset) -> vec4<f32>
+//       The BRDF per unit albedo of each linear component, (diffuse, specular, substrate, fuzz):
+//       brdf = b.x kd + b.y ks + b.z substrate_albedo + b.w fuzz (Ward: b.x rho_d + b.y rho_s),
+//       for renderers that feed albedo maps.
+//
+// Parameters: baked in as the constants returned by fibrefit_params(). Every entry point has a
+// `_with` form taking them first, e.g. fibrefit_brdf_with(p: FibrefitParams, l, v, n, t), so a
+// renderer can pass its own values, e.g. from a uniform buffer it declares itself:
+//   @group(0) @binding(0) var<uniform> material: FibrefitParams;  ...  fibrefit_brdf_with(material, l, v, n, t)
+// FibrefitParams is laid out for uniform buffers (vec4 members, arrays of vec4). The array
+// lengths (height nodes, spread nodes) and the Gauss-Legendre rule are fixed by this export.
+// This file declares no bindings and no entry points of its own.
+";
+
+/// The baked parameters' field documentation (WGSL struct).
+const PARAMS_STRUCT: &str = "\
+struct FibrefitParams {
+    // albedos per channel (rgb; w unused): fibre diffuse kd (Ward rho_d), specular ks (Ward
+    // rho_s), substrate, fuzz layer weight
+    kd: vec4<f32>,
+    ks: vec4<f32>,
+    substrate: vec4<f32>,
+    fuzz: vec4<f32>,
+    // x: Phong exponent e, y: spacing d (fibre radii), z: Fresnel index of refraction (0: off),
+    // w: fraction of the lobe peak where the specular window ends, exp(ln(1e-15) / e)
+    shape: vec4<f32>,
+    // x: Ward alpha_x (along t), y: Ward alpha_y, z: fuzz optical depth (0: no layer),
+    // w: fuzz phase asymmetry g
+    extra: vec4<f32>,
+    // x: base height H0, y: map scale s, z: H_max = sqrt(d^2 - 1) (fibre radii); w unused
+    topology: vec4<f32>,
+    // the spot's height distribution: x height H (fibre radii), y weight (summing to 1)
+    heights: array<vec4<f32>, FIBREFIT_HEIGHT_NODES>,
+    // the fibre-direction spread's nodes: x cos, y sin of the turn from t, z weight
+    spread: array<vec4<f32>, FIBREFIT_SPREAD_NODES>,
+}
+";
+
+/// The sections of the master each rung needs, after `common`.
+fn sections(id: ModelId) -> Result<&'static [&'static str]> {
+    Ok(match id {
+        ModelId::Lambert => &["lambert"],
+        ModelId::MaxNormal => &["max_normal"],
+        ModelId::HastDiffuse => &["hast_diffuse"],
+        ModelId::Ward => &["ward"],
+        ModelId::PoulinFournier | ModelId::VaryingTopology => &["cross_section"],
+        ModelId::Reference => bail!(
+            "model `reference` has no shader: it integrates adaptively to 1e-8 and is the \
+             yardstick, not a rung to render with; fit or export `varying-topology` (the same \
+             parameters; reports/speed_accuracy.md gives its error against the reference per \
+             quadrature order)"
+        ),
+    })
+}
+
+/// The text of one master section.
+fn section(name: &str) -> &'static str {
+    let marker = format!("// @section {name}\n");
+    let start = MASTER
+        .find(&marker)
+        .unwrap_or_else(|| panic!("fibrefit.wgsl has no section {name}"))
+        + marker.len();
+    let end = MASTER[start..]
+        .find("// @section ")
+        .map_or(MASTER.len(), |e| start + e);
+    &MASTER[start..end]
+}
+
+/// An f32 constant as a WGSL literal (round-trips the f32).
+fn lit(x: f64) -> String {
+    let v = x as f32;
+    let s = format!("{v:?}");
+    if s.contains('.') || s.contains('e') || s.contains("inf") || s.contains("NaN") {
+        s
+    } else {
+        format!("{s}.0")
+    }
+}
+
+fn vec4(v: [f64; 4]) -> String {
+    format!(
+        "vec4<f32>({}, {}, {}, {})",
+        lit(v[0]),
+        lit(v[1]),
+        lit(v[2]),
+        lit(v[3])
+    )
+}
+
+/// What an export bakes in.
+pub struct Baked {
+    pub id: ModelId,
+    /// (H, weight) of the spot's height distribution (one node for rungs without a topology).
+    pub heights: Vec<(f64, f64)>,
+    /// (cos, sin, weight) of the spread's nodes (one identity node without a spread).
+    pub spread: Vec<(f64, f64, f64)>,
+    pub quadrature_order: usize,
+}
+
+impl Baked {
+    pub fn new(id: ModelId, p: &ModelParams) -> Result<Self> {
+        sections(id)?;
+        let heights = match id {
+            ModelId::VaryingTopology => p.topology.discretise(p.spacing, p.histogram_bins),
+            _ => vec![(0.0, 1.0)],
+        };
+        let fibre = !matches!(id, ModelId::Lambert | ModelId::Ward);
+        let spread = if fibre && p.azimuth_spread_deg > 0.0 {
+            spread_nodes(p.azimuth_spread_deg, p.azimuth_nodes, p.fibre_azimuth)
+        } else {
+            vec![(1.0, 0.0, 1.0)]
+        };
+        Ok(Self {
+            id,
+            heights,
+            spread,
+            quadrature_order: if id.is_cross_section() {
+                p.quadrature_order
+            } else {
+                1
+            },
+        })
+    }
+}
+
+/// The rung's part of `fibrefit_rung`: the basis at local directions (both above the horizon),
+/// at `height` when `at_height`.
+fn rung_body(id: ModelId) -> &'static str {
+    match id {
+        ModelId::Lambert => "    return fibrefit_lambert(l, v);\n",
+        ModelId::MaxNormal => "    return fibrefit_max_normal(l, v, p.shape.x);\n",
+        ModelId::HastDiffuse => "    return fibrefit_hast_diffuse(l, v);\n",
+        ModelId::Ward => "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);\n",
+        ModelId::PoulinFournier => {
+            "    let sp = fibrefit_pair(l, v, p.shape.w);
+    let b = fibrefit_pattern(sp, p.shape.y, 0.0, 1.0, p.shape.x);
+    return vec4<f32>(b, 0.0);\n"
+        }
+        _ => {
+            "    let sp = fibrefit_pair(l, v, p.shape.w);
+    if (at_height) {
+        return vec4<f32>(fibrefit_pattern(sp, p.shape.y, height, 1.0, p.shape.x), 0.0);
+    }
+    var heights = p.heights;
+    var b = vec3<f32>(0.0);
+    for (var k = 0u; k < FIBREFIT_HEIGHT_NODES; k++) {
+        b += fibrefit_pattern(sp, p.shape.y, heights[k].x, heights[k].y, p.shape.x);
+    }
+    return vec4<f32>(b, 0.0);\n"
+        }
+    }
+}
+
+/// The WGSL library for rung `id` with parameters `p`; `provenance` (one line per entry) says
+/// where they came from. Validated by naga before it is returned.
+pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<String> {
+    let baked = Baked::new(id, p)?;
+    let mut s = String::new();
+    writeln!(
+        s,
+        "// fibrefit {} shader export: model `{id}`",
+        env!("CARGO_PKG_VERSION")
+    )?;
+    for line in provenance {
+        writeln!(s, "// {line}")?;
+    }
+    s.push_str("//\n");
+    s.push_str(HEADER);
+    s.push('\n');
+    let a = &p.albedos;
+    let rgb = |c: [f64; 3]| [c[0], c[1], c[2], 0.0];
+    writeln!(
+        s,
+        "// The rung and its discretisation (fixed by this export).\nconst FIBREFIT_MODEL: u32 = {}u; // {id}",
+        ModelId::ALL.iter().position(|&m| m == id).unwrap_or(0)
+    )?;
+    writeln!(
+        s,
+        "const FIBREFIT_FIBRE_AZIMUTH_DEG: f32 = {}; // the fit's fibre azimuth psi from the swatch's x axis",
+        lit(p.fibre_azimuth.to_degrees())
+    )?;
+    writeln!(
+        s,
+        "const FIBREFIT_MAX_HEIGHT: f32 = {}; // sqrt(d^2 - 1), fibre radii",
+        lit(max_height(p.spacing))
+    )?;
+    writeln!(
+        s,
+        "const FIBREFIT_HEIGHT_NODES: u32 = {}u;",
+        baked.heights.len()
+    )?;
+    writeln!(
+        s,
+        "const FIBREFIT_SPREAD_NODES: u32 = {}u;",
+        baked.spread.len()
+    )?;
+    writeln!(
+        s,
+        "const FIBREFIT_QUADRATURE_ORDER: u32 = {}u;",
+        baked.quadrature_order
+    )?;
+    let gl = GaussLegendre::new(baked.quadrature_order);
+    let (x, w) = gl.nodes_and_weights();
+    let nodes: Vec<String> = x
+        .iter()
+        .zip(w)
+        .map(|(x, w)| format!("vec2<f32>({}, {})", lit(*x), lit(*w)))
+        .collect();
+    writeln!(
+        s,
+        "// Gauss-Legendre nodes and weights on [-1, 1] of the specular lobe\nconst FIBREFIT_GAUSS_LEGENDRE = array<vec2<f32>, {}>(\n    {}\n);\n",
+        nodes.len(),
+        nodes.join(",\n    ")
+    )?;
+    s.push_str(PARAMS_STRUCT);
+    s.push('\n');
+    let heights: Vec<String> = baked
+        .heights
+        .iter()
+        .map(|&(h, w)| vec4([h, w, 0.0, 0.0]))
+        .collect();
+    let spread: Vec<String> = baked
+        .spread
+        .iter()
+        .map(|&(c, sn, w)| vec4([c, sn, w, 0.0]))
+        .collect();
+    let lobe_floor = (1e-15f64.ln() / p.exponent).exp();
+    writeln!(
+        s,
+        "// The fitted parameters.
+fn fibrefit_params() -> FibrefitParams {{
+    return FibrefitParams(
+        {}, // kd
+        {}, // ks
+        {}, // substrate
+        {}, // fuzz
+        {}, // exponent, spacing, Fresnel ior, lobe floor
+        {}, // alpha_x, alpha_y, fuzz depth, fuzz asymmetry
+        {}, // H0, map scale, H_max
+        array<vec4<f32>, {}>(\n            {}\n        ),
+        array<vec4<f32>, {}>(\n            {}\n        )
+    );
+}}
+",
+        vec4(rgb(a.diffuse)),
+        vec4(rgb(a.specular)),
+        vec4(rgb(a.substrate)),
+        vec4(rgb(a.fuzz)),
+        vec4([p.exponent, p.spacing, p.fresnel_ior, lobe_floor]),
+        vec4([p.alpha_x, p.alpha_y, p.fuzz_depth, p.fuzz_asymmetry]),
+        vec4([
+            p.topology.height,
+            p.topology.map_scale,
+            max_height(p.spacing),
+            0.0
+        ]),
+        heights.len(),
+        heights.join(",\n            "),
+        spread.len(),
+        spread.join(",\n            "),
+    )?;
+    s.push_str(section("common"));
+    for name in sections(id)? {
+        s.push_str(section(name));
+    }
+    writeln!(
+        s,
+        "
+// ---------------------------------------------------------------------------------------------
+// The rung `{id}` and the public entry points.
+// ---------------------------------------------------------------------------------------------
+
+fn fibrefit_rung(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, height: f32, at_height: bool) -> vec4<f32> {{
+{}}}",
+        rung_body(id)
+    )?;
+    s.push_str(PUBLIC);
+    validate(&s)?;
+    Ok(s)
+}
+
+/// The entry points, the same for every rung.
+const PUBLIC: &str = "
+// The basis at fibre-frame directions: the spread's nodes, the Fresnel factor, the fuzz layer.
+fn fibrefit_basis_local(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, height: f32, at_height: bool) -> vec4<f32> {
+    if (!(l.z > 0.0 && v.z > 0.0)) {
+        return vec4<f32>(0.0);
+    }
+    var spread = p.spread;
+    var b = vec4<f32>(0.0);
+    for (var j = 0u; j < FIBREFIT_SPREAD_NODES; j++) {
+        let c = spread[j].x;
+        let s = spread[j].y;
+        let lr = normalize(vec3<f32>(l.x * c + l.y * s, -l.x * s + l.y * c, l.z));
+        let vr = normalize(vec3<f32>(v.x * c + v.y * s, -v.x * s + v.y * c, v.z));
+        b += spread[j].z * fibrefit_rung(p, lr, vr, height, at_height);
+    }
+    b.y *= fibrefit_schlick(l, v, p.shape.z);
+    let fz = fibrefit_fuzz(l, v, p.extra.z, p.extra.w);
+    return vec4<f32>(b.xyz * fz.x, b.w * fz.x + fz.y);
+}
+
+fn fibrefit_combine(p: FibrefitParams, b: vec4<f32>) -> vec3<f32> {
+    return b.x * p.kd.xyz + b.y * p.ks.xyz + b.z * p.substrate.xyz + b.w * p.fuzz.xyz;
+}
+
+fn fibrefit_height_from_map_with(p: FibrefitParams, m: f32) -> f32 {
+    return clamp(p.topology.x + p.topology.y * (2.0 * m - 1.0), 0.0, p.topology.z);
+}
+
+fn fibrefit_basis_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>) -> vec4<f32> {
+    let d = fibrefit_local(l, v, n, t, 0.0);
+    return fibrefit_basis_local(p, d.l, d.v, 0.0, false);
+}
+
+fn fibrefit_basis_at_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, height: f32, azimuth_offset: f32) -> vec4<f32> {
+    let d = fibrefit_local(l, v, n, t, azimuth_offset);
+    return fibrefit_basis_local(p, d.l, d.v, clamp(height, 0.0, p.topology.z), true);
+}
+
+fn fibrefit_brdf_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>) -> vec3<f32> {
+    return fibrefit_combine(p, fibrefit_basis_with(p, l, v, n, t));
+}
+
+fn fibrefit_brdf_at_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, height: f32, azimuth_offset: f32) -> vec3<f32> {
+    return fibrefit_combine(p, fibrefit_basis_at_with(p, l, v, n, t, height, azimuth_offset));
+}
+
+fn fibrefit_height_from_map(m: f32) -> f32 {
+    return fibrefit_height_from_map_with(fibrefit_params(), m);
+}
+
+fn fibrefit_basis(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>) -> vec4<f32> {
+    return fibrefit_basis_with(fibrefit_params(), l, v, n, t);
+}
+
+fn fibrefit_basis_at(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, height: f32, azimuth_offset: f32) -> vec4<f32> {
+    return fibrefit_basis_at_with(fibrefit_params(), l, v, n, t, height, azimuth_offset);
+}
+
+fn fibrefit_brdf(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>) -> vec3<f32> {
+    return fibrefit_brdf_with(fibrefit_params(), l, v, n, t);
+}
+
+fn fibrefit_brdf_at(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, height: f32, azimuth_offset: f32) -> vec3<f32> {
+    return fibrefit_brdf_at_with(fibrefit_params(), l, v, n, t, height, azimuth_offset);
+}
+";
+
+/// Parse and validate WGSL with naga.
+pub fn validate(src: &str) -> Result<(naga::Module, naga::valid::ModuleInfo)> {
+    let module = naga::front::wgsl::parse_str(src)
+        .map_err(|e| anyhow!("internal: the shader does not parse: {}", e.emit_to_string(src)))?;
+    let info = naga::valid::Validator::new(
+        naga::valid::ValidationFlags::all(),
+        naga::valid::Capabilities::empty(),
+    )
+    .validate(&module)
+    .map_err(|e| anyhow!("internal: the shader does not validate: {}", e.emit_to_string(src)))?;
+    Ok((module, info))
+}
+
+/// A compute entry point that calls every public function, so backends that write only what an
+/// entry point reaches (GLSL) write them all; removed from the translation afterwards.
+const ANCHOR: &str = "
+@group(0) @binding(0) var<storage, read_write> fibrefit_anchor_io: array<vec4<f32>>;
+@compute @workgroup_size(1)
+fn fibrefit_anchor_main() {
+    let a = fibrefit_anchor_io[0].xyz;
+    let h = fibrefit_anchor_io[0].w;
+    fibrefit_anchor_io[1] = vec4<f32>(fibrefit_brdf(a, a, a, a), h);
+    fibrefit_anchor_io[2] = vec4<f32>(fibrefit_brdf_at(a, a, a, a, h, h), h);
+    fibrefit_anchor_io[3] = fibrefit_basis(a, a, a, a);
+    fibrefit_anchor_io[4] = fibrefit_basis_at(a, a, a, a, h, h);
+    fibrefit_anchor_io[5] = vec4<f32>(fibrefit_height_from_map(h));
+}
+";
+
+/// `wgsl` (a validated library) in `lang`, validated by naga, without entry points or bindings.
+/// GLSL has no `#version` line (the host shader's comes first; written for GLSL 4.50 core).
+pub fn translate(wgsl: &str, lang: Language) -> Result<String> {
+    if lang == Language::Wgsl {
+        return Ok(wgsl.to_string());
+    }
+    let header: String = wgsl
+        .lines()
+        .take_while(|l| l.starts_with("//"))
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let body = match lang {
+        Language::Glsl => {
+            // the GLSL writer writes what one entry point reaches: an anchor reaching everything,
+            // removed again below
+            let (module, info) = validate(&format!("{wgsl}{ANCHOR}"))?;
+            let options = naga::back::glsl::Options {
+                version: naga::back::glsl::Version::Desktop(450),
+                ..Default::default()
+            };
+            let pipeline = naga::back::glsl::PipelineOptions {
+                shader_stage: naga::ShaderStage::Compute,
+                entry_point: "fibrefit_anchor_main".into(),
+                multiview: None,
+            };
+            let mut out = String::new();
+            let mut w = naga::back::glsl::Writer::new(
+                &mut out,
+                &module,
+                &info,
+                &options,
+                &pipeline,
+                naga::proc::BoundsCheckPolicies::default(),
+            )
+            .map_err(|e| anyhow!("internal: GLSL translation: {e}"))?;
+            w.write()
+                .map_err(|e| anyhow!("internal: GLSL translation: {e}"))?;
+            format!(
+                "// GLSL 4.50 core. No #version line: include this after your shader's own.\n{}",
+                strip_glsl_anchor(&out)?
+            )
+        }
+        Language::Hlsl => {
+            let (module, info) = validate(wgsl)?;
+            let options = naga::back::hlsl::Options::default();
+            let mut out = String::new();
+            let mut w = naga::back::hlsl::Writer::new(&mut out, &options);
+            w.write(&module, &info, None)
+                .map_err(|e| anyhow!("internal: HLSL translation: {e}"))?;
+            format!("// HLSL shader model 5.1 or later.\n{out}")
+        }
+        Language::Msl => {
+            let (module, info) = validate(wgsl)?;
+            let options = naga::back::msl::Options::default();
+            let pipeline = naga::back::msl::PipelineOptions::default();
+            let (out, _) = naga::back::msl::write_string(&module, &info, &options, &pipeline)
+                .map_err(|e| anyhow!("internal: MSL translation: {e}"))?;
+            out
+        }
+        Language::Wgsl => unreachable!(),
+    };
+    Ok(format!("{header}{body}"))
+}
+
+/// The GLSL writer's output without the anchor: no `#version`/`#extension` lines, no `layout`
+/// declarations (the compute size, the anchor's buffer) and no `void main()`.
+fn strip_glsl_anchor(body: &str) -> Result<String> {
+    let mut out = String::new();
+    let mut lines = body.lines();
+    let mut main = false;
+    while let Some(line) = lines.next() {
+        if line.starts_with("#version") || line.starts_with("#extension") || line.starts_with("layout(") {
+            continue;
+        }
+        if line.starts_with("void main(") {
+            main = true;
+            if !line.trim_end().ends_with('}') {
+                for l in lines.by_ref() {
+                    if l.starts_with('}') {
+                        break;
+                    }
+                }
+            }
+            continue;
+        }
+        out.push_str(line);
+        out.push('\n');
+    }
+    if !main {
+        bail!("internal: the GLSL translation has no anchor entry point to remove");
+    }
+    if out.contains("_group_0_binding") || out.contains("fibrefit_anchor") {
+        bail!("internal: the GLSL translation still refers to the anchor");
+    }
+    Ok(out)
+}
