@@ -4,6 +4,7 @@
 pub mod bench;
 pub mod data;
 pub mod eval;
+pub mod export;
 pub mod fit;
 pub mod inspect;
 pub mod map_tiles;
@@ -46,6 +47,8 @@ pub enum Command {
     Synth(synth::SynthArgs),
     /// Render a material on an object (torus, sphere, swatch) as an image and its AOVs.
     Render(render::RenderArgs),
+    /// The fitted model as shader code (WGSL, GLSL, HLSL, MSL) or a glTF preview with a fitted material.
+    Export(export::ExportArgs),
     /// Principal curvature directions of a mesh (seed 004's tangent field) as CSV or glTF.
     Tangents(tangents::TangentsArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
@@ -79,6 +82,7 @@ where
         Command::MergeMaps(args) => map_tiles::run_merge(&args),
         Command::Render(args) => render::run(&args),
         Command::Tangents(args) => tangents::run(&args),
+        Command::Export(args) => export::run(&args),
     }
 }
 

@@ -186,3 +186,39 @@ pub fn write_glb(
     glb.to_writer(out)
         .map_err(|e| anyhow!("cannot write the GLB: {e}"))
 }
+
+/// The glTF material object of a fitted [`FittedMaterial`]: metallic-roughness (metallic 0),
+/// KHR_materials_anisotropy along the TANGENT (the fibre direction) and KHR_materials_ior, with
+/// the fit's error and provenance in `extras.fibrefit`.
+pub fn fitted_material(
+    fitted: &crate::fit::gltf_material::FittedMaterial,
+    model: crate::model::ModelId,
+    provenance: &[String],
+) -> Value {
+    let m = &fitted.material;
+    let c = m.base_color;
+    json!({
+        "name": format!("fibrefit {model}"),
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [c[0], c[1], c[2], 1.0],
+            "metallicFactor": 0.0,
+            "roughnessFactor": m.roughness,
+        },
+        "extensions": {
+            "KHR_materials_anisotropy": {
+                "anisotropyStrength": m.anisotropy_strength,
+                "anisotropyRotation": m.anisotropy_rotation,
+            },
+            "KHR_materials_ior": { "ior": m.ior },
+        },
+        "extras": { "fibrefit": {
+            "model": model.as_str(),
+            "fitted_to": "the fibre model's BRDF (1/sr) over light and view directions uniform in solid angle up to 80 deg, the fibre direction along TANGENT",
+            "directions": fitted.directions,
+            "rms_error_per_sr": fitted.rms_error,
+            "relative_rms_error": fitted.relative_rms_error,
+            "relative_rms_error_without_anisotropy": fitted.isotropic_relative_rms_error,
+            "source": provenance,
+        }},
+    })
+}

@@ -13,6 +13,6 @@ pub mod maps_report;
 pub mod plots;
 pub mod report;
 pub mod result_json;
-pub mod shader;
 pub mod robustness_report;
+pub mod shader;
 pub mod speed_report;

@@ -12,6 +12,7 @@ pub mod all_pixels;
 pub mod config;
 pub mod finish;
 pub mod global;
+pub mod gltf_material;
 pub mod lm;
 pub mod maps;
 pub mod parameters;

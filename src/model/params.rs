@@ -141,6 +141,15 @@ impl RawParams {
 
 /// The parameters of a `fibrefit fit` result (schema `fibrefit-result/1`).
 fn from_result_json(v: &serde_json::Value) -> Result<RawParams> {
+    let schema = v.get("schema").and_then(|s| s.as_str()).unwrap_or_default();
+    if schema != crate::fit::RESULT_SCHEMA {
+        bail!(
+            "result schema `{schema}` is not one this fibrefit ({}) reads: it reads `{}`; \
+             a newer fibrefit wrote this file",
+            env!("CARGO_PKG_VERSION"),
+            crate::fit::RESULT_SCHEMA
+        );
+    }
     let params = v
         .get("parameters")
         .and_then(|p| p.as_object())

@@ -11,6 +11,7 @@
 pub mod curvature;
 pub mod mesh_object;
 pub mod objects;
+pub mod preview_mesh;
 pub mod scene;
 
 use crate::load::texel_maps::TexelMapsIn;

@@ -149,31 +149,81 @@ pub fn rust_basis(model: &dyn ShadingModel, c: &Case) -> Basis {
     }
 }
 
+/// What f32 allows, as a relative error of each value (compared relative to max(|Rust value|,
+/// 1e-4 of the largest Rust value of that quantity over the cases)).
+///
+/// Why these: directions reach the shader as f32, so each carries a rounding of ~6e-8 the Rust
+/// model (f64, from the same f32 values) does not add again. The Phong lobe (r.v)^e has relative
+/// sensitivity e to r.v, so near its peak one ulp of a direction moves it by ~e x 6e-8 (6e-4 at
+/// e = 1e4): no f32 evaluation does better, hence the term in e. Grazing directions divide by
+/// N.l (the BRDF's 1/cos) and resolve angles near 90 deg only to ulp(pi/2) = 1.2e-7, so the
+/// relative error grows as ~1.2e-7 / min(N.l, N.v): 12 % at N.v = 1e-6 (0.00006 deg above the
+/// horizon, where f cos is ~1e-6 of its size), 1e-4 at 1e-3.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Bound {
+    /// The 99th percentile over the cases.
+    pub p99: f64,
+    /// Every case, away from the horizon.
+    pub max: f64,
+    /// Added to `max` for a case as `grazing / min(N.l, N.v)`.
+    pub grazing: f64,
+}
+
+impl Bound {
+    pub fn for_exponent(e: f64) -> Self {
+        Self {
+            p99: 5e-5 + 3e-7 * e,
+            max: 3e-3 + 5e-7 * e,
+            grazing: 2.4e-7,
+        }
+    }
+
+    fn case_tolerance(&self, min_cos: f64) -> f64 {
+        self.max + self.grazing / min_cos.max(1e-300)
+    }
+
+    /// Whether the agreement is within the bound (and the shader gave no non-finite or
+    /// negative value).
+    pub fn holds(&self, a: &Agreement) -> bool {
+        a.p99_relative <= self.p99
+            && a.worst_over_tolerance <= 1.0
+            && a.non_finite == 0
+            && a.negative == 0
+    }
+}
+
 /// How far the shader is from the Rust model over a set of cases.
 #[derive(Clone, Debug, Default)]
 pub struct Agreement {
     pub cases: usize,
-    /// Largest and 99th-percentile relative error of the BRDF and of each basis component, each
-    /// value compared relative to max(|Rust value|, `floor`).
+    /// Largest and 99th-percentile relative error over the cases (each case's worst of its BRDF
+    /// channels and basis components; see [`Bound`] for how values are compared).
     pub max_relative: f64,
     pub p99_relative: f64,
-    /// The floor: 1e-4 of the largest Rust value of that quantity over the cases (values far
-    /// below the peak are compared in absolute terms at that level).
-    pub floor_fraction: f64,
-    /// The worst case: its index, the Rust and the shader value.
+    /// The largest ratio of a case's error to its tolerance under the bound used (<= 1 passes).
+    pub worst_over_tolerance: f64,
+    /// The worst case by that ratio: its index, the Rust and the shader value.
     pub worst: (usize, f64, f64),
-    /// Cases where the shader returned a non-finite or negative value.
+    /// Values the shader returned non-finite or negative, or non-zero below a horizon.
     pub non_finite: usize,
     pub negative: usize,
 }
 
-/// Compare shader `outputs` with the Rust model at `cases`.
+/// The local cosines (N.l, N.v) of a case as the Rust model sees it.
+fn cosines(c: &Case) -> (f64, f64) {
+    let v3 = |a: [f32; 3]| Vec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
+    let n = v3(c.n);
+    (v3(c.l).dot(&n), v3(c.v).dot(&n))
+}
+
+/// Compare shader `outputs` with the Rust model at `cases` under `bound`.
 pub fn compare(
     model: &dyn ShadingModel,
     albedos: &Albedos,
     channels: usize,
     cases: &[Case],
     outputs: &[Output],
+    bound: &Bound,
 ) -> Agreement {
     const FLOOR: f64 = 1e-4;
     // per case: 3 BRDF channels and 4 basis components (Rust, shader)
@@ -198,32 +248,47 @@ pub fn compare(
     }
     let mut a = Agreement {
         cases: cases.len(),
-        floor_fraction: FLOOR,
         ..Default::default()
     };
     let mut errors = Vec::with_capacity(values.len());
-    for (i, row) in values.iter().enumerate() {
+    for (i, (row, c)) in values.iter().zip(cases).enumerate() {
+        let (cl, cv) = cosines(c);
+        let min_cos = cl.min(cv);
         let mut worst: f64 = 0.0;
-        for k in 0..7 {
-            let (r, g) = row[k];
+        let mut worst_pair = (0.0, 0.0);
+        for (k, &(r, g)) in row.iter().enumerate() {
             if !g.is_finite() {
                 a.non_finite += 1;
                 worst = f64::INFINITY;
+                worst_pair = (r, g);
                 continue;
             }
             if g < 0.0 {
                 a.negative += 1;
             }
-            let e = (g - r).abs() / r.abs().max(FLOOR * peak[k]).max(f64::MIN_POSITIVE);
+            let e = if min_cos <= -1e-6 {
+                // below a horizon: exactly zero
+                if g == 0.0 {
+                    0.0
+                } else {
+                    f64::INFINITY
+                }
+            } else {
+                (g - r).abs() / r.abs().max(FLOOR * peak[k]).max(f64::MIN_POSITIVE)
+            };
             if e > worst {
                 worst = e;
+                worst_pair = (r, g);
             }
-            if e > a.max_relative || !a.max_relative.is_finite() {
-                a.max_relative = a.max_relative.max(e);
-                if e >= a.max_relative {
-                    a.worst = (i, r, g);
-                }
-            }
+        }
+        let ratio = if min_cos.abs() < 1e-6 && min_cos <= 0.0 {
+            0.0
+        } else {
+            worst / bound.case_tolerance(min_cos)
+        };
+        if i == 0 || ratio > a.worst_over_tolerance {
+            a.worst_over_tolerance = ratio;
+            a.worst = (i, worst_pair.0, worst_pair.1);
         }
         errors.push(worst);
     }

@@ -335,6 +335,8 @@ struct FibrefitPair {
     v: FibrefitProj,
     cos_lv: f32,
     cos_delta: f32,
+    // 1 + cos_delta without cancellation (l and v opposite in the cross-section plane)
+    opc: f32,
     sigma: f32,
     k2: f32,
     // the lobe window [x, y] in th; z > 0 when there is one
@@ -346,8 +348,10 @@ fn fibrefit_pair(l: vec3<f32>, v: vec3<f32>, lobe_floor: f32) -> FibrefitPair {
     let vp = fibrefit_project(v);
     let cos_lv = dot(l, v);
     let cos_delta = lp.c * vp.c + lp.s * vp.s;
+    // 1 + cos(al - av) = ((lc + vc)^2 + (ls + vs)^2) / 2 for unit projections
+    let opc = 0.5 * ((lp.c + vp.c) * (lp.c + vp.c) + (lp.s + vp.s) * (lp.s + vp.s));
     let k = lp.len * vp.len;
-    let peak = k * (cos_delta + 1.0) - cos_lv;
+    let peak = k * opc - cos_lv;
     let c = (lobe_floor * peak + cos_lv) / k - cos_delta;
     let cc = clamp(c, -1.0, 1.0);
     let half = fibrefit_atan2_right(sqrt(1.0 - cc), sqrt(1.0 + cc));
@@ -356,7 +360,7 @@ fn fibrefit_pair(l: vec3<f32>, v: vec3<f32>, lobe_floor: f32) -> FibrefitPair {
     if (peak > 0.0 && k > 0.0 && c < 1.0) {
         has = 1.0;
     }
-    return FibrefitPair(lp, vp, cos_lv, cos_delta, sigma, 2.0 * k,
+    return FibrefitPair(lp, vp, cos_lv, cos_delta, opc, sigma, 2.0 * k,
         vec3<f32>(0.5 * sigma - half, 0.5 * sigma + half, has));
 }
 
@@ -368,7 +372,10 @@ fn fibrefit_lobe(a: f32, b: f32, sp: FibrefitPair, exponent: f32) -> f32 {
     var acc = 0.0;
     for (var i = 0u; i < FIBREFIT_QUADRATURE_ORDER; i++) {
         let u = 2.0 * half * nodes[i].x + tms;
-        let cc = 0.5 * (sp.cos_delta + cos(u));
+        // (cos_delta + cos u) / 2 as ((1 + cos_delta) - 2 sin^2(u/2)) / 2: no cancellation
+        // when l and v are opposite in the cross-section plane (grazing from both sides)
+        let h = sin(0.5 * u);
+        let cc = 0.5 * (sp.opc - 2.0 * h * h);
         let rv = sp.k2 * cc - sp.cos_lv;
         if (rv > 0.0) {
             acc += nodes[i].y * fibrefit_pow(rv, exponent) * cc;

@@ -163,7 +163,13 @@ impl Gpu {
 
     /// Run `entry` of the harness over `cases`; returns the output buffer and the time from
     /// submission to completion (seconds).
-    fn dispatch(&self, wgsl: &str, entry: &str, cases: &[Case]) -> Result<(Vec<[f32; 4]>, f64)> {
+    fn dispatch(
+        &self,
+        wgsl: &str,
+        entry: &str,
+        cases: &[Case],
+        uniform: Option<&[u8]>,
+    ) -> Result<(Vec<[f32; 4]>, f64)> {
         if cases.is_empty() {
             return Ok((vec![], 0.0));
         }
@@ -189,19 +195,34 @@ impl Gpu {
             usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
             mapped_at_creation: false,
         });
+        let ubuf = uniform.map(|bytes| {
+            self.device
+                .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                    label: Some("parameters"),
+                    contents: bytes,
+                    usage: wgpu::BufferUsages::UNIFORM,
+                })
+        });
+        let mut entries = vec![
+            wgpu::BindGroupEntry {
+                binding: 0,
+                resource: inbuf.as_entire_binding(),
+            },
+            wgpu::BindGroupEntry {
+                binding: 1,
+                resource: outbuf.as_entire_binding(),
+            },
+        ];
+        if let Some(u) = &ubuf {
+            entries.push(wgpu::BindGroupEntry {
+                binding: 2,
+                resource: u.as_entire_binding(),
+            });
+        }
         let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
             label: None,
             layout: &pipeline.get_bind_group_layout(0),
-            entries: &[
-                wgpu::BindGroupEntry {
-                    binding: 0,
-                    resource: inbuf.as_entire_binding(),
-                },
-                wgpu::BindGroupEntry {
-                    binding: 1,
-                    resource: outbuf.as_entire_binding(),
-                },
-            ],
+            entries: &entries,
         });
         let groups = cases.len().div_ceil(64) as u32;
         let (gx, gy) = if groups <= GROUPS_PER_ROW {
@@ -239,7 +260,18 @@ impl Gpu {
     /// `fibrefit_brdf` and `fibrefit_basis` (or the `_at` forms) of an exported WGSL library at
     /// each case.
     pub fn evaluate(&self, wgsl: &str, cases: &[Case]) -> Result<Vec<Output>> {
-        let (out, _) = self.dispatch(wgsl, "fibrefit_check_main", cases)?;
+        self.evaluate_with_uniform(wgsl, cases, None)
+    }
+
+    /// [`Gpu::evaluate`] with `uniform` bound at group 0, binding 2 (a library whose parameters
+    /// come from a `var<uniform>` it declares there).
+    pub fn evaluate_with_uniform(
+        &self,
+        wgsl: &str,
+        cases: &[Case],
+        uniform: Option<&[u8]>,
+    ) -> Result<Vec<Output>> {
+        let (out, _) = self.dispatch(wgsl, "fibrefit_check_main", cases, uniform)?;
         Ok(out
             .chunks_exact(2)
             .map(|c| Output {
@@ -254,9 +286,9 @@ impl Gpu {
     pub fn time_brdf(&self, wgsl: &str, cases: &[Case], repeats: usize) -> Result<f64> {
         let mut times = Vec::new();
         // the first run compiles the pipeline in the driver; not counted
-        self.dispatch(wgsl, "fibrefit_speed_main", cases)?;
+        self.dispatch(wgsl, "fibrefit_speed_main", cases, None)?;
         for _ in 0..repeats.max(1) {
-            times.push(self.dispatch(wgsl, "fibrefit_speed_main", cases)?.1);
+            times.push(self.dispatch(wgsl, "fibrefit_speed_main", cases, None)?.1);
         }
         times.sort_by(f64::total_cmp);
         Ok(times[times.len() / 2])

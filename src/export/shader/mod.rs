@@ -36,7 +36,11 @@ impl std::str::FromStr for Language {
             "glsl" => Language::Glsl,
             "hlsl" => Language::Hlsl,
             "msl" => Language::Msl,
-            _ => return Err(format!("unknown shader language '{s}'; expected one of: wgsl, glsl, hlsl, msl")),
+            _ => {
+                return Err(format!(
+                    "unknown shader language '{s}'; expected one of: wgsl, glsl, hlsl, msl"
+                ))
+            }
         })
     }
 }
@@ -194,6 +198,41 @@ impl Baked {
     }
 }
 
+/// The members of `FibrefitParams` in order, each a vec4 (the struct is nothing but vec4s and
+/// arrays of vec4, so this is also its uniform-buffer layout, 16 bytes per row).
+fn params_rows(p: &ModelParams, baked: &Baked) -> Vec<[f64; 4]> {
+    let a = &p.albedos;
+    let rgb = |c: [f64; 3]| [c[0], c[1], c[2], 0.0];
+    let lobe_floor = (1e-15f64.ln() / p.exponent).exp();
+    let mut rows = vec![
+        rgb(a.diffuse),
+        rgb(a.specular),
+        rgb(a.substrate),
+        rgb(a.fuzz),
+        [p.exponent, p.spacing, p.fresnel_ior, lobe_floor],
+        [p.alpha_x, p.alpha_y, p.fuzz_depth, p.fuzz_asymmetry],
+        [
+            p.topology.height,
+            p.topology.map_scale,
+            max_height(p.spacing),
+            0.0,
+        ],
+    ];
+    rows.extend(baked.heights.iter().map(|&(h, w)| [h, w, 0.0, 0.0]));
+    rows.extend(baked.spread.iter().map(|&(c, s, w)| [c, s, w, 0.0]));
+    rows
+}
+
+/// The bytes of a `FibrefitParams` uniform buffer holding the parameters `wgsl` bakes in
+/// (little-endian f32), for renderers (and tests) that pass them with the `_with` entry points.
+pub fn params_uniform(id: ModelId, p: &ModelParams) -> Result<Vec<u8>> {
+    let baked = Baked::new(id, p)?;
+    Ok(params_rows(p, &baked)
+        .iter()
+        .flat_map(|r| r.iter().flat_map(|&x| (x as f32).to_le_bytes()))
+        .collect())
+}
+
 /// The rung's part of `fibrefit_rung`: the basis at local directions (both above the horizon),
 /// at `height` when `at_height`.
 fn rung_body(id: ModelId) -> &'static str {
@@ -238,8 +277,6 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     s.push_str("//\n");
     s.push_str(HEADER);
     s.push('\n');
-    let a = &p.albedos;
-    let rgb = |c: [f64; 3]| [c[0], c[1], c[2], 0.0];
     writeln!(
         s,
         "// The rung and its discretisation (fixed by this export).\nconst FIBREFIT_MODEL: u32 = {}u; // {id}",
@@ -285,17 +322,11 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     )?;
     s.push_str(PARAMS_STRUCT);
     s.push('\n');
-    let heights: Vec<String> = baked
-        .heights
-        .iter()
-        .map(|&(h, w)| vec4([h, w, 0.0, 0.0]))
-        .collect();
-    let spread: Vec<String> = baked
-        .spread
-        .iter()
-        .map(|&(c, sn, w)| vec4([c, sn, w, 0.0]))
-        .collect();
-    let lobe_floor = (1e-15f64.ln() / p.exponent).exp();
+    let rows = params_rows(p, &baked);
+    let fmt = |r: &[[f64; 4]]| -> Vec<String> { r.iter().map(|v| vec4(*v)).collect() };
+    let (fixed, arrays) = rows.split_at(7);
+    let (heights, spread) = arrays.split_at(baked.heights.len());
+    let f = fmt(fixed);
     writeln!(
         s,
         "// The fitted parameters.
@@ -313,22 +344,17 @@ fn fibrefit_params() -> FibrefitParams {{
     );
 }}
 ",
-        vec4(rgb(a.diffuse)),
-        vec4(rgb(a.specular)),
-        vec4(rgb(a.substrate)),
-        vec4(rgb(a.fuzz)),
-        vec4([p.exponent, p.spacing, p.fresnel_ior, lobe_floor]),
-        vec4([p.alpha_x, p.alpha_y, p.fuzz_depth, p.fuzz_asymmetry]),
-        vec4([
-            p.topology.height,
-            p.topology.map_scale,
-            max_height(p.spacing),
-            0.0
-        ]),
+        f[0],
+        f[1],
+        f[2],
+        f[3],
+        f[4],
+        f[5],
+        f[6],
         heights.len(),
-        heights.join(",\n            "),
+        fmt(heights).join(",\n            "),
         spread.len(),
-        spread.join(",\n            "),
+        fmt(spread).join(",\n            "),
     )?;
     s.push_str(section("common"));
     for name in sections(id)? {
@@ -420,14 +446,23 @@ fn fibrefit_brdf_at(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, heig
 
 /// Parse and validate WGSL with naga.
 pub fn validate(src: &str) -> Result<(naga::Module, naga::valid::ModuleInfo)> {
-    let module = naga::front::wgsl::parse_str(src)
-        .map_err(|e| anyhow!("internal: the shader does not parse: {}", e.emit_to_string(src)))?;
+    let module = naga::front::wgsl::parse_str(src).map_err(|e| {
+        anyhow!(
+            "internal: the shader does not parse: {}",
+            e.emit_to_string(src)
+        )
+    })?;
     let info = naga::valid::Validator::new(
         naga::valid::ValidationFlags::all(),
         naga::valid::Capabilities::empty(),
     )
     .validate(&module)
-    .map_err(|e| anyhow!("internal: the shader does not validate: {}", e.emit_to_string(src)))?;
+    .map_err(|e| {
+        anyhow!(
+            "internal: the shader does not validate: {}",
+            e.emit_to_string(src)
+        )
+    })?;
     Ok((module, info))
 }
 
@@ -518,7 +553,10 @@ fn strip_glsl_anchor(body: &str) -> Result<String> {
     let mut lines = body.lines();
     let mut main = false;
     while let Some(line) = lines.next() {
-        if line.starts_with("#version") || line.starts_with("#extension") || line.starts_with("layout(") {
+        if line.starts_with("#version")
+            || line.starts_with("#extension")
+            || line.starts_with("layout(")
+        {
             continue;
         }
         if line.starts_with("void main(") {
