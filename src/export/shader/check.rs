@@ -1,7 +1,7 @@
 //! The exported shader against the Rust model: the cases (random pairs in random frames, the
 //! extremes, texel heights and azimuth offsets) and the comparison.
 
-use super::gpu::{Case, Output};
+pub use super::gpu::{Case, Output};
 use crate::model::frame::{DirectionPair, Local, Vec3};
 use crate::model::{Albedos, Basis, ShadingModel};
 
