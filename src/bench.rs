@@ -13,6 +13,7 @@ pub mod camera;
 pub mod felt;
 pub mod maps;
 pub mod robustness;
+pub mod shader;
 
 use crate::fit::config::FitConfig;
 use crate::load::samples::{DataKind, Dropped, Origin, Sample, Samples};

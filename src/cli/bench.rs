@@ -49,6 +49,11 @@ pub struct BenchArgs {
     /// wall time, CPU time and peak memory measured): writes OUT/camera_resolution.md and .csv
     #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "1024")]
     pub camera: Option<usize>,
+    /// Instead: the exported shader's cost per rung (evaluations per second on this machine's
+    /// GPU driver against the Rust model on the CPU, SPIR-V instruction counts): writes
+    /// OUT/shader_cost.md and .csv
+    #[arg(long)]
+    pub shader: bool,
     /// Only these cases of the robustness study (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
@@ -128,6 +133,40 @@ pub fn run(args: &BenchArgs) -> Result<()> {
                 );
             }
             eprintln!("wrote {}", args.out.join("camera_resolution.md").display());
+        }
+        return Ok(());
+    }
+    if args.shader {
+        let t = Instant::now();
+        let bar = crate::progress::bar(
+            crate::bench::shader::RUNGS.len() as u64,
+            "shader",
+            args.quiet,
+        );
+        let (pairs, min_pairs, repeats) = if args.quick {
+            (4096, 256, 3)
+        } else {
+            (262_144, 2048, 5)
+        };
+        let run = crate::bench::shader::run(pairs, min_pairs, repeats, &bar)?;
+        bar.finish_and_clear();
+        let command = if args.quick {
+            "fibrefit bench --shader --quick"
+        } else {
+            "fibrefit bench --shader"
+        };
+        crate::export::shader_report::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
+        if !args.quiet {
+            for r in &run.rows {
+                eprintln!(
+                    "{}: shader {:.3e} evals/s, Rust {:.3e} (all threads): ratio {:.2}",
+                    r.rung,
+                    r.gpu_evals_per_second,
+                    r.cpu_all_threads_evals_per_second,
+                    r.ratio_gpu_to_cpu
+                );
+            }
+            eprintln!("wrote {}", args.out.join("shader_cost.md").display());
         }
         return Ok(());
     }

@@ -15,4 +15,5 @@ pub mod report;
 pub mod result_json;
 pub mod robustness_report;
 pub mod shader;
+pub mod shader_report;
 pub mod speed_report;

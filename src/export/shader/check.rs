@@ -69,7 +69,8 @@ fn extreme_locals() -> Vec<[f64; 3]> {
 
 /// `random` random pairs (uniform over the upper hemisphere, random frames, a third of them at
 /// a random texel height in [0, `max_height`] and azimuth offset) and every pair of the extremes
-/// (with their mirrors and their T -> -T twins), deterministic from `seed`.
+/// (with their mirrors and their T -> -T twins; some at H_max, some flat), deterministic from
+/// `seed`.
 pub fn cases(random: usize, seed: u64, max_height: f64) -> Vec<Case> {
     let mut rng = Rng(seed.wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1);
     let mut out = Vec::with_capacity(random + 600);
@@ -104,7 +105,12 @@ pub fn cases(random: usize, seed: u64, max_height: f64) -> Vec<Case> {
         for v in ext.iter().chain(std::iter::once(&mirror)) {
             for flip in [false, true] {
                 let t = if flip { -x } else { x };
-                let at = (k % 2 == 1).then_some((max_height as f32, 0.0));
+                // both elevation limits of the texel forms: H_max and flat
+                let at = match k % 4 {
+                    1 => Some((max_height as f32, 0.0)),
+                    3 => Some((0.0, 0.0)),
+                    _ => None,
+                };
                 out.push(Case {
                     l: f32s(&world(*l, &z, &x)),
                     v: f32s(&world(*v, &z, &x)),

@@ -466,6 +466,34 @@ pub fn validate(src: &str) -> Result<(naga::Module, naga::valid::ModuleInfo)> {
     Ok((module, info))
 }
 
+/// Instructions in the SPIR-V naga makes of the library (all its functions, called from one
+/// entry point whose few instructions are included): the static size of the shader.
+pub fn spirv_instructions(wgsl: &str) -> Result<usize> {
+    let (module, info) = validate(&format!("{wgsl}{ANCHOR}"))?;
+    let words = naga::back::spv::write_vec(
+        &module,
+        &info,
+        &naga::back::spv::Options::default(),
+        Some(&naga::back::spv::PipelineOptions {
+            shader_stage: naga::ShaderStage::Compute,
+            entry_point: "fibrefit_anchor_main".into(),
+        }),
+    )
+    .map_err(|e| anyhow!("internal: SPIR-V translation: {e}"))?;
+    // header of 5 words, then instructions whose first word holds their length in its high half
+    let mut at = 5;
+    let mut count = 0;
+    while at < words.len() {
+        let len = (words[at] >> 16) as usize;
+        if len == 0 {
+            bail!("internal: malformed SPIR-V");
+        }
+        at += len;
+        count += 1;
+    }
+    Ok(count)
+}
+
 /// A compute entry point that calls every public function, so backends that write only what an
 /// entry point reaches (GLSL) write them all; removed from the translation afterwards.
 const ANCHOR: &str = "
