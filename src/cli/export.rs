@@ -268,8 +268,8 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         if let (Some((_, fitted)), Some(path)) = (&glb, &args.gltf) {
             let m = &fitted.material;
             eprintln!(
-                "wrote {} ({}: base colour {:.3?}, roughness {:.3}, anisotropy strength {:.2} rotation {:.0} deg, ior {:.2}; \
-                 relative RMS error {:.1} % over {} direction pairs, {:.1} % without anisotropy)",
+                "wrote {} ({}: base colour {:.3?}, roughness {:.3}, anisotropy strength {:.2} rotation {:.0} deg, ior {:.2}, {}; \
+                 relative RMS error of f cos {:.1} % over {} direction pairs; without anisotropy {:.1} %, with sheen {:.1} %, without {:.1} %)",
                 path.display(),
                 args.object,
                 m.base_color,
@@ -277,9 +277,15 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 m.anisotropy_strength,
                 m.anisotropy_rotation.to_degrees(),
                 m.ior,
+                m.sheen.map_or("no sheen".to_string(), |s| format!(
+                    "sheen colour {:.2} roughness {:.2}",
+                    s.colour, s.roughness
+                )),
                 100.0 * fitted.relative_rms_error,
                 fitted.directions,
-                100.0 * fitted.isotropic_relative_rms_error
+                100.0 * fitted.isotropic_relative_rms_error,
+                100.0 * fitted.with_sheen_relative_rms_error,
+                100.0 * fitted.without_sheen_relative_rms_error
             );
         }
     }

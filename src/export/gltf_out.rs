@@ -188,8 +188,9 @@ pub fn write_glb(
 }
 
 /// The glTF material object of a fitted [`FittedMaterial`]: metallic-roughness (metallic 0),
-/// KHR_materials_anisotropy along the TANGENT (the fibre direction) and KHR_materials_ior, with
-/// the fit's error and provenance in `extras.fibrefit`.
+/// KHR_materials_anisotropy along the TANGENT (the fibre direction), KHR_materials_ior and, when
+/// the fit chose one, KHR_materials_sheen, with the fit's errors and provenance in
+/// `extras.fibrefit`.
 pub fn fitted_material(
     fitted: &crate::fit::gltf_material::FittedMaterial,
     model: crate::model::ModelId,
@@ -197,7 +198,7 @@ pub fn fitted_material(
 ) -> Value {
     let m = &fitted.material;
     let c = m.base_color;
-    json!({
+    let mut material = json!({
         "name": format!("fibrefit {model}"),
         "pbrMetallicRoughness": {
             "baseColorFactor": [c[0], c[1], c[2], 1.0],
@@ -218,7 +219,20 @@ pub fn fitted_material(
             "rms_error_per_sr": fitted.rms_error,
             "relative_rms_error": fitted.relative_rms_error,
             "relative_rms_error_without_anisotropy": fitted.isotropic_relative_rms_error,
+            "relative_rms_error_without_sheen": fitted.without_sheen_relative_rms_error,
+            "relative_rms_error_with_sheen": fitted.with_sheen_relative_rms_error,
+            "sheen_rule": format!(
+                "KHR_materials_sheen is included only when it lowers the relative error by {:.0} % of itself",
+                100.0 * crate::fit::gltf_material::SHEEN_GAIN
+            ),
             "source": provenance,
         }},
-    })
+    });
+    if let Some(sh) = m.sheen {
+        material["extensions"]["KHR_materials_sheen"] = json!({
+            "sheenColorFactor": [sh.colour, sh.colour, sh.colour],
+            "sheenRoughnessFactor": sh.roughness,
+        });
+    }
+    material
 }

@@ -1,6 +1,7 @@
 //! A glTF 2.0 material fitted to a fitted fibre model, for engines without custom shaders: the
 //! core metallic-roughness BRDF (dielectric, metallic 0) with KHR_materials_anisotropy and
-//! KHR_materials_ior, fitted to the model's BRDF over the Ward fallback's kind of direction set.
+//! KHR_materials_ior, and KHR_materials_sheen when it measurably helps ([`SHEEN_GAIN`]), fitted
+//! to the model over the Ward fallback's kind of direction set.
 //!
 //! The BRDF is the one the glTF specification (Appendix B and the extensions' texts) defines:
 //!
@@ -46,6 +47,88 @@ pub struct PbrMaterial {
     pub anisotropy_rotation: f64,
     /// KHR_materials_ior.
     pub ior: f64,
+    /// KHR_materials_sheen, when it is part of the material.
+    pub sheen: Option<Sheen>,
+}
+
+/// KHR_materials_sheen: a grey sheenColorFactor and sheenRoughnessFactor.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sheen {
+    pub colour: f64,
+    pub roughness: f64,
+}
+
+/// The sheen lobe of KHR_materials_sheen per unit sheen colour at a local pair: the "Charlie"
+/// distribution (Estevez and Kulla) and its visibility with the curve-fitted lambda, as the
+/// extension's text and the Khronos sample viewer write them.
+pub fn sheen_lobe(roughness: f64, p: &DirectionPair) -> f64 {
+    let (nl, nv) = (p.l.n, p.v.n);
+    if nl <= 0.0 || nv <= 0.0 {
+        return 0.0;
+    }
+    let h = [p.l.t + p.v.t, p.l.b + p.v.b, p.l.n + p.v.n];
+    let hn = (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt();
+    let nh = if hn > 0.0 { h[2] / hn } else { 1.0 };
+    let alpha = roughness.max(1e-6).powi(2);
+    let inv = 1.0 / alpha;
+    let d = (2.0 + inv) * (1.0 - nh * nh).max(0.0).powf(0.5 * inv) / (2.0 * PI);
+    let r = (1.0 - alpha) * (1.0 - alpha);
+    let mix = |a: f64, b: f64| a + (b - a) * r;
+    let curve = |x: f64| {
+        mix(21.5473, 25.3245) / (1.0 + mix(3.82987, 3.32435) * x.powf(mix(0.19823, 0.16801)))
+            + mix(-1.97760, -1.27393) * x
+            + mix(-4.32054, -4.85967)
+    };
+    let lambda = |c: f64| {
+        if c < 0.5 {
+            curve(c).exp()
+        } else {
+            (2.0 * curve(0.5) - curve(1.0 - c)).exp()
+        }
+    };
+    let v = (1.0 / ((1.0 + lambda(nv) + lambda(nl)) * 4.0 * nv * nl)).clamp(0.0, 1.0);
+    d * v
+}
+
+/// The sheen lobe's directional albedo E(mu) = int sheen_lobe cos dw over the light directions,
+/// tabulated at mu = 0, 1/32, .., 1 (midpoint rule, 32 polar x 32 azimuths over the half the
+/// lobe's mirror symmetry leaves), for the extension's albedo scaling
+/// of the base: min(1 - c E(N.v), 1 - c E(N.l)).
+fn sheen_albedo_table(roughness: f64) -> [f64; 33] {
+    let mut out = [0.0; 33];
+    let (nt, np) = (32, 32);
+    for (k, o) in out.iter_mut().enumerate() {
+        let mu = (k as f64 / 32.0).max(1e-4);
+        let v = Local {
+            t: (1.0 - mu * mu).sqrt(),
+            b: 0.0,
+            n: mu,
+        };
+        let mut sum = 0.0;
+        for i in 0..nt {
+            let th = (i as f64 + 0.5) / nt as f64 * 0.5 * PI;
+            let (st, ct) = th.sin_cos();
+            for j in 0..np {
+                let ph = (j as f64 + 0.5) / np as f64 * PI;
+                let l = Local {
+                    t: st * ph.cos(),
+                    b: st * ph.sin(),
+                    n: ct,
+                };
+                sum += sheen_lobe(roughness, &DirectionPair { l, v }) * ct * st;
+            }
+        }
+        // the other half of the azimuths mirrors this one
+        *o = 2.0 * sum * (0.5 * PI / nt as f64) * (PI / np as f64);
+    }
+    out
+}
+
+fn table_at(table: &[f64; 33], mu: f64) -> f64 {
+    let x = mu.clamp(0.0, 1.0) * 32.0;
+    let i = (x as usize).min(31);
+    let f = x - i as f64;
+    table[i] * (1.0 - f) + table[i + 1] * f
 }
 
 /// The specular part F D V and the diffuse weight (1 - F)/pi of the glTF BRDF at a local pair
@@ -102,8 +185,12 @@ pub struct FittedMaterial {
     /// irradiance, 1/sr); and relative to the RMS of the model's f N.l.
     pub rms_error: f64,
     pub relative_rms_error: f64,
-    /// The same fit without anisotropy (strength 0): what the extension gains.
+    /// The same fit without anisotropy (strength 0, no sheen): what the extension gains.
     pub isotropic_relative_rms_error: f64,
+    /// The anisotropic fit without and with a sheen layer (the sheen goes in only when it
+    /// gains [`SHEEN_GAIN`]).
+    pub without_sheen_relative_rms_error: f64,
+    pub with_sheen_relative_rms_error: f64,
     pub directions: usize,
 }
 
@@ -163,19 +250,41 @@ impl Targets {
         }
     }
 
-    /// Sum of squared residuals and the best base colour for (roughness, strength, ior, rotation).
-    fn cost(&self, roughness: f64, strength: f64, ior: f64, rotation: f64) -> (f64, [f64; 3]) {
+    /// Sum of squared residuals and the best base colour (per channel, least squares, clamped
+    /// to [0, 1]) for a shape.
+    fn cost(&self, shape: &Shape) -> (f64, [f64; 3]) {
+        let table = shape.sheen.map(|sh| sheen_albedo_table(sh.roughness));
+        // per pair: the part that does not scale with the base colour, and the one that does
         let terms: Vec<(f64, f64)> = self
             .pairs
             .iter()
-            .map(|p| pbr_terms(roughness, strength, rotation, ior, p))
+            .map(|p| {
+                let (spec, diff) = pbr_terms(
+                    shape.roughness,
+                    shape.strength,
+                    shape.rotation,
+                    shape.ior,
+                    p,
+                );
+                match (shape.sheen, &table) {
+                    (Some(sh), Some(e)) => {
+                        let scale = (1.0 - sh.colour * table_at(e, p.v.n))
+                            .min(1.0 - sh.colour * table_at(e, p.l.n));
+                        (
+                            sh.colour * sheen_lobe(sh.roughness, p) + scale * spec,
+                            scale * diff,
+                        )
+                    }
+                    _ => (spec, diff),
+                }
+            })
             .collect();
         let mut base = [0.0; 3];
         let mut sse = 0.0;
         for c in 0..self.channels {
             let (mut num, mut den) = (0.0, 0.0);
-            for (((spec, diff), y), w) in terms.iter().zip(&self.values).zip(&self.weights) {
-                num += w * w * diff * (y[c] - spec);
+            for (((fixed, diff), y), w) in terms.iter().zip(&self.values).zip(&self.weights) {
+                num += w * w * diff * (y[c] - fixed);
                 den += w * w * diff * diff;
             }
             let b = if den > 0.0 {
@@ -184,8 +293,8 @@ impl Targets {
                 0.0
             };
             base[c] = b;
-            for (((spec, diff), y), w) in terms.iter().zip(&self.values).zip(&self.weights) {
-                sse += (w * (y[c] - diff * b - spec)).powi(2);
+            for (((fixed, diff), y), w) in terms.iter().zip(&self.values).zip(&self.weights) {
+                sse += (w * (y[c] - diff * b - fixed)).powi(2);
             }
         }
         for c in self.channels..3 {
@@ -195,32 +304,68 @@ impl Targets {
     }
 }
 
-/// Nelder–Mead's objective: the cost at clamped (roughness, strength, ior), plus a penalty
-/// outside the ranges so the simplex comes back.
+/// Everything of a material but its base colour.
+#[derive(Clone, Copy, Debug)]
+struct Shape {
+    roughness: f64,
+    strength: f64,
+    ior: f64,
+    rotation: f64,
+    sheen: Option<Sheen>,
+}
+
+/// Which parameters a search varies.
+#[derive(Clone, Copy, Debug, PartialEq)]
+enum Mode {
+    /// Strength 0.
+    Isotropic,
+    Anisotropic,
+    /// Anisotropic with a sheen layer.
+    Sheen,
+}
+
+/// Nelder–Mead's objective: the cost at the clamped parameters, with a penalty outside the
+/// ranges so the simplex comes back. x = (roughness, strength, ior[, sheen colour, sheen
+/// roughness]).
 struct Objective<'a> {
     targets: &'a Targets,
     rotation: f64,
-    /// Strength fixed at 0 (the isotropic comparison).
-    isotropic: bool,
+    mode: Mode,
 }
 
 impl Objective<'_> {
-    fn clamp(&self, x: &DVector<f64>) -> (f64, f64, f64, f64) {
-        let r = x[0].clamp(ROUGHNESS_RANGE.0, ROUGHNESS_RANGE.1);
-        let s = if self.isotropic {
-            0.0
+    fn shape(&self, x: &DVector<f64>) -> (Shape, f64) {
+        let clamp = |v: f64, lo: f64, hi: f64| (v.clamp(lo, hi), (v - v.clamp(lo, hi)).abs());
+        let (r, o1) = clamp(x[0], ROUGHNESS_RANGE.0, ROUGHNESS_RANGE.1);
+        let (s, o2) = if self.mode == Mode::Isotropic {
+            (0.0, 0.0)
         } else {
-            x[1].clamp(0.0, 1.0)
+            clamp(x[1], 0.0, 1.0)
         };
-        let i = x[2].clamp(IOR_RANGE.0, IOR_RANGE.1);
-        let outside = (x[0] - r).abs()
-            + if self.isotropic {
-                0.0
-            } else {
-                (x[1] - s).abs()
-            }
-            + (x[2] - i).abs();
-        (r, s, i, outside)
+        let (i, o3) = clamp(x[2], IOR_RANGE.0, IOR_RANGE.1);
+        let (sheen, o4) = if self.mode == Mode::Sheen {
+            let (c, a) = clamp(x[3], 0.0, 1.0);
+            let (sr, b) = clamp(x[4], 0.05, 1.0);
+            (
+                Some(Sheen {
+                    colour: c,
+                    roughness: sr,
+                }),
+                a + b,
+            )
+        } else {
+            (None, 0.0)
+        };
+        (
+            Shape {
+                roughness: r,
+                strength: s,
+                ior: i,
+                rotation: self.rotation,
+                sheen,
+            },
+            o1 + o2 + o3 + o4,
+        )
     }
 }
 
@@ -228,58 +373,40 @@ impl CostFunction for Objective<'_> {
     type Param = DVector<f64>;
     type Output = f64;
     fn cost(&self, x: &Self::Param) -> Result<f64, ArgminError> {
-        let (r, s, i, outside) = self.clamp(x);
-        let (sse, _) = self.targets.cost(r, s, i, self.rotation);
+        let (shape, outside) = self.shape(x);
+        let (sse, _) = self.targets.cost(&shape);
         Ok(sse * (1.0 + outside))
     }
 }
 
-/// The best (roughness, strength, ior, rotation) and its cost, with strength 0 if `isotropic`.
-fn search(t: &Targets, isotropic: bool) -> Result<(f64, f64, f64, f64, f64)> {
-    let mut best = (f64::INFINITY, 0.5, 0.0, 1.5, 0.0);
-    let rotations: &[f64] = if isotropic { &[0.0] } else { &[0.0, 0.5 * PI] };
-    let strengths: Vec<f64> = if isotropic {
-        vec![0.0]
-    } else {
-        (0..=10).map(|k| k as f64 / 10.0).collect()
-    };
-    for &rot in rotations {
-        for k in 0..24 {
-            // log-spaced roughness
-            let r =
-                ROUGHNESS_RANGE.0 * (ROUGHNESS_RANGE.1 / ROUGHNESS_RANGE.0).powf(k as f64 / 23.0);
-            for &s in &strengths {
-                for ior in [1.2, 1.5, 2.0, 2.6, 4.0, 7.0] {
-                    let (c, _) = t.cost(r, s, ior, rot);
-                    if c < best.0 {
-                        best = (c, r, s, ior, rot);
-                    }
-                }
-            }
-        }
+/// Polish `start` with Nelder–Mead; the better of the two.
+fn polish(t: &Targets, mode: Mode, start: (f64, Shape)) -> Result<(f64, Shape)> {
+    let s0 = start.1;
+    let mut x0 = vec![s0.roughness, s0.strength, s0.ior];
+    let mut steps = vec![0.1 * s0.roughness.max(0.05), 0.1, 0.2];
+    let mut highs = vec![ROUGHNESS_RANGE.1, 1.0, IOR_RANGE.1];
+    if let Some(sh) = s0.sheen {
+        x0.extend([sh.colour, sh.roughness]);
+        steps.extend([0.1, 0.1]);
+        highs.extend([1.0, 1.0]);
     }
-    let (_, r0, s0, i0, rot) = best;
-    let objective = Objective {
-        targets: t,
-        rotation: rot,
-        isotropic,
-    };
-    let start = DVector::from_vec(vec![r0, s0, i0]);
-    let mut simplex = vec![start.clone()];
-    for (k, step) in [0.1 * r0.max(0.05), 0.1, 0.2].iter().enumerate() {
-        let mut p = start.clone();
-        p[k] += if p[k] + step > [ROUGHNESS_RANGE.1, 1.0, IOR_RANGE.1][k] {
-            -step
-        } else {
-            *step
-        };
+    let start_x = DVector::from_vec(x0);
+    let mut simplex = vec![start_x.clone()];
+    for (k, step) in steps.iter().enumerate() {
+        let mut p = start_x.clone();
+        p[k] += if p[k] + step > highs[k] { -step } else { *step };
         simplex.push(p);
     }
+    let objective = Objective {
+        targets: t,
+        rotation: s0.rotation,
+        mode,
+    };
     let solver = NelderMead::new(simplex)
         .with_sd_tolerance(1e-10)
         .map_err(|e| anyhow!("glTF material fit: {e}"))?;
     let res = Executor::new(objective, solver)
-        .configure(|c| c.max_iters(300))
+        .configure(|c| c.max_iters(if mode == Mode::Sheen { 400 } else { 300 }))
         .run()
         .map_err(|e| anyhow!("glTF material fit: {e}"))?;
     let x = res
@@ -289,13 +416,82 @@ fn search(t: &Targets, isotropic: bool) -> Result<(f64, f64, f64, f64, f64)> {
         .ok_or_else(|| anyhow!("glTF material fit: no solution"))?;
     let objective = Objective {
         targets: t,
-        rotation: rot,
-        isotropic,
+        rotation: s0.rotation,
+        mode,
     };
-    let (r, s, i, _) = objective.clamp(&x);
-    let (c, _) = t.cost(r, s, i, rot);
-    Ok(if c <= best.0 { (c, r, s, i, rot) } else { best })
+    let (shape, _) = objective.shape(&x);
+    let (c, _) = t.cost(&shape);
+    Ok(if c <= start.0 { (c, shape) } else { start })
 }
+
+/// The best shape and its cost: a grid (roughness, strength, ior, rotation 0 and 90 deg), then
+/// Nelder–Mead; with `Mode::Sheen`, from the anisotropic optimum `base` over a grid of sheen
+/// colours and roughnesses.
+fn search(t: &Targets, mode: Mode, base: Option<Shape>) -> Result<(f64, Shape)> {
+    let mut best = (
+        f64::INFINITY,
+        Shape {
+            roughness: 0.5,
+            strength: 0.0,
+            ior: 1.5,
+            rotation: 0.0,
+            sheen: None,
+        },
+    );
+    if let (Mode::Sheen, Some(b)) = (mode, base) {
+        for colour in [0.1, 0.3, 0.6, 1.0] {
+            for roughness in [0.2, 0.4, 0.6, 0.8, 1.0] {
+                let shape = Shape {
+                    sheen: Some(Sheen { colour, roughness }),
+                    ..b
+                };
+                let (c, _) = t.cost(&shape);
+                if c < best.0 {
+                    best = (c, shape);
+                }
+            }
+        }
+        return polish(t, mode, best);
+    }
+    let rotations: &[f64] = if mode == Mode::Isotropic {
+        &[0.0]
+    } else {
+        &[0.0, 0.5 * PI]
+    };
+    let strengths: Vec<f64> = if mode == Mode::Isotropic {
+        vec![0.0]
+    } else {
+        (0..=10).map(|k| k as f64 / 10.0).collect()
+    };
+    for &rotation in rotations {
+        for k in 0..24 {
+            // log-spaced roughness
+            let roughness =
+                ROUGHNESS_RANGE.0 * (ROUGHNESS_RANGE.1 / ROUGHNESS_RANGE.0).powf(k as f64 / 23.0);
+            for &strength in &strengths {
+                for ior in [1.2, 1.5, 2.0, 2.6, 4.0, 7.0] {
+                    let shape = Shape {
+                        roughness,
+                        strength,
+                        ior,
+                        rotation,
+                        sheen: None,
+                    };
+                    let (c, _) = t.cost(&shape);
+                    if c < best.0 {
+                        best = (c, shape);
+                    }
+                }
+            }
+        }
+    }
+    polish(t, mode, best)
+}
+
+/// A sheen layer goes into the material only when it lowers the relative RMS error by at least
+/// this fraction of itself (it measurably helps), since engines differ most in how they render
+/// it (the albedo-scaling tables).
+pub const SHEEN_GAIN: f64 = 0.1;
 
 /// Fit a glTF material to `model` with `albedos` (the fibre frame's T is the mesh's TANGENT).
 pub fn fit(model: &dyn ShadingModel, albedos: &Albedos, seed: u64) -> Result<FittedMaterial> {
@@ -309,21 +505,31 @@ pub fn fit(model: &dyn ShadingModel, albedos: &Albedos, seed: u64) -> Result<Fit
         .sum::<f64>()
         / n;
     let scale = mean_sq.sqrt().max(f64::MIN_POSITIVE);
-    let (c, r, s, i, rot) = search(&t, false)?;
-    let (ci, ..) = search(&t, true)?;
-    let (_, base) = t.cost(r, s, i, rot);
-    let rms = (c / n).sqrt();
+    let relative = |c: f64| (c / n).sqrt() / scale;
+    let (c, shape) = search(&t, Mode::Anisotropic, None)?;
+    let (ci, _) = search(&t, Mode::Isotropic, None)?;
+    let (cs, sheen_shape) = search(&t, Mode::Sheen, Some(shape))?;
+    let with_sheen = relative(cs) <= (1.0 - SHEEN_GAIN) * relative(c);
+    let (cost, chosen) = if with_sheen {
+        (cs, sheen_shape)
+    } else {
+        (c, shape)
+    };
+    let (_, base) = t.cost(&chosen);
     Ok(FittedMaterial {
         material: PbrMaterial {
             base_color: base,
-            roughness: r,
-            anisotropy_strength: s,
-            anisotropy_rotation: rot,
-            ior: i,
+            roughness: chosen.roughness,
+            anisotropy_strength: chosen.strength,
+            anisotropy_rotation: chosen.rotation,
+            ior: chosen.ior,
+            sheen: chosen.sheen,
         },
-        rms_error: rms,
-        relative_rms_error: rms / scale,
-        isotropic_relative_rms_error: (ci / n).sqrt() / scale,
+        rms_error: (cost / n).sqrt(),
+        relative_rms_error: relative(cost),
+        isotropic_relative_rms_error: relative(ci),
+        without_sheen_relative_rms_error: relative(c),
+        with_sheen_relative_rms_error: relative(cs),
         directions: t.pairs.len(),
     })
 }

@@ -184,7 +184,8 @@ impl Bound {
         }
     }
 
-    fn case_tolerance(&self, min_cos: f64) -> f64 {
+    /// The tolerance of one case whose smaller cosine to the normal is `min_cos`.
+    pub fn case_tolerance(&self, min_cos: f64) -> f64 {
         self.max + self.grazing / min_cos.max(1e-300)
     }
 
@@ -238,11 +239,11 @@ pub fn compare(
         let b = rust_basis(model, c);
         let rb = [b.diffuse, b.specular, b.substrate, b.fuzz];
         let mut row = [(0.0, 0.0); 7];
-        for ch in 0..3 {
-            row[ch] = (b.brdf(albedos, ch.min(channels - 1)), o.brdf[ch] as f64);
+        for (ch, (slot, g)) in row[..3].iter_mut().zip(o.brdf).enumerate() {
+            *slot = (b.brdf(albedos, ch.min(channels - 1)), g as f64);
         }
-        for k in 0..4 {
-            row[3 + k] = (rb[k], o.basis[k] as f64);
+        for ((slot, want), got) in row[3..].iter_mut().zip(rb).zip(o.basis) {
+            *slot = (want, got as f64);
         }
         values.push(row);
     }
