@@ -20,6 +20,24 @@ pub struct FramedMesh {
     pub undefined: Vec<bool>,
 }
 
+impl FramedMesh {
+    /// The frames with bitangents N x T.
+    fn new(mesh: Mesh, normals: Vec<Vec3>, tangents: Vec<Vec3>, undefined: Vec<bool>) -> Self {
+        let bitangents = normals
+            .iter()
+            .zip(&tangents)
+            .map(|(n, t)| n.cross(t))
+            .collect();
+        Self {
+            mesh,
+            normals,
+            tangents,
+            bitangents,
+            undefined,
+        }
+    }
+}
+
 /// A (u, v) grid of `nu` x `nv` quads over a parametric surface `at(u, v)` -> (position, normal,
 /// tangent), u, v in [0, 1]; seams keep separate vertices (texture coordinates are continuous).
 fn grid(nu: usize, nv: usize, at: impl Fn(f64, f64) -> (Vec3, Vec3, Vec3)) -> Result<FramedMesh> {
@@ -45,19 +63,8 @@ fn grid(nu: usize, nv: usize, at: impl Fn(f64, f64) -> (Vec3, Vec3, Vec3)) -> Re
     }
     let mut mesh = Mesh::new(positions, triangles)?;
     mesh.uvs = Some(uvs);
-    let bitangents = normals
-        .iter()
-        .zip(&tangents)
-        .map(|(n, t): (&Vec3, &Vec3)| n.cross(t))
-        .collect();
     let undefined = vec![false; normals.len()];
-    Ok(FramedMesh {
-        mesh,
-        normals,
-        tangents,
-        bitangents,
-        undefined,
-    })
+    Ok(FramedMesh::new(mesh, normals, tangents, undefined))
 }
 
 /// The swatch [-1, 1]^2 at z = 0, normal +z, fibres at azimuth `psi_deg` from x.
@@ -127,17 +134,6 @@ pub fn curvature_aligned(mesh: Mesh, psi_deg: f64) -> Result<FramedMesh> {
             }
         }
     }
-    let bitangents = normals
-        .iter()
-        .zip(&tangents)
-        .map(|(n, t)| n.cross(t))
-        .collect();
     let undefined = curv.iter().map(|c| c.umbilic).collect();
-    Ok(FramedMesh {
-        mesh,
-        normals,
-        tangents,
-        bitangents,
-        undefined,
-    })
+    Ok(FramedMesh::new(mesh, normals, tangents, undefined))
 }

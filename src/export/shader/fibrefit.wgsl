@@ -188,6 +188,21 @@ fn fibrefit_project(w: vec3<f32>) -> FibrefitProj {
     return FibrefitProj(fibrefit_atan2_right(w.y, w.z), w.y / len, w.z / len, len, w.y / w.z, len / w.z);
 }
 
+// Three intervals sorted by their start.
+fn fibrefit_sort3(v: array<vec2<f32>, 3>) -> array<vec2<f32>, 3> {
+    var x = v;
+    for (var i = 0u; i < 2u; i++) {
+        for (var j = 0u; j < 2u - i; j++) {
+            if (x[j + 1u].x < x[j].x) {
+                let y = x[j];
+                x[j] = x[j + 1u];
+                x[j + 1u] = y;
+            }
+        }
+    }
+    return x;
+}
+
 // The gaps, in s = sin(th - alpha), that every occluder of the infinite pattern leaves on one
 // fibre's front arc seen along a direction (sin sa, cos ca of its angle); `other_row` is the
 // other row's axis height above this fibre's (+H even, -H odd). Up to four gaps.
@@ -233,15 +248,7 @@ fn fibrefit_gaps(sa: f32, ca: f32, step: f32, other_row: f32) -> FibrefitGaps {
         }
     }
     // sort by start, then the complement of the union in (-1, 1)
-    for (var i = 0u; i < 2u; i++) {
-        for (var j = 0u; j < 2u - i; j++) {
-            if (sh[j + 1u].x < sh[j].x) {
-                let x = sh[j];
-                sh[j] = sh[j + 1u];
-                sh[j + 1u] = x;
-            }
-        }
-    }
+    sh = fibrefit_sort3(sh);
     var out: FibrefitGaps;
     out.n = 0u;
     var cursor = -1.0;
@@ -310,15 +317,7 @@ fn fibrefit_substrate(l: FibrefitProj, v: FibrefitProj, step: f32, rise: f32) ->
         let r = fibrefit_wrap(x[k].x - origin, p, inv_p);
         x[k] = vec2<f32>(r, min(r + x[k].y, p));
     }
-    for (var i = 0u; i < 2u; i++) {
-        for (var j = 0u; j < 2u - i; j++) {
-            if (x[j + 1u].x < x[j].x) {
-                let y = x[j];
-                x[j] = x[j + 1u];
-                x[j + 1u] = y;
-            }
-        }
-    }
+    x = fibrefit_sort3(x);
     var cursor = width;
     var open = 0.0;
     for (var k = 0u; k < 3u; k++) {

@@ -30,16 +30,25 @@ const HARNESS: &str = "
 @group(0) @binding(0) var<storage, read> fibrefit_check_in: array<vec4<f32>>;
 @group(0) @binding(1) var<storage, read_write> fibrefit_check_out: array<vec4<f32>>;
 
+// case i's four vec4 (l + height, v + azimuth offset, n + texel flag, t); false past the end
+fn fibrefit_check_case(id: vec3<u32>) -> bool {
+    return id.x + id.y * 4194240u < arrayLength(&fibrefit_check_out) / 2u;
+}
+
+fn fibrefit_check_input(id: vec3<u32>, k: u32) -> vec4<f32> {
+    return fibrefit_check_in[4u * (id.x + id.y * 4194240u) + k];
+}
+
 @compute @workgroup_size(64)
 fn fibrefit_check_main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x + id.y * 4194240u;
-    if (i >= arrayLength(&fibrefit_check_out) / 2u) {
+    if (!fibrefit_check_case(id)) {
         return;
     }
-    let a = fibrefit_check_in[4u * i];
-    let b = fibrefit_check_in[4u * i + 1u];
-    let c = fibrefit_check_in[4u * i + 2u];
-    let d = fibrefit_check_in[4u * i + 3u];
+    let i = id.x + id.y * 4194240u;
+    let a = fibrefit_check_input(id, 0u);
+    let b = fibrefit_check_input(id, 1u);
+    let c = fibrefit_check_input(id, 2u);
+    let d = fibrefit_check_input(id, 3u);
     if (c.w > 0.5) {
         fibrefit_check_out[2u * i] = vec4<f32>(fibrefit_brdf_at(a.xyz, b.xyz, c.xyz, d.xyz, a.w, b.w), 0.0);
         fibrefit_check_out[2u * i + 1u] = fibrefit_basis_at(a.xyz, b.xyz, c.xyz, d.xyz, a.w, b.w);
@@ -51,15 +60,13 @@ fn fibrefit_check_main(@builtin(global_invocation_id) id: vec3<u32>) {
 
 @compute @workgroup_size(64)
 fn fibrefit_speed_main(@builtin(global_invocation_id) id: vec3<u32>) {
-    let i = id.x + id.y * 4194240u;
-    if (i >= arrayLength(&fibrefit_check_out) / 2u) {
+    if (!fibrefit_check_case(id)) {
         return;
     }
-    let a = fibrefit_check_in[4u * i];
-    let b = fibrefit_check_in[4u * i + 1u];
-    let c = fibrefit_check_in[4u * i + 2u];
-    let d = fibrefit_check_in[4u * i + 3u];
-    fibrefit_check_out[2u * i] = vec4<f32>(fibrefit_brdf(a.xyz, b.xyz, c.xyz, d.xyz), 0.0);
+    let i = id.x + id.y * 4194240u;
+    fibrefit_check_out[2u * i] = vec4<f32>(fibrefit_brdf(fibrefit_check_input(id, 0u).xyz,
+        fibrefit_check_input(id, 1u).xyz, fibrefit_check_input(id, 2u).xyz,
+        fibrefit_check_input(id, 3u).xyz), 0.0);
 }
 ";
 
