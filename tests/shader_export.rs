@@ -90,19 +90,9 @@ fn every_rung_equals_the_rust_model_on_the_gpu_within_f32_limits() {
     for (name, text) in RUNGS {
         let (id, p) = params(text);
         let src = shader::wgsl(id, &p, &[name.to_string()]).unwrap();
-        let m = model::build(id, &p).unwrap();
         // 10 000 random pairs and the extremes
         let cases = check::cases(10_000, 3, max_height(p.spacing));
-        let out = gpu.evaluate(&src, &cases).unwrap();
-        let bound = check::Bound::for_exponent(p.exponent);
-        let a = check::compare(
-            m.as_ref(),
-            &p.albedos,
-            p.albedos.channels(),
-            &cases,
-            &out,
-            &bound,
-        );
+        let (a, bound) = check::on_gpu(gpu, &src, id, &p, &cases).unwrap();
         eprintln!(
             "{name}: p99 {:.2e} (bound {:.1e}), max {:.2e}, worst/tolerance {:.3}",
             a.p99_relative, bound.p99, a.max_relative, a.worst_over_tolerance

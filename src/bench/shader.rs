@@ -134,16 +134,7 @@ pub fn run(
                 .for_each(|(o, p)| m.basis_many(p, o));
             all.push(t.elapsed().as_secs_f64());
         }
-        let outputs = gpu.evaluate(&src, &cases)?;
-        let bound = check::Bound::for_exponent(p.exponent);
-        let a = check::compare(
-            m.as_ref(),
-            &p.albedos,
-            p.albedos.channels(),
-            &cases,
-            &outputs,
-            &bound,
-        );
+        let (a, _) = check::on_gpu(&gpu, &src, id, &p, &cases)?;
         let (gpu_rate, one_rate, all_rate) = (
             n as f64 / gpu_seconds,
             n as f64 / median(one),

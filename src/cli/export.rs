@@ -178,19 +178,9 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         let wgsl_src = shader::wgsl(id, &params, &lines)?;
         let wgsl_src =
             if args.check {
-                let model = model::build(id, &params)?;
                 let gpu = Gpu::new()?;
                 let cases = check::cases(10_000, 1, max_height(params.spacing));
-                let outputs = gpu.evaluate(&wgsl_src, &cases)?;
-                let bound = check::Bound::for_exponent(params.exponent);
-                let a = check::compare(
-                    model.as_ref(),
-                    &params.albedos,
-                    params.albedos.channels(),
-                    &cases,
-                    &outputs,
-                    &bound,
-                );
+                let (a, bound) = check::on_gpu(&gpu, &wgsl_src, id, &params, &cases)?;
                 let line = format!(
                 "checked on {}: {} cases, relative error p99 {:.2e} (bound {:.1e}), max {:.2e}; \
                  worst case at {:.2} of its tolerance ({:.1e} + {:.1e} / min(N.l, N.v))",

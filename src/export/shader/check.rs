@@ -1,9 +1,12 @@
 //! The exported shader against the Rust model: the cases (random pairs in random frames, the
 //! extremes, texel heights and azimuth offsets) and the comparison.
 
+use super::gpu::Gpu;
 pub use super::gpu::{Case, Output};
 use crate::model::frame::{DirectionPair, Local, Vec3};
 use crate::model::{Albedos, Basis, ShadingModel};
+use crate::model::{ModelId, ModelParams};
+use anyhow::Result;
 
 /// Deterministic xorshift (the cases are the same on every run).
 struct Rng(u64);
@@ -305,4 +308,27 @@ pub fn compare(
         a.max_relative = *errors.last().unwrap_or(&0.0);
     }
     a
+}
+
+/// Run the exported `wgsl` of rung `id` with parameters `p` on `gpu` at `cases` and compare it
+/// with the Rust model under the bound for its exponent.
+pub fn on_gpu(
+    gpu: &Gpu,
+    wgsl: &str,
+    id: ModelId,
+    p: &ModelParams,
+    cases: &[Case],
+) -> Result<(Agreement, Bound)> {
+    let model = crate::model::build(id, p)?;
+    let outputs = gpu.evaluate(wgsl, cases)?;
+    let bound = Bound::for_exponent(p.exponent);
+    let a = compare(
+        model.as_ref(),
+        &p.albedos,
+        p.albedos.channels(),
+        cases,
+        &outputs,
+        &bound,
+    );
+    Ok((a, bound))
 }
