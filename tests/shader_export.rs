@@ -347,6 +347,8 @@ fn fitted_results_of_every_shipped_dataset_export_and_check_from_the_cli() {
             .success();
         let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
         assert!(stderr.contains("checked on"), "{stderr}");
+        // and at the result's own 20 check values
+        assert!(stderr.contains("the result's 20 check values"), "{stderr}");
         let text = std::fs::read_to_string(&out).unwrap();
         assert!(
             text.contains("// checked on") && text.contains("sha256"),

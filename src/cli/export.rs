@@ -176,12 +176,11 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if let Some(lang) = lang {
         let mut lines = lines.clone();
         let wgsl_src = shader::wgsl(id, &params, &lines)?;
-        let wgsl_src =
-            if args.check {
-                let gpu = Gpu::new()?;
-                let cases = check::cases(10_000, 1, max_height(params.spacing));
-                let (a, bound) = check::on_gpu(&gpu, &wgsl_src, id, &params, &cases)?;
-                let line = format!(
+        let wgsl_src = if args.check {
+            let gpu = Gpu::new()?;
+            let cases = check::cases(10_000, 1, max_height(params.spacing));
+            let (a, bound) = check::on_gpu(&gpu, &wgsl_src, id, &params, &cases)?;
+            let line = format!(
                 "checked on {}: {} cases, relative error p99 {:.2e} (bound {:.1e}), max {:.2e}; \
                  worst case at {:.2} of its tolerance ({:.1e} + {:.1e} / min(N.l, N.v))",
                 gpu.adapter,
@@ -193,21 +192,47 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 bound.max,
                 bound.grazing
             );
+            if !args.quiet {
+                eprintln!("{line}");
+            }
+            // the values the result itself states (what a renderer port checks against)
+            let stated = std::fs::read_to_string(&args.result)
+                .ok()
+                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+                .map(|v| check::stated_check_values(&v, params.fibre_azimuth))
+                .unwrap_or_default();
+            let mut stated_line = None;
+            if !stated.is_empty() {
+                let cases: Vec<check::Case> = stated.iter().map(|(c, _)| *c).collect();
+                let outputs = gpu.evaluate(&wgsl_src, &cases)?;
+                let (max_rel, worst) = check::compare_stated(&stated, &outputs, &bound);
+                let l = format!(
+                    "the result's {} check values: largest relative error {max_rel:.2e} ({worst:.2} of the tolerance)",
+                    stated.len()
+                );
                 if !args.quiet {
-                    eprintln!("{line}");
+                    eprintln!("{l}");
                 }
-                if !bound.holds(&a) {
-                    bail!(
+                if worst > 1.0 {
+                    bail!("the exported shader disagrees with the result's own check values: {l}; nothing written");
+                }
+                stated_line = Some(l);
+            }
+            if !bound.holds(&a) {
+                bail!(
                     "the exported shader disagrees with the Rust model on this GPU driver beyond \
                      f32 limits: {line}; worst case {} (Rust {}, shader {}); nothing written",
-                    a.worst.0, a.worst.1, a.worst.2
+                    a.worst.0,
+                    a.worst.1,
+                    a.worst.2
                 );
-                }
-                lines.push(line);
-                shader::wgsl(id, &params, &lines)?
-            } else {
-                wgsl_src
-            };
+            }
+            lines.push(line);
+            lines.extend(stated_line);
+            shader::wgsl(id, &params, &lines)?
+        } else {
+            wgsl_src
+        };
         shader_text = Some(shader::translate(&wgsl_src, lang)?);
     }
     let mut glb = None;

@@ -332,3 +332,70 @@ pub fn on_gpu(
     );
     Ok((a, bound))
 }
+
+/// The check values a fitted result states (`check_values`: directions in degrees in the swatch
+/// frame, the BRDF per channel, one number for grey), as cases in that frame (n = +z, t at the
+/// fibre azimuth `psi`, radians) with the stated values. Empty when the file has none.
+pub fn stated_check_values(result: &serde_json::Value, psi: f64) -> Vec<(Case, Vec<f64>)> {
+    use crate::model::frame::direction_from_angles;
+    let Some(list) = result.get("check_values").and_then(|c| c.as_array()) else {
+        return vec![];
+    };
+    let f32s3 = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
+    list.iter()
+        .filter_map(|c| {
+            let angle = |k: &str| c.get(k).and_then(|x| x.as_f64()).map(f64::to_radians);
+            let (ti, pi, to, po) = (
+                angle("theta_i")?,
+                angle("phi_i")?,
+                angle("theta_o")?,
+                angle("phi_o")?,
+            );
+            let brdf = match c.get("brdf")? {
+                serde_json::Value::Array(a) => {
+                    a.iter().map(|x| x.as_f64()).collect::<Option<_>>()?
+                }
+                x => vec![x.as_f64()?],
+            };
+            Some((
+                Case {
+                    l: f32s3(direction_from_angles(ti, pi)),
+                    v: f32s3(direction_from_angles(to, po)),
+                    n: [0.0, 0.0, 1.0],
+                    t: [psi.cos() as f32, psi.sin() as f32, 0.0],
+                    at: None,
+                },
+                brdf,
+            ))
+        })
+        .collect()
+}
+
+/// The shader's `outputs` at stated check values: (largest relative error, largest ratio of an
+/// error to its case's tolerance under `bound`). Values compared relative to max(|value|, 1e-4 of
+/// the largest stated value).
+pub fn compare_stated(
+    stated: &[(Case, Vec<f64>)],
+    outputs: &[Output],
+    bound: &Bound,
+) -> (f64, f64) {
+    let peak = stated
+        .iter()
+        .flat_map(|(_, v)| v.iter().map(|x| x.abs()))
+        .fold(0.0f64, f64::max);
+    let (mut max_rel, mut worst) = (0.0f64, 0.0f64);
+    for ((case, want), o) in stated.iter().zip(outputs) {
+        let (cl, cv) = cosines(case);
+        for (c, g) in o.brdf.iter().enumerate() {
+            let r = want[c.min(want.len() - 1)];
+            let e = (*g as f64 - r).abs() / r.abs().max(1e-4 * peak).max(f64::MIN_POSITIVE);
+            max_rel = max_rel.max(e);
+            if cl.min(cv) > 0.0 {
+                worst = worst.max(e / bound.case_tolerance(cl.min(cv)));
+            } else if *g != 0.0 {
+                worst = f64::INFINITY;
+            }
+        }
+    }
+    (max_rel, worst)
+}
