@@ -5,7 +5,7 @@
 //! its loop sizes, and the agreement with the Rust model on the same run.
 
 use crate::export::shader::{self, check, gpu::Gpu};
-use crate::model::frame::{DirectionPair, Local, Vec3};
+use crate::model::frame::DirectionPair;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::topology::max_height;
 use crate::model::{self, Basis, ModelId};
@@ -67,27 +67,6 @@ fn params(text: &str) -> Result<(ModelId, ModelParams)> {
     Ok((id, p))
 }
 
-/// The pairs of `cases` in the fibre frame, as the Rust model takes them.
-fn pairs(cases: &[check::Case]) -> Vec<DirectionPair> {
-    cases
-        .iter()
-        .map(|c| {
-            let v3 = |a: [f32; 3]| Vec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
-            let (l, v, n, t) = (v3(c.l), v3(c.v), v3(c.n), v3(c.t));
-            let b = n.cross(&t);
-            let loc = |w: &Vec3| Local {
-                t: w.dot(&t),
-                b: w.dot(&b),
-                n: w.dot(&n),
-            };
-            DirectionPair {
-                l: loc(&l),
-                v: loc(&v),
-            }
-        })
-        .collect()
-}
-
 fn median(mut x: Vec<f64>) -> f64 {
     x.sort_by(f64::total_cmp);
     x[x.len() / 2]
@@ -120,7 +99,7 @@ pub fn run(
         let gpu_seconds = gpu.time_brdf(&src, &cases, repeats)?;
         let count = shader::spirv_instructions(&src)?;
         let m = model::build(id, &p)?;
-        let pr = pairs(&cases);
+        let pr: Vec<DirectionPair> = cases.iter().map(check::local_pair).collect();
         let mut out = vec![Basis::default(); pr.len()];
         let mut one = Vec::new();
         let mut all = Vec::new();

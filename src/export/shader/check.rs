@@ -127,9 +127,9 @@ pub fn cases(random: usize, seed: u64, max_height: f64) -> Vec<Case> {
     out
 }
 
-/// The Rust model's basis at a case, from the case's f32 values (in f64), the same frame
-/// construction as the shader's.
-pub fn rust_basis(model: &dyn ShadingModel, c: &Case) -> Basis {
+/// A case's pair in the fibre frame, from its f32 values (in f64), built as the shader builds
+/// it: t made perpendicular to n, B = N x T, turned by the azimuth offset of a texel case.
+pub fn local_pair(c: &Case) -> DirectionPair {
     let v3 = |a: [f32; 3]| Vec3::new(a[0] as f64, a[1] as f64, a[2] as f64);
     let (l, v, n, t) = (v3(c.l), v3(c.v), v3(c.n), v3(c.t));
     let tp = (t - n * t.dot(&n)).normalize();
@@ -146,10 +146,15 @@ pub fn rust_basis(model: &dyn ShadingModel, c: &Case) -> Basis {
         b: w.dot(&bt),
         n: w.dot(&n),
     };
-    let pair = DirectionPair {
+    DirectionPair {
         l: local(&l),
         v: local(&v),
-    };
+    }
+}
+
+/// The Rust model's basis at a case ([`local_pair`]; at its height for a texel case).
+pub fn rust_basis(model: &dyn ShadingModel, c: &Case) -> Basis {
+    let pair = local_pair(c);
     match c.at {
         Some((h, _)) => model
             .basis_at_height(&pair, h as f64)
