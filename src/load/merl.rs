@@ -13,7 +13,9 @@
 use super::rgl::MeasuredOptions;
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::{direction_from_angles, Vec3};
-use anyhow::{bail, Context, Result};
+use super::rgl::MAX_MAGNITUDE;
+use anyhow::{bail, Result};
+use std::io::Read;
 use rand::{Rng, SeedableRng};
 use std::f64::consts::{FRAC_PI_2, PI};
 use std::path::Path;
@@ -45,33 +47,83 @@ pub fn half_diff(l: &Vec3, v: &Vec3) -> (f64, f64, f64) {
 
 impl MerlBrdf {
     pub fn load(path: &Path) -> Result<Self> {
-        let bytes =
-            std::fs::read(path).with_context(|| format!("{}: cannot open", path.display()))?;
         let name = path.display();
-        if bytes.len() < 12 {
+        let mut input = super::input::open(path, super::input::MAX_MEASURED_BYTES)?;
+        let mut header = [0u8; 12];
+        let mut got = 0;
+        while got < 12 {
+            match input.read(&mut header[got..]) {
+                Ok(0) => break,
+                Ok(n) => got += n,
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(super::input::io_error(path, e)),
+            }
+        }
+        if got < 12 {
             bail!("{name}: not a MERL .binary BRDF: shorter than its 12-byte header");
         }
-        let dim = |k: usize| i32::from_le_bytes(bytes[4 * k..4 * k + 4].try_into().expect("4"));
+        let dim = |k: usize| {
+            i32::from_le_bytes([header[4 * k], header[4 * k + 1], header[4 * k + 2], header[4 * k + 3]])
+        };
         let dims = [dim(0), dim(1), dim(2)];
         if dims.iter().any(|&d| !(1..=4096).contains(&d)) {
             bail!("{name}: not a MERL .binary BRDF: dimensions {dims:?} (the database's are 90, 90, 180)");
         }
         let dims = dims.map(|d| d as usize);
-        let n: usize = dims.iter().product();
-        let want = 12 + 3 * n * 8;
-        if bytes.len() != want {
+        // checked arithmetic: 3 channels x n doubles after the header, within the limit
+        let n = dims[0]
+            .checked_mul(dims[1])
+            .and_then(|x| x.checked_mul(dims[2]))
+            .filter(|&n| n.checked_mul(24).is_some());
+        let want = n.and_then(|n| (n * 24).checked_add(12)).map(|w| w as u64);
+        let (n, want) = match (n, want) {
+            (Some(n), Some(w)) if w <= super::input::MAX_MEASURED_BYTES => (n, w),
+            _ => bail!(
+                "{name}: dimensions {dims:?} need more than {} (3 channels of doubles), the largest measured file read",
+                super::input::bytes_text(super::input::MAX_MEASURED_BYTES)
+            ),
+        };
+        let size_said = input.size();
+        if let Some(size) = size_said {
+            if size != want {
+                bail!("{name}: {size} bytes, but dimensions {dims:?} need {want} (3 channels x {n} doubles)");
+            }
+        }
+        // a device or FIFO: read what the header says and one byte more, to see that it ends
+        input.limit_to(want + 1);
+        let mut bytes = Vec::with_capacity(want as usize - 12);
+        match input.read_rest(&mut bytes) {
+            Ok(()) => {}
+            Err(_) if size_said.is_none() && bytes.len() as u64 > want - 12 => {
+                bail!("{name}: longer than the {want} bytes its dimensions {dims:?} need")
+            }
+            Err(e) => return Err(e),
+        }
+        if bytes.len() as u64 != want - 12 {
             bail!(
                 "{name}: {} bytes, but dimensions {dims:?} need {want} (3 channels x {n} doubles)",
-                bytes.len()
+                bytes.len() + 12
             );
         }
-        let data: Vec<f64> = bytes[12..]
+        input.finish()?;
+        let data: Vec<f64> = bytes
             .chunks_exact(8)
-            .map(|c| f64::from_le_bytes(c.try_into().expect("8")))
+            .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
             .collect();
-        if let Some(i) = data.iter().position(|v| !v.is_finite()) {
+        drop(bytes);
+        // negative entries mark unmeasured cells (kept, left out when drawn); positive ones must
+        // be finite and within the magnitude the fit can square
+        if let Some(i) = data
+            .iter()
+            .position(|v| !(v.is_finite() && *v * SCALE[2] <= MAX_MAGNITUDE))
+        {
+            let c = ["red", "green", "blue"][i / n];
+            let cell = i % n;
             bail!(
-                "{name}: table entry {i} is {}: values must be finite",
+                "{name}: table entry {i} ({c}, theta_h {} theta_d {} phi_d {}) is {}: values must be finite and within {MAX_MAGNITUDE:e} 1/sr",
+                cell / (dims[1] * dims[2]),
+                cell / dims[2] % dims[1],
+                cell % dims[2],
                 data[i]
             );
         }
@@ -107,13 +159,8 @@ impl MerlBrdf {
 /// Samples of a MERL file at `opts.directions` seeded pairs, light and view uniform in solid
 /// angle up to the largest theta.
 pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
+    opts.check()?;
     let b = MerlBrdf::load(path)?;
-    if opts.directions == 0 {
-        bail!("--directions must be at least 1");
-    }
-    if !(opts.max_theta_deg > 0.0 && opts.max_theta_deg < 90.0) {
-        bail!("--max-theta must lie in (0, 90) degrees");
-    }
     let cmin = opts.max_theta_deg.to_radians().cos();
     let mut rng = rand::rngs::StdRng::seed_from_u64(opts.seed);
     let mut dir = || {

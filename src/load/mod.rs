@@ -4,6 +4,7 @@ pub mod capture;
 pub mod capture_store;
 pub mod gonio;
 pub mod image_io;
+pub mod input;
 pub mod merl;
 pub mod mesh;
 pub mod queries;
@@ -11,6 +12,8 @@ pub mod rgl;
 pub mod samples;
 pub mod summary;
 pub mod texel_maps;
+
+pub use input::{read_input, sha256_read, InputBytes, MAX_INPUT_BYTES};
 
 use crate::model::frame::Vec3;
 use anyhow::{bail, Result};

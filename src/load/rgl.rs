@@ -18,7 +18,7 @@
 
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::{direction_from_angles, Vec3};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use rand::{Rng, SeedableRng};
 use std::collections::HashMap;
 use std::f64::consts::{FRAC_PI_2, PI};
@@ -35,6 +35,26 @@ pub struct MeasuredOptions {
     pub max_theta_deg: f64,
 }
 
+/// The most direction pairs a measured file is sampled at (`--directions`): 10 million (about
+/// 1.8 GB of samples).
+pub const MAX_DIRECTIONS: usize = 10_000_000;
+
+impl MeasuredOptions {
+    /// `--directions` in [1, [`MAX_DIRECTIONS`]] and `--max-theta` in (0, 90) degrees.
+    pub fn check(&self) -> Result<()> {
+        if !(1..=MAX_DIRECTIONS).contains(&self.directions) {
+            bail!(
+                "--directions {}: expected 1 to {MAX_DIRECTIONS}",
+                self.directions
+            );
+        }
+        if !(self.max_theta_deg > 0.0 && self.max_theta_deg < 90.0) {
+            bail!("--max-theta must lie in (0, 90) degrees");
+        }
+        Ok(())
+    }
+}
+
 impl Default for MeasuredOptions {
     fn default() -> Self {
         Self {
@@ -45,14 +65,19 @@ impl Default for MeasuredOptions {
     }
 }
 
-/// One field of a tensor file: shape and values (converted to f64).
+/// One field of a tensor file: shape and values (converted to f64; empty for types the BRDF
+/// does not use).
 struct Field {
     shape: Vec<usize>,
     values: Vec<f64>,
 }
 
+/// Values beyond this magnitude are refused, as the goniometric CSV loader refuses them: their
+/// squares (in a fit's residuals) would overflow.
+pub const MAX_MAGNITUDE: f64 = 1e100;
+
 fn read_tensor_file(path: &Path) -> Result<HashMap<String, Field>> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot open", path.display()))?;
+    let bytes = super::input::read_input(path, super::input::MAX_MEASURED_BYTES)?.bytes;
     let name = path.display();
     let bad = |what: &str| anyhow!("{name}: not an RGL/Mitsuba tensor file: {what}");
     if bytes.len() < 18 || &bytes[..12] != b"tensor_file\0" {
@@ -67,15 +92,17 @@ fn read_tensor_file(path: &Path) -> Result<HashMap<String, Field>> {
     }
     let mut p = 14;
     let take = |p: &mut usize, n: usize| -> Result<&[u8]> {
-        let s = bytes
-            .get(*p..*p + n)
+        let s = p
+            .checked_add(n)
+            .and_then(|end| bytes.get(*p..end))
             .ok_or_else(|| bad("truncated field table"))?;
         *p += n;
         Ok(s)
     };
     let u16_at = |s: &[u8]| u16::from_le_bytes([s[0], s[1]]) as usize;
-    let u64_at = |s: &[u8]| u64::from_le_bytes(s.try_into().expect("8 bytes")) as usize;
-    let n_fields = u32::from_le_bytes(take(&mut p, 4)?.try_into().expect("4 bytes")) as usize;
+    let u64_at = |s: &[u8]| u64::from_le_bytes([s[0], s[1], s[2], s[3], s[4], s[5], s[6], s[7]]);
+    let n_fields = u32::from_le_bytes([bytes[14], bytes[15], bytes[16], bytes[17]]) as usize;
+    p += 4;
     let mut fields = HashMap::new();
     for _ in 0..n_fields {
         let len = u16_at(take(&mut p, 2)?);
@@ -83,35 +110,52 @@ fn read_tensor_file(path: &Path) -> Result<HashMap<String, Field>> {
         let ndim = u16_at(take(&mut p, 2)?);
         let dtype = take(&mut p, 1)?[0];
         let offset = u64_at(take(&mut p, 8)?);
-        let mut shape = Vec::with_capacity(ndim);
+        let mut shape = Vec::with_capacity(ndim.min(16));
         for _ in 0..ndim {
-            shape.push(u64_at(take(&mut p, 8)?));
+            let d = u64_at(take(&mut p, 8)?);
+            shape.push(usize::try_from(d).map_err(|_| {
+                bad(&format!("field `{fname}` has a dimension of {d}"))
+            })?);
         }
-        let count: usize = shape.iter().product();
         // types: 1 u8, 2 i8, 3 u16, 4 i16, 5 u32, 6 i32, 7 u64, 8 i64, 9 f16, 10 f32, 11 f64
-        let size = match dtype {
+        let size: usize = match dtype {
             1 | 2 => 1,
             3 | 4 | 9 => 2,
             5 | 6 | 10 => 4,
             7 | 8 | 11 => 8,
             _ => return Err(bad(&format!("field `{fname}` has unknown type {dtype}"))),
         };
-        let data = bytes
-            .get(offset..offset + count * size)
-            .ok_or_else(|| bad(&format!("field `{fname}` lies beyond the end of the file")))?;
+        // the shape's product and the data's extent in checked arithmetic (no wrap-around)
+        let beyond = || {
+            bad(&format!(
+                "field `{fname}` (shape {shape:?}, {size}-byte values at offset {offset}) lies beyond the end of the {}-byte file",
+                bytes.len()
+            ))
+        };
+        let count = shape
+            .iter()
+            .try_fold(1usize, |a, &d| a.checked_mul(d))
+            .ok_or_else(beyond)?;
+        let data = usize::try_from(offset)
+            .ok()
+            .and_then(|o| Some((o, count.checked_mul(size)?)))
+            .and_then(|(o, n)| bytes.get(o..o.checked_add(n)?))
+            .ok_or_else(beyond)?;
         let values: Vec<f64> = match dtype {
             1 => data.iter().map(|&b| b as f64).collect(),
             10 => data
                 .chunks_exact(4)
-                .map(|c| f32::from_le_bytes(c.try_into().expect("4")) as f64)
+                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]) as f64)
                 .collect(),
             11 => data
                 .chunks_exact(8)
-                .map(|c| f64::from_le_bytes(c.try_into().expect("8")))
+                .map(|c| f64::from_le_bytes([c[0], c[1], c[2], c[3], c[4], c[5], c[6], c[7]]))
                 .collect(),
             _ => vec![], // not needed by the BRDF
         };
-        fields.insert(fname, Field { shape, values });
+        if fields.insert(fname.clone(), Field { shape, values }).is_some() {
+            return Err(bad(&format!("field `{fname}` appears twice")));
+        }
     }
     Ok(fields)
 }
@@ -174,7 +218,8 @@ impl Table2D {
                     sum += 0.5 * (c[(y + 1) * nx - 1] + c[(y + 2) * nx - 1]);
                     m[y + 1] = sum;
                 }
-                let norm = 1.0 / m[ny - 1];
+                // a slice with no mass (padding at the horizon) stays zero rather than NaN
+                let norm = if m[ny - 1] > 0.0 { 1.0 / m[ny - 1] } else { 0.0 };
                 c.iter_mut().for_each(|v| *v *= norm);
                 m.iter_mut().for_each(|v| *v *= norm);
                 d.iter_mut().for_each(|v| *v *= norm);
@@ -325,6 +370,64 @@ impl RglBsdf {
                 rgb.shape
             );
         }
+        // every table at least 2 x 2 (bilinear interpolation needs two nodes each way)
+        for (k, field) in [("ndf", &ndf), ("sigma", &sigma), ("vndf", &vndf), ("rgb", &rgb)] {
+            let r = field.shape.len();
+            if field.shape[r - 2] < 2 || field.shape[r - 1] < 2 {
+                bail!(
+                    "{name}: field `{k}` has shape {:?}; its last two dimensions (the table) must each be at least 2",
+                    field.shape
+                );
+            }
+        }
+        // values: finite, within the magnitude the fit can square, and of the right sign
+        let check = |k: &str, field: &Field, min: f64, strict: bool| -> Result<()> {
+            let bad = field.values.iter().position(|&v| {
+                !(v.is_finite() && v.abs() <= MAX_MAGNITUDE && (v > min || (!strict && v == min)))
+            });
+            if let Some(i) = bad {
+                let v = field.values[i];
+                let want = if strict { "positive" } else { "non-negative" };
+                let why = if !v.is_finite() {
+                    "values must be finite".to_string()
+                } else if v.abs() > MAX_MAGNITUDE {
+                    format!("values beyond {MAX_MAGNITUDE:e} in magnitude are refused")
+                } else {
+                    format!("values must be {want}")
+                };
+                bail!("{name}: field `{k}` entry {i} is {v}: {why}");
+            }
+            Ok(())
+        };
+        check("ndf", &ndf, 0.0, false)?;
+        check("sigma", &sigma, 0.0, true)?;
+        check("vndf", &vndf, 0.0, false)?;
+        check("rgb", &rgb, 0.0, false)?;
+        // the incidence grid: finite angles, increasing, theta in [0, 90] and phi in [-180, 180]
+        // degrees
+        let grid = |k: &str, g: &[f64], lo: f64, hi: f64| -> Result<()> {
+            const SLACK: f64 = 1e-4;
+            if let Some(i) = g
+                .iter()
+                .position(|&t| !(t.is_finite() && t >= lo - SLACK && t <= hi + SLACK))
+            {
+                bail!(
+                    "{name}: field `{k}` entry {i} is {} rad: incidence angles must lie in [{lo:.4}, {hi:.4}] rad",
+                    g[i]
+                );
+            }
+            if let Some(i) = g.windows(2).position(|w| w[1] <= w[0]) {
+                bail!(
+                    "{name}: field `{k}` is not increasing: entry {} ({}) follows {}",
+                    i + 1,
+                    g[i + 1],
+                    g[i]
+                );
+            }
+            Ok(())
+        };
+        grid("theta_i", &theta_i.values, 0.0, FRAC_PI_2)?;
+        grid("phi_i", &phi_i.values, -PI, PI)?;
         if np > 2 {
             let span = phi_i.values[np - 1] - phi_i.values[0];
             if ((2.0 * PI / span).round() as i64) != 1 {
@@ -392,13 +495,8 @@ impl RglBsdf {
 /// Samples of an RGL file at `opts.directions` seeded pairs: light uniform in solid angle up to
 /// min(max theta, the file's measured incidence), view up to max theta.
 pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
+    opts.check()?;
     let b = RglBsdf::load(path)?;
-    if opts.directions == 0 {
-        bail!("--directions must be at least 1");
-    }
-    if !(opts.max_theta_deg > 0.0 && opts.max_theta_deg < 90.0) {
-        bail!("--max-theta must lie in (0, 90) degrees");
-    }
     let max_v = opts.max_theta_deg.to_radians();
     let max_l = max_v.min(b.max_theta_i);
     let mut rng = rand::rngs::StdRng::seed_from_u64(opts.seed);
@@ -411,19 +509,30 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
         .map(|k| {
             let l = dir(max_l);
             let v = dir(max_v);
-            Sample {
+            let value = b.brdf(&l, &v);
+            // the tables are checked field by field; this catches what their combination gives
+            if !value.iter().all(|f| f.is_finite() && f.abs() <= MAX_MAGNITUDE) {
+                bail!(
+                    "{}: the tables give f = {value:?} at direction pair {} (light theta {:.2}, view theta {:.2} degrees): values must be finite and within {MAX_MAGNITUDE:e}",
+                    path.display(),
+                    k + 1,
+                    l.z.acos().to_degrees(),
+                    v.z.acos().to_degrees()
+                );
+            }
+            Ok(Sample {
                 l,
                 v,
                 fibre_azimuth: None,
                 map_value: None,
                 texel_height: None,
-                value: b.brdf(&l, &v),
+                value,
                 sigma: None,
                 weight: 1.0,
                 origin: Origin::Line(k as u64 + 1),
-            }
+            })
         })
-        .collect();
+        .collect::<Result<_>>()?;
     Ok(Samples {
         samples,
         channels: 3,

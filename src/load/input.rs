@@ -1,0 +1,310 @@
+//! Reading an input file: once, with a byte limit, hashed as it is read, and checked not to have
+//! changed while it was read.
+//!
+//! Every loader reads its file through [`open`] (streamed: [`Input`] is a [`Read`]) or
+//! [`read_input`] (into memory). Either way:
+//! - a regular file larger than the limit is refused before any byte is read; anything else
+//!   (a character device such as `/dev/zero`, a FIFO, a link to one) is read up to the limit and
+//!   refused beyond it, so no input can make a loader read without end;
+//! - the SHA-256 is taken of the very bytes the loader parsed, and recorded for this process:
+//!   [`sha256_read`] gives it to whoever records where a result came from;
+//! - a regular file whose size, modification or change time, or inode differ between the start
+//!   and the end of the read (or that gave fewer or more bytes than its size said) is an error
+//!   naming the file: it was written while this run read it, and what was read may be torn.
+//!
+//! A directory is refused. Opening a FIFO with no writer waits for one, as `cat` does.
+
+use anyhow::{anyhow, bail, Result};
+use sha2::{Digest, Sha256};
+use std::collections::HashMap;
+use std::io::Read;
+use std::path::{Path, PathBuf};
+use std::sync::{Mutex, OnceLock};
+
+/// The largest input file of any kind (goniometric CSV, query CSV, image, mesh): 4 GiB. A regular
+/// file above it is refused unread; a device or FIFO is read up to it and refused beyond.
+pub const MAX_INPUT_BYTES: u64 = 4 << 30;
+
+/// The largest text description (capture TOML, JSON, configuration): 64 MiB.
+pub const MAX_TEXT_BYTES: u64 = 64 << 20;
+
+/// The largest measured BRDF file (`.bsdf`, `.binary`): 1 GiB (the RGL database's RGB files
+/// are under 10 MB, a MERL file 35 MB).
+pub const MAX_MEASURED_BYTES: u64 = 1 << 30;
+
+/// What identifies a version of a file: device, inode, size, modification and change times.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Stamp {
+    dev: u64,
+    ino: u64,
+    size: u64,
+    mtime: (i64, i64),
+    ctime: (i64, i64),
+}
+
+#[cfg(unix)]
+fn stamp(m: &std::fs::Metadata) -> Stamp {
+    use std::os::unix::fs::MetadataExt;
+    Stamp {
+        dev: m.dev(),
+        ino: m.ino(),
+        size: m.size(),
+        mtime: (m.mtime(), m.mtime_nsec()),
+        ctime: (m.ctime(), m.ctime_nsec()),
+    }
+}
+
+#[cfg(not(unix))]
+fn stamp(m: &std::fs::Metadata) -> Stamp {
+    let t = |r: std::io::Result<std::time::SystemTime>| {
+        r.ok()
+            .and_then(|t| t.duration_since(std::time::UNIX_EPOCH).ok())
+            .map_or((0, 0), |d| (d.as_secs() as i64, d.subsec_nanos() as i64))
+    };
+    Stamp {
+        dev: 0,
+        ino: 0,
+        size: m.len(),
+        mtime: t(m.modified()),
+        ctime: (0, 0),
+    }
+}
+
+fn registry() -> &'static Mutex<HashMap<PathBuf, String>> {
+    static R: OnceLock<Mutex<HashMap<PathBuf, String>>> = OnceLock::new();
+    R.get_or_init(|| Mutex::new(HashMap::new()))
+}
+
+fn record(path: &Path, hex: &str) {
+    let mut r = registry().lock().unwrap_or_else(|e| e.into_inner());
+    r.insert(path.to_path_buf(), hex.to_owned());
+    if let Ok(c) = std::fs::canonicalize(path) {
+        r.insert(c, hex.to_owned());
+    }
+}
+
+/// The SHA-256 (hex) of the bytes a loader of this process last read from `path` (the path as
+/// given to the loader, or any path naming the same file); `None` when no loader has read it.
+pub fn sha256_read(path: &Path) -> Option<String> {
+    let r = registry().lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(h) = r.get(path) {
+        return Some(h.clone());
+    }
+    std::fs::canonicalize(path)
+        .ok()
+        .and_then(|c| r.get(&c).cloned())
+}
+
+/// Human form of a byte count (`64 MiB`).
+pub fn bytes_text(n: u64) -> String {
+    match n {
+        n if n >= 1 << 30 && n % (1 << 30) == 0 => format!("{} GiB", n >> 30),
+        n if n >= 1 << 20 && n % (1 << 20) == 0 => format!("{} MiB", n >> 20),
+        n => format!("{n} bytes"),
+    }
+}
+
+/// An input being read: a [`Read`] that counts, hashes and limits; [`Input::finish`] checks
+/// that the file did not change and records the hash.
+pub struct Input {
+    path: PathBuf,
+    file: std::fs::File,
+    before: Option<Stamp>,
+    limit: u64,
+    read: u64,
+    hasher: Sha256,
+}
+
+/// Open `path` for reading with at most `limit` bytes.
+pub fn open(path: &Path, limit: u64) -> Result<Input> {
+    let name = path.display();
+    let file = std::fs::File::open(path).map_err(|e| anyhow!("{name}: cannot open: {e}"))?;
+    let meta = file
+        .metadata()
+        .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
+    if meta.is_dir() {
+        bail!("{name}: is a directory, not a file");
+    }
+    let before = meta.is_file().then(|| stamp(&meta));
+    if let Some(b) = before {
+        if b.size > limit {
+            bail!(
+                "{name}: {} bytes; the largest input read is {} ({} bytes)",
+                b.size,
+                bytes_text(limit),
+                limit
+            );
+        }
+    }
+    Ok(Input {
+        path: path.to_path_buf(),
+        file,
+        before,
+        limit,
+        read: 0,
+        hasher: Sha256::new(),
+    })
+}
+
+fn too_long(path: &Path, limit: u64) -> anyhow::Error {
+    anyhow!(
+        "{}: not a regular file and longer than {} ({limit} bytes), the largest input read; refused",
+        path.display(),
+        bytes_text(limit)
+    )
+}
+
+impl Read for Input {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        // one byte past the limit may be read, so that an input of exactly the limit ends cleanly
+        let room = (self.limit + 1).saturating_sub(self.read);
+        if room == 0 {
+            return Err(std::io::Error::other(too_long(&self.path, self.limit)));
+        }
+        let want = buf.len().min(usize::try_from(room).unwrap_or(usize::MAX));
+        let n = self.file.read(&mut buf[..want])?;
+        self.read += n as u64;
+        if self.read > self.limit {
+            return Err(std::io::Error::other(too_long(&self.path, self.limit)));
+        }
+        self.hasher.update(&buf[..n]);
+        Ok(n)
+    }
+}
+
+impl Input {
+    pub fn path(&self) -> &Path {
+        &self.path
+    }
+
+    /// Bytes read so far.
+    pub fn bytes_read(&self) -> u64 {
+        self.read
+    }
+
+    /// Lower the limit (once a header has said how long the input should be).
+    pub fn limit_to(&mut self, limit: u64) {
+        self.limit = self.limit.min(limit);
+    }
+
+    /// Whether the input is a regular file (its size known before reading).
+    pub fn size(&self) -> Option<u64> {
+        self.before.map(|b| b.size)
+    }
+
+    /// The end of the read: for a regular file, every byte must have been read and the file must
+    /// be as it was when opened (and still be what `path` names). Records and returns the hash.
+    pub fn finish(self) -> Result<String> {
+        let name = self.path.display();
+        if let Some(before) = self.before {
+            let changed = || {
+                anyhow!(
+                    "{name}: changed while it was being read ({} bytes when opened, {} read); \
+                     what was read may be torn; run again once the file is complete",
+                    before.size,
+                    self.read
+                )
+            };
+            let now = self.file.metadata().map(|m| stamp(&m)).ok();
+            if now != Some(before) || self.read != before.size {
+                return Err(changed());
+            }
+            // the name still names the file read (not replaced while it was read)
+            match std::fs::metadata(&self.path) {
+                Ok(m) if stamp(&m) == before => {}
+                _ => return Err(changed()),
+            }
+        }
+        let hex: String = self
+            .hasher
+            .finalize()
+            .iter()
+            .map(|b| format!("{b:02x}"))
+            .collect();
+        record(&self.path, &hex);
+        Ok(hex)
+    }
+
+    /// The rest of the input into memory (the limit applies).
+    pub fn read_rest(&mut self, into: &mut Vec<u8>) -> Result<()> {
+        if let Some(size) = self.size() {
+            into.reserve(usize::try_from(size.saturating_sub(self.read)).unwrap_or(0));
+        }
+        self.read_to_end(into).map(|_| ()).map_err(|e| io_error(&self.path, e))
+    }
+}
+
+/// A read error as a message naming the file (the limit's own message kept as it is).
+pub fn io_error(path: &Path, e: std::io::Error) -> anyhow::Error {
+    if e.kind() == std::io::ErrorKind::Other {
+        if let Some(inner) = e.get_ref() {
+            if inner.to_string().starts_with(&path.display().to_string()) {
+                return anyhow!("{inner}");
+            }
+        }
+    }
+    anyhow!("{}: cannot read: {e}", path.display())
+}
+
+/// An input read into memory, with the SHA-256 of its bytes.
+#[derive(Debug)]
+pub struct InputBytes {
+    pub path: PathBuf,
+    pub bytes: Vec<u8>,
+    /// SHA-256 of `bytes`, hex.
+    pub sha256: String,
+}
+
+/// Read all of `path` (at most `limit` bytes), checked not to have changed while read; the
+/// hash is recorded for [`sha256_read`].
+pub fn read_input(path: &Path, limit: u64) -> Result<InputBytes> {
+    let mut input = open(path, limit)?;
+    let mut bytes = Vec::new();
+    input.read_rest(&mut bytes)?;
+    let sha256 = input.finish()?;
+    Ok(InputBytes {
+        path: path.to_path_buf(),
+        bytes,
+        sha256,
+    })
+}
+
+/// A text input (at most [`MAX_TEXT_BYTES`]) as UTF-8.
+pub fn read_text(path: &Path) -> Result<String> {
+    let b = read_input(path, MAX_TEXT_BYTES)?;
+    String::from_utf8(b.bytes).map_err(|e| {
+        anyhow!(
+            "{}: not UTF-8 text (byte {} is invalid)",
+            path.display(),
+            e.utf8_error().valid_up_to() + 1
+        )
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hash_limit_and_devices() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("a.txt");
+        std::fs::write(&p, "abc").unwrap();
+        let b = read_input(&p, 3).unwrap();
+        assert_eq!(
+            b.sha256,
+            "ba7816bf8f01cfea414140de5dae2223b00361a396177a9cb410ff61f20015ad"
+        );
+        assert_eq!(sha256_read(&p).as_deref(), Some(b.sha256.as_str()));
+        let e = read_input(&p, 2).unwrap_err().to_string();
+        assert!(e.contains("a.txt") && e.contains("largest input"), "{e}");
+        let e = read_input(d.path(), 10).unwrap_err().to_string();
+        assert!(e.contains("directory"), "{e}");
+        if Path::new("/dev/zero").exists() {
+            let e = read_input(Path::new("/dev/zero"), 1 << 20)
+                .unwrap_err()
+                .to_string();
+            assert!(e.contains("/dev/zero") && e.contains("1 MiB"), "{e}");
+        }
+    }
+}
