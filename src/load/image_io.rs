@@ -1,7 +1,104 @@
 //! Reading captured images into linear values: PNG (8/16 bit, linear or sRGB encoded) and EXR.
+//!
+//! Every image (captures, masks, tangent, topology, height and view maps, result maps) is read
+//! once through [`super::input`] (at most [`super::input::MAX_INPUT_BYTES`], hashed), its size
+//! taken from its header *before* any pixel is decoded: more than [`MAX_IMAGE_PIXELS`] pixels
+//! (2^28, e.g. 16384 x 16384) is refused with the image named and its claimed size, and the
+//! decoders are given a memory limit ([`MAX_DECODE_BYTES`]), so that a small file claiming a
+//! huge image, or a compressed one that expands without end (a PNG or ZIP-EXR bomb), is an
+//! error, not an allocation failure.
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
+use std::io::Cursor;
 use std::path::Path;
+
+/// The most pixels one image may have: 2^28 (268 million; 16384 x 16384), checked from the
+/// header before decoding.
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
+/// The most bytes a decoder may allocate for one image's pixels: 4 GiB (2^28 pixels of four
+/// 32-bit channels).
+pub const MAX_DECODE_BYTES: u64 = 4 << 30;
+
+/// Refuse a `width` x `height` image (claimed by the header of `path`, a `what`) beyond
+/// [`MAX_IMAGE_PIXELS`], or with a zero side.
+pub fn check_pixels(path: &Path, what: &str, width: u64, height: u64) -> Result<()> {
+    let pixels = width.checked_mul(height);
+    if width == 0 || height == 0 {
+        bail!("{}: {what} is {width}x{height} pixels: empty", path.display());
+    }
+    if pixels.is_none_or(|p| p > MAX_IMAGE_PIXELS) {
+        bail!(
+            "{}: {what} claims {width}x{height} pixels; the most an image may have is {MAX_IMAGE_PIXELS} (2^28, e.g. 16384x16384)",
+            path.display()
+        );
+    }
+    Ok(())
+}
+
+/// A PNG at `path` (a `what`), its size checked from the header before decoding, decoded with
+/// [`MAX_DECODE_BYTES`] as the limit.
+pub fn decode_png(path: &Path, what: &str) -> Result<image::DynamicImage> {
+    let bytes = super::input::read_input_as(path, super::input::MAX_INPUT_BYTES, what)?.bytes;
+    let name = path.display();
+    let reader = || {
+        image::ImageReader::new(Cursor::new(&bytes[..]))
+            .with_guessed_format()
+            .map_err(|e| anyhow!("{name}: cannot read {what}: {e}"))
+    };
+    let (w, h) = reader()?
+        .into_dimensions()
+        .map_err(|e| anyhow!("{name}: cannot decode {what}: {e}"))?;
+    check_pixels(path, what, w as u64, h as u64)?;
+    let mut r = reader()?;
+    let mut limits = image::Limits::default();
+    limits.max_alloc = Some(MAX_DECODE_BYTES);
+    r.limits(limits);
+    r.decode()
+        .map_err(|e| anyhow!("{name}: cannot decode {what}: {e}"))
+}
+
+/// The first layer of the EXR at `path` (a `what`): the header read first and every layer's
+/// size and decoded bytes checked before any pixel is read.
+pub fn decode_exr(
+    path: &Path,
+    what: &str,
+) -> Result<exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>> {
+    let bytes = super::input::read_input_as(path, super::input::MAX_INPUT_BYTES, what)?.bytes;
+    let name = path.display();
+    let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(&bytes[..]), false)
+        .map_err(|e| anyhow!("{name}: cannot read EXR {what}: {e}"))?;
+    for header in meta.headers.iter() {
+        let size = header.layer_size;
+        check_pixels(path, what, size.0 as u64, size.1 as u64)?;
+        let per_pixel: u64 = header
+            .channels
+            .list
+            .iter()
+            .map(|c| c.sample_type.bytes_per_sample() as u64)
+            .sum();
+        let decoded = (size.0 as u64 * size.1 as u64).checked_mul(per_pixel);
+        if decoded.is_none_or(|b| b > MAX_DECODE_BYTES) {
+            bail!(
+                "{name}: {what} claims {}x{} pixels of {} channels ({per_pixel} bytes a pixel); the most one image may decode to is {}",
+                size.0,
+                size.1,
+                header.channels.list.len(),
+                super::input::bytes_text(MAX_DECODE_BYTES)
+            );
+        }
+    }
+    use exr::prelude::traits::{ReadChannels, ReadLayers};
+    let image = exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(Cursor::new(bytes))
+        .map_err(|e| anyhow!("{name}: cannot read EXR {what}: {e}"))?;
+    Ok(image.layer_data)
+}
 
 /// How a PNG's code values relate to light.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
@@ -81,12 +178,7 @@ pub fn read(
 }
 
 fn read_png(path: &Path, encoding: Encoding) -> Result<LinearImage> {
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("{}: cannot open image", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("{}: cannot read image", path.display()))?
-        .decode()
-        .with_context(|| format!("{}: cannot decode image", path.display()))?;
+    let img = decode_png(path, "image")?;
     let (width, height) = (img.width() as usize, img.height() as usize);
     let (channels, codes, top): (usize, Vec<u16>, u16) = match img {
         image::DynamicImage::ImageLuma8(b) => {
@@ -155,9 +247,7 @@ fn read_png(path: &Path, encoding: Encoding) -> Result<LinearImage> {
 }
 
 fn read_exr(path: &Path, saturation: Option<f32>) -> Result<LinearImage> {
-    let image = exr::prelude::read_first_flat_layer_from_file(path)
-        .map_err(|e| anyhow!("{}: cannot read EXR image: {e}", path.display()))?;
-    let layer = image.layer_data;
+    let layer = decode_exr(path, "image")?;
     let (width, height) = (layer.size.width(), layer.size.height());
     let list = &layer.channel_data.list;
     let get = |name: &str| list.iter().find(|c| c.name.to_string() == name);

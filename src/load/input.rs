@@ -117,8 +117,15 @@ pub struct Input {
 
 /// Open `path` for reading with at most `limit` bytes.
 pub fn open(path: &Path, limit: u64) -> Result<Input> {
+    open_as(path, limit, "")
+}
+
+/// [`open`], naming what the file is (`mask`, `topology map`) when it cannot be opened.
+pub fn open_as(path: &Path, limit: u64, what: &str) -> Result<Input> {
     let name = path.display();
-    let file = std::fs::File::open(path).map_err(|e| anyhow!("{name}: cannot open: {e}"))?;
+    let sep = if what.is_empty() { "" } else { " " };
+    let file = std::fs::File::open(path)
+        .map_err(|e| anyhow!("{name}: cannot open{sep}{what}: {e}"))?;
     let meta = file
         .metadata()
         .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
@@ -258,7 +265,12 @@ pub struct InputBytes {
 /// Read all of `path` (at most `limit` bytes), checked not to have changed while read; the
 /// hash is recorded for [`sha256_read`].
 pub fn read_input(path: &Path, limit: u64) -> Result<InputBytes> {
-    let mut input = open(path, limit)?;
+    read_input_as(path, limit, "")
+}
+
+/// [`read_input`], naming what the file is when it cannot be opened.
+pub fn read_input_as(path: &Path, limit: u64, what: &str) -> Result<InputBytes> {
+    let mut input = open_as(path, limit, what)?;
     let mut bytes = Vec::new();
     input.read_rest(&mut bytes)?;
     let sha256 = input.finish()?;

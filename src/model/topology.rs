@@ -5,7 +5,7 @@
 //! H = clamp(H0 + s (2m - 1), 0, H_max), s = `map_scale`. A goniometric spot sees the mean of the
 //! model over the map's height distribution; without a map, H ~ uniform[H0 - s, H0 + s], clamped.
 
-use anyhow::{bail, Context, Result};
+use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -147,12 +147,7 @@ impl TopologyMap {
 }
 
 fn load_png_gray(path: &Path, what: &str) -> Result<(usize, usize, Vec<f32>)> {
-    let img = image::ImageReader::open(path)
-        .with_context(|| format!("{}: cannot open {what}", path.display()))?
-        .with_guessed_format()
-        .with_context(|| format!("{}: cannot read {what}", path.display()))?
-        .decode()
-        .with_context(|| format!("{}: cannot decode {what}", path.display()))?;
+    let img = crate::load::image_io::decode_png(path, what)?;
     let (w, h) = (img.width() as usize, img.height() as usize);
     let values: Vec<f32> = match img {
         image::DynamicImage::ImageLuma8(b) => {
@@ -183,9 +178,7 @@ fn load_png_gray(path: &Path, what: &str) -> Result<(usize, usize, Vec<f32>)> {
 }
 
 fn load_exr_gray(path: &Path, what: &str) -> Result<(usize, usize, Vec<f32>)> {
-    let image = exr::prelude::read_first_flat_layer_from_file(path)
-        .map_err(|e| anyhow::anyhow!("{}: cannot read EXR {what}: {e}", path.display()))?;
-    let layer = image.layer_data;
+    let layer = crate::load::image_io::decode_exr(path, what)?;
     let (w, h) = (layer.size.width(), layer.size.height());
     let channels = &layer.channel_data.list;
     let pick = ["Y", "R"]

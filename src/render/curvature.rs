@@ -83,17 +83,59 @@ fn adjacency(mesh: &Mesh) -> Vec<Vec<usize>> {
     adj
 }
 
-/// The vertices within `rings` edges of `v`, without `v`.
+/// The most neighbours a vertex's quadric is fitted to. A vertex of an ordinary mesh has far
+/// fewer within four rings (a regular grid: 60); one in the fan of a polygon of n corners has n
+/// within two, which without a bound makes the rings of all vertices O(n^2) work.
+pub const MAX_RING_VERTICES: usize = 256;
+
+/// A hasher for vertex indices (a multiplicative hash: no need for SipHash's resistance here).
+#[derive(Default)]
+struct IndexHasher(u64);
+
+impl std::hash::Hasher for IndexHasher {
+    fn finish(&self) -> u64 {
+        self.0
+    }
+    fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 = (self.0.rotate_left(8) ^ b as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+        }
+    }
+    fn write_usize(&mut self, i: usize) {
+        self.0 = (i as u64).wrapping_mul(0x9E37_79B9_7F4A_7C15);
+    }
+}
+
+/// The vertices within `rings` edges of `v`, without `v`, ring by ring in the order found, at
+/// most [`MAX_RING_VERTICES`] of them.
 fn k_ring(adj: &[Vec<usize>], v: usize, rings: usize) -> Vec<usize> {
+    // membership: a scan while the set is small (ordinary meshes), a hash set beyond
+    const SCAN: usize = 48;
     let mut seen = vec![v];
+    let mut set: std::collections::HashSet<usize, std::hash::BuildHasherDefault<IndexHasher>> =
+        Default::default();
     let mut frontier = vec![v];
-    for _ in 0..rings {
+    'rings: for _ in 0..rings {
         let mut next = Vec::new();
         for &f in &frontier {
             for &n in &adj[f] {
-                if !seen.contains(&n) {
+                let known = if seen.len() <= SCAN {
+                    seen.contains(&n)
+                } else {
+                    set.contains(&n)
+                };
+                if !known {
                     seen.push(n);
+                    if seen.len() == SCAN + 1 {
+                        set.reserve(MAX_RING_VERTICES + 1);
+                        set.extend(seen.iter().copied());
+                    } else if seen.len() > SCAN + 1 {
+                        set.insert(n);
+                    }
                     next.push(n);
+                    if seen.len() > MAX_RING_VERTICES {
+                        break 'rings;
+                    }
                 }
             }
         }
