@@ -14,7 +14,7 @@ pub use super::capture_store::CaptureStore;
 use super::image_io::{Encoding, LinearImage};
 use super::samples::Samples;
 use crate::model::frame::{direction_from_angles, Vec3};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
 
@@ -149,8 +149,7 @@ fn splitmix64(mut z: u64) -> u64 {
 
 impl CaptureFile {
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let text = super::input::read_text(path)?;
         toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))
     }

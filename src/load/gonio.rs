@@ -8,7 +8,7 @@
 
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::direction_from_angles;
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use std::path::Path;
 
 /// Options a user can set on loading.
@@ -155,9 +155,11 @@ const NEGATIVE_SIGMAS: f64 = 4.0;
 const NEGATIVE_FRACTION: f64 = 0.01;
 
 pub fn load(path: &Path, opts: GonioOptions) -> Result<Samples> {
-    let file =
-        std::fs::File::open(path).with_context(|| format!("{}: cannot open", path.display()))?;
-    let mut s = read(file, &path.display().to_string(), opts)?;
+    // read once through load::input: limited, hashed as parsed, checked unchanged at the end
+    // (a file cut or rewritten while it was read is an error, not a partial sample set)
+    let mut input = super::input::open(path, super::input::MAX_INPUT_BYTES)?;
+    let mut s = read(&mut input, &path.display().to_string(), opts)?;
+    input.finish()?;
     s.source = path.to_path_buf();
     Ok(s)
 }
@@ -183,7 +185,15 @@ pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Re
                 }
                 Ok(n) => got += n,
                 Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
-                Err(e) => return Err(anyhow!("{name}: cannot read: {e}")),
+                Err(e) => {
+                    // the input's own messages (its limit) already name the file
+                    let text = e.to_string();
+                    return Err(if text.starts_with(name) {
+                        anyhow!("{text}")
+                    } else {
+                        anyhow!("{name}: cannot read: {e}")
+                    });
+                }
             }
         }
         buf.truncate(start + got);
@@ -195,6 +205,10 @@ pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Re
         match header_end(&buf) {
             Some(_) => break,
             None if eof => break,
+            None if buf.len() >= BLOCK => bail!(
+                "{name}: no header line within the first {} MiB (is this a text CSV?)",
+                BLOCK >> 20
+            ),
             None => fill(&mut buf, &mut eof)?,
         }
     }
@@ -203,6 +217,13 @@ pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Re
     drop(buf);
     loop {
         if !eof && memchr::memrchr(b'\n', &rest).is_none() {
+            if rest.len() >= BLOCK {
+                bail!(
+                    "{name}:{}: a line longer than {} MiB (is this a text CSV?)",
+                    state.next_line,
+                    BLOCK >> 20
+                );
+            }
             fill(&mut rest, &mut eof)?;
             continue;
         }

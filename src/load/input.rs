@@ -241,6 +241,49 @@ impl Input {
     }
 }
 
+/// The longest line a text input (CSV) may have: 16 MiB.
+pub const MAX_LINE_BYTES: usize = 16 << 20;
+
+/// A text reader that fails once more than [`MAX_LINE_BYTES`] pass without a newline (a device
+/// such as `/dev/zero`, a binary file), so that a line-based parser never buffers without end.
+pub struct LineLimited<R> {
+    inner: R,
+    name: String,
+    since_newline: usize,
+}
+
+impl<R: Read> LineLimited<R> {
+    pub fn new(inner: R, name: &str) -> Self {
+        Self {
+            inner,
+            name: name.to_owned(),
+            since_newline: 0,
+        }
+    }
+
+    pub fn into_inner(self) -> R {
+        self.inner
+    }
+}
+
+impl<R: Read> Read for LineLimited<R> {
+    fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        let n = self.inner.read(buf)?;
+        match memchr::memrchr(b'\n', &buf[..n]) {
+            Some(p) => self.since_newline = n - p - 1,
+            None => self.since_newline += n,
+        }
+        if self.since_newline > MAX_LINE_BYTES {
+            return Err(std::io::Error::other(anyhow!(
+                "{}: a line longer than {} (is this a text file?)",
+                self.name,
+                bytes_text(MAX_LINE_BYTES as u64)
+            )));
+        }
+        Ok(n)
+    }
+}
+
 /// A read error as a message naming the file (the limit's own message kept as it is).
 pub fn io_error(path: &Path, e: std::io::Error) -> anyhow::Error {
     if e.kind() == std::io::ErrorKind::Other {

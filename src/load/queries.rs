@@ -3,7 +3,7 @@
 //! row's texel: `height` (H, fibre radii), `fibre_azimuth_deg` (psi, degrees), `kd` and `ks`
 //! (grey) or `kd_r,kd_g,kd_b` and `ks_r,ks_g,ks_b` (RGB).
 
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use std::path::Path;
 
 /// One query row; `fields` keeps the input text so it can be echoed exactly.
@@ -52,9 +52,12 @@ const COLUMNS: [&str; 14] = [
 ];
 
 pub fn load(path: &Path) -> Result<Queries> {
-    let file = std::fs::File::open(path)
-        .with_context(|| format!("{}: cannot open query file", path.display()))?;
-    read(file, &path.display().to_string())
+    let name = path.display().to_string();
+    let input = super::input::open_as(path, super::input::MAX_INPUT_BYTES, "query file")?;
+    let mut guarded = super::input::LineLimited::new(input, &name);
+    let q = read(&mut guarded, &name)?;
+    guarded.into_inner().finish()?;
+    Ok(q)
 }
 
 /// Parse queries from any reader; `name` labels errors (`name:line: ...`).
