@@ -77,12 +77,18 @@ struct Field {
 pub const MAX_MAGNITUDE: f64 = 1e100;
 
 fn read_tensor_file(path: &Path) -> Result<HashMap<String, Field>> {
-    let bytes = super::input::read_input(path, super::input::MAX_MEASURED_BYTES)?.bytes;
     let name = path.display();
     let bad = |what: &str| anyhow!("{name}: not an RGL/Mitsuba tensor file: {what}");
+    // the magic first (a device or another kind of file is refused after 18 bytes), then the rest
+    let mut input = super::input::open(path, super::input::MAX_MEASURED_BYTES)?;
+    let mut bytes = Vec::new();
+    std::io::Read::read_to_end(&mut std::io::Read::take(&mut input, 18), &mut bytes)
+        .map_err(|e| super::input::io_error(path, e))?;
     if bytes.len() < 18 || &bytes[..12] != b"tensor_file\0" {
         return Err(bad("no `tensor_file` header"));
     }
+    input.read_rest(&mut bytes)?;
+    input.finish()?;
     if bytes[12..14] != [1, 0] {
         bail!(
             "{name}: tensor file version {}.{} (this loader reads 1.0)",
