@@ -15,7 +15,9 @@ fn main() -> ExitCode {
         }
         Err(e) => {
             if !e.is::<fibrefit::cli::UsageError>() {
-                eprintln!("error: {e:#}");
+                // a closed or full stderr loses the message, not the exit code
+                use std::io::Write;
+                let _ = writeln!(std::io::stderr(), "error: {e:#}");
             }
             ExitCode::from(2)
         }

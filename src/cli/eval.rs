@@ -1,13 +1,13 @@
 //! `fibrefit eval`: a model's BRDF and intensity at given directions.
 
-use crate::export::{atomic::AtomicFile, eval_table};
+use crate::export::{atomic::Outputs, eval_table};
 use crate::load::queries;
 use crate::model::frame::{direction_from_angles, FibreFrame};
 use crate::model::lambert::preview_intensity;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::topology::max_height;
 use crate::model::{self, DirectionPair, ModelId};
-use anyhow::{anyhow, bail, Result};
+use anyhow::{anyhow, bail, Context, Result};
 use clap::Args;
 use rayon::prelude::*;
 use std::path::PathBuf;
@@ -116,13 +116,11 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         }
     }
     // Create the output first: a bad path fails before the work; it is never an input.
-    let mut out = match &args.out {
-        Some(path) => {
-            let mut inputs = vec![args.params.clone(), args.queries.clone()];
-            inputs.extend(raw.topology_map.iter().cloned());
-            crate::export::atomic::refuse_inputs(path, &inputs, "--out")?;
-            Some(AtomicFile::create(path)?)
-        }
+    let mut inputs = vec![args.params.clone(), args.queries.clone()];
+    inputs.extend(raw.topology_map.iter().cloned());
+    let mut outs = Outputs::new(&inputs);
+    let out = match &args.out {
+        Some(path) => Some(outs.file(path, "--out")?),
         None => None,
     };
 
@@ -189,12 +187,13 @@ pub fn run(args: &EvalArgs) -> Result<()> {
             .any(|a| a[0] != a[1] || a[1] != a[2])
     });
     let channels = if rgb_columns { 3 } else { albedos.channels() };
-    match out.as_mut() {
-        Some(file) => {
-            eval_table::write(file.writer(), &queries, &values, channels)?;
-            out.take().expect("checked").commit()?;
+    match out {
+        Some(id) => {
+            eval_table::write(&mut outs.writer(id), &queries, &values, channels)?;
+            outs.commit()?;
         }
-        None => eval_table::write(&mut std::io::stdout().lock(), &queries, &values, channels)?,
+        None => eval_table::write(&mut std::io::stdout().lock(), &queries, &values, channels)
+            .context("standard output")?,
     }
     Ok(())
 }

@@ -2,7 +2,7 @@
 //! `--gltf FILE.glb [--object ...]`: the fitted model as shader code a renderer runs, and as a
 //! glTF material for engines without custom shaders.
 
-use crate::export::atomic::{refuse_inputs, AtomicFile};
+use crate::export::atomic::Outputs;
 use crate::export::gltf_out::{self, VertexFrames};
 use crate::export::shader::{self, check, gpu::Gpu, Language};
 use crate::fit::gltf_material;
@@ -13,7 +13,6 @@ use crate::render::preview_mesh::{self, FramedMesh};
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use sha2::Digest;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Args)]
@@ -142,9 +141,13 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if args.object.to_ascii_lowercase().ends_with(".obj") {
         inputs.push(PathBuf::from(&args.object));
     }
-    if let Some(out) = &args.out {
-        refuse_inputs(out, &inputs, "--out")?;
-    }
+    // every output reserved before the work (none an input or another output), written together
+    let mut outs = Outputs::new(&inputs);
+    let shader_out = match &args.out {
+        Some(out) => Some(outs.file(out, "--out")?),
+        None => None,
+    };
+    let mut gltf_out = None;
     if let Some(g) = &args.gltf {
         let ext = g
             .extension()
@@ -153,10 +156,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         if ext.as_deref() != Some("glb") {
             bail!("--gltf {}: expected a .glb file name", g.display());
         }
-        refuse_inputs(g, &inputs, "--gltf")?;
-        if args.out.as_ref().is_some_and(|o| o == g) {
-            bail!("--gltf and --out are the same file {}", g.display());
-        }
+        gltf_out = Some(outs.file(g, "--gltf")?);
     }
     let (_, id, params) =
         super::eval::load_params(&args.result, args.model.as_deref(), args.quiet)?;
@@ -257,21 +257,14 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         )?;
         glb = Some((bytes, fitted));
     }
-    // write: every file staged, then committed
-    let mut staged = Vec::new();
-    if let (Some(text), Some(path)) = (&shader_text, &args.out) {
-        let mut f = AtomicFile::create(path)?;
-        f.writer().write_all(text.as_bytes())?;
-        staged.push((f, path.clone()));
+    // write: every file staged, then committed together
+    if let (Some(text), Some(id)) = (&shader_text, shader_out) {
+        outs.put(id, text.as_bytes())?;
     }
-    if let (Some((bytes, _)), Some(path)) = (&glb, &args.gltf) {
-        let mut f = AtomicFile::create(path)?;
-        f.writer().write_all(bytes)?;
-        staged.push((f, path.clone()));
+    if let (Some((bytes, _)), Some(id)) = (&glb, gltf_out) {
+        outs.put(id, bytes)?;
     }
-    for (f, _) in staged {
-        f.commit()?;
-    }
+    outs.commit()?;
     if !args.quiet {
         if let (Some(lang), Some(path)) = (lang, &args.out) {
             eprintln!(

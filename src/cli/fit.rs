@@ -1,7 +1,9 @@
 //! `fibrefit fit`: fit a rung to measurements and export what a renderer needs.
 
 use super::data::LoadArgs;
-use crate::export::atomic::{refuse_inputs, AtomicFile};
+use crate::export::atomic::Outputs;
+use crate::export::maps_out::MapFiles;
+use crate::export::report::ReportFiles;
 use crate::export::{report, result_json as rj};
 use crate::fit::config::FitConfig;
 use crate::fit::problem::{albedos_of, model_for};
@@ -91,50 +93,6 @@ pub(crate) fn sha256_of(path: &Path) -> Result<String> {
         .collect())
 }
 
-/// `--report DIR` must be a directory that exists and is writable, or one that can be created
-/// (its nearest existing ancestor a writable directory); checked before the fit, created after.
-fn check_report_dir(dir: &Path, flag: &str) -> Result<()> {
-    let writable = |d: &Path| -> Result<()> {
-        tempfile::Builder::new()
-            .prefix(".fibrefit-check")
-            .tempfile_in(d)
-            .map(drop)
-            .with_context(|| {
-                format!(
-                    "{flag} {}: directory {} is not writable",
-                    dir.display(),
-                    d.display()
-                )
-            })
-    };
-    if dir.exists() {
-        if !dir.is_dir() {
-            anyhow::bail!("{flag} {}: exists and is not a directory", dir.display());
-        }
-        return writable(dir);
-    }
-    let mut up = dir.parent();
-    while let Some(p) = up {
-        let p = if p.as_os_str().is_empty() {
-            Path::new(".")
-        } else {
-            p
-        };
-        if p.exists() {
-            if !p.is_dir() {
-                anyhow::bail!(
-                    "{flag} {}: {} is not a directory",
-                    dir.display(),
-                    p.display()
-                );
-            }
-            return writable(p);
-        }
-        up = p.parent();
-    }
-    Ok(())
-}
-
 pub fn run(args: &FitArgs) -> Result<()> {
     let mut cfg = match (&args.config, &args.model) {
         (Some(path), _) => FitConfig::load(path)?,
@@ -172,25 +130,26 @@ pub fn run(args: &FitArgs) -> Result<()> {
         return super::map_tiles::run_tile(args, cfg, tile, &inputs);
     }
     let out_path = args.out.clone().expect("clap: --out unless --tile");
-    refuse_inputs(&out_path, &inputs, "--out")?;
     if args.map_globals {
         crate::fit::maps::check_request(&cfg, &cfg.maps)?;
     }
-    if let Some(dir) = &args.report {
-        check_report_dir(dir, "--report")?;
-        refuse_inputs(&dir.join("report.md"), &inputs, "--report")?;
-    }
-    if let Some(dir) = &args.maps {
+    if args.maps.is_some() {
         if cfg.model == "auto" {
             anyhow::bail!("--maps: name a rung (`model` or --model), not auto");
         }
         crate::fit::maps::check_request(&cfg, &cfg.maps)?;
-        check_report_dir(dir, "--maps")?;
-        for f in crate::export::maps_out::file_names(&cfg.maps.requested()) {
-            refuse_inputs(&dir.join(f), &inputs, "--maps")?;
-        }
     }
-    let mut out = AtomicFile::create(&out_path)?;
+    // every output reserved before the work (none an input or another output), written together
+    let mut outs = Outputs::new(&inputs);
+    let json_out = outs.file(&out_path, "--out")?;
+    let map_files = match &args.maps {
+        Some(dir) => Some(MapFiles::reserve(&mut outs, dir, &cfg.maps.requested())?),
+        None => None,
+    };
+    let mut report_files = match &args.report {
+        Some(dir) => Some(ReportFiles::reserve(&mut outs, dir)?),
+        None => None,
+    };
     let opts = args
         .load
         .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
@@ -204,6 +163,18 @@ pub fn run(args: &FitArgs) -> Result<()> {
         (Some(st), Some(ids)) => st.samples_of(ids),
         _ => load_data(&args.data, &opts)?,
     };
+    if let Some(files) = &mut report_files {
+        // a residual map per capture image
+        let images: std::collections::BTreeSet<u32> = samples
+            .samples
+            .iter()
+            .filter_map(|s| match s.origin {
+                crate::load::samples::Origin::Pixel { image, .. } => Some(image),
+                _ => None,
+            })
+            .collect();
+        files.add_images(&mut outs, images)?;
+    }
     let selection = if cfg.model == "auto" {
         let s = crate::fit::selection::select(&samples, &cfg)?;
         cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow::anyhow!(e))?);
@@ -400,7 +371,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 outcome.statistics.free_parameters,
                 crate::model::topology::max_height(globals.shape_value(Shape::Spacing)),
             )?;
-            let mut desc = crate::export::maps_out::write(dir, &cfg.maps.requested(), &maps)?;
+            let files = map_files.as_ref().expect("reserved with --maps");
+            let _ = dir;
+            let mut desc =
+                crate::export::maps_out::write(&mut outs, files, &cfg.maps.requested(), &maps)?;
             desc["method"] = method;
             desc["method"]["residual_variance"] = serde_json::json!(variance);
             result.maps = Some(desc);
@@ -408,12 +382,13 @@ pub fn run(args: &FitArgs) -> Result<()> {
             outcome.fitted = fit::maps::fitted_all(&samples, &cfg, &cfg.maps, &globals, &maps)?;
         }
     }
-    if let Some(dir) = &args.report {
+    if let (Some(dir), Some(files)) = (&args.report, &report_files) {
         // the report is optional: its failure is a warning in the result, never the lost fit
         let fitted = fit::fitted_brdf(&outcome, &cfg);
         let measured = crate::load::measured_brdf(&args.data).unwrap_or(None);
         if let Err(e) = report::write_dir(
-            dir,
+            &mut outs,
+            files,
             &outcome,
             &samples,
             &report_text,
@@ -423,23 +398,27 @@ pub fn run(args: &FitArgs) -> Result<()> {
             let w = format!("{}: the report could not be written: {e:#}", dir.display());
             eprintln!("warning: {w}");
             result.warnings.push(w);
+            files.discard(&mut outs);
         }
     }
-    serde_json::to_writer_pretty(out.writer(), &result)?;
-    out.commit()?;
+    serde_json::to_writer_pretty(outs.writer(json_out), &result)
+        .with_context(|| format!("--out {}: cannot write the result", out_path.display()))?;
+    outs.commit()?;
+    // stdout's failure (a closed pipe, a full disk) is reported after the banner, never instead
+    let mut printed = Ok(());
     if args.json {
         let s = &outcome.statistics;
-        println!(
-            "{}",
+        printed = super::print_out(&format!(
+            "{}\n",
             serde_json::json!({
                 "model": id.as_str(), "out": out_path.display().to_string(), "samples": samples.samples.len(),
                 "rmse": s.rmse, "relative_rmse": s.relative_rmse, "reduced_chi_square": s.reduced_chi_square,
                 "iterations": outcome.iterations, "evaluations": outcome.evaluations,
                 "seconds": outcome.elapsed_seconds, "warnings": outcome.warnings.len()
             })
-        );
+        ));
     } else if !args.quiet {
-        print!("{report_text}");
+        printed = super::print_out(&report_text);
         eprintln!("wrote {}", out_path.display());
     }
     if !args.quiet {
@@ -452,7 +431,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     }
     // what the quality checks found is printed even with --quiet: it must not be missed
     quality_banner(&outcome.quality);
-    Ok(())
+    printed.with_context(|| format!("the outputs were written ({})", out_path.display()))
 }
 
 /// The texels of a capture the global fit uses: every one, or a seeded sample of

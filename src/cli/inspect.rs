@@ -24,9 +24,9 @@ pub fn run(args: &InspectArgs) -> Result<()> {
     let samples = load_data(&args.data, &args.load.options()?)?;
     let summary = Summary::of(&samples);
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&summary)?);
+        super::print_out(&(serde_json::to_string_pretty(&summary)? + "\n"))?;
     } else {
-        print!("{}", summary.to_text());
+        super::print_out(&summary.to_text())?;
     }
     Ok(())
 }

@@ -4,7 +4,8 @@
 
 use super::fit::sha256_of;
 use super::fit::FitArgs;
-use crate::export::atomic::{refuse_inputs, AtomicFile};
+use crate::export::atomic::Outputs;
+use crate::export::maps_out::MapFiles;
 use crate::fit::config::FitConfig;
 use crate::fit::maps::{self, TexelPart};
 use anyhow::{anyhow, bail, Context, Result};
@@ -104,10 +105,9 @@ pub fn run_tile(args: &FitArgs, cfg: FitConfig, tile: &str, inputs: &[PathBuf]) 
     let file = dir.join(format!("tile_{i}_of_{n}.json"));
     let mut inputs = inputs.to_vec();
     inputs.push(globals.clone());
-    refuse_inputs(&file, &inputs, "--maps")?;
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("{}: cannot create the tile directory", dir.display()))?;
-    let mut out = AtomicFile::create(&file)?;
+    let mut outs = Outputs::new(&inputs);
+    outs.dir(dir, "--maps")?;
+    let tile_out = outs.file(&file, "--maps")?;
     let opts = args
         .load
         .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
@@ -139,8 +139,8 @@ pub fn run_tile(args: &FitArgs, cfg: FitConfig, tile: &str, inputs: &[PathBuf]) 
         global_free,
         part,
     };
-    serde_json::to_writer(out.writer(), &t)?;
-    out.commit()?;
+    serde_json::to_writer(outs.writer(tile_out), &t)?;
+    outs.commit()?;
     if !args.quiet {
         eprintln!(
             "wrote {} (rows {}..{}, {} texels)",
@@ -256,13 +256,11 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
     let inputs: Vec<PathBuf> = std::iter::once(args.globals.clone())
         .chain(tiles.iter().map(|t| t.0.clone()))
         .collect();
-    refuse_inputs(&args.out, &inputs, "--out")?;
-    for f in crate::export::maps_out::file_names(&req.requested()) {
-        refuse_inputs(&args.maps.join(f), &inputs, "--maps")?;
-    }
+    let mut outs = Outputs::new(&inputs);
+    let json_out = outs.file(&args.out, "--out")?;
+    let map_files = MapFiles::reserve(&mut outs, &args.maps, &req.requested())?;
     let mut g: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&args.globals)?)
         .map_err(|e| anyhow!("{}: {e}", args.globals.display()))?;
-    let mut out = AtomicFile::create(&args.out)?;
     let (width, height, channels, global_free) =
         (first.width, first.height, first.channels, first.global_free);
     let set =
@@ -274,7 +272,7 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
     let (maps, variance, warns) =
         maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;
     let method = g["maps"]["method"].clone();
-    let mut desc = crate::export::maps_out::write(&args.maps, &req.requested(), &maps)?;
+    let mut desc = crate::export::maps_out::write(&mut outs, &map_files, &req.requested(), &maps)?;
     desc["method"] = method;
     desc["method"]["residual_variance"] = serde_json::json!(variance);
     desc["method"]["tiles"] = serde_json::json!(n);
@@ -282,8 +280,8 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
     if let Some(w) = g["warnings"].as_array_mut() {
         w.extend(warns.iter().map(|x| serde_json::json!(x)));
     }
-    serde_json::to_writer_pretty(out.writer(), &g)?;
-    out.commit()?;
+    serde_json::to_writer_pretty(outs.writer(json_out), &g)?;
+    outs.commit()?;
     if !args.quiet {
         eprintln!(
             "merged {n} tiles: wrote {} and {}",

@@ -65,9 +65,10 @@ where
         Ok(cli) => cli,
         Err(e) => {
             let code = e.exit_code();
-            e.print().ok();
+            let printed = e.print();
             if code == 0 {
-                return Ok(());
+                // help and version on stdout: a full disk is an error, a closed pipe is not
+                return printed.map_err(|e| named_stdout(e).into());
             }
             return Err(UsageError.into());
         }
@@ -84,6 +85,20 @@ where
         Command::Tangents(args) => tangents::run(&args),
         Command::Export(args) => export::run(&args),
     }
+}
+
+/// Write `text` to standard output and flush it: a closed pipe comes back as `BrokenPipe` (exit
+/// 0 in `main`, as Unix tools do), a full disk as an error naming standard output (exit 2).
+pub fn print_out(text: &str) -> Result<()> {
+    use std::io::Write;
+    let mut out = std::io::stdout().lock();
+    out.write_all(text.as_bytes())
+        .and_then(|_| out.flush())
+        .map_err(|e| named_stdout(e).into())
+}
+
+fn named_stdout(e: std::io::Error) -> std::io::Error {
+    std::io::Error::new(e.kind(), format!("standard output: {e}"))
 }
 
 /// A usage error already printed by clap.

@@ -1,7 +1,7 @@
 //! `fibrefit render`: a material on an object, as a picture and its AOVs; `--seed001` renders
 //! seed 001's figures 6 and 7 as one grid.
 
-use crate::export::atomic::{refuse_inputs, AtomicFile};
+use crate::export::atomic::{OutputId, Outputs};
 use crate::model::frame::{direction_from_angles, Vec3};
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::topology::TopologyMap;
@@ -10,7 +10,7 @@ use crate::render::mesh_object::{MeshObject, TangentSource};
 use crate::render::objects::Object;
 use crate::render::scene::{Scene, SceneFile};
 use crate::render::{self, Camera, Light, Material, Picture};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use clap::Args;
 use std::path::{Path, PathBuf};
 
@@ -135,12 +135,18 @@ fn object(name: &str, tangents: &str, params: &ModelParams) -> Result<Object> {
 
 /// Write `pic` to `path` (.exr linear RGBA, .png sRGB RGBA with `exposure`); returns the
 /// exposure used.
-fn write_picture(path: &Path, pic: &Picture, exposure: &str) -> Result<Option<f64>> {
+fn write_picture(
+    outs: &mut Outputs,
+    id: OutputId,
+    pic: &Picture,
+    exposure: &str,
+) -> Result<Option<f64>> {
+    let path = &outs.name(id).to_path_buf();
     let ext = path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase);
-    let mut out = AtomicFile::create(path)?;
+    let out = &mut *outs;
     let used = match ext.as_deref() {
         Some("exr") => {
             let data: Vec<f32> = pic
@@ -150,7 +156,7 @@ fn write_picture(path: &Path, pic: &Picture, exposure: &str) -> Result<Option<f6
                 .flat_map(|(c, a)| [c[0], c[1], c[2], *a])
                 .collect();
             crate::export::images::write_exr_into(
-                out.file(),
+                out.file_and_name(id).0,
                 path,
                 pic.width,
                 pic.height,
@@ -204,7 +210,7 @@ fn write_picture(path: &Path, pic: &Picture, exposure: &str) -> Result<Option<f6
                     ]
                 })
                 .collect();
-            let mut w = std::io::BufWriter::new(out.file());
+            let mut w = std::io::BufWriter::new(out.writer(id));
             image::RgbaImage::from_raw(pic.width as u32, pic.height as u32, bytes)
                 .ok_or_else(|| anyhow!("image buffer size"))?
                 .write_to(&mut w, image::ImageFormat::Png)
@@ -217,38 +223,37 @@ fn write_picture(path: &Path, pic: &Picture, exposure: &str) -> Result<Option<f6
             path.display()
         ),
     };
-    out.commit()?;
     Ok(used)
 }
 
-/// Write the AOVs of `pic` into `dir` (each written whole or not at all).
-fn write_aovs(dir: &Path, pic: &Picture, with_height: bool) -> Result<()> {
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("{}: cannot create the AOV directory", dir.display()))?;
-    let vecs: [(&str, &Vec<[f32; 3]>); 3] = [
-        ("normal.exr", &pic.normal),
-        ("tangent.exr", &pic.tangent),
-        ("position.exr", &pic.position),
-    ];
-    for (name, v) in vecs {
-        let path = dir.join(name);
-        let mut f = AtomicFile::create(&path)?;
-        let data: Vec<f32> = v.iter().flatten().copied().collect();
-        crate::export::images::write_exr_into(f.file(), &path, pic.width, pic.height, 3, &data)?;
-        f.commit()?;
-    }
+/// The AOV files of a render (`height.exr` only for rungs with a topology), reserved in `dir`.
+fn reserve_aovs(outs: &mut Outputs, dir: &Path, with_height: bool) -> Result<Vec<OutputId>> {
+    outs.dir(dir, "--aovs")?;
+    let mut names = vec!["normal.exr", "tangent.exr", "position.exr"];
     if with_height {
-        let path = dir.join("height.exr");
-        let mut f = AtomicFile::create(&path)?;
-        crate::export::images::write_exr_into(
-            f.file(),
-            &path,
-            pic.width,
-            pic.height,
-            1,
-            &pic.fibre_height,
-        )?;
-        f.commit()?;
+        names.push("height.exr");
+    }
+    names
+        .into_iter()
+        .map(|f| outs.file(&dir.join(f), "--aovs"))
+        .collect()
+}
+
+/// Write the AOVs of `pic` into their reserved files (committed with the picture).
+fn write_aovs(outs: &mut Outputs, ids: &[OutputId], pic: &Picture) -> Result<()> {
+    let layers: [(&[[f32; 3]], usize); 3] = [
+        (&pic.normal, 3),
+        (&pic.tangent, 3),
+        (&pic.position, 3),
+    ];
+    for (k, &id) in ids.iter().enumerate() {
+        let data: Vec<f32> = match layers.get(k) {
+            Some((v, _)) => v.iter().flatten().copied().collect(),
+            None => pic.fibre_height.clone(),
+        };
+        let channels = layers.get(k).map_or(1, |l| l.1);
+        let (f, name) = outs.file_and_name(id);
+        crate::export::images::write_exr_into(f, name, pic.width, pic.height, channels, &data)?;
     }
     Ok(())
 }
@@ -293,12 +298,12 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
     }
     inputs.extend(raw.topology_map.iter().cloned());
-    refuse_inputs(&args.out, &inputs, "--out")?;
-    if let Some(dir) = &args.aovs {
-        for f in ["normal.exr", "tangent.exr", "position.exr", "height.exr"] {
-            refuse_inputs(&dir.join(f), &inputs, "--aovs")?;
-        }
-    }
+    let mut outs = Outputs::new(&inputs);
+    let picture_out = outs.file(&args.out, "--out")?;
+    let aovs = match &args.aovs {
+        Some(dir) => reserve_aovs(&mut outs, dir, id.has_topology())?,
+        None => vec![],
+    };
     if let Some(f) = args.ward_curvature_alpha {
         if id != ModelId::Ward {
             bail!("--ward-curvature-alpha: the Ward rung's alphas; this is `{id}`");
@@ -343,13 +348,13 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     );
     bar.finish_and_clear();
     let exposure = write_picture(
-        &args.out,
+        &mut outs,
+        picture_out,
         &pic,
         scene.exposure.as_deref().unwrap_or(&args.exposure),
     )?;
-    if let Some(dir) = &args.aovs {
-        write_aovs(dir, &pic, id.has_topology())?;
-    }
+    write_aovs(&mut outs, &aovs, &pic)?;
+    outs.commit()?;
     if !args.quiet {
         match exposure {
             Some(e) => eprintln!("wrote {} (exposure {e:.4})", args.out.display()),
@@ -397,9 +402,7 @@ fn flags_scene(args: &RenderArgs, params: &ModelParams) -> Result<Scene> {
     let obj = object(&args.object, &args.tangents, params)?;
     let lights = lights_of(&args.light)?;
     let (w, h) = (args.size[0], args.size[1]);
-    if w == 0 || h == 0 || w * h > 64 << 20 {
-        bail!("--size {w} {h}: expected 1 to 64 M pixels");
-    }
+    crate::render::check_budget(w, h, args.supersample, "--size/--supersample")?;
     let camera = Camera {
         direction: direction(&args.camera, "--camera")?,
         target: obj.centre(),
@@ -443,6 +446,8 @@ fn lights_of(specs: &[String]) -> Result<Vec<Light>> {
 /// Seed 001's figures 6 and 7: the torus in four rows (max-normal, poulin-fournier,
 /// varying-topology, varying-topology with a topology map of scale 0.25) under two lightings.
 fn seed001(args: &RenderArgs) -> Result<()> {
+    let mut outs = Outputs::new(&[]);
+    let picture_out = outs.file(&args.out, "--out")?;
     let size = 256usize;
     let lightings = [
         vec!["35,120".to_string()],
@@ -552,8 +557,8 @@ fn seed001(args: &RenderArgs) -> Result<()> {
             }
         }
     }
-    refuse_inputs(&args.out, &[], "--out")?;
-    write_picture(&args.out, &grid, &format!("{e}"))?;
+    write_picture(&mut outs, picture_out, &grid, &format!("{e}"))?;
+    outs.commit()?;
     if !args.quiet {
         eprintln!(
             "wrote {} (rows: {}; columns: light 35,120 and lights 70,20 + 30,250; camera {})",

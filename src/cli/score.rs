@@ -34,9 +34,9 @@ pub fn run(args: &ScoreArgs) -> Result<()> {
     let result = score::read_result(&args.result, samples.channels)?;
     let s = score::score(&result, &samples)?;
     if args.json {
-        println!("{}", serde_json::to_string_pretty(&s)?);
+        super::print_out(&(serde_json::to_string_pretty(&s)? + "\n"))?;
     } else {
-        print!("{}", score::text(&s));
+        super::print_out(&score::text(&s))?;
     }
     Ok(())
 }

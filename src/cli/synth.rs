@@ -6,7 +6,7 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-Writes into OUT: gonio.csv (if [gonio]), capture.toml + img_NNN.exr|png (if [capture]),
+Writes into OUT (a new or empty folder, or one synth wrote before; its own files are kept): gonio.csv (if [gonio]), capture.toml + img_NNN.exr|png (if [capture]),
 topology.png / tangent.png when used, truth.json (the true parameters; usable as
 `fibrefit eval --params OUT/truth.json`) and synth_info.json (noise, seeds, files).
 The config format is documented in src/synth/mod.rs and the README; examples: configs/synth_*.toml.")]
@@ -17,13 +17,16 @@ pub struct SynthArgs {
     /// Output directory (created if missing)
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
+    /// Write into a folder synth did not make (no synth_info.json), over files it did not write
+    #[arg(long)]
+    pub force: bool,
     /// No progress bar or warnings
     #[arg(long, short)]
     pub quiet: bool,
 }
 
 pub fn run(args: &SynthArgs) -> Result<()> {
-    let info = crate::synth::run(&args.config, &args.out, args.quiet)?;
+    let info = crate::synth::write_set(&args.config, &args.out, args.quiet, args.force)?;
     if !args.quiet {
         eprintln!(
             "wrote {} ({} gonio rows, {} images) to {}",

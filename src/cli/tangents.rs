@@ -1,6 +1,6 @@
 //! `fibrefit tangents MESH.obj --out T.csv|T.glb`: seed 004's curvature-aligned tangent field.
 
-use crate::export::atomic::{refuse_inputs, AtomicFile};
+use crate::export::atomic::Outputs;
 use crate::export::gltf_out::{self, VertexFrames};
 use crate::load::mesh;
 use crate::render::curvature::{self, UMBILIC_TOLERANCE};
@@ -55,17 +55,18 @@ pub fn run(args: &TangentsArgs) -> Result<()> {
     if !(1..=8).contains(&args.rings) {
         bail!("--rings {}: expected 1 to 8", args.rings);
     }
-    refuse_inputs(&args.out, std::slice::from_ref(&args.mesh), "--out")?;
+    // the output checked before the work; never the mesh it reads
+    let mut outs = Outputs::new(std::slice::from_ref(&args.mesh));
+    let id = outs.file(&args.out, "--out")?;
     let mesh = mesh::load_obj(&args.mesh)?;
     let curv = curvature::principal_curvatures(&mesh, args.rings);
     let umbilic = curv.iter().filter(|c| c.umbilic).count();
-    let mut out = AtomicFile::create(&args.out)?;
     if glb {
         let normals: Vec<_> = curv.iter().map(|c| c.normal).collect();
         let tangents: Vec<_> = curv.iter().map(|c| c.k1_direction).collect();
         let bitangents: Vec<_> = curv.iter().map(|c| c.k2_direction).collect();
         let undefined: Vec<bool> = curv.iter().map(|c| c.umbilic).collect();
-        let mut w = std::io::BufWriter::new(out.writer());
+        let mut w = std::io::BufWriter::new(outs.writer(id));
         gltf_out::write_glb(
             &mut w,
             &mesh,
@@ -80,7 +81,7 @@ pub fn run(args: &TangentsArgs) -> Result<()> {
         )?;
         w.flush()?;
     } else {
-        let mut w = csv::Writer::from_writer(out.writer());
+        let mut w = csv::Writer::from_writer(outs.writer(id));
         w.write_record([
             "x", "y", "z", "nx", "ny", "nz", "k1x", "k1y", "k1z", "k2x", "k2y", "k2z", "k1", "k2",
         ])?;
@@ -101,7 +102,7 @@ pub fn run(args: &TangentsArgs) -> Result<()> {
         }
         w.flush()?;
     }
-    out.commit()?;
+    outs.commit()?;
     if !args.quiet {
         eprintln!(
             "wrote {} ({} vertices, {} triangles; {umbilic} umbilic: |k1 - k2| <= {:.0} % of the larger or flat, no direction)",

@@ -10,12 +10,12 @@
 //! over the channels. A hemisphere map shows every view direction for one light, in orthographic
 //! projection seen from above: right = +B (the far side of a light coming from -B), up = +T.
 
+use super::atomic::Sink;
 use super::plots::{font, palette};
 use crate::load::samples::Sample;
 use crate::model::frame::{FibreFrame, Vec3};
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
-use std::path::Path;
 
 /// A BRDF per channel at (l, v) in the swatch frame; `None` where it is not defined (outside a
 /// measured file's range).
@@ -104,7 +104,7 @@ pub fn near_slice(
 /// Returns the number of measured points drawn.
 #[allow(clippy::too_many_arguments)]
 pub fn slices(
-    path: &Path,
+    path: Sink,
     title: &str,
     psi_deg: f64,
     channels: usize,
@@ -279,10 +279,9 @@ fn short(y: f64) -> String {
     format!("{y:.digits$}")
 }
 
-fn save(path: &Path, w: u32, h: u32, buf: Vec<u8>) -> Result<()> {
+fn save(path: Sink, w: u32, h: u32, buf: Vec<u8>) -> Result<()> {
     let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow!("plot buffer size"))?;
-    img.save(path)
-        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))
+    path.png(&img)
 }
 
 /// Viridis-like colour of t in [0, 1].
@@ -324,7 +323,7 @@ pub const RESIDUAL_LN_RANGE: f64 = 1.0;
 /// dense; without, the measured and residual panels show the samples whose light lies within
 /// [`NEAR_LIGHT_DEG`] of the row's. Returns the number of samples drawn.
 pub fn hemispheres(
-    path: &Path,
+    path: Sink,
     title: &str,
     psi_deg: f64,
     channels: usize,

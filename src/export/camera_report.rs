@@ -60,6 +60,8 @@ pub fn write(dir: &Path, run: &CameraRun, command: &str, seconds: f64) -> Result
          its noise).\n",
         run.store_bytes_per_value
     );
-    std::fs::write(dir.join("camera_resolution.md"), md)?;
+    let mut f = super::atomic::AtomicFile::create(&dir.join("camera_resolution.md"))?;
+    std::io::Write::write_all(&mut f.writer(), md.as_bytes())?;
+    f.commit()?;
     Ok(())
 }

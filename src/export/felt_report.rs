@@ -54,7 +54,7 @@ pub fn write(
         }
     }
     plots::xy(
-        &dir.join("felt.png"),
+        super::atomic::Sink::File(&dir.join("felt.png")),
         "Real felt: held-out log error vs cost per rung",
         "ns per evaluation (single thread)",
         "held-out log error",
@@ -146,7 +146,7 @@ pub fn write(
         }
         let psi = 0.0; // the felt is isotropic
         let points = brdf_plots::slices(
-            &dir.join("felt_slices.png"),
+            super::atomic::Sink::File(&dir.join("felt_slices.png")),
             "Real felt (log metric fits): slices at fixed incidence",
             psi,
             3,
@@ -167,7 +167,7 @@ pub fn write(
         for (k, &i) in drawn.iter().enumerate() {
             let file = format!("felt_hemispheres_{}.png", k + 1);
             brdf_plots::hemispheres(
-                &dir.join(&file),
+                super::atomic::Sink::File(&dir.join(&file)),
                 &format!("Real felt: measured vs {} (log metric)", label(&rows[i])),
                 0.0,
                 3,

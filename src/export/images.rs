@@ -38,10 +38,9 @@ pub fn write_exr(
     channels: usize,
     data: &[f32],
 ) -> Result<()> {
-    exr_image(width, height, channels, data)
-        .write()
-        .to_file(path)
-        .map_err(|e| anyhow!("{}: cannot write EXR: {e}", path.display()))
+    let mut f = super::atomic::AtomicFile::create(path)?;
+    write_exr_into(f.file(), path, width, height, channels, data)?;
+    f.commit()
 }
 
 /// [`write_exr`] into an open file (an [`super::atomic::AtomicFile`]'s); `name` for errors.
@@ -83,14 +82,22 @@ pub fn write_png16(
         })
         .collect();
     let (w, h) = (width as u32, height as u32);
+    let mut f = super::atomic::AtomicFile::create(path)?;
+    let mut out = std::io::BufWriter::new(f.writer());
     let result = if channels == 1 {
-        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, codes).map(|b| b.save(path))
+        image::ImageBuffer::<image::Luma<u16>, _>::from_raw(w, h, codes)
+            .map(|b| b.write_to(&mut out, image::ImageFormat::Png))
     } else {
-        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, codes).map(|b| b.save(path))
+        image::ImageBuffer::<image::Rgb<u16>, _>::from_raw(w, h, codes)
+            .map(|b| b.write_to(&mut out, image::ImageFormat::Png))
     };
     result
         .ok_or_else(|| anyhow!("{}: image buffer size mismatch", path.display()))?
-        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))
+        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))?;
+    std::io::Write::flush(&mut out)
+        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))?;
+    drop(out);
+    f.commit()
 }
 
 /// Write values in [0, 1] as a 16-bit grayscale PNG (topology maps, masks).

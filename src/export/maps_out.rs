@@ -4,11 +4,11 @@
 //!
 //! Files: `height.exr` (H, fibre radii), `fibre_azimuth.exr` (psi, degrees in [-90, 90)),
 //! `kd.exr`, `ks.exr` (albedos, one channel per colour channel), `<name>_std_error.exr`, and
-//! `residual.exr` (RMS relative residual per texel). All are written into a staging directory
-//! first and moved into DIR only when every one is complete.
+//! `residual.exr` (RMS relative residual per texel). All are reserved in the run's outputs before
+//! the work and put in place with its other outputs when every one is complete.
 
-use super::atomic::Staging;
-use super::images::write_exr;
+use super::atomic::{OutputId, Outputs};
+use super::images::write_exr_into;
 use crate::fit::maps::{TexelMaps, TexelValues};
 use anyhow::{Context, Result};
 use std::path::Path;
@@ -33,7 +33,37 @@ fn layout(name: &str, channels: usize) -> (&'static str, usize, Getter) {
     }
 }
 
-/// File names `write` produces for `names` (for refusing outputs that are inputs).
+/// The map files of a run, reserved in its outputs before the work (`file_names` in `dir`).
+pub struct MapFiles {
+    dir: std::path::PathBuf,
+    ids: Vec<(String, OutputId)>,
+}
+
+impl MapFiles {
+    /// Reserve the files of the maps `names` in `dir` (created if missing).
+    pub fn reserve(outs: &mut Outputs, dir: &Path, names: &[&str]) -> Result<Self> {
+        outs.dir(dir, "--maps")?;
+        let mut ids = vec![];
+        for f in file_names(names) {
+            let id = outs.file(&dir.join(&f), "--maps")?;
+            ids.push((f, id));
+        }
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            ids,
+        })
+    }
+
+    fn id(&self, file: &str) -> Result<OutputId> {
+        self.ids
+            .iter()
+            .find(|(f, _)| f == file)
+            .map(|(_, id)| *id)
+            .with_context(|| format!("{}: {file} was not reserved", self.dir.display()))
+    }
+}
+
+/// File names `write` produces for `names`.
 pub fn file_names(names: &[&str]) -> Vec<String> {
     let mut v: Vec<String> = names
         .iter()
@@ -43,17 +73,17 @@ pub fn file_names(names: &[&str]) -> Vec<String> {
     v
 }
 
-/// Write the maps `names` into `dir` (created if missing); returns the JSON description.
-pub fn write(dir: &Path, names: &[&str], maps: &TexelMaps) -> Result<serde_json::Value> {
-    let parent = match dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => std::path::PathBuf::from("."),
-    };
-    std::fs::create_dir_all(&parent)
-        .with_context(|| format!("{}: cannot create directory", parent.display()))?;
-    let stage = Staging::new(&parent, "maps")?;
+/// Write the maps `names` into their reserved files (committed with the run's other outputs);
+/// returns the JSON description.
+pub fn write(
+    outs: &mut Outputs,
+    files: &MapFiles,
+    names: &[&str],
+    maps: &TexelMaps,
+) -> Result<serde_json::Value> {
+    let dir = &files.dir;
     let (w, h) = (maps.width, maps.height);
-    let mut files = serde_json::Map::new();
+    let mut json = serde_json::Map::new();
     let grid = |channels: usize, get: &dyn Fn(usize, usize) -> f64| -> Vec<f32> {
         let mut data = vec![f32::NAN; w * h * channels];
         for (t, &(x, y)) in maps.texels.iter().enumerate() {
@@ -64,25 +94,17 @@ pub fn write(dir: &Path, names: &[&str], maps: &TexelMaps) -> Result<serde_json:
         }
         data
     };
+    let mut put = |file: &str, channels: usize, data: &[f32]| -> Result<()> {
+        let (f, name) = outs.file_and_name(files.id(file)?);
+        write_exr_into(f, name, w, h, channels, data)
+    };
     for &name in names {
         let (unit, channels, get) = layout(name, maps.channels);
         let values = grid(channels, &|t, c| get(&maps.values[t], c));
         let errors = grid(channels, &|t, c| get(&maps.std_errors[t], c));
-        write_exr(
-            &stage.path().join(format!("{name}.exr")),
-            w,
-            h,
-            channels,
-            &values,
-        )?;
-        write_exr(
-            &stage.path().join(format!("{name}_std_error.exr")),
-            w,
-            h,
-            channels,
-            &errors,
-        )?;
-        files.insert(
+        put(&format!("{name}.exr"), channels, &values)?;
+        put(&format!("{name}_std_error.exr"), channels, &errors)?;
+        json.insert(
             name.into(),
             serde_json::json!({
                 "file": format!("{name}.exr"),
@@ -93,8 +115,8 @@ pub fn write(dir: &Path, names: &[&str], maps: &TexelMaps) -> Result<serde_json:
         );
     }
     let residual = grid(1, &|t, _| maps.residual[t]);
-    write_exr(&stage.path().join("residual.exr"), w, h, 1, &residual)?;
-    files.insert(
+    put("residual.exr", 1, &residual)?;
+    json.insert(
         "residual".into(),
         serde_json::json!({
             "file": "residual.exr",
@@ -102,20 +124,12 @@ pub fn write(dir: &Path, names: &[&str], maps: &TexelMaps) -> Result<serde_json:
             "channels": "Y",
         }),
     );
-    std::fs::create_dir_all(dir)
-        .with_context(|| format!("{}: cannot create the maps directory", dir.display()))?;
-    for entry in std::fs::read_dir(stage.path())? {
-        let entry = entry?;
-        std::fs::rename(entry.path(), dir.join(entry.file_name()))
-            .with_context(|| format!("{}: cannot put the maps in place", dir.display()))?;
-    }
-    drop(stage);
     Ok(serde_json::json!({
         "directory": dir.display().to_string(),
         "width": w,
         "height": h,
         "texels": maps.texels.len(),
         "registration": "one texel per capture pixel (x right, y down from the top-left); NaN where no usable pixel",
-        "maps": files,
+        "maps": json,
     }))
 }

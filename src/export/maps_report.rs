@@ -95,10 +95,8 @@ fn figure(path: &Path, p: &Pictures) -> Result<()> {
         .map_err(err)?;
         root.present().map_err(err)?;
     }
-    image::RgbImage::from_raw(w, h, buf)
-        .ok_or_else(|| anyhow!("plot buffer size"))?
-        .save(path)
-        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))
+    let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow!("plot buffer size"))?;
+    super::atomic::Sink::File(path).png(&img)
 }
 
 pub fn write(

@@ -2,9 +2,9 @@
 //! plotters' pure-Rust font rendering (ab_glyph) with DejaVu Sans embedded in the binary, so no
 //! system font library is needed.
 
+use super::atomic::Sink;
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
-use std::path::Path;
 use std::sync::Once;
 
 static FONT: &[u8] = include_bytes!("../../assets/fonts/DejaVuSans.ttf");
@@ -64,15 +64,14 @@ fn range(v: impl Iterator<Item = f64> + Clone, log: bool) -> (f64, f64) {
     }
 }
 
-fn save(path: &Path, buf: Vec<u8>) -> Result<()> {
+fn save(path: Sink, buf: Vec<u8>) -> Result<()> {
     let img = image::RgbImage::from_raw(W, H, buf).ok_or_else(|| anyhow!("plot buffer size"))?;
-    img.save(path)
-        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))
+    path.png(&img)
 }
 
 /// An x-y plot of several series, each axis linear or logarithmic.
 pub fn xy(
-    path: &Path,
+    path: Sink,
     title: &str,
     x_label: &str,
     y_label: &str,
@@ -166,7 +165,7 @@ pub fn xy(
 
 /// A histogram of `values` in `bins` equal bins.
 pub fn histogram(
-    path: &Path,
+    path: Sink,
     title: &str,
     x_label: &str,
     values: &[f64],
@@ -215,7 +214,7 @@ pub fn histogram(
 /// A residual map: blue (model below data) - white - red (model above), scaled to the largest
 /// |value|; `None` pixels (not used in the fit) grey.
 pub fn residual_map(
-    path: &Path,
+    path: Sink,
     width: usize,
     height: usize,
     values: &[Option<f64>],
@@ -239,6 +238,5 @@ pub fn residual_map(
             }
         }
     });
-    img.save(path)
-        .map_err(|e| anyhow!("{}: cannot write PNG: {e}", path.display()))
+    path.png(&img)
 }

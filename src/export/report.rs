@@ -1,6 +1,7 @@
 //! The fit report in the style of a lab notebook (after lmfit's fit_report): statistics, each
 //! parameter as `value +/- stderr (pct) (init)`, and correlations above 0.1 sorted by size.
 
+use super::atomic::{OutputId, Outputs, Sink};
 use crate::fit::FitOutcome;
 use std::fmt::Write;
 
@@ -130,7 +131,8 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
 /// data is a measured file, `measured`), a histogram of the relative residuals, and for image
 /// captures a residual map per image.
 pub fn write_dir(
-    dir: &std::path::Path,
+    outs: &mut Outputs,
+    files: &ReportFiles,
     outcome: &FitOutcome,
     samples: &crate::load::samples::Samples,
     report_text: &str,
@@ -140,7 +142,6 @@ pub fn write_dir(
     use super::brdf_plots::{self, Curve};
     use super::plots;
     use crate::load::samples::Origin;
-    std::fs::create_dir_all(dir)?;
     let mut md = format!("# fibrefit fit report\n\n```text\n{report_text}```\n\n");
     let ch = samples.channels;
     let psi_deg = outcome
@@ -170,7 +171,7 @@ pub fn write_dir(
         dashed: false,
     });
     let points = brdf_plots::slices(
-        &dir.join("slices.png"),
+        Sink::Staged(outs, files.slices),
         "Slices at fixed incidence: fitted curves and measured samples",
         psi_deg,
         ch,
@@ -194,7 +195,7 @@ pub fn write_dir(
         brdf_plots::NEAR_PLANE_COSINE.asin().to_degrees(),
     );
     let near = brdf_plots::hemispheres(
-        &dir.join("hemispheres.png"),
+        Sink::Staged(outs, files.hemispheres),
         "Hemisphere maps: measured, fitted, residual",
         psi_deg,
         ch,
@@ -223,7 +224,7 @@ pub fn write_dir(
         .flat_map(|(s, m)| (0..ch).map(move |c| (m[c] - s.value[c]) / s.value[c].abs().max(1e-12)))
         .collect();
     plots::histogram(
-        &dir.join("residuals.png"),
+        Sink::Staged(outs, files.residuals),
         "Relative residuals (fitted - measured) / measured",
         "relative residual",
         &rel,
@@ -249,10 +250,68 @@ pub fn write_dir(
             values[y as usize * w + x as usize] = Some(r);
         }
         let file = format!("residual_map_{k:03}.png");
-        plots::residual_map(&dir.join(&file), w, h, &values)?;
+        let Some(&id) = files.maps.get(&k) else {
+            anyhow::bail!("image {k}: no residual map was reserved for it");
+        };
+        plots::residual_map(Sink::Staged(outs, id), w, h, &values)?;
         md += &format!("### Image {k}: relative residual per pixel (red: fitted above measured, blue: below, grey: not used)\n\n![residual map {k}]({file})\n\n");
     }
-    let mut f = super::atomic::AtomicFile::create(&dir.join("report.md"))?;
-    std::io::Write::write_all(f.writer(), md.as_bytes())?;
-    f.commit()
+    outs.put(files.md, md.as_bytes())
+}
+
+/// The files of a fit report (`report.md`, its plots, a residual map per capture image),
+/// reserved in the run's outputs before the work, so that none is an input or another output.
+pub struct ReportFiles {
+    dir: std::path::PathBuf,
+    md: OutputId,
+    slices: OutputId,
+    hemispheres: OutputId,
+    residuals: OutputId,
+    maps: std::collections::BTreeMap<u32, OutputId>,
+}
+
+impl ReportFiles {
+    /// Reserve the report in `dir` (created if missing); a capture's residual maps are added
+    /// with [`ReportFiles::add_images`] once its images are known.
+    pub fn reserve(outs: &mut Outputs, dir: &std::path::Path) -> anyhow::Result<Self> {
+        outs.dir(dir, "--report")?;
+        let mut file = |name: &str| outs.file(&dir.join(name), "--report");
+        let (md, slices, hemispheres, residuals) = (
+            file("report.md")?,
+            file("slices.png")?,
+            file("hemispheres.png")?,
+            file("residuals.png")?,
+        );
+        Ok(Self {
+            dir: dir.to_path_buf(),
+            md,
+            slices,
+            hemispheres,
+            residuals,
+            maps: Default::default(),
+        })
+    }
+
+    /// Reserve the residual maps of the capture images `images`.
+    pub fn add_images(
+        &mut self,
+        outs: &mut Outputs,
+        images: impl IntoIterator<Item = u32>,
+    ) -> anyhow::Result<()> {
+        for k in images {
+            let path = self.dir.join(format!("residual_map_{k:03}.png"));
+            self.maps.insert(k, outs.file(&path, "--report")?);
+        }
+        Ok(())
+    }
+
+    /// Give the report up (the old files stay as they were).
+    pub fn discard(&self, outs: &mut Outputs) {
+        for id in [self.md, self.slices, self.hemispheres, self.residuals]
+            .into_iter()
+            .chain(self.maps.values().copied())
+        {
+            outs.discard(id);
+        }
+    }
 }

@@ -24,7 +24,7 @@ pub fn write(dir: &Path, runs: &[Run], size: StudySize, command: &str, seconds: 
         })
         .collect();
     plots::xy(
-        &dir.join("fit_robustness.png"),
+        super::atomic::Sink::File(&dir.join("fit_robustness.png")),
         "Default fit from random starts: final chi-square / truth's",
         "fit wall time [s]",
         "chi2 fit / chi2 truth (1 = global minimum)",

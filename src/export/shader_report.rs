@@ -56,6 +56,8 @@ pub fn write(dir: &Path, run: &ShaderCostRun, command: &str, seconds: f64) -> Re
          `reports/speed_accuracy.md` gives the error each costs against `reference`.\n\n\
          Agreement columns: the same run's comparison with the Rust model (relative error per \
          value; `tests/shader_export.rs` asserts the bound `export --check` uses).\n";
-    std::fs::write(dir.join("shader_cost.md"), md)?;
+    let mut f = super::atomic::AtomicFile::create(&dir.join("shader_cost.md"))?;
+    std::io::Write::write_all(&mut f.writer(), md.as_bytes())?;
+    f.commit()?;
     Ok(())
 }

@@ -61,7 +61,7 @@ pub fn write(
         })
         .collect();
     plots::xy(
-        &dir.join("pareto.png"),
+        super::atomic::Sink::File(&dir.join("pareto.png")),
         "Error vs cost per rung (climbing set)",
         "ns per evaluation (single thread)",
         "RMS relative error vs reference",
@@ -85,7 +85,7 @@ pub fn write(
         })
         .collect();
     plots::xy(
-        &dir.join("fit_time_vs_error.png"),
+        super::atomic::Sink::File(&dir.join("fit_time_vs_error.png")),
         "Fit time vs parameter error (silk capture, by subsampling)",
         "fit wall time [s]",
         "largest relative parameter error",

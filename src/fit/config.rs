@@ -115,6 +115,18 @@ impl Default for Optimizer {
     }
 }
 
+/// Most quadrature nodes of one model evaluation (`quadrature_order` x `azimuth_nodes`): 2^16,
+/// 256 times the default 16 x 16. Each knob alone may reach its own maximum (1024).
+pub const MAX_NODES_PER_EVALUATION: usize = 1 << 16;
+/// Most candidates of the global stage (`optimizer.global_candidates`).
+pub const MAX_GLOBAL_CANDIDATES: usize = 100_000;
+/// Most samples the global stage costs each candidate on (`optimizer.global_subsample`).
+pub const MAX_GLOBAL_SUBSAMPLE: usize = 1_000_000;
+/// Most polishing starts (`starts`).
+pub const MAX_STARTS: usize = 1_000;
+/// Most Levenberg-Marquardt iterations per start (`optimizer.max_iterations`).
+pub const MAX_ITERATIONS: u64 = 100_000;
+
 fn default_azimuth_nodes() -> usize {
     crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES
 }
@@ -466,6 +478,37 @@ impl FitConfig {
             bail!(
                 "knobs.azimuth_nodes = {} must lie in [1, {max_nodes}]",
                 self.knobs.azimuth_nodes
+            );
+        }
+        let nodes = self.knobs.quadrature_order * self.knobs.azimuth_nodes;
+        if nodes > MAX_NODES_PER_EVALUATION {
+            bail!(
+                "knobs.quadrature_order = {} x knobs.azimuth_nodes = {} = {nodes} quadrature nodes per model \
+                 evaluation, {}x the default's: more than the {MAX_NODES_PER_EVALUATION} a fit may take \
+                 (its time grows with the product); lower one of them",
+                self.knobs.quadrature_order,
+                self.knobs.azimuth_nodes,
+                nodes / 256
+            );
+        }
+        if let Some(c) = self.optimizer.global_candidates {
+            if !(1..=MAX_GLOBAL_CANDIDATES).contains(&c) {
+                bail!("optimizer.global_candidates = {c} must lie in [1, {MAX_GLOBAL_CANDIDATES}]");
+            }
+        }
+        if !(1..=MAX_GLOBAL_SUBSAMPLE).contains(&self.optimizer.global_subsample) {
+            bail!(
+                "optimizer.global_subsample = {} must lie in [1, {MAX_GLOBAL_SUBSAMPLE}]",
+                self.optimizer.global_subsample
+            );
+        }
+        if self.starts > MAX_STARTS {
+            bail!("starts = {} must lie in [1, {MAX_STARTS}]", self.starts);
+        }
+        if self.optimizer.max_iterations > MAX_ITERATIONS {
+            bail!(
+                "optimizer.max_iterations = {} must lie in [1, {MAX_ITERATIONS}]",
+                self.optimizer.max_iterations
             );
         }
         if self.knobs.stride == 0 || !(self.knobs.fraction > 0.0 && self.knobs.fraction <= 1.0) {

@@ -139,12 +139,7 @@ impl SceneFile {
         let at = path.display().to_string();
         let base = path.parent().unwrap_or(Path::new("."));
         let [w, h] = self.size;
-        if w == 0 || h == 0 || w * h > 64 << 20 {
-            bail!("{at}: size = [{w}, {h}]: expected 1 to 64 M pixels");
-        }
-        if !(1..=16).contains(&self.supersample) {
-            bail!("{at}: supersample = {}: expected 1 to 16", self.supersample);
-        }
+        super::check_budget(w, h, self.supersample, &at)?;
         if self.objects.is_empty() || self.lights.is_empty() {
             bail!("{at}: a scene needs [[objects]] and [[lights]]");
         }

@@ -268,74 +268,79 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 
 /// Render everything `config` asks for into `out_dir`. Returns what was written.
 ///
-/// The set is rendered into a staging directory beside `out_dir` and then put in place, so a
-/// dataset is always all old or all new: a failed or interrupted run leaves `out_dir` as it was.
-/// Files in an existing `out_dir` that no synth run wrote are kept.
+/// The set is rendered into a staging directory inside `out_dir` and its files put in place
+/// together (see [`crate::export::atomic::Outputs`]), so a dataset is always all old or all new:
+/// a failed or interrupted run leaves `out_dir` as it was. A linked `out_dir` stays a link (the
+/// set goes into its target). Files synth did not write are kept: a folder that is neither
+/// empty nor synth's own (no `synth_info.json`) is refused, and so is a new file of the set
+/// whose name a user's own file in a synth folder has; `force` writes over both.
 pub fn run(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
-    let parent = match out_dir.parent() {
-        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
-        _ => PathBuf::from("."),
-    };
-    if out_dir.exists() && !out_dir.is_dir() {
-        bail!("{}: exists and is not a directory", out_dir.display());
-    }
-    std::fs::create_dir_all(&parent)
-        .with_context(|| format!("{}: cannot create output directory", parent.display()))?;
-    let stage = crate::export::atomic::Staging::new(&parent, "synth")?;
-    let info = render_into(config_path, stage.path(), quiet)?;
-    install(stage.keep(), out_dir)?;
-    Ok(info)
+    write_set(config_path, out_dir, quiet, false)
 }
 
-/// Put the staged set in place of `out_dir`. Of an old `out_dir`, the files of the old set (its
-/// synth_info.json's list) go with it; other files (a user's own) are kept unless the new set
-/// has one of the same name.
-fn install(stage: PathBuf, out_dir: &Path) -> Result<()> {
-    let fail = |e: std::io::Error| {
-        anyhow!(
-            "{}: cannot put the new dataset in place: {e}",
-            out_dir.display()
-        )
-    };
-    if !out_dir.exists() {
-        return std::fs::rename(&stage, out_dir).map_err(|e| {
-            let _ = std::fs::remove_dir_all(&stage);
-            fail(e)
-        });
-    }
-    let old = stage.with_file_name(format!(
-        "{}-old",
-        stage
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or(".fibrefit-synth")
-    ));
-    std::fs::rename(out_dir, &old).map_err(|e| {
-        let _ = std::fs::remove_dir_all(&stage);
-        fail(e)
-    })?;
-    if let Err(e) = std::fs::rename(&stage, out_dir) {
-        let _ = std::fs::rename(&old, out_dir);
-        let _ = std::fs::remove_dir_all(&stage);
-        return Err(fail(e));
-    }
-    // the old set (as its synth_info.json lists it) goes; a user's own files stay
-    let old_set: Vec<String> = std::fs::read_to_string(old.join("synth_info.json"))
+/// [`run`], with `force`: write into a folder synth did not make, over files it did not write.
+pub fn write_set(config_path: &Path, out_dir: &Path, quiet: bool, force: bool) -> Result<SynthInfo> {
+    use crate::export::atomic::Outputs;
+    let mut outs = Outputs::new(&[config_path.to_path_buf()]);
+    let dir = outs.dir(out_dir, "--out")?;
+    let marker = dir.join("synth_info.json");
+    let has_marker = marker.is_file();
+    // the files of the old set, as its synth_info.json lists them
+    let old_set: Vec<String> = std::fs::read_to_string(&marker)
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .and_then(|v| v.get("files").cloned())
         .and_then(|f| serde_json::from_value(f).ok())
         .unwrap_or_default();
-    for entry in std::fs::read_dir(&old).map_err(fail)?.flatten() {
-        let name = entry.file_name();
-        let ours =
-            name == "synth_info.json" || old_set.iter().any(|f| std::ffi::OsStr::new(f) == name);
-        let dest = out_dir.join(&name);
-        if !ours && std::fs::symlink_metadata(&dest).is_err() {
-            std::fs::rename(entry.path(), &dest).map_err(fail)?;
+    let foreign: Vec<String> = std::fs::read_dir(&dir)
+        .with_context(|| format!("--out {}: cannot read the folder", out_dir.display()))?
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .filter(|n| !n.starts_with(".fibrefit-") && n != "synth_info.json" && !old_set.contains(n))
+        .collect();
+    if !has_marker && !foreign.is_empty() && !force {
+        bail!(
+            "--out {}: not empty and not a folder synth wrote (no synth_info.json): its files \
+             ({}{}) would be mixed with or replaced by the set; give a new or empty folder, or --force",
+            out_dir.display(),
+            foreign.iter().take(3).cloned().collect::<Vec<_>>().join(", "),
+            if foreign.len() > 3 { ", ..." } else { "" }
+        );
+    }
+    let stage = crate::export::atomic::Staging::new(&dir, "synth")?;
+    let info = render_into(config_path, stage.path(), quiet)?;
+    let mut staged: Vec<String> = std::fs::read_dir(stage.path())
+        .with_context(|| format!("{}: cannot read the staged set", stage.path().display()))?
+        .flatten()
+        .map(|e| e.file_name().to_string_lossy().into_owned())
+        .collect();
+    staged.sort();
+    if !force {
+        if let Some(mine) = staged.iter().find(|n| foreign.contains(n)) {
+            bail!(
+                "--out {}: {mine} is not a file synth wrote (not in synth_info.json's list), and the new \
+                 set has a file of that name; move it away, or give --force to replace it; nothing was written",
+                out_dir.display()
+            );
         }
     }
-    std::fs::remove_dir_all(&old).map_err(fail)
+    for name in &staged {
+        let id = outs.file(&out_dir.join(name), "--out")?;
+        let src = stage.path().join(name);
+        let mut from = std::fs::File::open(&src)
+            .with_context(|| format!("{}: cannot read the staged file", src.display()))?;
+        std::io::copy(&mut from, &mut outs.writer(id))?;
+    }
+    outs.commit()?;
+    drop(stage);
+    // files of the old set that the new one no longer has go (a user's own never do)
+    for f in old_set.iter().filter(|f| !info.files.contains(f)) {
+        let p = dir.join(f);
+        if std::fs::symlink_metadata(&p).is_ok_and(|m| m.is_file()) && !f.contains('/') {
+            let _ = std::fs::remove_file(p);
+        }
+    }
+    Ok(info)
 }
 
 fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
@@ -353,6 +358,7 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
     if cfg.noise.relative < 0.0 || cfg.noise.floor < 0.0 {
         bail!("{}: noise levels must be >= 0", config_path.display());
     }
+    check_budget(&cfg).map_err(|e| anyhow!("{}: {e}", config_path.display()))?;
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create output directory", out_dir.display()))?;
     let mut raw = cfg.params.clone();
@@ -460,6 +466,56 @@ fn relative_to(path: &Path, dir: &Path) -> PathBuf {
     path.strip_prefix(dir)
         .map(Path::to_path_buf)
         .unwrap_or_else(|_| std::path::absolute(path).unwrap_or(path.to_path_buf()))
+}
+
+/// Most goniometric rows synth writes: 10 million (about 1 GB of CSV).
+pub const MAX_GONIO_ROWS: usize = 10_000_000;
+/// Most pixels of one synthetic image or generated map: 16 M (4096 x 4096; 200 MB as RGB f32).
+pub const MAX_IMAGE_PIXELS: usize = 1 << 24;
+/// Most images of one synthetic capture.
+pub const MAX_IMAGES: usize = 1024;
+
+/// Refuse, before any work, a set larger than [`MAX_GONIO_ROWS`], [`MAX_IMAGE_PIXELS`] or
+/// [`MAX_IMAGES`] (sizes multiplied without overflow).
+fn check_budget(cfg: &SynthConfig) -> Result<()> {
+    if let Some(g) = &cfg.gonio {
+        let rows = match (&g.grid, &g.random) {
+            (Some(grid), _) => [&grid.theta_i, &grid.phi_i, &grid.theta_o, &grid.phi_o]
+                .iter()
+                .try_fold(1usize, |n, l| n.checked_mul(l.len())),
+            (None, Some(r)) => Some(r.count),
+            _ => Some(0),
+        };
+        match rows {
+            Some(n) if n <= MAX_GONIO_ROWS => {}
+            _ => bail!(
+                "[gonio] asks for {} rows, more than the {MAX_GONIO_ROWS} synth writes",
+                rows.map_or("over 2^64".to_string(), |n| n.to_string())
+            ),
+        }
+    }
+    let pixels = |what: &str, w: usize, h: usize| -> Result<()> {
+        match w.checked_mul(h) {
+            Some(n) if n <= MAX_IMAGE_PIXELS => Ok(()),
+            _ => bail!(
+                "{what}: {w} x {h} pixels, more than the {} M pixels synth renders per image",
+                MAX_IMAGE_PIXELS >> 20
+            ),
+        }
+    };
+    if let Some(c) = &cfg.capture {
+        pixels("[capture]", c.width, c.height)?;
+        if c.images.len() > MAX_IMAGES {
+            bail!(
+                "[capture]: {} images, more than the {MAX_IMAGES} synth renders",
+                c.images.len()
+            );
+        }
+    }
+    if let Some(m) = &cfg.topology_map {
+        pixels("[topology_map]", m.width, m.height)?;
+    }
+    Ok(())
 }
 
 /// Directions as (theta_i, phi_i, theta_o, phi_o) in degrees.
