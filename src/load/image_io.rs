@@ -36,10 +36,32 @@ pub fn check_pixels(path: &Path, what: &str, width: u64, height: u64) -> Result<
     Ok(())
 }
 
+/// The bytes of `path` (a `what`) when they start with `magic`: the signature is read first, so
+/// that a device or another kind of file is refused after a few bytes, not after the limit.
+fn read_with_magic(path: &Path, what: &str, magic: &[u8], kind: &str) -> Result<Vec<u8>> {
+    use std::io::Read;
+    let mut input = super::input::open_as(path, super::input::MAX_INPUT_BYTES, what)?;
+    let mut bytes = Vec::new();
+    (&mut input)
+        .take(magic.len() as u64)
+        .read_to_end(&mut bytes)
+        .map_err(|e| super::input::io_error(path, e))?;
+    if bytes != magic {
+        bail!(
+            "{}: cannot read {kind} {what}: not a{} {kind} file (no {kind} signature)",
+            path.display(),
+            if kind == "EXR" { "n" } else { "" }
+        );
+    }
+    input.read_rest(&mut bytes)?;
+    input.finish()?;
+    Ok(bytes)
+}
+
 /// A PNG at `path` (a `what`), its size checked from the header before decoding, decoded with
 /// [`MAX_DECODE_BYTES`] as the limit.
 pub fn decode_png(path: &Path, what: &str) -> Result<image::DynamicImage> {
-    let bytes = super::input::read_input_as(path, super::input::MAX_INPUT_BYTES, what)?.bytes;
+    let bytes = read_with_magic(path, what, b"\x89PNG\r\n\x1a\n", "PNG")?;
     let name = path.display();
     let reader = || {
         image::ImageReader::new(Cursor::new(&bytes[..]))
@@ -64,7 +86,7 @@ pub fn decode_exr(
     path: &Path,
     what: &str,
 ) -> Result<exr::image::Layer<exr::image::AnyChannels<exr::image::FlatSamples>>> {
-    let bytes = super::input::read_input_as(path, super::input::MAX_INPUT_BYTES, what)?.bytes;
+    let bytes = read_with_magic(path, what, &[0x76, 0x2f, 0x31, 0x01], "EXR")?;
     let name = path.display();
     let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(&bytes[..]), false)
         .map_err(|e| anyhow!("{name}: cannot read EXR {what}: {e}"))?;

@@ -185,6 +185,17 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
         let mut tok = body.split_ascii_whitespace();
         let Some(key) = tok.next() else { continue };
         let at = |what: String| anyhow!("{name}:{line_no}: {what}");
+        // OBJ statements are lower-case words (v, vt, f, usemtl, c_interp, ...): anything else
+        // is not an OBJ file (a binary file or a device is refused at its first line)
+        if !key
+            .bytes()
+            .all(|b| b.is_ascii_alphanumeric() || b == b'_')
+        {
+            let shown: String = key.chars().take(20).collect();
+            return Err(at(format!(
+                "'{shown}' is not an OBJ statement (expected v, vt, vn, f, o, g, ...)"
+            )));
+        }
         match key {
             "v" => {
                 let mut c = [0.0f64; 3];
