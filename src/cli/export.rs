@@ -12,7 +12,6 @@ use crate::model::{self, ModelId, ModelParams};
 use crate::render::preview_mesh::{self, FramedMesh};
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
-use sha2::Digest;
 use std::path::{Path, PathBuf};
 
 #[derive(Debug, Args)]
@@ -66,9 +65,9 @@ pub struct ExportArgs {
 
 /// One line per fact of where the parameters came from.
 fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> {
-    let bytes = std::fs::read(path).map_err(|e| anyhow!("{}: cannot read: {e}", path.display()))?;
-    let digest = sha2::Sha256::digest(&bytes);
-    let hex: String = digest.iter().map(|b| format!("{b:02x}")).collect();
+    // the hash of the bytes the parameters were read from
+    let hex = crate::load::sha256_read(path)
+        .ok_or_else(|| anyhow!("{}: no hash was recorded when it was read", path.display()))?;
     let name = path.file_name().map_or_else(
         || path.display().to_string(),
         |n| n.to_string_lossy().into_owned(),
@@ -196,7 +195,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 eprintln!("{line}");
             }
             // the values the result itself states (what a renderer port checks against)
-            let stated = std::fs::read_to_string(&args.result)
+            let stated = crate::load::input::read_text(&args.result)
                 .ok()
                 .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
                 .map(|v| check::stated_check_values(&v, params.fibre_azimuth))

@@ -14,8 +14,7 @@ use crate::load::samples::DataKind;
 use crate::model::{brdf_at_degrees, ModelId};
 use anyhow::{Context, Result};
 use clap::Args;
-use sha2::{Digest, Sha256};
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
@@ -82,15 +81,6 @@ pub struct FitArgs {
     pub json: bool,
     #[command(flatten)]
     pub load: LoadArgs,
-}
-
-/// SHA-256 of a file, hex.
-pub(crate) fn sha256_of(path: &Path) -> Result<String> {
-    let bytes = std::fs::read(path).with_context(|| format!("{}: cannot read", path.display()))?;
-    Ok(Sha256::digest(&bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect())
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
@@ -306,7 +296,10 @@ pub fn run(args: &FitArgs) -> Result<()> {
                 .file_name()
                 .map(|f| f.to_string_lossy().into_owned())
                 .unwrap_or_default(),
-            sha256: sha256_of(&args.data)?,
+            // of the bytes the loader read, not of the file as it is now
+            sha256: crate::load::sha256_read(&args.data).with_context(|| {
+                format!("{}: its loader recorded no hash", args.data.display())
+            })?,
             kind: match samples.kind {
                 DataKind::Gonio => "goniometric".into(),
                 DataKind::Capture => "image capture".into(),

@@ -2,7 +2,6 @@
 //! of one band of rows given the globals of `fit --map-globals`, and `fibrefit merge-maps`
 //! assembles the bands into the same maps (bit for bit) as a single `fit --maps` run.
 
-use super::fit::sha256_of;
 use super::fit::FitArgs;
 use crate::export::atomic::Outputs;
 use crate::export::maps_out::MapFiles;
@@ -83,11 +82,9 @@ pub fn run_tile(args: &FitArgs, cfg: FitConfig, tile: &str, inputs: &[PathBuf]) 
         bail!("--tile: name a rung (`model` or --model), not auto");
     }
     maps::check_request(&cfg, &cfg.maps)?;
-    let g: serde_json::Value = serde_json::from_str(
-        &std::fs::read_to_string(globals)
-            .with_context(|| format!("{}: cannot read", globals.display()))?,
-    )
-    .map_err(|e| anyhow!("{}: {e}", globals.display()))?;
+    let (g_text, globals_sha256) = crate::load::input::read_text_hashed(globals, "globals")?;
+    let g: serde_json::Value =
+        serde_json::from_str(&g_text).map_err(|e| anyhow!("{}: {e}", globals.display()))?;
     if g["maps"]["stage"] != "globals" {
         bail!(
             "{}: not the result of `fibrefit fit --map-globals` (no maps.stage = \"globals\")",
@@ -129,8 +126,9 @@ pub fn run_tile(args: &FitArgs, cfg: FitConfig, tile: &str, inputs: &[PathBuf]) 
     let t = TileFile {
         schema: TILE_SCHEMA.into(),
         tile: [i, n],
-        globals_sha256: sha256_of(globals)?,
-        capture_sha256: sha256_of(&args.data)?,
+        globals_sha256,
+        capture_sha256: crate::load::sha256_read(&args.data)
+            .with_context(|| format!("{}: its loader recorded no hash", args.data.display()))?,
         width: w,
         height: h,
         channels,
@@ -188,8 +186,7 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
             continue;
         }
         let t: TileFile = serde_json::from_str(
-            &std::fs::read_to_string(&p)
-                .with_context(|| format!("{}: cannot read", p.display()))?,
+            &crate::load::input::read_text(&p)?,
         )
         .map_err(|e| anyhow!("{}: not a tile file: {e}", p.display()))?;
         if t.schema != TILE_SCHEMA {
@@ -205,7 +202,7 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
         bail!("{}: no tile_I_of_N.json files", args.tiles.display());
     }
     tiles.sort_by_key(|t| t.1.tile[0]);
-    let g_sha = sha256_of(&args.globals)?;
+    let (g_text, g_sha) = crate::load::input::read_text_hashed(&args.globals, "globals")?;
     let first = &tiles[0].1;
     let n = first.tile[1];
     for (p, t) in &tiles {
@@ -259,8 +256,8 @@ pub fn run_merge(args: &MergeMapsArgs) -> Result<()> {
     let mut outs = Outputs::new(&inputs);
     let json_out = outs.file(&args.out, "--out")?;
     let map_files = MapFiles::reserve(&mut outs, &args.maps, &req.requested())?;
-    let mut g: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&args.globals)?)
-        .map_err(|e| anyhow!("{}: {e}", args.globals.display()))?;
+    let mut g: serde_json::Value =
+        serde_json::from_str(&g_text).map_err(|e| anyhow!("{}: {e}", args.globals.display()))?;
     let (width, height, channels, global_free) =
         (first.width, first.height, first.channels, first.global_free);
     let set =

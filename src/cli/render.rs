@@ -376,7 +376,7 @@ fn maps_dir(args: &RenderArgs, params: &Path) -> Result<Option<PathBuf>> {
     if !is_json {
         return Ok(None);
     }
-    let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(params)?)
+    let v: serde_json::Value = serde_json::from_str(&crate::load::input::read_text(params)?)
         .map_err(|e| anyhow!("{}: {e}", params.display()))?;
     let Some(named) = v["maps"]["directory"].as_str() else {
         return Ok(None);

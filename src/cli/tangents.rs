@@ -25,7 +25,8 @@ GLB: the mesh with NORMAL and TANGENT (k1's direction; w = +-1 so that N x T . w
 direction), TEXCOORD_0 when the OBJ has texture coordinates: any glTF viewer can show
 KHR_materials_anisotropy along it.")]
 pub struct TangentsArgs {
-    /// Triangle mesh (Wavefront OBJ; polygons are triangulated as fans)
+    /// Triangle mesh (Wavefront OBJ; polygons of up to 8 corners become fans, larger ones strips;
+    /// degenerate triangles are left out and counted)
     pub mesh: PathBuf,
     /// Output: .csv (per vertex) or .glb (the mesh with NORMAL and TANGENT)
     #[arg(long, value_name = "FILE")]
@@ -59,6 +60,13 @@ pub fn run(args: &TangentsArgs) -> Result<()> {
     let mut outs = Outputs::new(std::slice::from_ref(&args.mesh));
     let id = outs.file(&args.out, "--out")?;
     let mesh = mesh::load_obj(&args.mesh)?;
+    if mesh.degenerate > 0 && !args.quiet {
+        eprintln!(
+            "warning: {}: {} degenerate triangles (a repeated vertex or zero area) left out",
+            args.mesh.display(),
+            mesh.degenerate
+        );
+    }
     let curv = curvature::principal_curvatures(&mesh, args.rings);
     let umbilic = curv.iter().filter(|c| c.umbilic).count();
     if glb {

@@ -4,7 +4,7 @@
 
 use crate::model::params::Albedo;
 use crate::model::ModelId;
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -332,8 +332,7 @@ fn default_metric() -> Metric {
 
 impl FitConfig {
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read fit config", path.display()))?;
+        let text = crate::load::input::read_text_as(path, "fit config")?;
         let mut cfg: FitConfig = toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
         if let Some(map) = &cfg.knobs.topology_map {

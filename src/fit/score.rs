@@ -36,8 +36,7 @@ pub struct FittedResult {
 
 /// Read a `fibrefit-result/1` JSON for data with `channels` channels.
 pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
-    let text = std::fs::read_to_string(path)
-        .with_context(|| format!("{}: cannot read result file", path.display()))?;
+    let text = crate::load::input::read_text_as(path, "result file")?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     result_from_value(&v, &path.display().to_string(), channels)

@@ -326,8 +326,19 @@ pub fn read_input_as(path: &Path, limit: u64, what: &str) -> Result<InputBytes> 
 
 /// A text input (at most [`MAX_TEXT_BYTES`]) as UTF-8.
 pub fn read_text(path: &Path) -> Result<String> {
-    let b = read_input(path, MAX_TEXT_BYTES)?;
-    String::from_utf8(b.bytes).map_err(|e| {
+    Ok(read_text_hashed(path, "")?.0)
+}
+
+/// [`read_text`] naming what the file is (`parameter file`) when it cannot be opened.
+pub fn read_text_as(path: &Path, what: &str) -> Result<String> {
+    Ok(read_text_hashed(path, what)?.0)
+}
+
+/// [`read_text_as`] and the SHA-256 of the bytes read (hex).
+pub fn read_text_hashed(path: &Path, what: &str) -> Result<(String, String)> {
+    let b = read_input_as(path, MAX_TEXT_BYTES, what)?;
+    let sha256 = b.sha256;
+    String::from_utf8(b.bytes).map(|t| (t, sha256)).map_err(|e| {
         anyhow!(
             "{}: not UTF-8 text (byte {} is invalid)",
             path.display(),

@@ -4,7 +4,7 @@
 use super::lambert::Preview;
 use super::topology::{max_elevation, max_height, Topology, TopologyMap};
 use super::{Albedos, ModelId};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -107,8 +107,7 @@ pub const DEFAULT_HISTOGRAM_BINS: usize = 16;
 impl RawParams {
     /// Read a `.toml` or `.json` file (by extension; otherwise TOML, then JSON).
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read parameter file", path.display()))?;
+        let text = crate::load::input::read_text_as(path, "parameter file")?;
         let ext = path
             .extension()
             .and_then(|e| e.to_str())

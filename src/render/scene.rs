@@ -29,7 +29,7 @@ use super::mesh_object::{MeshObject, TangentSource};
 use super::objects::Object;
 use super::{Camera, Light};
 use crate::model::frame::{direction_from_angles, Vec3};
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{anyhow, bail, Result};
 use serde::Deserialize;
 use std::path::{Path, PathBuf};
 
@@ -128,8 +128,7 @@ fn finite(v: &[f64], what: &str, at: &str) -> Result<()> {
 
 impl SceneFile {
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read the scene", path.display()))?;
+        let text = crate::load::input::read_text_as(path, "the scene")?;
         toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))
     }

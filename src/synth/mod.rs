@@ -166,8 +166,7 @@ pub struct SynthInfo {
 
 impl SynthConfig {
     pub fn load(path: &Path) -> Result<Self> {
-        let text = std::fs::read_to_string(path)
-            .with_context(|| format!("{}: cannot read", path.display()))?;
+        let text = crate::load::input::read_text_as(path, "synth config")?;
         let mut cfg: SynthConfig = toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
         let base = path.parent().unwrap_or(Path::new("."));
@@ -380,8 +379,7 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
         let name = format!("topology.{ext}");
         let dest = out_dir.join(&name);
         if std::fs::canonicalize(&src).ok() != std::fs::canonicalize(&dest).ok() {
-            let bytes = std::fs::read(&src)
-                .with_context(|| format!("{}: cannot read topology map", src.display()))?;
+            let bytes = crate::load::input::read_input_as(&src, crate::load::input::MAX_INPUT_BYTES, "topology map")?.bytes;
             write_file(&dest, &bytes)?;
         }
         files.push(name);
@@ -838,7 +836,7 @@ fn render_capture(
             return Ok(None);
         }
         let bytes =
-            std::fs::read(&src).with_context(|| format!("{}: cannot read", src.display()))?;
+            crate::load::read_input(&src, crate::load::input::MAX_INPUT_BYTES)?.bytes;
         write_file(&out_dir.join(name), &bytes)?;
         files.push(name.to_string());
         Ok(Some(PathBuf::from(name)))
