@@ -299,6 +299,7 @@ fn outputs_are_checked_before_the_work_and_leave_nothing() {
     let q = queries();
     for args in [
         vec!["fit", "g.csv", "--model", "lambert", "--out", "newdir/o.json", "-q"],
+        vec!["fit", "g.csv", "--model", "lambert", "--out", "newdir/", "-q"],
         vec!["eval", "--params", "o.json", "--queries", &q, "--out", "newdir/e.csv"],
         vec![
             "render", "--params", "o.json", "--object", "torus", "--size", "2048", "2048",

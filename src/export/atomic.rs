@@ -352,7 +352,17 @@ impl Outputs {
         let mut missing = vec![];
         let mut up = Some(dir.as_path());
         while let Some(p) = up {
-            if p.as_os_str().is_empty() || std::fs::symlink_metadata(p).is_ok() {
+            if p.as_os_str().is_empty() {
+                break;
+            }
+            if std::fs::symlink_metadata(p).is_ok() {
+                if !p.is_dir() {
+                    bail!(
+                        "{}: {} is not a directory",
+                        flagged(flag, &dir),
+                        p.display()
+                    );
+                }
                 break;
             }
             missing.push(p.to_path_buf());
@@ -383,6 +393,14 @@ impl Outputs {
     /// its directory must exist and be writable. Returns the handle to write it through.
     pub fn file(&mut self, path: &Path, flag: &str) -> Result<OutputId> {
         let shown = path.to_path_buf();
+        use std::os::unix::ffi::OsStrExt;
+        let bytes = path.as_os_str().as_bytes();
+        if bytes.is_empty() || bytes.ends_with(b"/") || path.file_name().is_none() {
+            bail!(
+                "{}: names a directory, expected a file path",
+                flagged(flag, path)
+            );
+        }
         let target = resolve(path)?;
         let meta = std::fs::metadata(&target).ok();
         let (kind, identity) = match &meta {
