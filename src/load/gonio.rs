@@ -154,6 +154,10 @@ const NEGATIVE_SIGMAS: f64 = 4.0;
 /// Without sigmas, negatives down to this fraction of the largest value are noise.
 const NEGATIVE_FRACTION: f64 = 0.01;
 
+/// Most rows of one goniometric CSV: 10 million (each sample is held in memory, with the fit's
+/// own per-sample arrays several hundred bytes in all; about 5 GB at this limit).
+pub const MAX_ROWS: usize = 10_000_000;
+
 pub fn load(path: &Path, opts: GonioOptions) -> Result<Samples> {
     // read once through load::input: limited, hashed as parsed, checked unchanged at the end
     // (a file cut or rewritten while it was read is an error, not a partial sample set)
@@ -442,6 +446,13 @@ impl ParseState {
             .map(|(b, first)| parse_chunk(b, first, lay, header, name, opts))
             .collect();
         self.next_line += memchr::memchr_iter(b'\n', body).count() as u64;
+        let rows = self.samples.len() + chunks.iter().map(|c| c.samples.len()).sum::<usize>();
+        if rows > MAX_ROWS {
+            bail!(
+                "{name}: more than {MAX_ROWS} rows (by line {}): split the file or subsample it",
+                self.next_line
+            );
+        }
         self.samples
             .reserve(chunks.iter().map(|c| c.samples.len()).sum());
         for c in chunks {

@@ -60,6 +60,10 @@ pub fn load(path: &Path) -> Result<Queries> {
     Ok(q)
 }
 
+/// Most rows of one query file: 10 million (each row with its results several hundred bytes of
+/// memory; about 4 GB at this limit).
+pub const MAX_QUERIES: usize = 10_000_000;
+
 /// Parse queries from any reader; `name` labels errors (`name:line: ...`).
 pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
     let mut reader = csv::ReaderBuilder::new()
@@ -115,6 +119,9 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             anyhow!("{name}:{line}: malformed row: {e}")
         })?;
         let line = record.position().map(|p| p.line()).unwrap_or(0);
+        if rows.len() >= MAX_QUERIES {
+            bail!("{name}:{line}: more than {MAX_QUERIES} queries; split the file");
+        }
         let number = |slot: usize| -> Result<f64> {
             let col = COLUMNS[slot];
             let text = record.get(index[slot]).unwrap_or("");
