@@ -2,6 +2,11 @@
 //! meet at them (the connectivity curvature needs), in the file's order, triangles, and
 //! per-vertex texture coordinates where the file has them. Every object and group of the file
 //! is one mesh.
+//!
+//! Read by our own line parser rather than a crate (tobj before): the issue that asked for it
+//! (26) needs errors naming the line, vertices in the file's order (tobj renumbers them by
+//! first use in the faces) and `mtllib` files never opened, none of which tobj offers; the
+//! subset of OBJ a mesh needs (`v`, `vt`, `f`) is small.
 
 use crate::model::frame::Vec3;
 use anyhow::{anyhow, bail, Result};
