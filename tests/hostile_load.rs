@@ -4,10 +4,12 @@
 
 #![allow(dead_code)]
 
+mod common;
+
 use assert_cmd::Command;
 use fibrefit::load;
 use std::fs;
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::time::{Duration, Instant};
 
 pub fn fibrefit() -> Command {
@@ -351,38 +353,6 @@ pub fn exr_claiming(valid: &[u8], w: i32, h: i32) -> Vec<u8> {
     b
 }
 
-fn crc32(data: &[u8]) -> u32 {
-    let mut c = 0xFFFF_FFFFu32;
-    for &b in data {
-        c ^= b as u32;
-        for _ in 0..8 {
-            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
-        }
-    }
-    !c
-}
-
-/// A PNG whose header claims `w` x `h` 8-bit grey pixels, with a tiny (incomplete) image body.
-pub fn png_claiming(w: u32, h: u32) -> Vec<u8> {
-    let mut b = b"\x89PNG\r\n\x1a\n".to_vec();
-    let mut chunk = |kind: &[u8], data: &[u8]| {
-        b.extend((data.len() as u32).to_be_bytes());
-        let mut body = kind.to_vec();
-        body.extend(data);
-        b.extend(&body);
-        b.extend(crc32(&body).to_be_bytes());
-    };
-    let mut ihdr = Vec::new();
-    ihdr.extend(w.to_be_bytes());
-    ihdr.extend(h.to_be_bytes());
-    ihdr.extend([8, 0, 0, 0, 0]);
-    chunk(b"IHDR", &ihdr);
-    // zlib stream of a few zero bytes
-    chunk(b"IDAT", &[0x78, 0x9c, 0x63, 0x00, 0x00, 0x00, 0x01, 0x00, 0x01]);
-    chunk(b"IEND", &[]);
-    b
-}
-
 fn capture_toml(image: &str, extra: &str) -> String {
     let encoding = if image.ends_with(".png") {
         "encoding = \"linear\"\n"
@@ -436,7 +406,7 @@ fn image_headers_claiming_huge_sizes_are_refused_before_decoding() {
     .to_string();
     assert!(e.contains("kd.exr") && e.contains("100000x100000"), "{e}");
     // PNGs: a header claiming 100000^2 (a decompression bomb's shape)
-    fs::write(dir.join("bomb.png"), png_claiming(100_000, 100_000)).unwrap();
+    fs::write(dir.join("bomb.png"), common::png_claiming(100_000, 100_000)).unwrap();
     fs::write(dir.join("bomb.toml"), capture_toml("bomb.png", "")).unwrap();
     refused(&["inspect", "bomb.toml"], dir, &["bomb.png", "100000x100000"]);
     fs::write(
@@ -691,4 +661,3 @@ fn a_polygon_of_100000_vertices_takes_under_a_second() {
     assert!(t.elapsed() < Duration::from_secs(5), "tangents: {:?}", t.elapsed());
 }
 
-fn _unused(_: PathBuf) {}
