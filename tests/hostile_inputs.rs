@@ -2,7 +2,10 @@
 //! byte flips, swapped fields, extreme numbers) and fitted: no panic, exit 0 or 2, and when the
 //! exit is 2, the output file and the directory are exactly as before.
 
+mod common;
+
 use assert_cmd::Command;
+use common::mutate::Lcg;
 use std::fs;
 use std::path::{Path, PathBuf};
 
@@ -10,81 +13,9 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> u64 {
-        self.0 = self
-            .0
-            .wrapping_mul(6364136223846793005)
-            .wrapping_add(1442695040888963407);
-        self.0 >> 17
-    }
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
-const EXTREMES: [&str; 10] = [
-    "1e308", "-1e308", "nan", "inf", "-0", "1e-320", "0", "99999", "-5", "90",
-];
-
-/// One random mutation of `text`.
+/// One random mutation of a text file.
 fn mutate(text: &[u8], rng: &mut Lcg) -> Vec<u8> {
-    let mut t = text.to_vec();
-    match rng.below(4) {
-        0 => t.truncate(rng.below(t.len())),
-        1 => {
-            for _ in 0..1 + rng.below(3) {
-                let i = rng.below(t.len());
-                t[i] ^= 1 << rng.below(8);
-            }
-        }
-        2 => {
-            // swap two fields of one line (CSV: between commas; TOML: two lines)
-            let s = String::from_utf8_lossy(&t).into_owned();
-            let mut lines: Vec<String> = s.lines().map(str::to_owned).collect();
-            if lines.len() > 2 {
-                let k = rng.below(lines.len());
-                let mut fields: Vec<String> = lines[k].split(',').map(str::to_owned).collect();
-                if fields.len() > 1 {
-                    let (a, b) = (rng.below(fields.len()), rng.below(fields.len()));
-                    fields.swap(a, b);
-                    lines[k] = fields.join(",");
-                } else {
-                    let j = rng.below(lines.len());
-                    lines.swap(k, j);
-                }
-            }
-            t = (lines.join("\n") + "\n").into_bytes();
-        }
-        _ => {
-            // an extreme number in place of a random number
-            let s = String::from_utf8_lossy(&t).into_owned();
-            let spans: Vec<(usize, usize)> = {
-                let b = s.as_bytes();
-                let mut v = Vec::new();
-                let mut i = 0;
-                while i < b.len() {
-                    if b[i].is_ascii_digit() {
-                        let j0 = i;
-                        while i < b.len() && (b[i].is_ascii_digit() || b[i] == b'.') {
-                            i += 1;
-                        }
-                        v.push((j0, i));
-                    } else {
-                        i += 1;
-                    }
-                }
-                v
-            };
-            if !spans.is_empty() {
-                let (a, b) = spans[rng.below(spans.len())];
-                let x = EXTREMES[rng.below(EXTREMES.len())];
-                t = format!("{}{x}{}", &s[..a], &s[b..]).into_bytes();
-            }
-        }
-    }
-    t
+    common::mutate::mutate(text, rng, 0, true)
 }
 
 fn listing(dir: &Path) -> Vec<(String, Vec<u8>)> {

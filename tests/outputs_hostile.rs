@@ -4,6 +4,8 @@
 //! (a failure or a signal leaves every old output as it was), within stated budgets; a closed
 //! or full stream exits cleanly. Disk-full cases mount a small tmpfs (CI runs as root).
 
+mod common;
+
 use assert_cmd::Command;
 use std::fs;
 use std::os::unix::fs::FileTypeExt;
@@ -34,31 +36,6 @@ fn refused(o: &Output, fragment: &str) {
 
 fn ok(o: &Output) {
     assert!(o.status.success(), "{}", stderr(o));
-}
-
-/// Every file below `d` (relative name, content), links as `-> target`.
-fn snapshot(d: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut v = vec![];
-    let mut stack = vec![d.to_path_buf()];
-    while let Some(p) = stack.pop() {
-        for e in fs::read_dir(&p).unwrap().flatten() {
-            let path = e.path();
-            let name = path.strip_prefix(d).unwrap().display().to_string();
-            let t = e.file_type().unwrap();
-            if t.is_symlink() {
-                v.push((name, format!("-> {}", fs::read_link(&path).unwrap().display()).into_bytes()));
-            } else if t.is_dir() {
-                v.push((name + "/", vec![]));
-                stack.push(path);
-            } else if t.is_file() {
-                v.push((name, fs::read(&path).unwrap()));
-            } else {
-                v.push((name, b"(special)".to_vec()));
-            }
-        }
-    }
-    v.sort();
-    v
 }
 
 /// The first 101 lines of the brushed gonio set as `g.csv` in `d`, and a lambert result `o.json`.
@@ -222,7 +199,7 @@ fn fifos_and_devices_are_streamed_never_replaced() {
     refused(&o, "--out /dev/full: cannot write output: No space left on device");
     assert!(fs::metadata("/dev/full").unwrap().file_type().is_char_device());
     // nothing staged is left in the temporary directory's name space of ours
-    assert!(!snapshot(d)
+    assert!(!common::snapshot(d)
         .iter()
         .any(|(n, _)| n.contains(".fibrefit-")));
 }
@@ -259,14 +236,14 @@ fn a_full_disk_changes_nothing() {
     fs::remove_file(d.join("full/fill")).unwrap();
     // a fit whose result goes to the full disk leaves its report folder as it was
     ok(&run(&["fit", "g.csv", "--model", "lambert", "--out", "x.json", "--report", "rep", "-q"], d));
-    let report_before = snapshot(&d.join("rep"));
+    let report_before = common::snapshot(&d.join("rep"));
     fs::write(d.join("full/fill"), vec![1u8; 40_000]).unwrap();
     let o = run(
         &["fit", "g.csv", "--model", "lambert", "--out", "full/o.json", "--report", "rep", "-q"],
         d,
     );
     refused(&o, "No space left on device");
-    assert_eq!(snapshot(&d.join("rep")), report_before);
+    assert_eq!(common::snapshot(&d.join("rep")), report_before);
     // render: the picture is not written when its AOVs do not fit
     let o = run(
         &[
@@ -295,7 +272,7 @@ fn outputs_are_checked_before_the_work_and_leave_nothing() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     small_set(d);
-    let before = snapshot(d);
+    let before = common::snapshot(d);
     let q = queries();
     for args in [
         vec!["fit", "g.csv", "--model", "lambert", "--out", "newdir/o.json", "-q"],
@@ -313,7 +290,7 @@ fn outputs_are_checked_before_the_work_and_leave_nothing() {
         // render would take many seconds: refused before it (generous bound for a busy CI)
         assert!(t.elapsed().as_secs_f64() < 5.0, "{args:?} failed late");
     }
-    assert_eq!(snapshot(d), before, "a failed run left something");
+    assert_eq!(common::snapshot(d), before, "a failed run left something");
 }
 
 #[test]
@@ -364,7 +341,7 @@ fn synth_keeps_what_it_did_not_write() {
     assert!(fs::symlink_metadata(d.join("link")).unwrap().file_type().is_symlink());
     assert_eq!(fs::read_to_string(d.join("real/mine.txt")).unwrap(), "keep");
     assert!(d.join("real/gonio.csv").is_file());
-    assert!(!snapshot(d).iter().any(|(n, _)| n.contains(".fibrefit-")));
+    assert!(!common::snapshot(d).iter().any(|(n, _)| n.contains(".fibrefit-")));
 }
 
 #[test]
@@ -417,7 +394,7 @@ fn a_late_signal_leaves_all_old_or_all_new() {
             assert!(e.contains("after the outputs were written"), "{e}");
         }
     }
-    assert!(!snapshot(d).iter().any(|(n, _)| n.contains(".fibrefit-")));
+    assert!(!common::snapshot(d).iter().any(|(n, _)| n.contains(".fibrefit-")));
 }
 
 #[test]

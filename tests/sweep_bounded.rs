@@ -20,32 +20,6 @@ fn root() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR"))
 }
 
-/// Every regular file below `d` with its content, and every special file's kind.
-fn snapshot(d: &Path) -> Vec<(String, Vec<u8>)> {
-    let mut v = vec![];
-    let mut stack = vec![d.to_path_buf()];
-    while let Some(p) = stack.pop() {
-        for e in fs::read_dir(&p).unwrap().flatten() {
-            let path = e.path();
-            let name = path.strip_prefix(d).unwrap().display().to_string();
-            let t = e.file_type().unwrap();
-            let content = if t.is_symlink() {
-                format!("-> {}", fs::read_link(&path).unwrap().display()).into_bytes()
-            } else if t.is_dir() {
-                stack.push(path);
-                b"(dir)".to_vec()
-            } else if t.is_fifo() {
-                b"(fifo)".to_vec()
-            } else {
-                fs::read(&path).unwrap()
-            };
-            v.push((name, content));
-        }
-    }
-    v.sort();
-    v
-}
-
 /// The inputs of the sweep in `d`: valid ones and hostile ones (names say which).
 fn lay_inputs(d: &Path) {
     let csv: String = fs::read_to_string(root().join("data_synthetic/brushed/gonio.csv"))
@@ -190,7 +164,7 @@ fn hostile_combinations_exit_cleanly_within_bounds_and_destroy_nothing() {
             .iter()
             .map(|a| a.replace("{in}", input).replace("{out}", output))
             .collect();
-        let before = snapshot(d);
+        let before = common::snapshot(d);
         // a reader for the FIFO, so a write to it completes
         let fifo = d.join("pipe");
         let reader = std::thread::spawn(move || {
@@ -236,7 +210,7 @@ fn hostile_combinations_exit_cleanly_within_bounds_and_destroy_nothing() {
         if code == Some(2) {
             assert!(err.contains("error: "), "case {case} {args:?}: no message");
         }
-        let after = snapshot(d);
+        let after = common::snapshot(d);
         // inputs never change; after a failure nothing changes at all. The links and the hard
         // link name good.csv: written through when it is not an input of the run.
         let reads_good = args.iter().any(|a| a == "good.csv");

@@ -1,6 +1,8 @@
 //! Shared helpers for the integration tests: direction sets and parameter sets.
 #![allow(dead_code)]
 
+pub mod mutate;
+
 use fibrefit::model::frame::{direction_from_angles, FibreFrame, Vec3};
 use fibrefit::model::topology::Topology;
 use fibrefit::model::{self, DirectionPair, ModelId, ShadingModel};
@@ -229,3 +231,31 @@ pub fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     chunk(b"IEND", &[]);
     b
 }
+
+/// Every file below `d` (relative name, content): links as `-> target`, directories and FIFOs
+/// by their kind, so that two snapshots differ when anything below `d` changed.
+pub fn snapshot(d: &std::path::Path) -> Vec<(String, Vec<u8>)> {
+    let mut v = vec![];
+    let mut stack = vec![d.to_path_buf()];
+    while let Some(p) = stack.pop() {
+        for e in std::fs::read_dir(&p).unwrap().flatten() {
+            let path = e.path();
+            let name = path.strip_prefix(d).unwrap().display().to_string();
+            let t = e.file_type().unwrap();
+            let content = if t.is_symlink() {
+                format!("-> {}", std::fs::read_link(&path).unwrap().display()).into_bytes()
+            } else if t.is_dir() {
+                stack.push(path);
+                b"(dir)".to_vec()
+            } else if std::os::unix::fs::FileTypeExt::is_fifo(&t) {
+                b"(fifo)".to_vec()
+            } else {
+                std::fs::read(&path).unwrap()
+            };
+            v.push((name, content));
+        }
+    }
+    v.sort();
+    v
+}
+
