@@ -1,7 +1,8 @@
 //! fibrefit: fit fibre reflectance models to goniometric and image measurements.
 //!
 //! Data flows one way: [`load`] -> [`model`] -> fit -> [`export`] (and [`render`] beside it);
-//! [`cli`] drives it.
+//! [`api`] holds the entry points (a request in, an outcome out) that [`cli`] and other front
+//! ends call.
 
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must take the safe branch.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]
@@ -16,6 +17,7 @@ macro_rules! eprintln {
     }};
 }
 
+pub mod api;
 pub mod bench;
 pub mod cli;
 pub mod export;

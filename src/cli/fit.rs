@@ -1,17 +1,9 @@
-//! `fibrefit fit`: fit a rung to measurements and export what a renderer needs.
+//! `fibrefit fit`: parse the command line, reserve the outputs, run [`crate::api::fit`], print.
 
 use super::data::LoadArgs;
+use crate::api::fit::{self as fit_api, FitRequest, FitTargets, Maps};
 use crate::export::atomic::Outputs;
-use crate::export::maps_out::MapFiles;
-use crate::export::report::ReportFiles;
-use crate::export::{report, result_json as rj};
-use crate::fit::config::FitConfig;
-use crate::fit::problem::{albedos_of, model_for};
-use crate::fit::{self, parameters::Shape, ward_fallback};
-use crate::load::capture_store::CaptureStore;
-use crate::load::load_data;
-use crate::load::samples::DataKind;
-use crate::model::{brdf_at_degrees, ModelId};
+use crate::fit;
 use anyhow::{Context, Result};
 use clap::Args;
 use std::path::PathBuf;
@@ -84,338 +76,60 @@ pub struct FitArgs {
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
-    let mut cfg = match (&args.config, &args.model) {
-        (Some(path), _) => FitConfig::load(path)?,
-        (None, Some(m)) => {
-            let mut c: FitConfig = toml::from_str(&format!("model = {m:?}\n"))?;
-            let measured = args.data.extension().is_some_and(|e| {
-                e.eq_ignore_ascii_case("bsdf") || e.eq_ignore_ascii_case("binary")
-            });
-            if measured {
-                c.metric = crate::fit::config::Metric::Log;
-            }
-            c
-        }
-        (None, None) => {
-            anyhow::bail!("give --config FILE, or --model ID|auto to fit with the defaults")
-        }
-    };
-    if let Some(m) = &args.model {
-        cfg.model = m.clone();
-    }
-    if let Some(m) = &args.metric {
-        cfg.metric = serde_json::from_value(serde_json::Value::String(m.clone()))
-            .map_err(|_| anyhow::anyhow!("--metric {m}: expected linear, log or cosine"))?;
-    }
-    if args.fuzz {
-        cfg.parameters.entry("fuzz_depth".into()).or_default();
-    }
-    cfg.validate()
-        .map_err(|e| anyhow::anyhow!("--model: {e}"))?;
-    // Check every output first: a bad path fails before the work, and no output replaces an input.
-    let mut inputs = crate::load::input_files(&args.data);
-    inputs.extend(args.config.iter().cloned());
-    inputs.extend(cfg.knobs.topology_map.iter().cloned());
-    if let Some(tile) = &args.tile {
-        return super::map_tiles::run_tile(args, cfg, tile, &inputs);
-    }
-    let out_path = args.out.clone().expect("clap: --out unless --tile");
-    if args.map_globals {
-        crate::fit::maps::check_request(&cfg, &cfg.maps)?;
-    }
-    if args.maps.is_some() {
-        if cfg.model == "auto" {
-            anyhow::bail!("--maps: name a rung (`model` or --model), not auto");
-        }
-        crate::fit::maps::check_request(&cfg, &cfg.maps)?;
-    }
-    // every output reserved before the work (none an input or another output), written together
-    let mut outs = Outputs::new(&inputs);
-    let json_out = outs.file(&out_path, "--out")?;
-    let map_files = match &args.maps {
-        Some(dir) => Some(MapFiles::reserve(&mut outs, dir, &cfg.maps.requested())?),
-        None => None,
-    };
-    let mut report_files = match &args.report {
-        Some(dir) => Some(ReportFiles::reserve(&mut outs, dir)?),
-        None => None,
-    };
-    let opts = args
+    let config = fit_api::configure(
+        args.config.as_deref(),
+        args.model.as_deref(),
+        args.metric.as_deref(),
+        args.fuzz,
+        &args.data,
+    )?;
+    let load = args
         .load
-        .options_with(cfg.knobs.stride, cfg.knobs.fraction)?;
-    // captures are held compactly by texel; the global fit takes a seeded sample of texels
-    let store = match crate::load::is_capture(&args.data) {
-        true => Some(CaptureStore::load(&args.data, opts.subsample)?),
-        false => None,
-    };
-    let fit_texels = store.as_ref().map(|st| fit_texel_sample(st, &cfg));
-    let samples = match (&store, &fit_texels) {
-        (Some(st), Some(ids)) => st.samples_of(ids),
-        _ => load_data(&args.data, &opts)?,
-    };
-    if let Some(files) = &mut report_files {
-        // a residual map per capture image
-        let images: std::collections::BTreeSet<u32> = samples
-            .samples
-            .iter()
-            .filter_map(|s| match s.origin {
-                crate::load::samples::Origin::Pixel { image, .. } => Some(image),
-                _ => None,
-            })
-            .collect();
-        files.add_images(&mut outs, images)?;
-    }
-    let selection = if cfg.model == "auto" {
-        let s = crate::fit::selection::select(&samples, &cfg)?;
-        cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow::anyhow!(e))?);
-        if !args.quiet && !args.json {
-            eprintln!("{}", crate::fit::selection::table(&s));
-        }
-        Some(s)
-    } else {
-        None
-    };
-    let id = cfg.model_id()?;
-    let hints = selection
-        .as_ref()
-        .map(|s| s.hints.clone())
-        .unwrap_or_default();
-    let (mut outcome, stage_costs) = match args.maps.is_some() || args.map_globals {
-        true => {
-            let store = store.as_ref().ok_or_else(|| {
-                anyhow::anyhow!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels")
-            })?;
-            let st = fit::maps::global_stage(store, &cfg, &cfg.maps, args.quiet || args.json)
-                .with_context(|| {
-                    format!("recovering maps with {} from {}", id, args.data.display())
-                })?;
-            let mut global = st.outcome;
-            global.warnings.extend(st.warnings.iter().cloned());
-            (global, Some((st.costs, st.texel_variance)))
-        }
-        false => (
-            fit::fit_with_hints(&samples, &cfg, args.quiet || args.json, &hints)
-                .with_context(|| format!("fitting {} to {}", id, args.data.display()))?,
-            None,
-        ),
-    };
-    let channels = samples.channels;
-    // a fit on a sample of a capture's texels, checked on every pixel
-    let mut all_pixels = None;
-    if let (Some(st), Some(ids), None) = (&store, &fit_texels, &stage_costs) {
-        let fitted_texels = ids.len();
-        if fitted_texels < st.texels().len() {
-            let all = fit::all_pixels::statistics(st, &cfg, &outcome, args.quiet || args.json)?;
-            if let Some(w) =
-                fit::all_pixels::warning(&all, outcome.statistics.reduced_chi_square, fitted_texels)
-            {
-                outcome.warnings.push(w);
-            }
-            all_pixels = Some(all);
-        }
-    }
-    let m = model_for(
-        &outcome.set,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
-        cfg.knobs.azimuth_nodes,
-        outcome.map.clone(),
-    );
-    let albedos = albedos_of(&outcome.set);
-    let psi = outcome.set.shape_value(Shape::Azimuth).to_radians();
-    let check_values = rj::check_directions()
-        .into_iter()
-        .map(|d| rj::CheckValue {
-            theta_i: d[0],
-            phi_i: d[1],
-            theta_o: d[2],
-            phi_o: d[3],
-            brdf: brdf_at_degrees(m.as_ref(), &albedos, psi, d, channels),
-        })
-        .collect();
-    // an optional stage: its failure is a warning, never the loss of the fit
-    let mut warnings = outcome.warnings.clone();
-    let ward = if id == ModelId::Ward {
-        None
-    } else {
-        match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
-            Ok(w) => Some(rj::WardFallback {
-                model: "ward".into(),
-                parameters: w
-                    .parameters
-                    .into_iter()
-                    .map(|(k, v)| (k, rj::number_or_rgb(&v)))
-                    .collect(),
-                rms_error: w.rms_error,
-                relative_rms_error: w.relative_rms_error,
-                directions: w.directions,
-            }),
-            Err(e) => {
-                warnings.push(format!(
-                    "the Ward fallback could not be fitted, so the result has none: {e:#}"
-                ));
-                None
-            }
-        }
-    };
-    let mut knobs = rj::knobs(&cfg, opts.subsample.stride, opts.subsample.fraction);
-    if let Some(mp) = &outcome.map {
-        knobs.topology_map = Some(
-            std::fs::canonicalize(&mp.source)
-                .unwrap_or(mp.source.clone())
-                .display()
-                .to_string(),
-        );
-    }
-    let result = rj::ResultFile {
-        schema: rj::SCHEMA.into(),
-        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
-        model: id.to_string(),
-        conventions: rj::Conventions::default(),
-        parameters: rj::params_out(&outcome),
-        correlations: outcome
-            .correlations
-            .iter()
-            .map(|(a, b, r)| rj::Correlation {
-                a: a.clone(),
-                b: b.clone(),
-                r: *r,
-            })
-            .collect(),
-        statistics: {
-            let mut v = serde_json::to_value(&outcome.statistics)?;
-            if let Some(all) = &all_pixels {
-                v["all_pixels"] = serde_json::to_value(all)?;
-            }
-            v
+        .options_with(config.knobs.stride, config.knobs.fraction)?;
+    let req = FitRequest {
+        data: args.data.clone(),
+        load,
+        maps: match (&args.maps, args.map_globals) {
+            (_, true) => Maps::Globals,
+            (Some(dir), false) => Maps::Into(dir.clone()),
+            (None, false) => Maps::None,
         },
-        knobs,
-        data: rj::Provenance {
-            file: args
-                .data
-                .file_name()
-                .map(|f| f.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            // of the bytes the loader read, not of the file as it is now
-            sha256: crate::load::sha256_read(&args.data).with_context(|| {
-                format!("{}: its loader recorded no hash", args.data.display())
-            })?,
-            kind: match samples.kind {
-                DataKind::Gonio => "goniometric".into(),
-                DataKind::Capture => "image capture".into(),
-                DataKind::Measured => "measured BRDF file".into(),
-            },
-            samples: samples.samples.len(),
-            channels,
-        },
-        check_values,
-        ward_fallback: ward,
-        model_selection: selection
-            .as_ref()
-            .map(|s| {
-                s.candidates
-                    .iter()
-                    .map(|c| serde_json::to_value(c).unwrap_or_default())
-                    .collect()
-            })
-            .unwrap_or_default(),
-        quality: Some(serde_json::to_value(&outcome.quality)?),
-        maps: None,
-        warnings: warnings.clone(),
+        progress: !(args.quiet || args.json),
+        config,
     };
-    let mut report_text = report::text(&outcome, id.as_str(), &args.data.display().to_string());
-    if let Some(s) = &selection {
-        report_text += &format!("[[Model selection]]\n{}", crate::fit::selection::table(s));
+    let inputs = fit_api::inputs(&req, args.config.as_deref());
+    if let Some(tile) = &args.tile {
+        return super::map_tiles::run_tile(args, req, tile, &inputs);
     }
-    let mut result = result;
-    if let Some((costs, texel_variance)) = &stage_costs {
-        let method = super::map_tiles::method(&cfg, costs, *texel_variance);
-        if args.map_globals {
-            result.maps = Some(serde_json::json!({
-                "stage": "globals",
-                "requested": cfg.maps.requested(),
-                "method": method,
-            }));
-        } else if let Some(dir) = &args.maps {
-            // the texel stage takes the globals as the result states them, as tiles do
-            let globals = crate::fit::score::result_from_value(
-                &serde_json::to_value(&result)?,
-                "the global fit",
-                channels,
-            )?
-            .set;
-            let store = store.as_ref().expect("the global stage needed the capture");
-            let (w, h) = (store.width, store.height);
-            let part = fit::maps::texel_stage(
-                store,
-                &cfg,
-                &cfg.maps,
-                &globals,
-                (0, h as u32),
-                *texel_variance,
-                args.quiet || args.json,
-            )?;
-            let (maps, variance, warns) = fit::maps::finish_maps(
-                vec![part],
-                w,
-                h,
-                channels,
-                &cfg.maps,
-                outcome.statistics.free_parameters,
-                crate::model::topology::max_height(globals.shape_value(Shape::Spacing)),
-            )?;
-            let files = map_files.as_ref().expect("reserved with --maps");
-            let _ = dir;
-            let mut desc =
-                crate::export::maps_out::write(&mut outs, files, &cfg.maps.requested(), &maps)?;
-            desc["method"] = method;
-            desc["method"]["residual_variance"] = serde_json::json!(variance);
-            result.maps = Some(desc);
-            result.warnings.extend(warns);
-            outcome.fitted = fit::maps::fitted_all(&samples, &cfg, &cfg.maps, &globals, &maps)?;
-        }
-    }
-    if let (Some(dir), Some(files)) = (&args.report, &report_files) {
-        // the report is optional: its failure is a warning in the result, never the lost fit
-        let fitted = fit::fitted_brdf(&outcome, &cfg);
-        let measured = crate::load::measured_brdf(&args.data).unwrap_or(None);
-        if let Err(e) = report::write_dir(
-            &mut outs,
-            files,
-            &outcome,
-            &samples,
-            &report_text,
-            fitted.as_ref(),
-            measured.as_deref(),
-        ) {
-            let w = format!("{}: the report could not be written: {e:#}", dir.display());
-            eprintln!("warning: {w}");
-            result.warnings.push(w);
-            files.discard(&mut outs);
-        }
-    }
-    serde_json::to_writer_pretty(outs.writer(json_out), &result)
-        .with_context(|| format!("--out {}: cannot write the result", out_path.display()))?;
+    fit_api::check(&req)?;
+    // every output reserved before the work (none an input or another output), written together
+    let out_path = args.out.clone().expect("clap: --out unless --tile");
+    let mut outs = Outputs::new(&inputs);
+    let targets = FitTargets::reserve(&mut outs, &req, Some(&out_path), args.report.as_deref())?;
+    let mut run = fit_api::fit(&req)?;
+    run.write(&mut outs, &targets)?;
     outs.commit()?;
     // stdout's failure (a closed pipe, a full disk) is reported after the banner, never instead
     let mut printed = Ok(());
+    let outcome = &run.outcome;
     if args.json {
         let s = &outcome.statistics;
         printed = super::print_out(&format!(
             "{}\n",
             serde_json::json!({
-                "model": id.as_str(), "out": out_path.display().to_string(), "samples": samples.samples.len(),
+                "model": run.model.as_str(), "out": out_path.display().to_string(), "samples": run.samples.samples.len(),
                 "rmse": s.rmse, "relative_rmse": s.relative_rmse, "reduced_chi_square": s.reduced_chi_square,
                 "iterations": outcome.iterations, "evaluations": outcome.evaluations,
                 "seconds": outcome.elapsed_seconds, "warnings": outcome.warnings.len()
             })
         ));
     } else if !args.quiet {
-        printed = super::print_out(&report_text);
+        printed = super::print_out(&run.report_text);
         eprintln!("wrote {}", out_path.display());
     }
     if !args.quiet {
-        for w in warnings
+        for w in run
+            .warnings
             .iter()
             .filter(|w| !outcome.quality.warnings.contains(w))
         {
@@ -425,16 +139,6 @@ pub fn run(args: &FitArgs) -> Result<()> {
     // what the quality checks found is printed even with --quiet: it must not be missed
     quality_banner(&outcome.quality);
     printed.with_context(|| format!("the outputs were written ({})", out_path.display()))
-}
-
-/// The texels of a capture the global fit uses: every one, or a seeded sample of
-/// `[knobs] fit_texels` of them.
-fn fit_texel_sample(store: &CaptureStore, cfg: &FitConfig) -> Vec<usize> {
-    let n = match cfg.knobs.fit_texels {
-        0 => usize::MAX,
-        k => k,
-    };
-    store.sample_texels(n, cfg.seed ^ 0x6669_7474)
 }
 
 /// The quality warnings as a banner on stderr (bold red on a terminal).

@@ -73,37 +73,24 @@ pub fn file_names(names: &[&str]) -> Vec<String> {
     v
 }
 
-/// Write the maps `names` into their reserved files (committed with the run's other outputs);
-/// returns the JSON description.
-pub fn write(
-    outs: &mut Outputs,
-    files: &MapFiles,
-    names: &[&str],
-    maps: &TexelMaps,
-) -> Result<serde_json::Value> {
-    let dir = &files.dir;
-    let (w, h) = (maps.width, maps.height);
-    let mut json = serde_json::Map::new();
-    let grid = |channels: usize, get: &dyn Fn(usize, usize) -> f64| -> Vec<f32> {
-        let mut data = vec![f32::NAN; w * h * channels];
-        for (t, &(x, y)) in maps.texels.iter().enumerate() {
-            let px = (y as usize * w + x as usize) * channels;
-            for c in 0..channels {
-                data[px + c] = get(t, c) as f32;
-            }
+/// The grid of one map: texel values at their pixels, NaN where no texel is.
+fn grid(maps: &TexelMaps, channels: usize, get: &dyn Fn(usize, usize) -> f64) -> Vec<f32> {
+    let w = maps.width;
+    let mut data = vec![f32::NAN; w * maps.height * channels];
+    for (t, &(x, y)) in maps.texels.iter().enumerate() {
+        let px = (y as usize * w + x as usize) * channels;
+        for c in 0..channels {
+            data[px + c] = get(t, c) as f32;
         }
-        data
-    };
-    let mut put = |file: &str, channels: usize, data: &[f32]| -> Result<()> {
-        let (f, name) = outs.file_and_name(files.id(file)?);
-        write_exr_into(f, name, w, h, channels, data)
-    };
+    }
+    data
+}
+
+/// The result JSON's description of the maps `names` written into `dir`.
+pub fn describe(dir: &Path, names: &[&str], maps: &TexelMaps) -> serde_json::Value {
+    let mut json = serde_json::Map::new();
     for &name in names {
-        let (unit, channels, get) = layout(name, maps.channels);
-        let values = grid(channels, &|t, c| get(&maps.values[t], c));
-        let errors = grid(channels, &|t, c| get(&maps.std_errors[t], c));
-        put(&format!("{name}.exr"), channels, &values)?;
-        put(&format!("{name}_std_error.exr"), channels, &errors)?;
+        let (unit, channels, _) = layout(name, maps.channels);
         json.insert(
             name.into(),
             serde_json::json!({
@@ -114,8 +101,6 @@ pub fn write(
             }),
         );
     }
-    let residual = grid(1, &|t, _| maps.residual[t]);
-    put("residual.exr", 1, &residual)?;
     json.insert(
         "residual".into(),
         serde_json::json!({
@@ -124,12 +109,29 @@ pub fn write(
             "channels": "Y",
         }),
     );
-    Ok(serde_json::json!({
+    serde_json::json!({
         "directory": dir.display().to_string(),
-        "width": w,
-        "height": h,
+        "width": maps.width,
+        "height": maps.height,
         "texels": maps.texels.len(),
         "registration": "one texel per capture pixel (x right, y down from the top-left); NaN where no usable pixel",
         "maps": json,
-    }))
+    })
+}
+
+/// Write the maps `names` into their reserved files (committed with the run's other outputs).
+pub fn write(outs: &mut Outputs, files: &MapFiles, names: &[&str], maps: &TexelMaps) -> Result<()> {
+    let (w, h) = (maps.width, maps.height);
+    let mut put = |file: &str, channels: usize, data: &[f32]| -> Result<()> {
+        let (f, name) = outs.file_and_name(files.id(file)?);
+        write_exr_into(f, name, w, h, channels, data)
+    };
+    for &name in names {
+        let (_, channels, get) = layout(name, maps.channels);
+        let values = grid(maps, channels, &|t, c| get(&maps.values[t], c));
+        let errors = grid(maps, channels, &|t, c| get(&maps.std_errors[t], c));
+        put(&format!("{name}.exr"), channels, &values)?;
+        put(&format!("{name}_std_error.exr"), channels, &errors)?;
+    }
+    put("residual.exr", 1, &grid(maps, 1, &|t, _| maps.residual[t]))
 }

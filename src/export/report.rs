@@ -242,6 +242,12 @@ pub fn write_dir(
             images.entry(image).or_default().push((x, y, r));
         }
     }
+    // reserved maps of images without samples are not written
+    for (k, id) in &files.maps {
+        if !images.contains_key(k) {
+            outs.discard(*id);
+        }
+    }
     for (k, px) in images {
         let w = px.iter().map(|p| p.0).max().unwrap_or(0) as usize + 1;
         let h = px.iter().map(|p| p.1).max().unwrap_or(0) as usize + 1;

@@ -1797,3 +1797,16 @@ fn final_global(
     outcome.fitted = fitted;
     Ok(outcome)
 }
+
+/// The `method` block of a result's `maps`.
+pub fn method(cfg: &FitConfig, costs: &[f64], texel_variance: f64) -> serde_json::Value {
+    serde_json::json!({
+        "texel_variance": texel_variance,
+        "global_stage_rounds": costs.len().saturating_sub(1),
+        "global_stage_cost_per_round": costs,
+        "global_texels": cfg.maps.global_texels,
+        "smoothness": cfg.maps.smoothness,
+        "prior_sweeps": if cfg.maps.smoothness > 0.0 { PRIOR_SWEEPS } else { 0 },
+    })
+}
+

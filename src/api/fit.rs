@@ -1,0 +1,442 @@
+//! `fit`: a request in (data, configuration, what to recover), a [`FitRun`] out (the result
+//! file, the outcome, the samples, the maps, the report text); [`FitRun::write`] puts its files
+//! into outputs reserved with [`FitTargets::reserve`]. The CLI (`fibrefit fit`) and any other
+//! front end call these; nothing here parses arguments or prints results.
+
+use crate::export::atomic::{OutputId, Outputs};
+use crate::export::maps_out::{self, MapFiles};
+use crate::export::report::{self, ReportFiles};
+use crate::export::result_json as rj;
+use crate::fit::config::{FitConfig, Metric};
+use crate::fit::maps::TexelMaps;
+use crate::fit::problem::{albedos_of, model_for};
+use crate::fit::selection::SelectionOutcome;
+use crate::fit::{self, parameters::Shape, ward_fallback, FitOutcome};
+use crate::load::capture_store::CaptureStore;
+use crate::load::samples::{DataKind, Samples};
+use crate::load::{load_data, LoadOptions};
+use crate::model::{brdf_at_degrees, ModelId};
+use anyhow::{anyhow, bail, Context, Result};
+use std::path::{Path, PathBuf};
+
+/// The configuration of a fit: a config file, or the defaults of a rung (`model`), with
+/// `model`, `metric` and `fuzz` overriding it; validated. Without a config a measured-BRDF file
+/// (.bsdf, .binary) is fitted with the log metric.
+pub fn configure(
+    config: Option<&Path>,
+    model: Option<&str>,
+    metric: Option<&str>,
+    fuzz: bool,
+    data: &Path,
+) -> Result<FitConfig> {
+    let mut cfg = match (config, model) {
+        (Some(path), _) => FitConfig::load(path)?,
+        (None, Some(m)) => {
+            let mut c: FitConfig = toml::from_str(&format!("model = {m:?}\n"))?;
+            let measured = data.extension().is_some_and(|e| {
+                e.eq_ignore_ascii_case("bsdf") || e.eq_ignore_ascii_case("binary")
+            });
+            if measured {
+                c.metric = Metric::Log;
+            }
+            c
+        }
+        (None, None) => bail!("give --config FILE, or --model ID|auto to fit with the defaults"),
+    };
+    if let Some(m) = model {
+        cfg.model = m.to_string();
+    }
+    if let Some(m) = metric {
+        cfg.metric = serde_json::from_value(serde_json::Value::String(m.to_string()))
+            .map_err(|_| anyhow!("--metric {m}: expected linear, log or cosine"))?;
+    }
+    if fuzz {
+        cfg.parameters.entry("fuzz_depth".into()).or_default();
+    }
+    cfg.validate().map_err(|e| anyhow!("--model: {e}"))?;
+    Ok(cfg)
+}
+
+/// What a fit recovers besides the global parameters.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Maps {
+    /// Global parameters only.
+    None,
+    /// Only the global stage of map recovery (the globals that `--tile` runs share).
+    Globals,
+    /// Per-texel maps, to be written into this directory (named in the result).
+    Into(PathBuf),
+}
+
+/// A fit to run.
+#[derive(Clone, Debug)]
+pub struct FitRequest {
+    /// Goniometric CSV, capture TOML or measured BRDF file.
+    pub data: PathBuf,
+    pub config: FitConfig,
+    /// Loading options (`LoadArgs::options_with` the config's stride and fraction).
+    pub load: LoadOptions,
+    pub maps: Maps,
+    /// Progress bars and the model-selection table on stderr.
+    pub progress: bool,
+}
+
+/// A finished fit.
+pub struct FitRun {
+    /// The result file (schema fibrefit-result/1) as it will be written.
+    pub result: rj::ResultFile,
+    pub outcome: FitOutcome,
+    /// The samples the global fit used.
+    pub samples: Samples,
+    /// The configuration of the fitted rung (auto's choice applied).
+    pub config: FitConfig,
+    pub model: ModelId,
+    pub selection: Option<SelectionOutcome>,
+    /// The fit report (lmfit's layout), the model-selection table appended for auto.
+    pub report_text: String,
+    pub maps: Option<TexelMaps>,
+    /// Warnings beside the quality checks' own (those are in `outcome.quality`).
+    pub warnings: Vec<String>,
+    data: PathBuf,
+}
+
+/// Every file a fit reads: its data (a capture's images and maps too), config, topology map.
+pub fn inputs(req: &FitRequest, config_file: Option<&Path>) -> Vec<PathBuf> {
+    let mut inputs = crate::load::input_files(&req.data);
+    inputs.extend(config_file.map(Path::to_path_buf));
+    inputs.extend(req.config.knobs.topology_map.iter().cloned());
+    inputs
+}
+
+/// Checks of a request that need no data (before any output is reserved).
+pub fn check(req: &FitRequest) -> Result<()> {
+    if req.maps != Maps::None {
+        if req.config.model == "auto" && matches!(req.maps, Maps::Into(_)) {
+            bail!("--maps: name a rung (`model` or --model), not auto");
+        }
+        fit::maps::check_request(&req.config, &req.config.maps)?;
+    }
+    Ok(())
+}
+
+/// The texels of a capture the global fit uses: every one, or a seeded sample of
+/// `[knobs] fit_texels` of them.
+fn fit_texel_sample(store: &CaptureStore, cfg: &FitConfig) -> Vec<usize> {
+    let n = match cfg.knobs.fit_texels {
+        0 => usize::MAX,
+        k => k,
+    };
+    store.sample_texels(n, cfg.seed ^ 0x6669_7474)
+}
+
+/// Run the fit `req` asks for.
+pub fn fit(req: &FitRequest) -> Result<FitRun> {
+    check(req)?;
+    let quiet = !req.progress;
+    let mut cfg = req.config.clone();
+    // captures are held compactly by texel; the global fit takes a seeded sample of texels
+    let store = match crate::load::is_capture(&req.data) {
+        true => Some(CaptureStore::load(&req.data, req.load.subsample)?),
+        false => None,
+    };
+    let fit_texels = store.as_ref().map(|st| fit_texel_sample(st, &cfg));
+    let samples = match (&store, &fit_texels) {
+        (Some(st), Some(ids)) => st.samples_of(ids),
+        _ => load_data(&req.data, &req.load)?,
+    };
+    let selection = if cfg.model == "auto" {
+        let s = fit::selection::select(&samples, &cfg)?;
+        cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow!(e))?);
+        if req.progress {
+            eprintln!("{}", fit::selection::table(&s));
+        }
+        Some(s)
+    } else {
+        None
+    };
+    let id = cfg.model_id()?;
+    let hints = selection
+        .as_ref()
+        .map(|s| s.hints.clone())
+        .unwrap_or_default();
+    let (mut outcome, stage_costs) = match req.maps != Maps::None {
+        true => {
+            let store = store.as_ref().ok_or_else(|| {
+                anyhow!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels")
+            })?;
+            let st = fit::maps::global_stage(store, &cfg, &cfg.maps, quiet).with_context(|| {
+                format!("recovering maps with {} from {}", id, req.data.display())
+            })?;
+            let mut global = st.outcome;
+            global.warnings.extend(st.warnings.iter().cloned());
+            (global, Some((st.costs, st.texel_variance)))
+        }
+        false => (
+            fit::fit_with_hints(&samples, &cfg, quiet, &hints)
+                .with_context(|| format!("fitting {} to {}", id, req.data.display()))?,
+            None,
+        ),
+    };
+    let channels = samples.channels;
+    // a fit on a sample of a capture's texels, checked on every pixel
+    let mut all_pixels = None;
+    if let (Some(st), Some(ids), None) = (&store, &fit_texels, &stage_costs) {
+        let fitted_texels = ids.len();
+        if fitted_texels < st.texels().len() {
+            let all = fit::all_pixels::statistics(st, &cfg, &outcome, quiet)?;
+            if let Some(w) =
+                fit::all_pixels::warning(&all, outcome.statistics.reduced_chi_square, fitted_texels)
+            {
+                outcome.warnings.push(w);
+            }
+            all_pixels = Some(all);
+        }
+    }
+    let m = model_for(
+        &outcome.set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        outcome.map.clone(),
+    );
+    let albedos = albedos_of(&outcome.set);
+    let psi = outcome.set.shape_value(Shape::Azimuth).to_radians();
+    let check_values = rj::check_directions()
+        .into_iter()
+        .map(|d| rj::CheckValue {
+            theta_i: d[0],
+            phi_i: d[1],
+            theta_o: d[2],
+            phi_o: d[3],
+            brdf: brdf_at_degrees(m.as_ref(), &albedos, psi, d, channels),
+        })
+        .collect();
+    // an optional stage: its failure is a warning, never the loss of the fit
+    let mut warnings = outcome.warnings.clone();
+    let ward = if id == ModelId::Ward {
+        None
+    } else {
+        match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
+            Ok(w) => Some(rj::WardFallback {
+                model: "ward".into(),
+                parameters: w
+                    .parameters
+                    .into_iter()
+                    .map(|(k, v)| (k, rj::number_or_rgb(&v)))
+                    .collect(),
+                rms_error: w.rms_error,
+                relative_rms_error: w.relative_rms_error,
+                directions: w.directions,
+            }),
+            Err(e) => {
+                warnings.push(format!(
+                    "the Ward fallback could not be fitted, so the result has none: {e:#}"
+                ));
+                None
+            }
+        }
+    };
+    let mut knobs = rj::knobs(&cfg, req.load.subsample.stride, req.load.subsample.fraction);
+    if let Some(mp) = &outcome.map {
+        knobs.topology_map = Some(
+            std::fs::canonicalize(&mp.source)
+                .unwrap_or(mp.source.clone())
+                .display()
+                .to_string(),
+        );
+    }
+    let mut result = rj::ResultFile {
+        schema: rj::SCHEMA.into(),
+        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
+        model: id.to_string(),
+        conventions: rj::Conventions::default(),
+        parameters: rj::params_out(&outcome),
+        correlations: outcome
+            .correlations
+            .iter()
+            .map(|(a, b, r)| rj::Correlation {
+                a: a.clone(),
+                b: b.clone(),
+                r: *r,
+            })
+            .collect(),
+        statistics: {
+            let mut v = serde_json::to_value(&outcome.statistics)?;
+            if let Some(all) = &all_pixels {
+                v["all_pixels"] = serde_json::to_value(all)?;
+            }
+            v
+        },
+        knobs,
+        data: rj::Provenance {
+            file: req
+                .data
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            // of the bytes the loader read, not of the file as it is now
+            sha256: crate::load::sha256_read(&req.data).with_context(|| {
+                format!("{}: its loader recorded no hash", req.data.display())
+            })?,
+            kind: match samples.kind {
+                DataKind::Gonio => "goniometric".into(),
+                DataKind::Capture => "image capture".into(),
+                DataKind::Measured => "measured BRDF file".into(),
+            },
+            samples: samples.samples.len(),
+            channels,
+        },
+        check_values,
+        ward_fallback: ward,
+        model_selection: selection
+            .as_ref()
+            .map(|s| {
+                s.candidates
+                    .iter()
+                    .map(|c| serde_json::to_value(c).unwrap_or_default())
+                    .collect()
+            })
+            .unwrap_or_default(),
+        quality: Some(serde_json::to_value(&outcome.quality)?),
+        maps: None,
+        warnings: warnings.clone(),
+    };
+    let mut report_text = report::text(&outcome, id.as_str(), &req.data.display().to_string());
+    if let Some(s) = &selection {
+        report_text += &format!("[[Model selection]]\n{}", fit::selection::table(s));
+    }
+    let mut maps = None;
+    if let Some((costs, texel_variance)) = &stage_costs {
+        let method = fit::maps::method(&cfg, costs, *texel_variance);
+        match &req.maps {
+            Maps::Globals => {
+                result.maps = Some(serde_json::json!({
+                    "stage": "globals",
+                    "requested": cfg.maps.requested(),
+                    "method": method,
+                }));
+            }
+            Maps::Into(dir) => {
+                // the texel stage takes the globals as the result states them, as tiles do
+                let globals = fit::score::result_from_value(
+                    &serde_json::to_value(&result)?,
+                    "the global fit",
+                    channels,
+                )?
+                .set;
+                let store = store.as_ref().expect("the global stage needed the capture");
+                let (w, h) = (store.width, store.height);
+                let part = fit::maps::texel_stage(
+                    store,
+                    &cfg,
+                    &cfg.maps,
+                    &globals,
+                    (0, h as u32),
+                    *texel_variance,
+                    quiet,
+                )?;
+                let (texel_maps, variance, warns) = fit::maps::finish_maps(
+                    vec![part],
+                    w,
+                    h,
+                    channels,
+                    &cfg.maps,
+                    outcome.statistics.free_parameters,
+                    crate::model::topology::max_height(globals.shape_value(Shape::Spacing)),
+                )?;
+                let mut desc = maps_out::describe(dir, &cfg.maps.requested(), &texel_maps);
+                desc["method"] = method;
+                desc["method"]["residual_variance"] = serde_json::json!(variance);
+                result.maps = Some(desc);
+                result.warnings.extend(warns);
+                outcome.fitted =
+                    fit::maps::fitted_all(&samples, &cfg, &cfg.maps, &globals, &texel_maps)?;
+                maps = Some(texel_maps);
+            }
+            Maps::None => {}
+        }
+    }
+    Ok(FitRun {
+        result,
+        outcome,
+        samples,
+        config: cfg,
+        model: id,
+        selection,
+        report_text,
+        maps,
+        warnings,
+        data: req.data.clone(),
+    })
+}
+
+/// The files a fit writes, reserved before the work.
+pub struct FitTargets {
+    json: Option<OutputId>,
+    maps: Option<MapFiles>,
+    report: Option<(PathBuf, ReportFiles)>,
+}
+
+impl FitTargets {
+    /// Reserve the result JSON (`json`), the maps of `req` and a report into `report`.
+    pub fn reserve(
+        outs: &mut Outputs,
+        req: &FitRequest,
+        json: Option<&Path>,
+        report: Option<&Path>,
+    ) -> Result<Self> {
+        let json = json.map(|p| outs.file(p, "--out")).transpose()?;
+        let maps = match &req.maps {
+            Maps::Into(dir) => Some(MapFiles::reserve(outs, dir, &req.config.maps.requested())?),
+            _ => None,
+        };
+        let report = match report {
+            Some(dir) => {
+                let mut files = ReportFiles::reserve(outs, dir)?;
+                // a residual map per capture image
+                if crate::load::is_capture(&req.data) {
+                    let n = crate::load::capture::CaptureFile::load(&req.data)?.images.len();
+                    files.add_images(outs, 0..n as u32)?;
+                }
+                Some((dir.to_path_buf(), files))
+            }
+            None => None,
+        };
+        Ok(Self { json, maps, report })
+    }
+}
+
+impl FitRun {
+    /// Write the run's files into their reserved outputs (committed by the caller): the maps,
+    /// the report (optional: its failure becomes a warning in the result, never the lost fit),
+    /// then the result JSON.
+    pub fn write(&mut self, outs: &mut Outputs, targets: &FitTargets) -> Result<()> {
+        if let (Some(files), Some(maps)) = (&targets.maps, &self.maps) {
+            maps_out::write(outs, files, &self.config.maps.requested(), maps)?;
+        }
+        if let Some((dir, files)) = &targets.report {
+            let fitted = fit::fitted_brdf(&self.outcome, &self.config);
+            let measured = crate::load::measured_brdf(&self.data).unwrap_or(None);
+            if let Err(e) = report::write_dir(
+                outs,
+                files,
+                &self.outcome,
+                &self.samples,
+                &self.report_text,
+                fitted.as_ref(),
+                measured.as_deref(),
+            ) {
+                let w = format!("{}: the report could not be written: {e:#}", dir.display());
+                eprintln!("warning: {w}");
+                self.result.warnings.push(w);
+                files.discard(outs);
+            }
+        }
+        if let Some(id) = targets.json {
+            let name = outs.name(id).to_path_buf();
+            serde_json::to_writer_pretty(outs.writer(id), &self.result)
+                .with_context(|| format!("--out {}: cannot write the result", name.display()))?;
+        }
+        Ok(())
+    }
+}

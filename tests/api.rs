@@ -1,0 +1,75 @@
+//! The library API (`fibrefit::api`) is what the command line runs: a fit through the API gives
+//! the result file the CLI writes, value for value; its outputs go only where reserved.
+
+use fibrefit::api::fit::{self, FitRequest, FitTargets, Maps};
+use fibrefit::export::atomic::Outputs;
+use std::path::PathBuf;
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn a_fit_through_the_api_is_the_cli_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let data = root().join("data_synthetic/brushed/gonio.csv");
+    let cfg = fit::configure(None, Some("poulin-fournier"), None, false, &data).unwrap();
+    let req = FitRequest {
+        data: data.clone(),
+        load: fibrefit::load::LoadOptions::default(),
+        maps: Maps::None,
+        progress: false,
+        config: cfg,
+    };
+    let mut run = fit::fit(&req).unwrap();
+    assert_eq!(run.model.as_str(), "poulin-fournier");
+    assert!(run.report_text.contains("[[Fit Statistics]]"));
+    // written through reserved outputs
+    let mut outs = Outputs::new(&fit::inputs(&req, None));
+    let json = d.join("api.json");
+    let targets = FitTargets::reserve(&mut outs, &req, Some(&json), None).unwrap();
+    run.write(&mut outs, &targets).unwrap();
+    outs.commit().unwrap();
+    // the CLI on the same data and settings
+    let cli = d.join("cli.json");
+    let o = assert_cmd::Command::cargo_bin("fibrefit")
+        .unwrap()
+        .arg("fit")
+        .arg(&data)
+        .args(["--model", "poulin-fournier", "-q", "--out"])
+        .arg(&cli)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let read = |p: &PathBuf| -> serde_json::Value {
+        let mut v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(p).unwrap()).unwrap();
+        // wall times differ from run to run
+        v["statistics"]["elapsed_seconds"] = serde_json::Value::Null;
+        v
+    };
+    let (a, b) = (read(&json), read(&cli));
+    assert_eq!(a["parameters"], b["parameters"]);
+    assert_eq!(a["check_values"], b["check_values"]);
+    assert_eq!(a["data"], b["data"]);
+    assert_eq!(a["ward_fallback"], b["ward_fallback"]);
+}
+
+#[test]
+fn configure_names_what_is_wrong() {
+    let data = root().join("data_synthetic/brushed/gonio.csv");
+    let e = fit::configure(None, None, None, false, &data).err().unwrap();
+    assert!(e.to_string().contains("--model"), "{e}");
+    let e = fit::configure(None, Some("lambert"), Some("cubic"), false, &data)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("--metric cubic"), "{e}");
+    let e = fit::configure(None, Some("no-such-rung"), None, false, &data)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("no-such-rung"), "{e}");
+    // a measured file without a config is fitted with the log metric
+    let c = fit::configure(None, Some("lambert"), None, false, std::path::Path::new("x.bsdf")).unwrap();
+    assert_eq!(c.metric, fibrefit::fit::config::Metric::Log);
+}
