@@ -503,10 +503,20 @@ fn work_beyond_the_budgets_is_refused_up_front() {
             "quadrature nodes per model evaluation",
         ),
         ("starts = 1000000\n", "starts"),
+        (
+            // auto with every knob at its documented maximum: refused with the estimate
+            "starts = 1000\n[optimizer]\nmax_iterations = 100000\nglobal_candidates = 100000\n\
+             global_subsample = 1000000\n[knobs]\nquadrature_order = 256\nazimuth_nodes = 256\n\
+             histogram_bins = 65536\n",
+            "sample evaluations",
+        ),
     ] {
         fs::write(
             d.join("c.toml"),
-            format!("model = \"poulin-fournier\"\n{cfg}"),
+            format!(
+                "model = \"{}\"\n{cfg}",
+                if cfg.contains("65536") { "auto" } else { "poulin-fournier" }
+            ),
         )
         .unwrap();
         let o = run(&["fit", "g.csv", "--config", "c.toml", "--out", "c.json", "-q"], d);

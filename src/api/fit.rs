@@ -144,6 +144,8 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
         (Some(st), Some(ids)) => st.samples_of(ids),
         _ => load_data(&req.data, &req.load)?,
     };
+    cfg.check_work(samples.samples.len())
+        .map_err(|e| anyhow!("{}: {e}", req.data.display()))?;
     let selection = if cfg.model == "auto" {
         let s = fit::selection::select(&samples, &cfg)?;
         cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow!(e))?);

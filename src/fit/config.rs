@@ -127,6 +127,10 @@ pub const MAX_STARTS: usize = 1_000;
 /// Most Levenberg-Marquardt iterations per start (`optimizer.max_iterations`).
 pub const MAX_ITERATIONS: u64 = 100_000;
 
+/// Most sample evaluations a fit may plan ([`FitConfig::check_work`]): 1e10, about 8 hours on
+/// 2 cores at the rate of the shipped silk fit (5.4e5 planned in 1.5 s).
+pub const MAX_PLANNED_EVALUATIONS: f64 = 1e10;
+
 fn default_azimuth_nodes() -> usize {
     crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES
 }
@@ -349,6 +353,55 @@ impl FitConfig {
         self.model
             .parse()
             .map_err(|e: String| anyhow!("`model`: {e}"))
+    }
+
+    /// The work a fit of `samples` samples plans at most, in sample evaluations at the default
+    /// quadrature: per rung tried, the global stage (candidates x subsample), the polishing of
+    /// every start (starts x iterations x subsample) and the final run on all samples
+    /// (iterations x samples), scaled by the quadrature nodes per evaluation over the default's.
+    pub fn planned_evaluations(&self, samples: usize) -> f64 {
+        let n = samples as f64;
+        let sub = (self.optimizer.global_subsample as f64).min(n);
+        let candidates = self
+            .optimizer
+            .global_candidates
+            .unwrap_or_else(|| crate::fit::global::default_candidates(8)) as f64;
+        let iterations = self.optimizer.max_iterations as f64;
+        let rungs = if self.model == "auto" {
+            self.selection.rungs.len().max(1) as f64
+        } else {
+            1.0
+        };
+        let nodes = (self.knobs.quadrature_order * self.knobs.azimuth_nodes) as f64 / 256.0;
+        rungs
+            * (candidates * sub + self.starts as f64 * iterations * sub + iterations * n)
+            * nodes.max(1.0)
+    }
+
+    /// Refuse, before the fit, a plan beyond [`MAX_PLANNED_EVALUATIONS`], with the estimate.
+    pub fn check_work(&self, samples: usize) -> Result<()> {
+        let planned = self.planned_evaluations(samples);
+        if planned > MAX_PLANNED_EVALUATIONS {
+            bail!(
+                "this fit plans up to {planned:.2e} sample evaluations ({samples} samples; starts = {}, \
+                 optimizer.max_iterations = {}, global_candidates = {}, global_subsample = {}, \
+                 quadrature_order x azimuth_nodes = {}{}): more than the {MAX_PLANNED_EVALUATIONS:.0e} \
+                 a fit may take (about 8 hours on 2 cores); lower them or subsample the data",
+                self.starts,
+                self.optimizer.max_iterations,
+                self.optimizer
+                    .global_candidates
+                    .map_or("default".to_string(), |c| c.to_string()),
+                self.optimizer.global_subsample,
+                self.knobs.quadrature_order * self.knobs.azimuth_nodes,
+                if self.model == "auto" {
+                    format!(", {} rungs tried", self.selection.rungs.len())
+                } else {
+                    String::new()
+                }
+            );
+        }
+        Ok(())
     }
 
     /// Checks that need no data: names, bounds, starts, knob ranges.
