@@ -4,3 +4,5 @@
 
 pub mod fit;
 pub mod tiles;
+pub mod eval;
+pub mod score;

@@ -158,7 +158,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         gltf_out = Some(outs.file(g, "--gltf")?);
     }
     let (_, id, params) =
-        super::eval::load_params(&args.result, args.model.as_deref(), args.quiet)?;
+        crate::api::eval::load_params(&args.result, args.model.as_deref(), args.quiet)?;
     if let Some(map) = &params.topology.map {
         // loaded (so it exists); say which, since the export bakes its histogram in
         if !args.quiet {

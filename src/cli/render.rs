@@ -281,7 +281,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         .as_ref()
         .expect("clap: --params unless --seed001");
     let (raw, id, params) =
-        super::eval::load_params(params_path, args.model.as_deref(), args.quiet)?;
+        crate::api::eval::load_params(params_path, args.model.as_deref(), args.quiet)?;
     let scene = match &args.scene {
         Some(path) => {
             SceneFile::load(path)?.build(path, params.fibre_azimuth.to_degrees(), params.spacing)?

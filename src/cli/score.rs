@@ -2,7 +2,6 @@
 
 use super::data::LoadArgs;
 use crate::fit::score;
-use crate::load::load_data;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -30,9 +29,7 @@ pub struct ScoreArgs {
 }
 
 pub fn run(args: &ScoreArgs) -> Result<()> {
-    let samples = load_data(&args.data, &args.load.options()?)?;
-    let result = score::read_result(&args.result, samples.channels)?;
-    let s = score::score(&result, &samples)?;
+    let s = crate::api::score::score(&args.result, &args.data, &args.load.options()?)?;
     if args.json {
         super::print_out(&(serde_json::to_string_pretty(&s)? + "\n"))?;
     } else {
