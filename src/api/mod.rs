@@ -6,3 +6,4 @@ pub mod fit;
 pub mod tiles;
 pub mod eval;
 pub mod score;
+pub mod render;

@@ -10,6 +10,7 @@ pub mod gltf_out;
 pub mod images;
 pub mod maps_out;
 pub mod maps_report;
+pub mod picture;
 pub mod plots;
 pub mod report;
 pub mod result_json;

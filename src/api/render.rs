@@ -1,0 +1,365 @@
+//! `render`: a material on an object (or a scene), as a picture and its AOVs.
+//! [`Render::prepare`] loads the parameters, the scene and the maps (so the caller can reserve
+//! its outputs knowing every input), [`Render::run`] renders; [`seed001`] renders seed 001's
+//! figures 6 and 7 as one grid. Files are written by [`crate::export::picture`].
+
+use crate::load::texel_maps::TexelMapsIn;
+use crate::model::frame::{direction_from_angles, Vec3};
+use crate::model::params::{ModelParams, RawParams};
+use crate::model::topology::TopologyMap;
+use crate::model::{self, ModelId};
+use crate::render::mesh_object::{MeshObject, TangentSource};
+use crate::render::objects::Object;
+use crate::render::scene::{Scene, SceneFile};
+use crate::render::{self, Camera, Light, Material, Picture};
+use anyhow::{anyhow, bail, Result};
+use std::path::{Path, PathBuf};
+
+/// One object at the origin, directional lights of unit irradiance, an orthographic camera.
+#[derive(Clone, Debug)]
+pub struct FlagScene {
+    /// torus, sphere, swatch or MESH.obj
+    pub object: String,
+    /// Meshes' fibre field: curvature, uv or constant.
+    pub tangents: String,
+    /// Directions towards the lights (unit, world z up).
+    pub lights: Vec<Vec3>,
+    /// Direction towards the camera.
+    pub camera: Vec3,
+    pub size: [usize; 2],
+    pub supersample: usize,
+}
+
+/// Where the scene comes from.
+#[derive(Clone, Debug)]
+pub enum SceneSource {
+    /// A scene file (README: scenes).
+    File(PathBuf),
+    Flags(FlagScene),
+}
+
+/// A render to make.
+#[derive(Clone, Debug)]
+pub struct RenderRequest {
+    /// A parameter file `eval` accepts (or a fitted result).
+    pub params: PathBuf,
+    /// The rung, overriding the file's.
+    pub model: Option<String>,
+    pub scene: SceneSource,
+    /// Per-texel maps [default: those a fitted result names, found beside it].
+    pub maps: Option<PathBuf>,
+    /// Ward on a curvature-tangent mesh: alphas F |k1|, F |k2|.
+    pub ward_curvature_alpha: Option<f64>,
+    /// No progress bar and no warnings.
+    pub quiet: bool,
+}
+
+/// A render with everything loaded.
+pub struct Render {
+    pub model: ModelId,
+    pub params: ModelParams,
+    pub scene: Scene,
+    texel_maps: Option<TexelMapsIn>,
+    ward_curvature_alpha: Option<f64>,
+    inputs: Vec<PathBuf>,
+    quiet: bool,
+}
+
+impl Render {
+    /// Load what `req` names and check it.
+    pub fn prepare(req: &RenderRequest) -> Result<Self> {
+        let (raw, id, params) =
+            crate::api::eval::load_params(&req.params, req.model.as_deref(), req.quiet)?;
+        let scene = match &req.scene {
+            SceneSource::File(path) => SceneFile::load(path)?.build(
+                path,
+                params.fibre_azimuth.to_degrees(),
+                params.spacing,
+            )?,
+            SceneSource::Flags(f) => flags_scene(f, &params)?,
+        };
+        let mut inputs = vec![req.params.clone()];
+        inputs.extend(scene.inputs.iter().cloned());
+        let maps = maps_dir(req.maps.as_deref(), &req.params, req.quiet)?;
+        if let Some(dir) = &maps {
+            for f in ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"] {
+                inputs.push(dir.join(f));
+            }
+        }
+        inputs.extend(raw.topology_map.iter().cloned());
+        if let Some(f) = req.ward_curvature_alpha {
+            if id != ModelId::Ward {
+                bail!("--ward-curvature-alpha: the Ward rung's alphas; this is `{id}`");
+            }
+            if !(f.is_finite() && f > 0.0) {
+                bail!("--ward-curvature-alpha {f}: expected a finite positive factor");
+            }
+            let curvature_mesh = matches!(&req.scene, SceneSource::Flags(s)
+                if s.object.to_ascii_lowercase().ends_with(".obj") && s.tangents == "curvature");
+            if matches!(req.scene, SceneSource::Flags(_)) && !curvature_mesh {
+                bail!("--ward-curvature-alpha: needs a mesh (--object MESH.obj) with --tangents curvature");
+            }
+        }
+        let texel_maps = match &maps {
+            Some(dir) => {
+                Some(TexelMapsIn::load(dir, None).map_err(|e| anyhow!("--maps: {e:#}"))?)
+            }
+            None => None,
+        };
+        Ok(Self {
+            model: id,
+            params,
+            scene,
+            texel_maps,
+            ward_curvature_alpha: req.ward_curvature_alpha,
+            inputs,
+            quiet: req.quiet,
+        })
+    }
+
+    /// Every file the render reads (none may be an output).
+    pub fn inputs(&self) -> &[PathBuf] {
+        &self.inputs
+    }
+
+    /// Render the picture (with its AOVs).
+    pub fn run(&self) -> Result<Picture> {
+        let params = &self.params;
+        let shading = model::build(self.model, params)?;
+        let map = params.topology.map.clone();
+        let material = Material {
+            model: shading.as_ref(),
+            albedos: params.albedos,
+            channels: params.albedos.channels(),
+            spacing: params.spacing,
+            height: params.topology.height,
+            map_scale: params.topology.map_scale,
+            topology_map: map.as_deref(),
+            texel_maps: self.texel_maps.as_ref(),
+            fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
+            ward_curvature: self.ward_curvature_alpha,
+        };
+        let scene = &self.scene;
+        let bar = crate::progress::bar(scene.camera.height as u64, "render", self.quiet);
+        let pic = render::render(
+            &scene.objects,
+            &material,
+            &scene.lights,
+            &scene.camera,
+            scene.supersample,
+            &bar,
+        );
+        bar.finish_and_clear();
+        Ok(pic)
+    }
+}
+
+/// Directional lights of unit irradiance towards `dirs`.
+fn directional(dirs: &[Vec3]) -> Vec<Light> {
+    dirs.iter()
+        .map(|&direction| Light::Directional {
+            direction,
+            irradiance: 1.0,
+        })
+        .collect()
+}
+
+/// The object `name` (torus, sphere, swatch or a mesh MESH.obj with the fibre field `tangents`).
+pub fn object(name: &str, tangents: &str, params: &ModelParams) -> Result<Object> {
+    let psi = params.fibre_azimuth.to_degrees();
+    Ok(match name {
+        "torus" => Object::Torus {
+            spacing: params.spacing,
+        },
+        "sphere" => Object::Sphere { psi_deg: psi },
+        "swatch" => Object::Swatch { psi_deg: psi },
+        o if o.to_ascii_lowercase().ends_with(".obj") => {
+            let source = match tangents {
+                "curvature" => TangentSource::Curvature,
+                "uv" => TangentSource::Uv,
+                "constant" => TangentSource::Constant { psi_deg: psi },
+                t => bail!("--tangents {t}: expected curvature, uv or constant"),
+            };
+            let mesh = crate::load::mesh::load_obj(Path::new(o))?;
+            Object::Mesh(std::sync::Arc::new(MeshObject::new(mesh, source, psi)?))
+        }
+        o => bail!("--object {o}: expected torus, sphere, swatch or a mesh file MESH.obj"),
+    })
+}
+
+/// The maps directory: --maps, else the one a `fit --maps` result names (relative to the
+/// result file, then to the working directory), with a warning when it cannot be found.
+fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Option<PathBuf>> {
+    if let Some(d) = given {
+        return Ok(Some(d.to_path_buf()));
+    }
+    let is_json = params
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if !is_json {
+        return Ok(None);
+    }
+    let v: serde_json::Value = serde_json::from_str(&crate::load::input::read_text(params)?)
+        .map_err(|e| anyhow!("{}: {e}", params.display()))?;
+    let Some(named) = v["maps"]["directory"].as_str() else {
+        return Ok(None);
+    };
+    let beside = params.parent().unwrap_or(Path::new(".")).join(named);
+    for d in [beside, PathBuf::from(named)] {
+        if d.is_dir() {
+            return Ok(Some(d));
+        }
+    }
+    if !quiet {
+        eprintln!(
+            "warning: {} names the maps directory {named}, which is not beside it nor in the working directory: rendering without the maps (give --maps DIR)",
+            params.display()
+        );
+    }
+    Ok(None)
+}
+
+/// The scene the flags describe: one object at the origin, directional lights of unit
+/// irradiance, an orthographic camera.
+fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
+    let obj = object(&f.object, &f.tangents, params)?;
+    let lights = directional(&f.lights);
+    let [w, h] = f.size;
+    crate::render::check_budget(w, h, f.supersample, "--size/--supersample")?;
+    let camera = Camera {
+        direction: f.camera,
+        target: obj.centre(),
+        width: w,
+        height: h,
+        half_width: obj.bound() * 1.05 * (w as f64 / h as f64).max(1.0),
+        pinhole: None,
+    };
+    let inputs = if f.object.to_ascii_lowercase().ends_with(".obj") {
+        vec![PathBuf::from(&f.object)]
+    } else {
+        vec![]
+    };
+    Ok(Scene {
+        objects: vec![obj],
+        lights,
+        camera,
+        supersample: f.supersample,
+        exposure: None,
+        inputs,
+    })
+}
+
+/// Seed 001's figures 6 and 7: the torus in four rows (max-normal, poulin-fournier,
+/// varying-topology, varying-topology with a topology map of scale 0.25) under two lightings.
+/// Seed 001's figures 6 and 7 as one picture, seen from `camera` with `supersample`^2 rays per
+/// pixel; returns it with the exposure that puts the 99th percentile of every tile at 0.9.
+pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<(Picture, f32)> {
+    let size = 256usize;
+    let deg = |t: f64, p: f64| direction_from_angles(t.to_radians(), p.to_radians());
+    let lightings = [vec![deg(35.0, 120.0)], vec![deg(70.0, 20.0), deg(30.0, 250.0)]];
+    let map = TopologyMap {
+        width: 256,
+        height: 256,
+        values: crate::synth::generate_map(&crate::synth::MapSpec {
+            width: 256,
+            height: 256,
+            seed: 1,
+            waves: 48,
+        }),
+        source: PathBuf::from("seed001-noise"),
+    };
+    let rows: [(&str, ModelId, bool); 4] = [
+        ("max-normal", ModelId::MaxNormal, false),
+        ("poulin-fournier", ModelId::PoulinFournier, false),
+        ("varying-topology", ModelId::VaryingTopology, false),
+        ("varying-topology + map", ModelId::VaryingTopology, true),
+    ];
+    let bar = crate::progress::bar(
+        (rows.len() * lightings.len() * size) as u64,
+        "seed 001",
+        quiet,
+    );
+    let mut tiles = Vec::new();
+    for (_, id, with_map) in rows {
+        let raw: RawParams = toml::from_str(
+            "kd = [0.55, 0.32, 0.18]\nks = [0.5, 0.45, 0.4]\nexponent = 60\nspacing = 2.0\nmap_scale = 0.25\n",
+        )?;
+        let (params, _) = ModelParams::from_raw(&raw, id)?;
+        let shading = model::build(id, &params)?;
+        let material = Material {
+            model: shading.as_ref(),
+            albedos: params.albedos,
+            channels: 3,
+            spacing: 2.0,
+            height: 0.0,
+            map_scale: if with_map { 0.25 } else { 0.0 },
+            topology_map: with_map.then_some(&map),
+            texel_maps: None,
+            fibre_azimuth_deg: 0.0,
+            ward_curvature: None,
+        };
+        for lights in &lightings {
+            let camera = Camera {
+                direction: camera,
+                target: Vec3::zeros(),
+                width: size,
+                height: size,
+                half_width: (crate::render::objects::TORUS_MAJOR
+                    + crate::render::objects::TORUS_TUBE)
+                    * 1.05,
+                pinhole: None,
+            };
+            let pic = render::render(
+                &[Object::Torus { spacing: 2.0 }],
+                &material,
+                &directional(lights),
+                &camera,
+                supersample,
+                &bar,
+            );
+            tiles.push(pic);
+        }
+    }
+    bar.finish_and_clear();
+    // one exposure for the whole grid: the 99th percentile over every tile
+    let mut lum: Vec<f32> = tiles
+        .iter()
+        .flat_map(|p| {
+            p.radiance
+                .iter()
+                .zip(&p.alpha)
+                .filter(|(_, a)| **a > 0.0)
+                .map(|(c, a)| c[0].max(c[1]).max(c[2]) / a)
+        })
+        .collect();
+    lum.sort_by(f32::total_cmp);
+    let e = 0.9
+        / lum
+            .get(lum.len() * 99 / 100)
+            .copied()
+            .unwrap_or(1.0)
+            .max(1e-12);
+    let cols = lightings.len();
+    let (gw, gh) = (size * cols, size * rows.len());
+    let mut grid = Picture {
+        width: gw,
+        height: gh,
+        radiance: vec![[0.0; 3]; gw * gh],
+        alpha: vec![0.0; gw * gh],
+        normal: vec![],
+        tangent: vec![],
+        position: vec![],
+        fibre_height: vec![],
+    };
+    for (k, pic) in tiles.iter().enumerate() {
+        let (r, c) = (k / cols, k % cols);
+        for y in 0..size {
+            for x in 0..size {
+                let i = (r * size + y) * gw + c * size + x;
+                grid.radiance[i] = pic.radiance[y * size + x];
+                grid.alpha[i] = pic.alpha[y * size + x];
+            }
+        }
+    }
+    Ok((grid, e))
+}
