@@ -2,9 +2,10 @@
 
 use super::data::LoadArgs;
 use crate::api::fit::{self as fit_api, FitRequest, FitTargets, Maps};
+use crate::api::tiles::{self, TileRequest};
 use crate::export::atomic::Outputs;
 use crate::fit;
-use anyhow::{Context, Result};
+use anyhow::{anyhow, Context, Result};
 use clap::Args;
 use std::path::PathBuf;
 
@@ -99,7 +100,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     };
     let inputs = fit_api::inputs(&req, args.config.as_deref());
     if let Some(tile) = &args.tile {
-        return super::map_tiles::run_tile(args, req, tile, &inputs);
+        return run_tile(args, req, tile, &inputs);
     }
     fit_api::check(&req)?;
     // every output reserved before the work (none an input or another output), written together
@@ -139,6 +140,51 @@ pub fn run(args: &FitArgs) -> Result<()> {
     // what the quality checks found is printed even with --quiet: it must not be missed
     quality_banner(&outcome.quality);
     printed.with_context(|| format!("the outputs were written ({})", out_path.display()))
+}
+
+fn parse_tile(text: &str) -> Result<(u32, u32)> {
+    let bad = || anyhow!("--tile {text}: expected I/N with 0 <= I < N (e.g. 3/16)");
+    let (i, n) = text.split_once('/').ok_or_else(bad)?;
+    let (i, n): (u32, u32) = (
+        i.trim().parse().map_err(|_| bad())?,
+        n.trim().parse().map_err(|_| bad())?,
+    );
+    if n == 0 || i >= n {
+        return Err(bad());
+    }
+    Ok((i, n))
+}
+
+/// `fit --tile I/N`: the tile request of `args` (a fit's arguments, `req` their fit request).
+pub fn run_tile(
+    args: &FitArgs,
+    req: crate::api::fit::FitRequest,
+    tile: &str,
+    inputs: &[PathBuf],
+) -> Result<()> {
+    let tile = parse_tile(tile)?;
+    let t = tiles::run_tile(
+        &TileRequest {
+            data: req.data,
+            config: req.config,
+            load: req.load,
+            globals: args.globals.clone().expect("clap: --tile requires --globals"),
+            dir: args.maps.clone().expect("clap: --tile requires --maps"),
+            tile,
+            progress: req.progress,
+        },
+        inputs,
+    )?;
+    if !args.quiet {
+        eprintln!(
+            "wrote {} (rows {}..{}, {} texels)",
+            t.file.display(),
+            t.rows.0,
+            t.rows.1,
+            t.tile.part.texels.len()
+        );
+    }
+    Ok(())
 }
 
 /// The quality warnings as a banner on stderr (bold red on a terminal).

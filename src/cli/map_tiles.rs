@@ -1,55 +1,10 @@
-//! `fit --tile I/N --globals G.json --maps TILES` and `fibrefit merge-maps`: the command line
-//! of [`crate::api::tiles`].
+//! `fibrefit merge-maps`: the command line of [`crate::api::tiles::merge`] (the tiles come from
+//! `fit --tile`, in `cli/fit.rs`).
 
-use crate::api::tiles::{self, MergeRequest, TileRequest};
-use anyhow::{anyhow, Result};
+use crate::api::tiles::{self, MergeRequest};
+use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
-
-fn parse_tile(text: &str) -> Result<(u32, u32)> {
-    let bad = || anyhow!("--tile {text}: expected I/N with 0 <= I < N (e.g. 3/16)");
-    let (i, n) = text.split_once('/').ok_or_else(bad)?;
-    let (i, n): (u32, u32) = (
-        i.trim().parse().map_err(|_| bad())?,
-        n.trim().parse().map_err(|_| bad())?,
-    );
-    if n == 0 || i >= n {
-        return Err(bad());
-    }
-    Ok((i, n))
-}
-
-/// `fit --tile I/N`: the tile request of `args` (a fit's arguments, `req` their fit request).
-pub fn run_tile(
-    args: &super::fit::FitArgs,
-    req: crate::api::fit::FitRequest,
-    tile: &str,
-    inputs: &[PathBuf],
-) -> Result<()> {
-    let tile = parse_tile(tile)?;
-    let t = tiles::run_tile(
-        &TileRequest {
-            data: req.data,
-            config: req.config,
-            load: req.load,
-            globals: args.globals.clone().expect("clap: --tile requires --globals"),
-            dir: args.maps.clone().expect("clap: --tile requires --maps"),
-            tile,
-            progress: req.progress,
-        },
-        inputs,
-    )?;
-    if !args.quiet {
-        eprintln!(
-            "wrote {} (rows {}..{}, {} texels)",
-            t.file.display(),
-            t.rows.0,
-            t.rows.1,
-            t.tile.part.texels.len()
-        );
-    }
-    Ok(())
-}
 
 #[derive(Debug, Args)]
 #[command(after_help = "\

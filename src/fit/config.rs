@@ -131,6 +131,12 @@ pub const MAX_ITERATIONS: u64 = 100_000;
 /// 2 cores at the rate of the shipped silk fit (5.4e5 planned in 1.5 s).
 pub const MAX_PLANNED_EVALUATIONS: f64 = 1e10;
 
+/// Candidates of the global stage when the config does not say: 32 plus 24 per free shape
+/// parameter.
+pub fn default_candidates(dim: usize) -> usize {
+    32 + 24 * dim
+}
+
 fn default_azimuth_nodes() -> usize {
     crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES
 }
@@ -365,7 +371,7 @@ impl FitConfig {
         let candidates = self
             .optimizer
             .global_candidates
-            .unwrap_or_else(|| crate::fit::global::default_candidates(8)) as f64;
+            .unwrap_or_else(|| default_candidates(8)) as f64;
         let iterations = self.optimizer.max_iterations as f64;
         let rungs = if self.model == "auto" {
             self.selection.rungs.len().max(1) as f64

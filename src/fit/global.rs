@@ -95,11 +95,6 @@ pub fn latin_hypercube(
         .collect()
 }
 
-/// Candidates this many per free shape parameter (plus a base) when the config does not say.
-pub fn default_candidates(dim: usize) -> usize {
-    32 + 24 * dim
-}
-
 /// Run the global stage on the subsample problem `sub`. `starts` are points that are always
 /// polished (the user's start, hints); the design adds the rest.
 pub fn search(
@@ -115,7 +110,7 @@ pub fn search(
     let periods = sub.periods();
     let count = opt
         .global_candidates
-        .unwrap_or_else(|| default_candidates(lo.len()));
+        .unwrap_or_else(|| crate::fit::config::default_candidates(lo.len()));
     let tol = opt.tolerance.max(1e-6);
     let forced = starts.len();
     let mut candidates = starts;
