@@ -19,6 +19,7 @@
 
 use super::config::Optimizer;
 use super::parameters::ParamSet;
+pub use super::basins::{box_distance, Basin, BASIN_SEPARATION};
 use super::polish::run_lm;
 use super::problem::FitProblem;
 use anyhow::Result;
@@ -28,45 +29,12 @@ use rand::seq::SliceRandom;
 use rand::Rng;
 use rayon::prelude::*;
 
-/// A basin found on the subsample: its polished point and cost there.
-#[derive(Clone, Debug)]
-pub struct Basin {
-    pub theta: DVector<f64>,
-    pub cost: f64,
-}
-
 /// Iterations of the first, short polish of every start.
 const FIRST_POLISH_ITERATIONS: u64 = 6;
 /// Iterations of the polish of the competitive basins on the subsample.
 const BASIN_POLISH_ITERATIONS: u64 = 30;
 /// Candidates closer than this (fraction of the box, RMS over the coordinates) are one start.
 const START_SEPARATION: f64 = 0.1;
-/// Polished points closer than this are one basin.
-pub const BASIN_SEPARATION: f64 = 0.02;
-
-/// Distance between two points as a fraction of the box, RMS over the coordinates; periodic
-/// coordinates (the azimuth) take the shorter way round.
-pub fn box_distance(
-    a: &DVector<f64>,
-    b: &DVector<f64>,
-    lo: &DVector<f64>,
-    hi: &DVector<f64>,
-    periods: &[Option<f64>],
-) -> f64 {
-    let n = a.len().max(1) as f64;
-    let sum: f64 = (0..a.len())
-        .map(|i| {
-            let mut d = (a[i] - b[i]).abs();
-            if let Some(p) = periods[i] {
-                d = d.rem_euclid(p);
-                d = d.min(p - d);
-            }
-            (d / (hi[i] - lo[i]).max(1e-12)).powi(2)
-        })
-        .sum();
-    (sum / n).sqrt()
-}
-
 /// A seeded Latin-hypercube design of `count` points in the box [lo, hi].
 pub fn latin_hypercube(
     lo: &DVector<f64>,

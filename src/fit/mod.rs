@@ -9,6 +9,7 @@
 //! (see [`problem`]).
 
 pub mod all_pixels;
+pub mod basins;
 pub mod config;
 pub mod finish;
 pub mod global;
@@ -38,7 +39,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 /// Schema of the result JSON the fit is exported as (and `score` reads back).
-pub const RESULT_SCHEMA: &str = "fibrefit-result/1";
+pub use crate::load::params_file::RESULT_SCHEMA;
 
 /// One parameter after the fit, in external units.
 #[derive(Clone, Debug, serde::Serialize)]

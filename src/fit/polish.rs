@@ -1,7 +1,7 @@
 //! Local polishing: bounded Levenberg–Marquardt runs from a start, and the final stage that
 //! polishes every competitive basin of the global stage on all samples.
 
-use super::global::{box_distance, Basin, BASIN_SEPARATION};
+use super::basins::{box_distance, Basin, BASIN_SEPARATION};
 use super::lm;
 use super::parameters::ParamSet;
 use super::problem::{ArgminProblem, FitProblem};

@@ -1,7 +1,7 @@
 //! Image captures: a TOML description of a swatch and its images (example:
 //! `configs/capture_example.toml`). Every pixel of every image becomes a sample with its own
 //! light and view directions, fibre tangent and topology-map texel; the pixels are held compactly
-//! by texel in a [`CaptureStore`] (`capture_store.rs`).
+//! by texel in a `CaptureStore` (`capture_store.rs`, which reads captures through this file).
 //!
 //! Pixel (x, y) (column x, row y from the top) of a W x H image covers the swatch point
 //! p = (((x + 0.5)/W - 0.5) w, (0.5 - (y + 0.5)/H) h, 0) mm for a swatch of w x h mm centred on
@@ -10,9 +10,7 @@
 //! radiance / (E cos theta_i) with E the irradiance perpendicular to the light: `irradiance` for
 //! a directional light, `intensity / r^2` (r in metres) for a point light.
 
-pub use super::capture_store::CaptureStore;
 use super::image_io::{Encoding, LinearImage};
-use super::samples::Samples;
 use crate::model::frame::{direction_from_angles, Vec3};
 use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
@@ -324,11 +322,6 @@ pub(crate) fn check_no_negatives(path: &Path, img: &LinearImage) -> Result<()> {
     Ok(())
 }
 
-/// Every pixel of the capture at `path` as a sample (image by image, rows from the top), via
-/// the compact [`CaptureStore`].
-pub fn load(path: &Path, subsample: Subsample) -> Result<Samples> {
-    Ok(CaptureStore::load(path, subsample)?.to_samples())
-}
 
 #[cfg(test)]
 mod tests {

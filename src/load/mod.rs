@@ -7,6 +7,7 @@ pub mod image_io;
 pub mod input;
 pub mod merl;
 pub mod mesh;
+pub mod params_file;
 pub mod queries;
 pub mod rgl;
 pub mod samples;
@@ -78,7 +79,8 @@ pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
         .as_deref()
     {
         Some("csv") => gonio::load(path, opts.gonio),
-        Some("toml") => capture::load(path, opts.subsample),
+        // every pixel as a sample (image by image, rows from the top), via the compact store
+        Some("toml") => Ok(capture_store::CaptureStore::load(path, opts.subsample)?.to_samples()),
         Some("bsdf") => rgl::load(path, opts.measured),
         Some("binary") => merl::load(path, opts.measured),
         _ => bail!(

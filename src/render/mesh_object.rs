@@ -4,7 +4,7 @@
 //! constant direction.
 
 use super::curvature::{self, consistent_on_face, VertexCurvature};
-use super::objects::{Hit, Ray};
+use super::ray::{Hit, Ray};
 use crate::load::mesh::Mesh;
 use crate::model::frame::Vec3;
 use anyhow::{bail, Result};

@@ -12,6 +12,7 @@ pub mod curvature;
 pub mod mesh_object;
 pub mod objects;
 pub mod preview_mesh;
+pub mod ray;
 pub mod scene;
 
 use crate::load::texel_maps::TexelMapsIn;
