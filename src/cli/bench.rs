@@ -86,7 +86,7 @@ fn robustness(args: &BenchArgs) -> Result<()> {
     if !args.cases.is_empty() {
         command += &format!(" --cases {}", args.cases.join(","));
     }
-    crate::export::robustness_report::write(
+    crate::bench::report::robustness::write(
         &args.out,
         &runs,
         size,
@@ -120,7 +120,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             1024 => "fibrefit bench --camera".to_string(),
             n => format!("fibrefit bench --camera {n}"),
         };
-        crate::export::camera_report::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
+        crate::bench::report::camera::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
         if !args.quiet {
             for r in &run.rows {
                 eprintln!(
@@ -155,7 +155,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         } else {
             "fibrefit bench --shader"
         };
-        crate::export::shader_report::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
+        crate::bench::report::shader::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
         if !args.quiet {
             for r in &run.rows {
                 eprintln!(
@@ -177,7 +177,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         let scratch = tempfile::tempdir()?;
         let (rows, pictures) = crate::bench::maps::run(scratch.path(), &bar)?;
         bar.finish_and_clear();
-        crate::export::maps_report::write(
+        crate::bench::report::maps::write(
             &args.out,
             &rows,
             &pictures,
@@ -200,7 +200,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             args.directions
         );
         let measured = crate::load::measured_brdf(file)?;
-        crate::export::felt_report::write(
+        crate::bench::report::felt::write(
             &args.out,
             &run,
             measured.as_deref(),
@@ -228,7 +228,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     let forward = crate::bench::forward(args.quick, &bar)?;
     let fit = crate::bench::fit_level(&args.root, args.quick, &bar)?;
     bar.finish_and_clear();
-    crate::export::speed_report::write(
+    crate::bench::report::speed::write(
         &args.out,
         &forward,
         &fit,

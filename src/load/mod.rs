@@ -3,6 +3,7 @@
 pub mod capture;
 pub mod capture_store;
 pub mod gonio;
+pub mod gray_map;
 pub mod image_io;
 pub mod input;
 pub mod merl;

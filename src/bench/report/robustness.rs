@@ -1,7 +1,7 @@
 //! `reports/fit_robustness.md` (+ CSV and a PNG) from the runs of the robustness study.
 
-use super::atomic::AtomicFile;
-use super::plots::{self, Series};
+use crate::export::atomic::AtomicFile;
+use crate::export::plots::{self, Series};
 use crate::bench::robustness::{summary, Run, StudySize, CASES};
 use anyhow::Result;
 use std::io::Write;
@@ -9,7 +9,7 @@ use std::path::Path;
 
 pub fn write(dir: &Path, runs: &[Run], size: StudySize, command: &str, seconds: f64) -> Result<()> {
     std::fs::create_dir_all(dir)?;
-    super::speed_report::write_csv(&dir.join("fit_robustness.csv"), runs)?;
+    super::speed::write_csv(&dir.join("fit_robustness.csv"), runs)?;
     let series: Vec<Series> = CASES
         .iter()
         .filter(|c| runs.iter().any(|r| r.case == c.name))
@@ -24,7 +24,7 @@ pub fn write(dir: &Path, runs: &[Run], size: StudySize, command: &str, seconds: 
         })
         .collect();
     plots::xy(
-        super::atomic::Sink::File(&dir.join("fit_robustness.png")),
+        crate::export::atomic::Sink::File(&dir.join("fit_robustness.png")),
         "Default fit from random starts: final chi-square / truth's",
         "fit wall time [s]",
         "chi2 fit / chi2 truth (1 = global minimum)",

@@ -1,7 +1,7 @@
 //! `reports/speed_accuracy.md` (+ CSVs and PNG plots) from measured rows; nothing typed in.
 
-use super::atomic::AtomicFile;
-use super::plots::{self, Series};
+use crate::export::atomic::AtomicFile;
+use crate::export::plots::{self, Series};
 use crate::bench::{FitRow, ForwardRow};
 use anyhow::Result;
 use std::collections::BTreeMap;
@@ -61,7 +61,7 @@ pub fn write(
         })
         .collect();
     plots::xy(
-        super::atomic::Sink::File(&dir.join("pareto.png")),
+        crate::export::atomic::Sink::File(&dir.join("pareto.png")),
         "Error vs cost per rung (climbing set)",
         "ns per evaluation (single thread)",
         "RMS relative error vs reference",
@@ -85,7 +85,7 @@ pub fn write(
         })
         .collect();
     plots::xy(
-        super::atomic::Sink::File(&dir.join("fit_time_vs_error.png")),
+        crate::export::atomic::Sink::File(&dir.join("fit_time_vs_error.png")),
         "Fit time vs parameter error (silk capture, by subsampling)",
         "fit wall time [s]",
         "largest relative parameter error",

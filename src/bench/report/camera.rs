@@ -7,7 +7,7 @@ use std::path::Path;
 
 pub fn write(dir: &Path, run: &CameraRun, command: &str, seconds: f64) -> Result<()> {
     std::fs::create_dir_all(dir)?;
-    super::speed_report::write_csv(&dir.join("camera_resolution.csv"), &run.rows)?;
+    super::speed::write_csv(&dir.join("camera_resolution.csv"), &run.rows)?;
     let n = run.size;
     let mut md = String::from("# Captures at camera resolution: time and memory\n\n");
     md += &format!(
@@ -60,7 +60,7 @@ pub fn write(dir: &Path, run: &CameraRun, command: &str, seconds: f64) -> Result
          its noise).\n",
         run.store_bytes_per_value
     );
-    let mut f = super::atomic::AtomicFile::create(&dir.join("camera_resolution.md"))?;
+    let mut f = crate::export::atomic::AtomicFile::create(&dir.join("camera_resolution.md"))?;
     std::io::Write::write_all(&mut f.writer(), md.as_bytes())?;
     f.commit()?;
     Ok(())

@@ -1,9 +1,9 @@
 //! `reports/maps_accuracy.md` (+ CSV and a PNG of true and recovered maps side by side) from
 //! the map-recovery study (`fibrefit bench --maps`).
 
-use super::atomic::AtomicFile;
-use super::brdf_plots::{diverging, sequential};
-use super::plots::font;
+use crate::export::atomic::AtomicFile;
+use crate::export::brdf_plots::{diverging, sequential};
+use crate::export::plots::font;
 use crate::bench::maps::{MapRow, Pictures, SIZE};
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
@@ -96,7 +96,7 @@ fn figure(path: &Path, p: &Pictures) -> Result<()> {
         root.present().map_err(err)?;
     }
     let img = image::RgbImage::from_raw(w, h, buf).ok_or_else(|| anyhow!("plot buffer size"))?;
-    super::atomic::Sink::File(path).png(&img)
+    crate::export::atomic::Sink::File(path).png(&img)
 }
 
 pub fn write(
@@ -107,7 +107,7 @@ pub fn write(
     seconds: f64,
 ) -> Result<()> {
     std::fs::create_dir_all(dir)?;
-    super::speed_report::write_csv(&dir.join("maps_accuracy.csv"), rows)?;
+    super::speed::write_csv(&dir.join("maps_accuracy.csv"), rows)?;
     figure(&dir.join("maps_accuracy.png"), pictures)?;
     let mut md = String::from("# Per-texel map recovery: accuracy and honesty\n\n");
     md += &format!(

@@ -2,9 +2,9 @@
 //! against cost, and for the chosen rung, Ward and the best fit with the optional components,
 //! slices and hemisphere maps against the measured file.
 
-use super::atomic::AtomicFile;
-use super::brdf_plots::{self, Curve};
-use super::plots::{self, Series};
+use crate::export::atomic::AtomicFile;
+use crate::export::brdf_plots::{self, Curve};
+use crate::export::plots::{self, Series};
 use crate::bench::felt::{FeltRow, FeltRun};
 use anyhow::Result;
 use std::io::Write;
@@ -27,7 +27,7 @@ pub fn write(
 ) -> Result<()> {
     let rows = &run.rows;
     std::fs::create_dir_all(dir)?;
-    super::speed_report::write_csv(&dir.join("felt.csv"), rows)?;
+    super::speed::write_csv(&dir.join("felt.csv"), rows)?;
     let mut series = Vec::new();
     let mut kinds: Vec<&str> = rows.iter().map(|r| r.components.as_str()).collect();
     kinds.sort();
@@ -54,7 +54,7 @@ pub fn write(
         }
     }
     plots::xy(
-        super::atomic::Sink::File(&dir.join("felt.png")),
+        crate::export::atomic::Sink::File(&dir.join("felt.png")),
         "Real felt: held-out log error vs cost per rung",
         "ns per evaluation (single thread)",
         "held-out log error",
@@ -146,7 +146,7 @@ pub fn write(
         }
         let psi = 0.0; // the felt is isotropic
         let points = brdf_plots::slices(
-            super::atomic::Sink::File(&dir.join("felt_slices.png")),
+            crate::export::atomic::Sink::File(&dir.join("felt_slices.png")),
             "Real felt (log metric fits): slices at fixed incidence",
             psi,
             3,
@@ -167,7 +167,7 @@ pub fn write(
         for (k, &i) in drawn.iter().enumerate() {
             let file = format!("felt_hemispheres_{}.png", k + 1);
             brdf_plots::hemispheres(
-                super::atomic::Sink::File(&dir.join(&file)),
+                crate::export::atomic::Sink::File(&dir.join(&file)),
                 &format!("Real felt: measured vs {} (log metric)", label(&rows[i])),
                 0.0,
                 3,
