@@ -1,0 +1,568 @@
+//! One texel's problem: its mapped values from its own pixels given the globals (grid,
+//! compass search on the column table, damped Gauss-Newton with the model, albedos solved
+//! linearly), with its standard errors and other minima.
+
+use super::*;
+
+/// Everything a per-texel fit needs from the globals.
+pub(super) struct Globals<'m> {
+    pub(super) model: &'m dyn ShadingModel,
+    pub(super) has_topology: bool,
+    pub(super) h_max: f64,
+    pub(super) tied: bool,
+    pub(super) channels: usize,
+    /// Global albedo per component index and channel (0 where absent).
+    pub(super) albedo: [[f64; 3]; 4],
+    /// Model columns over (H, psi) by the texels' directions ([`ColumnTable`]).
+    pub(super) tables: TableCache,
+}
+
+/// The rung at the globals `set` with the knobs of `cfg` (no map: texels carry their height).
+pub(super) fn rung_of(set: &ParamSet, cfg: &FitConfig) -> Box<dyn ShadingModel> {
+    problem::model_for(
+        set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        None,
+    )
+}
+
+impl<'m> Globals<'m> {
+    pub(super) fn of(set: &ParamSet, model: &'m dyn ShadingModel, channels: usize) -> Self {
+        Self {
+            model,
+            has_topology: set.rung.has_topology(),
+            h_max: max_height(set.shape_value(Shape::Spacing)),
+            tied: set.substrate_tied,
+            channels,
+            albedo: globals_albedo(set),
+            tables: TableCache::default(),
+        }
+    }
+}
+
+/// One texel's problem.
+pub(super) struct Texel {
+    /// The texel's samples, one per image.
+    pub(super) obs: Vec<Sample>,
+    /// Per observation and channel: residual weight (1/sigma or sqrt(weight)).
+    pub(super) scale: Vec<[f64; 3]>,
+    pub(super) free: Free,
+    /// Prior: (weight, neighbour mean of H, neighbour mean of psi) when smoothing.
+    pub(super) prior: Option<(f64, f64, f64)>,
+}
+
+impl Texel {
+    pub(super) fn new(obs: Vec<Sample>, free: Free, prior: Option<(f64, f64, f64)>) -> Self {
+        Self {
+            scale: obs.iter().map(scale_of).collect(),
+            obs,
+            free,
+            prior,
+        }
+    }
+
+    /// What the grid's columns depend on besides the globals: every observation's directions,
+    /// and the texel's height or azimuth where they are fixed.
+    pub(super) fn grid_key(&self, start: &TexelValues) -> Vec<u64> {
+        let mut key: Vec<u64> = self
+            .obs
+            .iter()
+            .flat_map(|s| [s.l.x, s.l.y, s.l.z, s.v.x, s.v.y, s.v.z].map(f64::to_bits))
+            .collect();
+        if !self.free.height {
+            key.push(start.height.to_bits());
+        }
+        if !self.free.psi {
+            key.push(start.psi.to_bits());
+        }
+        key
+    }
+
+    /// Columns of every observation at (H, psi).
+    pub(super) fn columns(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+        let frame = FibreFrame::from_azimuth(psi.to_radians());
+        let pairs: Vec<DirectionPair> = self
+            .obs
+            .iter()
+            .map(|s| DirectionPair::new(&frame, &s.l, &s.v))
+            .collect();
+        // one texel is one pattern seen in every image: one batch
+        let mut bases = vec![Basis::default(); pairs.len()];
+        if !(g.has_topology
+            && g.model
+                .basis_many_at_height(&pairs, h.clamp(0.0, g.h_max), &mut bases))
+        {
+            g.model.basis_many(&pairs, &mut bases);
+        }
+        bases
+            .iter()
+            .map(|b| {
+                if g.tied {
+                    [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
+                } else {
+                    [b.diffuse, b.specular, b.substrate, b.fuzz]
+                }
+            })
+            .collect()
+    }
+
+    /// Albedos of the texel (mapped ones solved linearly, bounded to [0, 1]) and the weighted
+    /// residuals, at fixed columns.
+    pub(super) fn solve(&self, g: &Globals, cols: &[[f64; 4]], v: &mut TexelValues) -> Vec<f64> {
+        let mapped: Vec<usize> = [(0usize, self.free.kd), (1, self.free.ks)]
+            .into_iter()
+            .filter(|x| x.1)
+            .map(|x| x.0)
+            .collect();
+        for c in 0..g.channels {
+            if mapped.is_empty() {
+                break;
+            }
+            let mut gm = [[0.0f64; 4]; 4];
+            let mut hv = [0.0f64; 4];
+            for ((s, col), sc) in self.obs.iter().zip(cols).zip(&self.scale) {
+                let w2 = sc[c] * sc[c];
+                let mut y = s.value[c];
+                for (k, x) in col.iter().enumerate() {
+                    if !mapped.contains(&k) {
+                        y -= g.albedo[k][c] * x;
+                    }
+                }
+                for &a in &mapped {
+                    hv[a] += w2 * col[a] * y;
+                    for &b in &mapped {
+                        gm[a][b] += w2 * col[a] * col[b];
+                    }
+                }
+            }
+            let bounds = vec![(0.0, 1.0); mapped.len()];
+            let sol = bounded_small_lsq(&gm, &hv, &mapped, &bounds);
+            for (&a, x) in mapped.iter().zip(sol) {
+                if a == 0 {
+                    v.kd[c] = x;
+                } else {
+                    v.ks[c] = x;
+                }
+            }
+        }
+        self.residuals(g, cols, v)
+    }
+
+    pub(super) fn albedo(&self, g: &Globals, v: &TexelValues, k: usize, c: usize) -> f64 {
+        match k {
+            0 if self.free.kd => v.kd[c],
+            1 if self.free.ks => v.ks[c],
+            _ => g.albedo[k][c],
+        }
+    }
+
+    pub(super) fn residuals(&self, g: &Globals, cols: &[[f64; 4]], v: &TexelValues) -> Vec<f64> {
+        let mut r = Vec::with_capacity(self.obs.len() * g.channels + 2);
+        for ((s, col), sc) in self.obs.iter().zip(cols).zip(&self.scale) {
+            for (c, scale) in sc.iter().enumerate().take(g.channels) {
+                let m: f64 = (0..4).map(|k| self.albedo(g, v, k, c) * col[k]).sum();
+                r.push(scale * (m - s.value[c]));
+            }
+        }
+        if let Some((w, hm, pm)) = self.prior {
+            let sw = w.sqrt();
+            if self.free.height {
+                r.push(sw * (v.height - hm));
+            }
+            if self.free.psi {
+                r.push(sw * wrap_azimuth(v.psi - pm) / 10.0);
+            }
+        }
+        r
+    }
+
+    /// Cost and solved values at nonlinear values `u` (H and/or psi in that order).
+    pub(super) fn cost_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (f64, TexelValues) {
+        let (r, v) = self.residuals_at(g, base, u);
+        (r.iter().map(|x| x * x).sum(), v)
+    }
+
+    /// [`Texel::cost_at`] with the columns interpolated in `table`.
+    pub(super) fn table_cost_at(
+        &self,
+        g: &Globals,
+        base: &TexelValues,
+        u: &[f64],
+        table: &ColumnTable,
+    ) -> (f64, TexelValues) {
+        let mut v = self.at_nonlinear(g, base, u);
+        let cols = table.interpolate(g, v.height, v.psi);
+        let r = self.solve(g, &cols, &mut v);
+        (r.iter().map(|x| x * x).sum(), v)
+    }
+
+    /// `base` with the nonlinear values `u` (H clamped to [0, H_max], psi wrapped).
+    pub(super) fn at_nonlinear(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> TexelValues {
+        let mut v = *base;
+        let mut k = 0;
+        if self.free.height {
+            v.height = u[k].clamp(0.0, g.h_max);
+            k += 1;
+        }
+        if self.free.psi {
+            v.psi = wrap_azimuth(u[k]);
+        }
+        v
+    }
+
+    /// Residuals and solved values at nonlinear values `u`.
+    pub(super) fn residuals_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (Vec<f64>, TexelValues) {
+        let mut v = self.at_nonlinear(g, base, u);
+        let cols = self.columns(g, v.height, v.psi);
+        (self.solve(g, &cols, &mut v), v)
+    }
+
+    pub(super) fn nonlinear(&self, v: &TexelValues) -> Vec<f64> {
+        let mut u = Vec::new();
+        if self.free.height {
+            u.push(v.height);
+        }
+        if self.free.psi {
+            u.push(v.psi);
+        }
+        u
+    }
+
+    /// Fit the texel from `start`: a grid over the nonlinear values (17 heights x 12 azimuths),
+    /// a coarse compass search from the best [`TEXEL_STARTS`] of its local minima and `start`,
+    /// the best of those searched on and polished by damped Gauss–Newton. Returns the best
+    /// (never worse than `start`) and the other distinct minima found, best first.
+    pub(super) fn fit(&self, g: &Globals, start: &TexelValues) -> TexelFit {
+        let u0 = self.nonlinear(start);
+        let (c0, v0) = self.cost_at(g, start, &u0);
+        if u0.is_empty() {
+            return (v0, c0, vec![]);
+        }
+        let (th, tp) = ColumnTable::dims(self.free);
+        let (nh, np) = (
+            if self.free.height { HEIGHT_GRID } else { 1 },
+            if self.free.psi { PSI_GRID } else { 1 },
+        );
+        // grid point (i, j) is table node (i TABLE_H_PER_GRID, j TABLE_PSI_PER_GRID)
+        let node_of = |k: usize| {
+            (
+                (k / np) * if nh > 1 { TABLE_H_PER_GRID } else { 0 },
+                (k % np) * if np > 1 { TABLE_PSI_PER_GRID } else { 0 },
+            )
+        };
+        let point = |k: usize| {
+            let (j, l) = node_of(k);
+            let (h, psi) = ColumnTable::node(th, tp, g, start, j, l);
+            let mut v = *start;
+            v.height = h;
+            v.psi = psi;
+            v
+        };
+        let table = g
+            .tables
+            .get(self.grid_key(start), || ColumnTable::build(self, g, start));
+        let grid: Vec<(f64, TexelValues)> = (0..nh * np)
+            .map(|k| {
+                let mut v = point(k);
+                let r = match &table {
+                    Some(t) => {
+                        let (j, l) = node_of(k);
+                        self.solve(g, t.at(j, l), &mut v)
+                    }
+                    None => {
+                        let cols = self.columns(g, v.height, v.psi);
+                        self.solve(g, &cols, &mut v)
+                    }
+                };
+                (r.iter().map(|x| x * x).sum(), v)
+            })
+            .collect();
+        // grid points no 4-neighbour undercuts (the azimuth wraps)
+        let mut local: Vec<usize> = (0..nh * np)
+            .filter(|&k| {
+                let (i, j) = (k / np, k % np);
+                let mut nb = Vec::new();
+                if i > 0 {
+                    nb.push(k - np);
+                }
+                if i + 1 < nh {
+                    nb.push(k + np);
+                }
+                if np > 1 {
+                    nb.push(i * np + (j + 1) % np);
+                    nb.push(i * np + (j + np - 1) % np);
+                }
+                nb.iter().all(|&n| grid[n].0 >= grid[k].0)
+            })
+            .collect();
+        local.sort_by(|a, b| grid[*a].0.total_cmp(&grid[*b].0));
+        local.truncate(TEXEL_STARTS);
+        // the start competes with the grid minima for the polishes (so the fit is never worse
+        // than the start); each is searched to a coarse step, the best of them to the end
+        let mut candidates: Vec<(TexelValues, f64)> =
+            local.iter().map(|&k| (grid[k].1, grid[k].0)).collect();
+        candidates.push((v0, c0));
+        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+        candidates.truncate(TEXEL_STARTS);
+        let same = |w: &TexelValues, v: &TexelValues| {
+            (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
+                && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
+        };
+        let mut minima: Vec<(TexelValues, f64)> = Vec::new();
+        for (v, c) in candidates {
+            // on the table where there is one, then the model's own cost there
+            let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table.as_deref());
+            let (v, c) = match table {
+                Some(_) => {
+                    let (c, v) = self.cost_at(g, start, &self.nonlinear(&v));
+                    (v, c)
+                }
+                None => (v, c),
+            };
+            match minima.iter_mut().find(|m| same(&m.0, &v)) {
+                Some(m) if c < m.1 => *m = (v, c),
+                Some(_) => {}
+                None => minima.push((v, c)),
+            }
+        }
+        // searched on to the end: every minimum that could still be the best (coarse cost
+        // within twice the lowest: a coarse step costs well under one noise variance, the
+        // ambiguity margin is nine)
+        let lowest = minima.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
+        for m in minima.iter_mut().filter(|m| m.1 <= 2.0 * lowest) {
+            let (v, c) = self.compass(g, start, m.0, m.1, (COMPASS_COARSE, COMPASS_FINE), None);
+            *m = self.gauss_newton(g, start, v, c);
+        }
+        minima.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let (best, best_cost) = minima.remove(0);
+        minima.retain(|m| !same(&m.0, &best));
+        // the grid's profiles (best over the other value at each grid height, and at each grid
+        // azimuth) count as other candidates too: a flat profile is an undetermined value even
+        // where it has no separate minimum
+        for i in 0..nh {
+            if let Some(k) =
+                (0..np).min_by(|a, b| grid[i * np + a].0.total_cmp(&grid[i * np + b].0))
+            {
+                let (c, v) = grid[i * np + k];
+                minima.push((v, c));
+            }
+        }
+        for j in 0..np {
+            if let Some(i) =
+                (0..nh).min_by(|a, b| grid[a * np + j].0.total_cmp(&grid[b * np + j].0))
+            {
+                let (c, v) = grid[i * np + j];
+                minima.push((v, c));
+            }
+        }
+        (best, best_cost, minima)
+    }
+
+    /// A compass search on the nonlinear values from `v` (cost `c`), albedos re-solved at every
+    /// point: occlusion makes the cost kinked in H, where Gauss–Newton stalls. Steps halve from
+    /// `from` to `to` times (H_max / 32, 3.75 degrees), half the grid's spacing.
+    pub(super) fn compass(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        v: TexelValues,
+        c: f64,
+        (from, to): (f64, f64),
+        table: Option<&ColumnTable>,
+    ) -> (TexelValues, f64) {
+        let (mut best, mut best_cost) = (v, c);
+        let mut best_u = self.nonlinear(&best);
+        let unit: Vec<f64> = (0..best_u.len())
+            .map(|k| {
+                if self.free.height && k == 0 {
+                    g.h_max / 32.0
+                } else {
+                    3.75
+                }
+            })
+            .collect();
+        let mut scale = from;
+        for _ in 0..400 {
+            if scale < to {
+                break;
+            }
+            let mut moved = false;
+            for k in 0..best_u.len() {
+                for sign in [1.0, -1.0] {
+                    let mut u = best_u.clone();
+                    u[k] += sign * scale * unit[k];
+                    let (c, v) = match table {
+                        Some(t) => self.table_cost_at(g, start, &u, t),
+                        None => self.cost_at(g, start, &u),
+                    };
+                    if c < best_cost {
+                        (best_cost, best) = (c, v);
+                        best_u = self.nonlinear(&v);
+                        moved = true;
+                        break;
+                    }
+                }
+            }
+            if !moved {
+                scale *= 0.5;
+            }
+        }
+        (best, best_cost)
+    }
+
+    /// Damped Gauss–Newton on the nonlinear values from `v` (cost `c`); albedos re-solved at
+    /// every point.
+    pub(super) fn gauss_newton(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        v: TexelValues,
+        c: f64,
+    ) -> (TexelValues, f64) {
+        let (mut best, mut best_cost) = (v, c);
+        let mut best_u = self.nonlinear(&best);
+        let n = best_u.len();
+        let (mut r0, _) = self.residuals_at(g, start, &best_u);
+        let mut lambda = 1e-3;
+        for _ in 0..30 {
+            let mut jac = DMatrix::zeros(r0.len(), n);
+            for k in 0..n {
+                let mut u = best_u.clone();
+                let mut step = if self.free.height && k == 0 {
+                    1e-4 * g.h_max.max(1e-3)
+                } else {
+                    1e-3
+                };
+                if self.free.height && k == 0 && u[0] + step > g.h_max {
+                    step = -step;
+                }
+                u[k] += step;
+                let (r, _) = self.residuals_at(g, start, &u);
+                for (i, (a, b)) in r.iter().zip(&r0).enumerate() {
+                    jac[(i, k)] = (a - b) / step;
+                }
+            }
+            let jt = jac.transpose();
+            let a = &jt * &jac;
+            let grad = &jt * DVector::from_vec(r0.clone());
+            let mut improved = false;
+            for _ in 0..8 {
+                let mut m = a.clone();
+                for k in 0..n {
+                    m[(k, k)] += lambda * a[(k, k)].max(1e-12);
+                }
+                let Some(step) = m.cholesky().map(|ch| ch.solve(&(-&grad))) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let u: Vec<f64> = best_u.iter().zip(step.iter()).map(|(x, d)| x + d).collect();
+                let (r, v) = self.residuals_at(g, start, &u);
+                let c: f64 = r.iter().map(|x| x * x).sum();
+                if c < best_cost {
+                    let gain = (best_cost - c) / best_cost.max(1e-300);
+                    (best_cost, best, r0) = (c, v, r);
+                    best_u = self.nonlinear(&v);
+                    lambda = (lambda * 0.3).max(1e-9);
+                    improved = gain > GAUSS_NEWTON_GAIN;
+                    break;
+                }
+                lambda *= 10.0;
+            }
+            if !improved {
+                break;
+            }
+        }
+        (best, best_cost)
+    }
+
+    /// Standard errors of the texel's unknowns from its Jacobian over all of them (nonlinear by
+    /// differences, albedos analytic), scaled by `variance`.
+    pub(super) fn std_errors(&self, g: &Globals, v: &TexelValues, variance: f64) -> TexelValues {
+        let mut se = TexelValues::default();
+        let (jcols, which) = self.jacobian(g, v);
+        let p = jcols.len();
+        let mut jtj: DMatrix<f64> = DMatrix::zeros(p, p);
+        for a in 0..p {
+            for b in 0..p {
+                jtj[(a, b)] = jcols[a].iter().zip(&jcols[b]).map(|(x, y)| x * y).sum();
+            }
+        }
+        let cov = jtj.try_inverse();
+        for (k, &(kind, c)) in which.iter().enumerate() {
+            let s = match &cov {
+                Some(m) if m[(k, k)] >= 0.0 => (variance * m[(k, k)]).sqrt(),
+                _ => f64::INFINITY,
+            };
+            match kind {
+                0 => se.height = s,
+                1 => se.psi = s,
+                2 => se.kd[c] = s,
+                _ => se.ks[c] = s,
+            }
+        }
+        se
+    }
+
+    /// The Jacobian of the texel's residuals (its pixels' rows, then any prior rows) over its
+    /// unknowns (nonlinear by differences, albedos analytic), one column each, with what each
+    /// column is: (0 height | 1 psi | 2 kd | 3 ks, channel).
+    pub(super) fn jacobian(&self, g: &Globals, v: &TexelValues) -> (Vec<Vec<f64>>, Vec<(u8, usize)>) {
+        let cols = self.columns(g, v.height, v.psi);
+        let r0 = self.residuals(g, &cols, v);
+        let mut jcols: Vec<Vec<f64>> = Vec::new();
+        let mut which: Vec<(u8, usize)> = Vec::new();
+        let diff = |h: f64, psi: f64, step: f64| -> Vec<f64> {
+            let mut w = *v;
+            w.height = h;
+            w.psi = psi;
+            let c = self.columns(g, h, psi);
+            let r = self.residuals(g, &c, &w);
+            r.iter().zip(&r0).map(|(a, b)| (a - b) / step).collect()
+        };
+        if self.free.height {
+            let step = 1e-5
+                * g.h_max.max(1e-3)
+                * if v.height + 1e-5 * g.h_max > g.h_max {
+                    -1.0
+                } else {
+                    1.0
+                };
+            jcols.push(diff(v.height + step, v.psi, step));
+            which.push((0, 0));
+        }
+        if self.free.psi {
+            jcols.push(diff(v.height, v.psi + 1e-4, 1e-4));
+            which.push((1, 0));
+        }
+        for (kind, comp, on) in [(2u8, 0usize, self.free.kd), (3, 1, self.free.ks)] {
+            if !on {
+                continue;
+            }
+            for c in 0..g.channels {
+                let mut col = vec![0.0; r0.len()];
+                for (i, (cl, sc)) in cols.iter().zip(&self.scale).enumerate() {
+                    col[i * g.channels + c] = sc[c] * cl[comp];
+                }
+                jcols.push(col);
+                which.push((kind, c));
+            }
+        }
+        (jcols, which)
+    }
+
+    /// RMS relative residual over the texel's pixels and channels.
+    pub(super) fn relative_residual(&self, g: &Globals, v: &TexelValues) -> f64 {
+        let cols = self.columns(g, v.height, v.psi);
+        let (mut s, mut n) = (0.0, 0.0);
+        for (o, col) in self.obs.iter().zip(&cols) {
+            for c in 0..g.channels {
+                let m: f64 = (0..4).map(|k| self.albedo(g, v, k, c) * col[k]).sum();
+                s += ((m - o.value[c]) / o.value[c].abs().max(1e-12)).powi(2);
+                n += 1.0;
+            }
+        }
+        (s / n).sqrt()
+    }
+}

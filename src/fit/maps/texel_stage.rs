@@ -1,0 +1,312 @@
+//! Stage 2: every texel of a band of rows from the globals (the smoothness prior by Jacobi
+//! sweeps), and the assembly of the bands into maps with their residual variance.
+
+use super::*;
+
+/// Sweeps of the per-texel stage with the smoothness prior on (the first without it).
+pub const PRIOR_SWEEPS: usize = 2;
+
+/// Stage 2 over some rows: every texel fitted independently given the globals (with the prior,
+/// [`PRIOR_SWEEPS`] Jacobi sweeps after the first), standard errors before scaling by the
+/// residual variance, which needs every row ([`finish_maps`]).
+#[derive(Clone, Debug, serde::Serialize, serde::Deserialize, PartialEq)]
+pub struct TexelPart {
+    /// Rows [first, last) of the capture this part covers.
+    pub rows: [u32; 2],
+    pub texels: Vec<(u32, u32)>,
+    pub values: Vec<TexelValues>,
+    /// sqrt of the diagonal of (J^T J)^-1 per value (infinity where singular).
+    pub unscaled_std_errors: Vec<TexelValues>,
+    /// Other minima of each texel: (cost above the best, |dH|, |dpsi| in degrees), those
+    /// costing less than `minima_below` above the best (all when `None`).
+    pub other_minima: Vec<Vec<[f64; 3]>>,
+    #[serde(default)]
+    pub minima_below: Option<f64>,
+    pub residual: Vec<f64>,
+    /// Per row of the part: (sum of squared weighted residuals, residual count).
+    pub row_costs: Vec<(f64, usize)>,
+}
+
+/// Stage 2 for the texels in rows [`rows.0`, `rows.1`) given the globals `set`, texel by
+/// texel from the compact store (no texel's samples are made before it is fitted, none kept
+/// after).
+///
+/// `variance_hint` is the residual variance the global stage expects ([`GlobalStage`]): other
+/// minima costing more than [`MINIMA_MARGIN`] x [`AMBIGUITY_DELTA`] of it above the best are
+/// not kept (at camera resolution they are most of the memory); infinity keeps every one.
+pub fn texel_stage(
+    store: &CaptureStore,
+    cfg: &FitConfig,
+    req: &MapsConfig,
+    set: &ParamSet,
+    rows: (u32, u32),
+    variance_hint: f64,
+    quiet: bool,
+) -> Result<TexelPart> {
+    let minima_below = (variance_hint.is_finite() && variance_hint > 0.0)
+        .then_some(MINIMA_MARGIN * AMBIGUITY_DELTA * variance_hint);
+    check_request(cfg, req)?;
+    let free = free_of(req);
+    let set = fix_mapped(set, req);
+    let model = rung_of(&set, cfg);
+    let g = Globals::of(&set, model.as_ref(), store.channels);
+    let sweeps = if req.smoothness > 0.0 {
+        1 + PRIOR_SWEEPS
+    } else {
+        1
+    };
+    // a halo of one row per later sweep makes a part's texels what a single run gives
+    let halo = (sweeps - 1) as u32;
+    let lo = rows.0.saturating_sub(halo);
+    let hi = rows.1.saturating_add(halo);
+    let texels = store.texels();
+    // texels are row-major: those of rows [lo, hi) are the ids [t0, t1)
+    let t0 = texels.partition_point(|t| t.1 < lo);
+    let t1 = texels.partition_point(|t| t.1 < hi);
+    let start_of = |t: usize| -> TexelValues {
+        let s = (0..store.images())
+            .find_map(|k| store.sample(t, k))
+            .expect("a stored texel has a sample");
+        start_value(&s, &set)
+    };
+    let start: Vec<TexelValues> = (t0..t1).into_par_iter().map(start_of).collect();
+    let neighbours = |t: usize| -> Vec<usize> {
+        let (x, y) = (texels[t].0 as i64, texels[t].1 as i64);
+        [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .filter_map(|(dx, dy)| store.texel_at(x + dx, y + dy))
+            .collect()
+    };
+    let problem = |t: usize, values: &[TexelValues], smoothness: f64| -> Texel {
+        let nbs: Vec<TexelValues> = neighbours(t)
+            .into_iter()
+            .map(|j| match j.checked_sub(t0) {
+                Some(k) if j < t1 => values[k],
+                _ => start_of(j),
+            })
+            .collect();
+        Texel::new(store.texel_samples(t), free, prior_of(&nbs, smoothness))
+    };
+    let mut values = start.clone();
+    let bar = crate::progress::bar((sweeps * (t1 - t0)) as u64, "maps: texels", quiet);
+    let kept = |t: usize| (rows.0..rows.1).contains(&texels[t].1);
+    // per texel: best values, cost, other minima (pruned; last sweep, kept texels only)
+    let mut fits: Vec<(TexelValues, f64, Vec<[f64; 3]>)> = Vec::new();
+    for sweep in 0..sweeps {
+        let smoothness = if sweep == 0 { 0.0 } else { req.smoothness };
+        let last = sweep + 1 == sweeps;
+        fits = (t0..t1)
+            .into_par_iter()
+            .map(|t| {
+                let (v, cost, others) = problem(t, &values, smoothness).fit(&g, &start[t - t0]);
+                bar.inc(1);
+                let others = if last && kept(t) {
+                    prune_minima(&v, cost, &others, minima_below.unwrap_or(f64::INFINITY))
+                } else {
+                    vec![]
+                };
+                (v, cost, others)
+            })
+            .collect();
+        for (k, f) in fits.iter().enumerate() {
+            values[k] = f.0;
+        }
+    }
+    bar.finish_and_clear();
+    let smoothness = req.smoothness * f64::from(u8::from(sweeps > 1));
+    let keep: Vec<usize> = (t0..t1).filter(|&t| kept(t)).collect();
+    // standard errors before scaling, relative residual, residual count
+    let details: Vec<(TexelValues, f64, usize)> = keep
+        .par_iter()
+        .map(|&t| {
+            let p = problem(t, &values, smoothness);
+            let v = &fits[t - t0].0;
+            (
+                p.std_errors(&g, v, 1.0),
+                p.relative_residual(&g, v),
+                p.obs.len() * store.channels,
+            )
+        })
+        .collect();
+    let n_rows = (rows.1 - rows.0) as usize;
+    let mut row_costs = vec![(0.0, 0usize); n_rows];
+    for (&t, d) in keep.iter().zip(&details) {
+        let r = &mut row_costs[(texels[t].1 - rows.0) as usize];
+        r.0 += fits[t - t0].1;
+        r.1 += d.2;
+    }
+    Ok(TexelPart {
+        rows: [rows.0, rows.1],
+        texels: keep.iter().map(|&t| texels[t]).collect(),
+        values: keep.iter().map(|&t| fits[t - t0].0).collect(),
+        unscaled_std_errors: details.iter().map(|d| d.0).collect(),
+        other_minima: keep
+            .iter()
+            .map(|&t| std::mem::take(&mut fits[t - t0].2))
+            .collect(),
+        residual: details.iter().map(|d| d.1).collect(),
+        minima_below,
+        row_costs,
+    })
+}
+
+/// The other minima of a texel fitted to `v` at `cost`, those at most `below` above it, as
+/// (cost above the best, |dH|, |dpsi| in degrees), keeping only those no other one dominates
+/// (as good or better in cost and as far or farther in both H and psi): [`finish_maps`] widens
+/// the standard errors by the farthest minimum within a cost margin, which the kept ones give
+/// for any margin.
+pub(super) fn prune_minima(
+    v: &TexelValues,
+    cost: f64,
+    others: &[(TexelValues, f64)],
+    below: f64,
+) -> Vec<[f64; 3]> {
+    let all: Vec<[f64; 3]> = others
+        .iter()
+        .filter(|(_, c)| c - cost <= below)
+        .map(|(w, c)| {
+            [
+                c - cost,
+                (w.height - v.height).abs(),
+                wrap_azimuth(w.psi - v.psi).abs(),
+            ]
+        })
+        .collect();
+    let mut kept: Vec<[f64; 3]> = Vec::new();
+    for (i, a) in all.iter().enumerate() {
+        let dominated = all.iter().enumerate().any(|(j, b)| {
+            j != i && b[0] <= a[0] && b[1] >= a[1] && b[2] >= a[2] && (b != a || j < i)
+        });
+        if !dominated {
+            kept.push(*a);
+        }
+    }
+    kept
+}
+
+/// Assemble parts covering every row into the maps: the residual variance over all pixel values
+/// less every unknown (each texel's and `global_free` globals'), the standard errors scaled by
+/// it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
+pub fn finish_maps(
+    parts: Vec<TexelPart>,
+    width: usize,
+    height: usize,
+    channels: usize,
+    req: &MapsConfig,
+    global_free: usize,
+    h_max: f64,
+) -> Result<(TexelMaps, f64, Vec<String>)> {
+    let free = free_of(req);
+    let mut parts = parts;
+    parts.sort_by_key(|p| p.rows[0]);
+    let mut next = 0u32;
+    for p in &parts {
+        if p.rows[0] != next {
+            bail!(
+                "the map parts do not cover rows {next}..{} exactly (a part starts at row {})",
+                height,
+                p.rows[0]
+            );
+        }
+        next = p.rows[1];
+    }
+    if next as usize != height {
+        bail!("the map parts end at row {next}, the capture has {height} rows");
+    }
+    // sums in row order: the same bits however the rows were split
+    let (mut cost, mut n) = (0.0, 0usize);
+    for p in &parts {
+        for &(c, k) in &p.row_costs {
+            cost += c;
+            n += k;
+        }
+    }
+    let texels: usize = parts.iter().map(|p| p.texels.len()).sum();
+    let params = per_texel_unknowns(free, channels) * texels + global_free;
+    if n <= params {
+        bail!("--maps: {n} pixel values cannot determine {params} unknowns; use more images");
+    }
+    let variance = cost / (n - params) as f64;
+    let scale = variance.sqrt();
+    let mut maps = TexelMaps {
+        width,
+        height,
+        texels: Vec::with_capacity(texels),
+        values: Vec::with_capacity(texels),
+        std_errors: Vec::with_capacity(texels),
+        residual: Vec::with_capacity(texels),
+        channels,
+    };
+    let mut ambiguous = 0;
+    let mut minima_cut = false;
+    // each part moved into the maps and dropped, so the maps never exist twice
+    for mut p in parts {
+        minima_cut |= p
+            .minima_below
+            .is_some_and(|b| b < AMBIGUITY_DELTA * variance);
+        for k in 0..p.texels.len() {
+            let u = &p.unscaled_std_errors[k];
+            let mut se = TexelValues {
+                height: u.height * scale,
+                psi: u.psi * scale,
+                kd: u.kd.map(|x| x * scale),
+                ks: u.ks.map(|x| x * scale),
+            };
+            let mut amb = false;
+            for &[dc, dh, dp] in &p.other_minima[k] {
+                if dc <= AMBIGUITY_DELTA * variance {
+                    amb = true;
+                    if free.height {
+                        se.height = se.height.max(dh);
+                    }
+                    if free.psi {
+                        se.psi = se.psi.max(dp);
+                    }
+                }
+            }
+            ambiguous += usize::from(amb);
+            maps.std_errors.push(se);
+        }
+        maps.texels.append(&mut p.texels);
+        maps.values.append(&mut p.values);
+        maps.residual.append(&mut p.residual);
+    }
+    let mut warnings = Vec::new();
+    if minima_cut {
+        warnings.push(format!(
+            "the residual variance over every pixel ({variance:.3e}) is far above what the global stage's texels gave: other minima beyond {MINIMA_MARGIN} x {AMBIGUITY_DELTA} of that were not kept, so some ambiguous texels may not be flagged; raise [maps] global_texels"
+        ));
+    }
+    let undetermined = |pick: fn(&TexelValues) -> f64, half_range: f64| {
+        maps.std_errors
+            .iter()
+            .filter(|e| !(pick(e) < half_range))
+            .count()
+    };
+    for (on, name, count, range) in [
+        (
+            free.height,
+            "height H",
+            undetermined(|e| e.height, h_max / 2.0),
+            "H_max / 2",
+        ),
+        (
+            free.psi,
+            "fibre azimuth",
+            undetermined(|e| e.psi, 45.0),
+            "45 deg",
+        ),
+    ] {
+        if on && count > 0 {
+            warnings.push(format!(
+                "the images leave the {name} undetermined in {count} of {texels} texels (standard error at or above {range}): add light and view directions that separate it (grazing light across the fibres, views on both sides), or set [maps] smoothness"
+            ));
+        }
+    }
+    if ambiguous > 0 {
+        warnings.push(format!(
+            "{ambiguous} of {texels} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (a height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima"
+        ));
+    }
+    Ok((maps, variance, warnings))
+}
