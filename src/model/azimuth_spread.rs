@@ -19,7 +19,7 @@
 //! invariance under T -> -T (the law is symmetric), non-negativity, finiteness.
 
 use super::frame::DirectionPair;
-use super::quadrature::adaptive_gk15_vec;
+use super::numerics::quadrature::adaptive_gk15_vec;
 use super::{Basis, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_PI_2, PI};
 

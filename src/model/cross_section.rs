@@ -17,7 +17,7 @@
 //! shadows overlap, so a whole row is one interval however many fibres it holds (grazing light).
 //! This handles ALL occluders in O(1), with no neighbour window.
 
-use super::elementary;
+use super::numerics::elementary;
 use super::frame::Local;
 
 /// Upper bound on disjoint arcs: <= 3 shadow intervals leave <= 4 gaps; the intersection of two
@@ -396,7 +396,7 @@ impl SubstrateProblem {
 /// [`SubstrateProblem::fraction`] of every problem, bit for bit, in lanes.
 pub fn substrate_fractions(problems: &[SubstrateProblem], out: &mut [f64]) {
     assert_eq!(problems.len(), out.len());
-    super::lanes::on_widest_lanes(
+    super::numerics::lanes::on_widest_lanes(
         #[inline(always)]
         |_| {
             for (p, o) in problems.iter().zip(out.iter_mut()) {
@@ -584,7 +584,7 @@ impl FibreOcclusions {
                 slot.resize(n, 0.0);
             }
         }
-        super::lanes::on_widest_lanes(
+        super::numerics::lanes::on_widest_lanes(
             #[inline(always)]
             |_| self.solve_lanes(),
         )
@@ -830,7 +830,7 @@ impl DiffuseArcs {
     /// [`diffuse_kernel`] of every arc, bit for bit, written to `out`, in lanes.
     pub fn kernels(&self, out: &mut [f64]) {
         assert_eq!(self.len(), out.len());
-        super::lanes::on_widest_lanes(
+        super::numerics::lanes::on_widest_lanes(
             #[inline(always)]
             |_| self.kernels_lanes(out),
         )
@@ -855,7 +855,7 @@ impl DiffuseArcs {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::model::quadrature::adaptive_gk15;
+    use crate::model::numerics::quadrature::adaptive_gk15;
 
     /// Sort intervals and return the complement of their union within (lo, hi).
     fn complement_within(shadows: &mut [(f64, f64)], lo: f64, hi: f64) -> Arcs {

@@ -6,18 +6,15 @@
 
 pub mod azimuth_spread;
 pub mod cross_section;
-pub mod elementary;
 pub mod frame;
 pub mod fresnel;
 pub mod fuzz;
 pub mod hast_diffuse;
 pub mod lambert;
-pub mod lanes;
-pub mod lobe_quadrature;
 pub mod max_normal;
+pub mod numerics;
 pub mod params;
 pub mod poulin_fournier;
-pub mod quadrature;
 pub mod reference;
 pub mod topology;
 pub mod varying_topology;

@@ -5,7 +5,7 @@
 //! every distinct texel value, or 4096 bin means beyond that).
 
 use super::cross_section::{Fibre, Pattern, SectionPair};
-use super::quadrature::adaptive_gk15_vec;
+use super::numerics::quadrature::adaptive_gk15_vec;
 use super::topology::{elevation_from_height, HeightLaw, Topology};
 use super::{Basis, DirectionPair, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};

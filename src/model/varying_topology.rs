@@ -20,10 +20,10 @@ use super::cross_section::{
     compact_gaps, for_each_seen_and_lit, lobe_half_width, substrate_fractions, DiffuseArc,
     DiffuseArcs, Fibre, FibreOcclusions, Pattern, Projected, SectionPair, SubstrateProblem,
 };
-use super::elementary;
+use super::numerics::elementary;
 use super::frame::Local;
-use super::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
-use super::quadrature::GaussLegendre;
+use super::numerics::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
+use super::numerics::quadrature::GaussLegendre;
 use super::topology::elevation_from_height;
 use super::{Basis, DirectionPair, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
@@ -63,7 +63,7 @@ impl GaussSection {
     /// The bases of `pairs` (written to `out`) for the mean over `patterns` ((pattern, weight)
     /// pairs). The work is split into passes over the whole batch so that everything with
     /// data-dependent branches or long latency (divisions, square roots, polynomials) runs as
-    /// branch-free lane loops ([`super::lanes::on_widest_lanes`]); only the arc bookkeeping stays
+    /// branch-free lane loops ([`super::numerics::lanes::on_widest_lanes`]); only the arc bookkeeping stays
     /// scalar. Per (pair, pattern) "visit":
     /// 1. each pair's projections and lobe window, in lanes (`GaussSection::prepare`);
     /// 2. each fibre's occlusion problem seen along v and lit along l, solved in lanes
@@ -192,12 +192,12 @@ impl GaussSection {
     }
 
     /// [`SectionPair::new`] and [`GaussSection::lobe`] of every pair, eight pairs at a time in
-    /// lanes ([`super::lanes::on_widest_lanes`]): one at a time, their two atan2, acos, square
+    /// lanes ([`super::numerics::lanes::on_widest_lanes`]): one at a time, their two atan2, acos, square
     /// roots and divisions per pair were latency-bound scalar code. A batch shorter than eight
     /// (a single-pair `basis` call) goes the scalar way. Pairs below the horizon get finite
     /// placeholders (the caller skips them).
     fn prepare(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
-        super::lanes::on_widest_lanes(
+        super::numerics::lanes::on_widest_lanes(
             #[inline(always)]
             |_| self.prepare_lanes(pairs, out),
         )

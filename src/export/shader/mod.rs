@@ -10,7 +10,7 @@ pub mod check;
 pub mod gpu;
 
 use crate::model::azimuth_spread::spread_nodes;
-use crate::model::quadrature::GaussLegendre;
+use crate::model::numerics::quadrature::GaussLegendre;
 use crate::model::topology::max_height;
 use crate::model::{ModelId, ModelParams};
 use anyhow::{anyhow, bail, Result};
