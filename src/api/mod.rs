@@ -2,8 +2,9 @@
 //! other front end (the Python package) call these; they hold the orchestration of the stages
 //! (load -> model -> fit -> export) and no argument parsing or printing of results.
 
-pub mod fit;
-pub mod tiles;
 pub mod eval;
-pub mod score;
+pub mod export;
+pub mod fit;
 pub mod render;
+pub mod score;
+pub mod tiles;

@@ -1,12 +1,10 @@
 //! `fibrefit tangents MESH.obj --out T.csv|T.glb`: seed 004's curvature-aligned tangent field.
 
 use crate::export::atomic::Outputs;
-use crate::export::gltf_out::{self, VertexFrames};
 use crate::load::mesh;
 use crate::render::curvature::{self, UMBILIC_TOLERANCE};
 use anyhow::{bail, Result};
 use clap::Args;
-use std::io::Write;
 use std::path::PathBuf;
 
 #[derive(Debug, Args)]
@@ -69,47 +67,7 @@ pub fn run(args: &TangentsArgs) -> Result<()> {
     }
     let curv = curvature::principal_curvatures(&mesh, args.rings);
     let umbilic = curv.iter().filter(|c| c.umbilic).count();
-    if glb {
-        let normals: Vec<_> = curv.iter().map(|c| c.normal).collect();
-        let tangents: Vec<_> = curv.iter().map(|c| c.k1_direction).collect();
-        let bitangents: Vec<_> = curv.iter().map(|c| c.k2_direction).collect();
-        let undefined: Vec<bool> = curv.iter().map(|c| c.umbilic).collect();
-        let mut w = std::io::BufWriter::new(outs.writer(id));
-        gltf_out::write_glb(
-            &mut w,
-            &mesh,
-            &VertexFrames {
-                normals: &normals,
-                tangents: &tangents,
-                bitangents: &bitangents,
-                undefined: &undefined,
-            },
-            None,
-            &format!("fibrefit {} tangents", env!("CARGO_PKG_VERSION")),
-        )?;
-        w.flush()?;
-    } else {
-        let mut w = csv::Writer::from_writer(outs.writer(id));
-        w.write_record([
-            "x", "y", "z", "nx", "ny", "nz", "k1x", "k1y", "k1z", "k2x", "k2y", "k2z", "k1", "k2",
-        ])?;
-        for (p, c) in mesh.positions.iter().zip(&curv) {
-            let dir = |d: &crate::model::frame::Vec3| {
-                if c.umbilic {
-                    [f64::NAN; 3]
-                } else {
-                    [d.x, d.y, d.z]
-                }
-            };
-            let (d1, d2) = (dir(&c.k1_direction), dir(&c.k2_direction));
-            let row = [
-                p.x, p.y, p.z, c.normal.x, c.normal.y, c.normal.z, d1[0], d1[1], d1[2], d2[0],
-                d2[1], d2[2], c.k1, c.k2,
-            ];
-            w.write_record(row.iter().map(|v| v.to_string()))?;
-        }
-        w.flush()?;
-    }
+    crate::export::tangent_field::write(&mut outs, id, &mesh, &curv, glb)?;
     outs.commit()?;
     if !args.quiet {
         eprintln!(

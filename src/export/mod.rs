@@ -14,3 +14,4 @@ pub mod plots;
 pub mod report;
 pub mod result_json;
 pub mod shader;
+pub mod tangent_field;
