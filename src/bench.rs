@@ -20,7 +20,6 @@ use crate::fit::config::FitConfig;
 use crate::load::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::load::{capture::Subsample, load_data, LoadOptions};
 use crate::model::frame::{direction_from_angles, FibreFrame, Vec3};
-use crate::model::params::RawParams;
 use crate::model::topology::Topology;
 use crate::model::{self, Albedos, Basis, DirectionPair, ShadingModel};
 use anyhow::{anyhow, Result};
@@ -338,7 +337,7 @@ fn spread_rows(pairs: &[DirectionPair], repeats: usize) -> Vec<ForwardRow> {
 /// Fit level on the shipped silk capture: subsampling fractions x quadrature orders.
 pub fn fit_level(root: &Path, quick: bool, bar: &ProgressBar) -> Result<Vec<FitRow>> {
     let data_path = root.join("data_synthetic/silk/capture.toml");
-    let truth = RawParams::load(&root.join("data_synthetic/silk/truth.json"))?;
+    let truth = crate::export::result_json::read_params(&root.join("data_synthetic/silk/truth.json"))?;
     let mut cfg = FitConfig::load(&root.join("configs/fit_silk.toml"))?;
     cfg.starts = 1;
     let fractions: &[f64] = if quick {

@@ -20,7 +20,7 @@ pub fn load_params(
     model: Option<&str>,
     quiet: bool,
 ) -> Result<(RawParams, ModelId, ModelParams)> {
-    let raw = RawParams::load(path)?;
+    let raw = crate::export::result_json::read_params(path)?;
     let id_text = model
         .map(str::to_string)
         .or_else(|| raw.model.clone())

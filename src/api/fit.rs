@@ -320,7 +320,7 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
             }
             Maps::Into(dir) => {
                 // the texel stage takes the globals as the result states them, as tiles do
-                let globals = fit::score::result_from_value(
+                let globals = rj::result_from_value(
                     &serde_json::to_value(&result)?,
                     "the global fit",
                     channels,

@@ -9,6 +9,6 @@ use std::path::Path;
 /// Score the result file `result` on `data`.
 pub fn score(result: &Path, data: &Path, load: &LoadOptions) -> Result<Score> {
     let samples = load_data(data, load)?;
-    let fitted = score::read_result(result, samples.channels)?;
+    let fitted = crate::export::result_json::read_result(result, samples.channels)?;
     score::score(&fitted, &samples)
 }

@@ -127,7 +127,7 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
     let store = crate::load::capture_store::CaptureStore::load(&req.data, req.load.subsample)?;
     let channels = store.channels;
     let set =
-        crate::fit::score::result_from_value(&g, &globals.display().to_string(), channels)?.set;
+        crate::export::result_json::result_from_value(&g, &globals.display().to_string(), channels)?.set;
     let (w, h) = (store.width, store.height);
     let rows = tile_rows(i, n, h);
     // the global stage's expected residual variance (older globals: none, every minimum kept)
@@ -248,7 +248,7 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     let (width, height, channels, global_free) =
         (first.width, first.height, first.channels, first.global_free);
     let set =
-        crate::fit::score::result_from_value(&g, &args.globals.display().to_string(), channels)?
+        crate::export::result_json::result_from_value(&g, &args.globals.display().to_string(), channels)?
             .set;
     let h_max =
         crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Shape::Spacing));

@@ -1,13 +1,200 @@
-//! The renderer JSON (schema `fibrefit-result/1`, documented in the README): the fitted model
-//! with its conventions, parameters and uncertainties, statistics, knobs, provenance, check
-//! values for renderer ports, and a Ward fallback.
+//! The renderer JSON (schema `fibrefit-result/1`, documented in the README), written and read in
+//! this one place: the fitted model with its conventions, parameters and uncertainties,
+//! statistics, knobs, provenance, check values for renderer ports, and a Ward fallback
+//! ([`ResultFile`]); read back as parameters ([`read_params`]: `eval`, `render`, `export`,
+//! `synth`) or as a fit's parameter set ([`read_result`]: `score`, map tiles).
 
-use crate::fit::config::FitConfig;
+use crate::fit::config::{FitConfig, Knobs as FitKnobs, Metric, ParamEntry};
+use crate::fit::parameters::ParamSet;
+use crate::fit::score::FittedResult;
 use crate::fit::FitOutcome;
+use crate::model::params::{Albedo, RawParams};
+use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
 
-pub const SCHEMA: &str = crate::fit::RESULT_SCHEMA;
+/// Schema of the result JSON a fit is exported as (and `score`, `eval`, `render` read back).
+pub const SCHEMA: &str = "fibrefit-result/1";
+
+/// A parameter file (TOML or JSON) or a fitted result, as parameters; a result's relative
+/// topology map is taken from beside it.
+pub fn read_params(path: &Path) -> Result<RawParams> {
+    let is_json = path
+        .extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case("json"));
+    if !is_json {
+        return RawParams::load(path);
+    }
+    let text = crate::load::input::read_text_as(path, "parameter file")?;
+    let value: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    let is_result = value
+        .get("schema")
+        .and_then(|s| s.as_str())
+        .is_some_and(|s| s.starts_with("fibrefit-result/"));
+    if !is_result {
+        return RawParams::load(path);
+    }
+    let mut raw = params_of_result(&value).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    if let Some(map) = &raw.topology_map {
+        if map.is_relative() {
+            raw.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
+        }
+    }
+    Ok(raw)
+}
+
+/// Read a `fibrefit-result/1` JSON for data with `channels` channels.
+pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
+    let text = crate::load::input::read_text_as(path, "result file")?;
+    let v: serde_json::Value =
+        serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    result_from_value(&v, &path.display().to_string(), channels)
+}
+
+/// [`read_result`] of a result already parsed; `name` labels errors.
+pub fn result_from_value(
+    v: &serde_json::Value,
+    name: &str,
+    channels: usize,
+) -> Result<FittedResult> {
+    let at = |what: &str| anyhow!("{}: {what}", name);
+    match v.get("schema").and_then(|s| s.as_str()) {
+        Some(SCHEMA) => {}
+        Some(other) => bail!(
+            "{}: schema `{other}` is not one this fibrefit reads ({})",
+            name,
+            SCHEMA
+        ),
+        None => return Err(at("not a fibrefit result (no `schema`)")),
+    }
+    let model = v
+        .get("model")
+        .and_then(|m| m.as_str())
+        .ok_or_else(|| at("no `model`"))?;
+    let params = v
+        .get("parameters")
+        .and_then(|p| p.as_object())
+        .ok_or_else(|| at("no `parameters`"))?;
+    let mut entries = BTreeMap::new();
+    let mut free = 0;
+    let mut rgb = false;
+    for (name, e) in params {
+        let value: Albedo = serde_json::from_value(e.get("value").cloned().unwrap_or_default())
+            .map_err(|_| {
+                at(&format!(
+                    "parameters.{name}.value is not a number or [r, g, b]"
+                ))
+            })?;
+        rgb |= value.is_rgb();
+        let fixed = e.get("fixed").and_then(|f| f.as_bool()).unwrap_or(true);
+        if !fixed {
+            free += if value.is_rgb() { 3 } else { 1 };
+        }
+        // the fitted value only: the fit's bounds are checked against the fitted spacing
+        entries.insert(
+            name.clone(),
+            ParamEntry {
+                value: Some(value),
+                vary: Some(false),
+                ..Default::default()
+            },
+        );
+    }
+    if rgb && channels == 1 {
+        bail!("{}: an RGB result cannot score grey data", name);
+    }
+    let k = v.get("knobs");
+    let knob = |name: &str| k.and_then(|k| k.get(name));
+    let metric: Metric = match knob("metric") {
+        Some(m) => serde_json::from_value(m.clone())
+            .map_err(|_| at("knobs.metric is not linear, log or cosine"))?,
+        None => Metric::Linear,
+    };
+    let knobs = FitKnobs {
+        quadrature_order: knob("quadrature_order")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(16) as usize,
+        histogram_bins: knob("histogram_bins")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(16) as usize,
+        azimuth_nodes: knob("azimuth_nodes")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES as u64)
+            as usize,
+        topology_map: knob("topology_map")
+            .and_then(|x| x.as_str())
+            .map(PathBuf::from),
+        ..FitKnobs::default()
+    };
+    let cfg = FitConfig {
+        model: model.to_string(),
+        metric,
+        starts: 1,
+        seed: 0,
+        knobs: knobs.clone(),
+        optimizer: Default::default(),
+        parameters: entries,
+        components: Default::default(),
+        selection: Default::default(),
+        maps: Default::default(),
+    };
+    cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
+    let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
+    Ok(FittedResult {
+        set,
+        metric,
+        knobs,
+        free_parameters: free,
+    })
+}
+
+
+/// The parameters of a `fibrefit fit` result (schema `fibrefit-result/1`).
+pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
+    let schema = v.get("schema").and_then(|s| s.as_str()).unwrap_or_default();
+    if schema != SCHEMA {
+        bail!(
+            "result schema `{schema}` is not one this fibrefit ({}) reads: it reads `{}`; \
+             a newer fibrefit wrote this file",
+            env!("CARGO_PKG_VERSION"),
+            SCHEMA
+        );
+    }
+    let params = v
+        .get("parameters")
+        .and_then(|p| p.as_object())
+        .ok_or_else(|| anyhow!("result file has no `parameters`"))?;
+    let mut flat = serde_json::Map::new();
+    flat.insert(
+        "model".into(),
+        v.get("model")
+            .cloned()
+            .ok_or_else(|| anyhow!("result file has no `model`"))?,
+    );
+    for (name, entry) in params {
+        let value = entry
+            .get("value")
+            .cloned()
+            .ok_or_else(|| anyhow!("parameter `{name}` has no value"))?;
+        flat.insert(name.clone(), value);
+    }
+    if let Some(k) = v.get("knobs") {
+        for key in [
+            "quadrature_order",
+            "histogram_bins",
+            "azimuth_nodes",
+            "topology_map",
+        ] {
+            if let Some(x) = k.get(key) {
+                flat.insert(key.into(), x.clone());
+            }
+        }
+    }
+    serde_json::from_value(serde_json::Value::Object(flat)).map_err(|e| anyhow!("{e}"))
+}
+
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ResultFile {

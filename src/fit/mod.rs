@@ -38,8 +38,6 @@ use rand::SeedableRng;
 use std::sync::Arc;
 use std::time::Instant;
 
-/// Schema of the result JSON the fit is exported as (and `score` reads back).
-pub use crate::load::params_file::RESULT_SCHEMA;
 
 /// One parameter after the fit, in external units.
 #[derive(Clone, Debug, serde::Serialize)]

@@ -11,18 +11,15 @@
 //! reduced value when the data carry sigmas (else the weighted sum of squares), and the quality
 //! block's residual-structure bins.
 
-use super::config::{FitConfig, Knobs, Metric, ParamEntry};
+use super::config::{Knobs, Metric};
 use super::parameters::{ParamSet, Shape};
 use super::problem::FitProblem;
 use super::quality;
 use super::uncertainty::{statistics, Statistics};
 use crate::load::samples::Samples;
-use crate::model::params::Albedo;
 use crate::model::topology::TopologyMap;
-use anyhow::{anyhow, bail, Context, Result};
+use anyhow::{Context, Result};
 use serde::Serialize;
-use std::collections::BTreeMap;
-use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
 /// A fitted result read back: the parameter set (nothing varies), its knobs and its free
@@ -32,111 +29,6 @@ pub struct FittedResult {
     pub metric: Metric,
     pub knobs: Knobs,
     pub free_parameters: usize,
-}
-
-/// Read a `fibrefit-result/1` JSON for data with `channels` channels.
-pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
-    let text = crate::load::input::read_text_as(path, "result file")?;
-    let v: serde_json::Value =
-        serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    result_from_value(&v, &path.display().to_string(), channels)
-}
-
-/// [`read_result`] of a result already parsed; `name` labels errors.
-pub fn result_from_value(
-    v: &serde_json::Value,
-    name: &str,
-    channels: usize,
-) -> Result<FittedResult> {
-    let at = |what: &str| anyhow!("{}: {what}", name);
-    match v.get("schema").and_then(|s| s.as_str()) {
-        Some(super::RESULT_SCHEMA) => {}
-        Some(other) => bail!(
-            "{}: schema `{other}` is not one this fibrefit reads ({})",
-            name,
-            super::RESULT_SCHEMA
-        ),
-        None => return Err(at("not a fibrefit result (no `schema`)")),
-    }
-    let model = v
-        .get("model")
-        .and_then(|m| m.as_str())
-        .ok_or_else(|| at("no `model`"))?;
-    let params = v
-        .get("parameters")
-        .and_then(|p| p.as_object())
-        .ok_or_else(|| at("no `parameters`"))?;
-    let mut entries = BTreeMap::new();
-    let mut free = 0;
-    let mut rgb = false;
-    for (name, e) in params {
-        let value: Albedo = serde_json::from_value(e.get("value").cloned().unwrap_or_default())
-            .map_err(|_| {
-                at(&format!(
-                    "parameters.{name}.value is not a number or [r, g, b]"
-                ))
-            })?;
-        rgb |= value.is_rgb();
-        let fixed = e.get("fixed").and_then(|f| f.as_bool()).unwrap_or(true);
-        if !fixed {
-            free += if value.is_rgb() { 3 } else { 1 };
-        }
-        // the fitted value only: the fit's bounds are checked against the fitted spacing
-        entries.insert(
-            name.clone(),
-            ParamEntry {
-                value: Some(value),
-                vary: Some(false),
-                ..Default::default()
-            },
-        );
-    }
-    if rgb && channels == 1 {
-        bail!("{}: an RGB result cannot score grey data", name);
-    }
-    let k = v.get("knobs");
-    let knob = |name: &str| k.and_then(|k| k.get(name));
-    let metric: Metric = match knob("metric") {
-        Some(m) => serde_json::from_value(m.clone())
-            .map_err(|_| at("knobs.metric is not linear, log or cosine"))?,
-        None => Metric::Linear,
-    };
-    let knobs = Knobs {
-        quadrature_order: knob("quadrature_order")
-            .and_then(|x| x.as_u64())
-            .unwrap_or(16) as usize,
-        histogram_bins: knob("histogram_bins")
-            .and_then(|x| x.as_u64())
-            .unwrap_or(16) as usize,
-        azimuth_nodes: knob("azimuth_nodes")
-            .and_then(|x| x.as_u64())
-            .unwrap_or(crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES as u64)
-            as usize,
-        topology_map: knob("topology_map")
-            .and_then(|x| x.as_str())
-            .map(PathBuf::from),
-        ..Knobs::default()
-    };
-    let cfg = FitConfig {
-        model: model.to_string(),
-        metric,
-        starts: 1,
-        seed: 0,
-        knobs: knobs.clone(),
-        optimizer: Default::default(),
-        parameters: entries,
-        components: Default::default(),
-        selection: Default::default(),
-        maps: Default::default(),
-    };
-    cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
-    let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
-    Ok(FittedResult {
-        set,
-        metric,
-        knobs,
-        free_parameters: free,
-    })
 }
 
 #[derive(Clone, Debug, Serialize)]

@@ -179,7 +179,7 @@ impl SynthConfig {
             } else {
                 file
             };
-            cfg.params = RawParams::load(&file)
+            cfg.params = crate::export::result_json::read_params(&file)
                 .with_context(|| format!("{}: params_file", path.display()))?;
             cfg.params.model = None;
             // a fit's knobs carry the map it used, resolved already
