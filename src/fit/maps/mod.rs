@@ -26,8 +26,8 @@
 //!
 //! Files: `texel.rs` (one texel's search and errors), `column_table.rs` (the shared model
 //! columns), `global_stage.rs` (stage 1 and the globals' widened errors), `texel_stage.rs`
-//! (stage 2 and the assembly of bands), `outputs.rs` (the whole recovery, the model at every
-//! sample, the result's `method` block); this file: the types, the request check and the
+//! (stage 2 and the assembly of bands), `uncertainty.rs` (texel errors, the globals' widening),
+//! `outputs.rs` (the whole recovery, the model at every sample, the result's `method` block); this file: the types, the request check and the
 //! helpers they share.
 
 use super::config::{FitConfig, MapsConfig};
@@ -50,12 +50,14 @@ mod global_stage;
 mod outputs;
 mod texel;
 mod texel_stage;
+mod uncertainty;
 
 use column_table::*;
 pub use global_stage::*;
 pub use outputs::*;
 use texel::*;
 pub use texel_stage::*;
+use uncertainty::*;
 
 /// Grid minima a per-texel fit polishes (besides its start).
 pub const TEXEL_STARTS: usize = 3;
