@@ -337,7 +337,8 @@ fn spread_rows(pairs: &[DirectionPair], repeats: usize) -> Vec<ForwardRow> {
 /// Fit level on the shipped silk capture: subsampling fractions x quadrature orders.
 pub fn fit_level(root: &Path, quick: bool, bar: &ProgressBar) -> Result<Vec<FitRow>> {
     let data_path = root.join("data_synthetic/silk/capture.toml");
-    let truth = crate::export::result_json::read_params(&root.join("data_synthetic/silk/truth.json"))?;
+    let truth =
+        crate::export::result_json::read_params(&root.join("data_synthetic/silk/truth.json"))?;
     let mut cfg = FitConfig::load(&root.join("configs/fit_silk.toml"))?;
     cfg.starts = 1;
     let fractions: &[f64] = if quick {

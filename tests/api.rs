@@ -59,7 +59,9 @@ fn a_fit_through_the_api_is_the_cli_fit() {
 #[test]
 fn configure_names_what_is_wrong() {
     let data = root().join("data_synthetic/brushed/gonio.csv");
-    let e = fit::configure(None, None, None, false, &data).err().unwrap();
+    let e = fit::configure(None, None, None, false, &data)
+        .err()
+        .unwrap();
     assert!(e.to_string().contains("--model"), "{e}");
     let e = fit::configure(None, Some("lambert"), Some("cubic"), false, &data)
         .err()
@@ -70,6 +72,13 @@ fn configure_names_what_is_wrong() {
         .unwrap();
     assert!(e.to_string().contains("no-such-rung"), "{e}");
     // a measured file without a config is fitted with the log metric
-    let c = fit::configure(None, Some("lambert"), None, false, std::path::Path::new("x.bsdf")).unwrap();
+    let c = fit::configure(
+        None,
+        Some("lambert"),
+        None,
+        false,
+        std::path::Path::new("x.bsdf"),
+    )
+    .unwrap();
     assert_eq!(c.metric, fibrefit::fit::config::Metric::Log);
 }

@@ -163,7 +163,9 @@ fn malformed_bsdf_files_are_refused_field_by_field() {
         ),
         (
             "huge_offset",
-            with(small_rgl_fields(), "sigma", |f| f.offset = Some(u64::MAX - 3)),
+            with(small_rgl_fields(), "sigma", |f| {
+                f.offset = Some(u64::MAX - 3)
+            }),
             vec!["field `sigma`", "beyond the end"],
         ),
         // values
@@ -257,7 +259,10 @@ fn malformed_bsdf_files_are_refused_field_by_field() {
     for cut in (0..bytes.len()).step_by(bytes.len() / 40 + 1) {
         fs::write(dir.join("cut.bsdf"), &bytes[..cut]).unwrap();
         let e = load::rgl::RglBsdf::load(&dir.join("cut.bsdf")).err();
-        assert!(e.is_some_and(|e| e.to_string().contains("cut.bsdf")), "cut {cut}");
+        assert!(
+            e.is_some_and(|e| e.to_string().contains("cut.bsdf")),
+            "cut {cut}"
+        );
     }
 }
 
@@ -306,7 +311,11 @@ fn merl_values_beyond_range_are_refused_and_negative_markers_kept() {
             merl_bytes(dims, |i| if i == 37 { bad } else { 150.0 }),
         )
         .unwrap();
-        refused(&["inspect", &file], dir, &[&file, "table entry 37", "finite"]);
+        refused(
+            &["inspect", &file],
+            dir,
+            &[&file, "table entry 37", "finite"],
+        );
     }
     // dimensions whose table would not fit (checked arithmetic, no allocation)
     let mut b = Vec::new();
@@ -314,7 +323,11 @@ fn merl_values_beyond_range_are_refused_and_negative_markers_kept() {
         b.extend(x.to_le_bytes());
     }
     fs::write(dir.join("big.binary"), &b).unwrap();
-    refused(&["inspect", "big.binary"], dir, &["big.binary", "need more than"]);
+    refused(
+        &["inspect", "big.binary"],
+        dir,
+        &["big.binary", "need more than"],
+    );
     let mut short = merl_bytes(dims, |_| 1.0);
     short.truncate(short.len() - 3);
     fs::write(dir.join("short.binary"), &short).unwrap();
@@ -391,7 +404,11 @@ fn image_headers_claiming_huge_sizes_are_refused_before_decoding() {
         capture_toml("ok.exr", "topology_map = \"huge.exr\""),
     )
     .unwrap();
-    refused(&["inspect", "topo.toml"], dir, &["huge.exr", "100000x100000"]);
+    refused(
+        &["inspect", "topo.toml"],
+        dir,
+        &["huge.exr", "100000x100000"],
+    );
     let e = load::texel_maps::TexelMapsIn::load(
         &{
             let m = dir.join("maps");
@@ -408,13 +425,21 @@ fn image_headers_claiming_huge_sizes_are_refused_before_decoding() {
     // PNGs: a header claiming 100000^2 (a decompression bomb's shape)
     fs::write(dir.join("bomb.png"), common::png_claiming(100_000, 100_000)).unwrap();
     fs::write(dir.join("bomb.toml"), capture_toml("bomb.png", "")).unwrap();
-    refused(&["inspect", "bomb.toml"], dir, &["bomb.png", "100000x100000"]);
+    refused(
+        &["inspect", "bomb.toml"],
+        dir,
+        &["bomb.png", "100000x100000"],
+    );
     fs::write(
         dir.join("mask.toml"),
         capture_toml("ok.exr", "mask = \"bomb.png\""),
     )
     .unwrap();
-    refused(&["inspect", "mask.toml"], dir, &["bomb.png", "100000x100000"]);
+    refused(
+        &["inspect", "mask.toml"],
+        dir,
+        &["bomb.png", "100000x100000"],
+    );
 }
 
 // ---------------------------------------------------------------------------------------------
@@ -439,7 +464,11 @@ fn devices_and_links_to_them_are_read_with_a_limit() {
     refused(&["inspect", "z.bsdf"], dir, &["z.bsdf", "tensor_file"]);
     refused(&["inspect", "z.binary"], dir, &["z.binary", "dimensions"]);
     refused(&["inspect", "z.toml"], dir, &["z.toml", "64 MiB"]);
-    refused(&["tangents", "z.obj", "--out", "t.csv"], dir, &["z.obj:1", "16 MiB"]);
+    refused(
+        &["tangents", "z.obj", "--out", "t.csv"],
+        dir,
+        &["z.obj:1", "16 MiB"],
+    );
     // an OBJ naming /dev/zero as its material library: materials are never read
     fs::write(
         dir.join("m.obj"),
@@ -560,20 +589,54 @@ fn obj_errors_name_the_line() {
     let d = tempfile::tempdir().unwrap();
     let dir = d.path();
     let cases = [
-        ("num.obj", "v 0 0 0\nv 1 0 0\nv 0 x 0\nf 1 2 3\n", "num.obj:3:"),
-        ("nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n", "nan.obj:2:"),
-        ("big.obj", "v 0 0 0\nv 1 0 1e39\nv 0 1 0\nf 1 2 3\n", "big.obj:2:"),
-        ("idx.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2 3\nf 1 2 9\n", "idx.obj:6:"),
-        ("zero.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n", "zero.obj:4:"),
-        ("neg.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", "neg.obj:4:"),
-        ("two.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n", "two.obj:4:"),
-        ("vt.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n", "vt.obj:5:"),
+        (
+            "num.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 x 0\nf 1 2 3\n",
+            "num.obj:3:",
+        ),
+        (
+            "nan.obj",
+            "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n",
+            "nan.obj:2:",
+        ),
+        (
+            "big.obj",
+            "v 0 0 0\nv 1 0 1e39\nv 0 1 0\nf 1 2 3\n",
+            "big.obj:2:",
+        ),
+        (
+            "idx.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\n\nf 1 2 3\nf 1 2 9\n",
+            "idx.obj:6:",
+        ),
+        (
+            "zero.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 0 1 2\n",
+            "zero.obj:4:",
+        ),
+        (
+            "neg.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n",
+            "neg.obj:4:",
+        ),
+        (
+            "two.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2\n",
+            "two.obj:4:",
+        ),
+        (
+            "vt.obj",
+            "v 0 0 0\nv 1 0 0\nv 0 1 0\nvt 0 0\nf 1/1 2/2 3/1\n",
+            "vt.obj:5:",
+        ),
         ("empty.obj", "# nothing\n", "no triangles"),
     ];
     for (file, text, want) in cases {
         fs::write(dir.join(file), text).unwrap();
         refused(&["tangents", file, "--out", "t.csv"], dir, &[file, want]);
-        let e = load::mesh::load_obj(&dir.join(file)).unwrap_err().to_string();
+        let e = load::mesh::load_obj(&dir.join(file))
+            .unwrap_err()
+            .to_string();
         assert!(e.contains(want), "{e}");
     }
     assert!(!dir.join("t.csv").exists());
@@ -607,7 +670,12 @@ fn degenerate_faces_give_no_nan_normals_and_rows_follow_the_file() {
     let obj = "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 1 0.1\nf 4 2 3\nf 2 1 3\n";
     fs::write(dir.join("o.obj"), obj).unwrap();
     let rows = tangent_rows(dir, "o.obj");
-    let want = [[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.1]];
+    let want = [
+        [0.0, 0.0, 0.0],
+        [1.0, 0.0, 0.0],
+        [0.0, 1.0, 0.0],
+        [1.0, 1.0, 0.1],
+    ];
     for (r, w) in rows.iter().zip(want) {
         for k in 0..3 {
             assert!((r[k] - w[k]).abs() < 1e-6, "{r:?} {w:?}");
@@ -658,6 +726,9 @@ fn a_polygon_of_100000_vertices_takes_under_a_second() {
     // and through the command line, rows in order
     let t = Instant::now();
     accepted(&["tangents", "poly.obj", "--out", "t.csv", "-q"], d.path());
-    assert!(t.elapsed() < Duration::from_secs(5), "tangents: {:?}", t.elapsed());
+    assert!(
+        t.elapsed() < Duration::from_secs(5),
+        "tangents: {:?}",
+        t.elapsed()
+    );
 }
-

@@ -47,7 +47,12 @@ fn small_set(d: &Path) {
         .map(|l| format!("{l}\n"))
         .collect();
     fs::write(d.join("g.csv"), csv).unwrap();
-    ok(&run(&["fit", "g.csv", "--model", "lambert", "--out", "o.json", "-q"], d));
+    ok(&run(
+        &[
+            "fit", "g.csv", "--model", "lambert", "--out", "o.json", "-q",
+        ],
+        d,
+    ));
 }
 
 fn queries() -> String {
@@ -101,7 +106,9 @@ fn report_files_never_go_onto_inputs() {
         }
         let o = fibrefit()
             .current_dir(d)
-            .args(["fit", "g.csv", "--model", "lambert", "--out", "x.json", "-q", "--report"])
+            .args([
+                "fit", "g.csv", "--model", "lambert", "--out", "x.json", "-q", "--report",
+            ])
             .arg(&rep)
             .output()
             .unwrap();
@@ -124,7 +131,15 @@ fn report_files_never_go_onto_inputs() {
     let image = fs::read(cap.join("residual_map_000.png")).unwrap();
     let o = run(
         &[
-            "fit", "capture.toml", "--model", "lambert", "--out", "r.json", "--report", ".", "-q",
+            "fit",
+            "capture.toml",
+            "--model",
+            "lambert",
+            "--out",
+            "r.json",
+            "--report",
+            ".",
+            "-q",
         ],
         &cap,
     );
@@ -140,7 +155,17 @@ fn two_outputs_of_one_run_never_share_a_file() {
     small_set(d);
     fs::create_dir(d.join("rep")).unwrap();
     let o = run(
-        &["fit", "g.csv", "--model", "lambert", "--out", "rep/report.md", "--report", "rep", "-q"],
+        &[
+            "fit",
+            "g.csv",
+            "--model",
+            "lambert",
+            "--out",
+            "rep/report.md",
+            "--report",
+            "rep",
+            "-q",
+        ],
         d,
     );
     refused(&o, "is also the output --out rep/report.md");
@@ -179,9 +204,19 @@ fn fifos_and_devices_are_streamed_never_replaced() {
     let q = queries();
     // every writer: eval, fit, export --shader; a reader takes the stream each time
     let commands: Vec<Vec<&str>> = vec![
-        vec!["eval", "--params", "o.json", "--queries", &q, "--out", "pipe"],
+        vec![
+            "eval",
+            "--params",
+            "o.json",
+            "--queries",
+            &q,
+            "--out",
+            "pipe",
+        ],
         vec!["fit", "g.csv", "--model", "lambert", "--out", "pipe", "-q"],
-        vec!["export", "o.json", "--shader", "wgsl", "--out", "pipe", "-q"],
+        vec![
+            "export", "o.json", "--shader", "wgsl", "--out", "pipe", "-q",
+        ],
     ];
     for args in commands {
         let f = fifo.clone();
@@ -193,11 +228,42 @@ fn fifos_and_devices_are_streamed_never_replaced() {
         assert!(t.is_fifo(), "{args:?}: the FIFO was replaced");
     }
     // a character device: /dev/null stays the device; /dev/full is a clear error, exit 2
-    ok(&run(&["eval", "--params", "o.json", "--queries", &q, "--out", "/dev/null"], d));
-    assert!(fs::metadata("/dev/null").unwrap().file_type().is_char_device());
-    let o = run(&["eval", "--params", "o.json", "--queries", &q, "--out", "/dev/full"], d);
-    refused(&o, "--out /dev/full: cannot write output: No space left on device");
-    assert!(fs::metadata("/dev/full").unwrap().file_type().is_char_device());
+    ok(&run(
+        &[
+            "eval",
+            "--params",
+            "o.json",
+            "--queries",
+            &q,
+            "--out",
+            "/dev/null",
+        ],
+        d,
+    ));
+    assert!(fs::metadata("/dev/null")
+        .unwrap()
+        .file_type()
+        .is_char_device());
+    let o = run(
+        &[
+            "eval",
+            "--params",
+            "o.json",
+            "--queries",
+            &q,
+            "--out",
+            "/dev/full",
+        ],
+        d,
+    );
+    refused(
+        &o,
+        "--out /dev/full: cannot write output: No space left on device",
+    );
+    assert!(fs::metadata("/dev/full")
+        .unwrap()
+        .file_type()
+        .is_char_device());
     // nothing staged is left in the temporary directory's name space of ours
     assert!(!common::snapshot(d)
         .iter()
@@ -215,16 +281,45 @@ fn a_full_disk_changes_nothing() {
     };
     // a hard-linked output: the old content (both names) stays whole, no temporary left. The
     // disk is filled so that the staged file fits but the rewrite of the old one cannot.
-    ok(&run(&["eval", "--params", "o.json", "--queries", &q, "--out", "e_len.csv"], d));
+    ok(&run(
+        &[
+            "eval",
+            "--params",
+            "o.json",
+            "--queries",
+            &q,
+            "--out",
+            "e_len.csv",
+        ],
+        d,
+    ));
     let pages = |n: u64| n.div_ceil(4096);
     let staged = pages(fs::metadata(d.join("e_len.csv")).unwrap().len());
     assert!(staged >= 3 && staged <= 10, "{staged} pages");
     let old: Vec<u8> = (0..4000u32).map(|i| (i * 7 % 251) as u8).collect();
     fs::write(d.join("full/e.csv"), &old).unwrap();
     fs::hard_link(d.join("full/e.csv"), d.join("full/e2.csv")).unwrap();
-    fs::write(d.join("full/fill"), vec![0u8; ((12 - 1 - staged) * 4096) as usize]).unwrap();
-    let o = run(&["eval", "--params", "o.json", "--queries", &q, "--out", "full/e.csv"], d);
-    refused(&o, "full/e.csv: cannot write output: No space left on device");
+    fs::write(
+        d.join("full/fill"),
+        vec![0u8; ((12 - 1 - staged) * 4096) as usize],
+    )
+    .unwrap();
+    let o = run(
+        &[
+            "eval",
+            "--params",
+            "o.json",
+            "--queries",
+            &q,
+            "--out",
+            "full/e.csv",
+        ],
+        d,
+    );
+    refused(
+        &o,
+        "full/e.csv: cannot write output: No space left on device",
+    );
     assert_eq!(fs::read(d.join("full/e.csv")).unwrap(), old);
     assert_eq!(fs::read(d.join("full/e2.csv")).unwrap(), old);
     let names: Vec<String> = fs::read_dir(d.join("full"))
@@ -235,11 +330,26 @@ fn a_full_disk_changes_nothing() {
     assert_eq!(names.len(), 3, "{names:?}");
     fs::remove_file(d.join("full/fill")).unwrap();
     // a fit whose result goes to the full disk leaves its report folder as it was
-    ok(&run(&["fit", "g.csv", "--model", "lambert", "--out", "x.json", "--report", "rep", "-q"], d));
+    ok(&run(
+        &[
+            "fit", "g.csv", "--model", "lambert", "--out", "x.json", "--report", "rep", "-q",
+        ],
+        d,
+    ));
     let report_before = common::snapshot(&d.join("rep"));
     fs::write(d.join("full/fill"), vec![1u8; 40_000]).unwrap();
     let o = run(
-        &["fit", "g.csv", "--model", "lambert", "--out", "full/o.json", "--report", "rep", "-q"],
+        &[
+            "fit",
+            "g.csv",
+            "--model",
+            "lambert",
+            "--out",
+            "full/o.json",
+            "--report",
+            "rep",
+            "-q",
+        ],
         d,
     );
     refused(&o, "No space left on device");
@@ -247,8 +357,19 @@ fn a_full_disk_changes_nothing() {
     // render: the picture is not written when its AOVs do not fit
     let o = run(
         &[
-            "render", "--params", "o.json", "--object", "sphere", "--size", "64", "64", "--out",
-            "pic.png", "--aovs", "full/aovs", "-q",
+            "render",
+            "--params",
+            "o.json",
+            "--object",
+            "sphere",
+            "--size",
+            "64",
+            "64",
+            "--out",
+            "pic.png",
+            "--aovs",
+            "full/aovs",
+            "-q",
         ],
         d,
     );
@@ -257,7 +378,9 @@ fn a_full_disk_changes_nothing() {
     assert!(!d.join("full/aovs").exists());
     // a report on the full disk: a warning, never a truncated plot
     let o = run(
-        &["fit", "g.csv", "--model", "lambert", "--out", "y.json", "--report", "full/rep", "-q"],
+        &[
+            "fit", "g.csv", "--model", "lambert", "--out", "y.json", "--report", "full/rep", "-q",
+        ],
         d,
     );
     let e = stderr(&o);
@@ -275,14 +398,51 @@ fn outputs_are_checked_before_the_work_and_leave_nothing() {
     let before = common::snapshot(d);
     let q = queries();
     for args in [
-        vec!["fit", "g.csv", "--model", "lambert", "--out", "newdir/o.json", "-q"],
-        vec!["fit", "g.csv", "--model", "lambert", "--out", "newdir/", "-q"],
-        vec!["eval", "--params", "o.json", "--queries", &q, "--out", "newdir/e.csv"],
         vec![
-            "render", "--params", "o.json", "--object", "torus", "--size", "2048", "2048",
-            "--supersample", "4", "--out", "newdir/r.png", "-q",
+            "fit",
+            "g.csv",
+            "--model",
+            "lambert",
+            "--out",
+            "newdir/o.json",
+            "-q",
         ],
-        vec!["export", "o.json", "--shader", "glsl", "--out", "newdir/s.glsl", "-q"],
+        vec![
+            "fit", "g.csv", "--model", "lambert", "--out", "newdir/", "-q",
+        ],
+        vec![
+            "eval",
+            "--params",
+            "o.json",
+            "--queries",
+            &q,
+            "--out",
+            "newdir/e.csv",
+        ],
+        vec![
+            "render",
+            "--params",
+            "o.json",
+            "--object",
+            "torus",
+            "--size",
+            "2048",
+            "2048",
+            "--supersample",
+            "4",
+            "--out",
+            "newdir/r.png",
+            "-q",
+        ],
+        vec![
+            "export",
+            "o.json",
+            "--shader",
+            "glsl",
+            "--out",
+            "newdir/s.glsl",
+            "-q",
+        ],
     ] {
         let t = std::time::Instant::now();
         let o = run(&args, d);
@@ -310,12 +470,22 @@ fn synth_keeps_what_it_did_not_write() {
     assert_eq!(fs::read_to_string(d.join("set/gonio.csv")).unwrap(), "mine");
     assert_eq!(fs::read_dir(d.join("set")).unwrap().count(), 1);
     // --force writes over it
-    ok(&run(&["synth", "--config", "s.toml", "--out", "set", "--force", "-q"], d));
-    assert!(fs::read_to_string(d.join("set/gonio.csv")).unwrap().starts_with("theta_i"));
+    ok(&run(
+        &[
+            "synth", "--config", "s.toml", "--out", "set", "--force", "-q",
+        ],
+        d,
+    ));
+    assert!(fs::read_to_string(d.join("set/gonio.csv"))
+        .unwrap()
+        .starts_with("theta_i"));
     // in synth's own folder, a user's new file is kept across runs, and one that a new set
     // would replace is refused
     fs::write(d.join("set/notes.txt"), "mine").unwrap();
-    ok(&run(&["synth", "--config", "s.toml", "--out", "set", "-q"], d));
+    ok(&run(
+        &["synth", "--config", "s.toml", "--out", "set", "-q"],
+        d,
+    ));
     assert_eq!(fs::read_to_string(d.join("set/notes.txt")).unwrap(), "mine");
     fs::write(
         d.join("s2.toml"),
@@ -327,21 +497,41 @@ fn synth_keeps_what_it_did_not_write() {
     fs::write(d.join("set/capture.toml"), "my own").unwrap();
     let o = run(&["synth", "--config", "s2.toml", "--out", "set", "-q"], d);
     if o.status.code() == Some(2) && stderr(&o).contains("capture.toml is not a file synth wrote") {
-        assert_eq!(fs::read_to_string(d.join("set/capture.toml")).unwrap(), "my own");
+        assert_eq!(
+            fs::read_to_string(d.join("set/capture.toml")).unwrap(),
+            "my own"
+        );
     } else {
-        panic!("expected a refusal to replace the user's capture.toml: {}", stderr(&o));
+        panic!(
+            "expected a refusal to replace the user's capture.toml: {}",
+            stderr(&o)
+        );
     }
     // a linked output folder stays a link; its target's own files stay put
     fs::create_dir(d.join("real")).unwrap();
     std::os::unix::fs::symlink("real", d.join("link")).unwrap();
-    ok(&run(&["synth", "--config", "s.toml", "--out", "link", "-q"], d));
-    assert!(fs::symlink_metadata(d.join("link")).unwrap().file_type().is_symlink());
+    ok(&run(
+        &["synth", "--config", "s.toml", "--out", "link", "-q"],
+        d,
+    ));
+    assert!(fs::symlink_metadata(d.join("link"))
+        .unwrap()
+        .file_type()
+        .is_symlink());
     fs::write(d.join("real/mine.txt"), "keep").unwrap();
-    ok(&run(&["synth", "--config", "s.toml", "--out", "link", "-q"], d));
-    assert!(fs::symlink_metadata(d.join("link")).unwrap().file_type().is_symlink());
+    ok(&run(
+        &["synth", "--config", "s.toml", "--out", "link", "-q"],
+        d,
+    ));
+    assert!(fs::symlink_metadata(d.join("link"))
+        .unwrap()
+        .file_type()
+        .is_symlink());
     assert_eq!(fs::read_to_string(d.join("real/mine.txt")).unwrap(), "keep");
     assert!(d.join("real/gonio.csv").is_file());
-    assert!(!common::snapshot(d).iter().any(|(n, _)| n.contains(".fibrefit-")));
+    assert!(!common::snapshot(d)
+        .iter()
+        .any(|(n, _)| n.contains(".fibrefit-")));
 }
 
 #[test]
@@ -394,7 +584,9 @@ fn a_late_signal_leaves_all_old_or_all_new() {
             assert!(e.contains("after the outputs were written"), "{e}");
         }
     }
-    assert!(!common::snapshot(d).iter().any(|(n, _)| n.contains(".fibrefit-")));
+    assert!(!common::snapshot(d)
+        .iter()
+        .any(|(n, _)| n.contains(".fibrefit-")));
 }
 
 #[test]
@@ -402,12 +594,19 @@ fn closed_and_full_streams_exit_cleanly() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     small_set(d);
-    let full = || fs::OpenOptions::new().write(true).open("/dev/full").unwrap();
+    let full = || {
+        fs::OpenOptions::new()
+            .write(true)
+            .open("/dev/full")
+            .unwrap()
+    };
     // stdout on a full disk: exit 2 naming it; stderr full: still exit 2, no panic
     for args in [
         vec!["inspect", "g.csv"],
         vec!["inspect", "--json", "g.csv"],
-        vec!["fit", "g.csv", "--model", "lambert", "--out", "z.json", "--json"],
+        vec![
+            "fit", "g.csv", "--model", "lambert", "--out", "z.json", "--json",
+        ],
     ] {
         let o = std::process::Command::new(assert_cmd::cargo::cargo_bin("fibrefit"))
             .current_dir(d)
@@ -455,15 +654,25 @@ fn work_beyond_the_budgets_is_refused_up_front() {
         (["1", "67108864"], "expected 1 to 32 M pixels"),
     ] {
         let o = run(
-            &["render", "--params", "o.json", "--size", size[0], size[1], "--out", "r.png"],
+            &[
+                "render", "--params", "o.json", "--size", size[0], size[1], "--out", "r.png",
+            ],
             d,
         );
         refused(&o, fragment);
     }
     let o = run(
         &[
-            "render", "--params", "o.json", "--size", "8192", "4096", "--supersample", "16",
-            "--out", "r.png",
+            "render",
+            "--params",
+            "o.json",
+            "--size",
+            "8192",
+            "4096",
+            "--supersample",
+            "16",
+            "--out",
+            "r.png",
         ],
         d,
     );
@@ -497,7 +706,10 @@ fn work_beyond_the_budgets_is_refused_up_front() {
         assert!(!d.join("big").exists());
     }
     for (cfg, fragment) in [
-        ("[optimizer]\nglobal_candidates = 1000000000\n", "global_candidates"),
+        (
+            "[optimizer]\nglobal_candidates = 1000000000\n",
+            "global_candidates",
+        ),
         (
             "[knobs]\nquadrature_order = 1024\nazimuth_nodes = 1024\n",
             "quadrature nodes per model evaluation",
@@ -515,11 +727,20 @@ fn work_beyond_the_budgets_is_refused_up_front() {
             d.join("c.toml"),
             format!(
                 "model = \"{}\"\n{cfg}",
-                if cfg.contains("65536") { "auto" } else { "poulin-fournier" }
+                if cfg.contains("65536") {
+                    "auto"
+                } else {
+                    "poulin-fournier"
+                }
             ),
         )
         .unwrap();
-        let o = run(&["fit", "g.csv", "--config", "c.toml", "--out", "c.json", "-q"], d);
+        let o = run(
+            &[
+                "fit", "g.csv", "--config", "c.toml", "--out", "c.json", "-q",
+            ],
+            d,
+        );
         refused(&o, fragment);
     }
 }

@@ -20,7 +20,6 @@ fn root() -> PathBuf {
 /// Mutations per parser.
 const MUTATIONS: usize = 160;
 
-
 /// Mutate `path` (a copy of `valid`) `MUTATIONS` times and run `load` on it each time.
 fn fuzz(
     what: &str,
@@ -55,7 +54,10 @@ fn fuzz(
             Err(_) => {
                 let keep = std::env::temp_dir().join(format!("fuzz_{what}_{k}"));
                 fs::write(&keep, &bytes).unwrap();
-                panic!("{what} mutation {k} panicked (input kept at {})", keep.display());
+                panic!(
+                    "{what} mutation {k} panicked (input kept at {})",
+                    keep.display()
+                );
             }
         }
     }
@@ -138,7 +140,10 @@ fn silk_capture(dir: &Path) -> String {
     }
     let text = fs::read_to_string(src.join("capture.toml")).unwrap();
     // the description up to its third image
-    let cut = text.match_indices("[[images]]").nth(2).map_or(text.len(), |m| m.0);
+    let cut = text
+        .match_indices("[[images]]")
+        .nth(2)
+        .map_or(text.len(), |m| m.0);
     text[..cut].to_string()
 }
 

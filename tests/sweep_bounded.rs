@@ -77,7 +77,15 @@ fn lay_inputs(d: &Path) {
     .unwrap();
     let st = std::process::Command::new(assert_cmd::cargo::cargo_bin("fibrefit"))
         .current_dir(d)
-        .args(["fit", "good.csv", "--model", "lambert", "--out", "result.json", "-q"])
+        .args([
+            "fit",
+            "good.csv",
+            "--model",
+            "lambert",
+            "--out",
+            "result.json",
+            "-q",
+        ])
         .status()
         .unwrap();
     assert!(st.success());
@@ -121,7 +129,9 @@ fn command(k: usize) -> (Vec<&'static str>, &'static [&'static str]) {
             &["good.csv", "cut.csv", "nan.csv", "zero.csv", "bomb.toml"],
         ),
         1 => (
-            vec!["fit", "good.csv", "--config", "{in}", "--out", "{out}", "-q"],
+            vec![
+                "fit", "good.csv", "--config", "{in}", "--out", "{out}", "-q",
+            ],
             &["heavy.toml", "many.toml"],
         ),
         2 => (
@@ -129,7 +139,15 @@ fn command(k: usize) -> (Vec<&'static str>, &'static [&'static str]) {
             &["good.csv", "cut.csv", "zero.csv", "bomb.toml"],
         ),
         3 => (
-            vec!["eval", "--params", "result.json", "--queries", "{in}", "--out", "{out}"],
+            vec![
+                "eval",
+                "--params",
+                "result.json",
+                "--queries",
+                "{in}",
+                "--out",
+                "{out}",
+            ],
             &["queries.csv", "good.csv", "zero.csv"],
         ),
         4 => (
@@ -206,7 +224,10 @@ fn hostile_combinations_exit_cleanly_within_bounds_and_destroy_nothing() {
             "case {case} {args:?}: exit {status:?}: {err}"
         );
         exits[(code == Some(2)) as usize] += 1;
-        eprintln!("case {case}: {args:?} -> {code:?} {}", err.lines().last().unwrap_or(""));
+        eprintln!(
+            "case {case}: {args:?} -> {code:?} {}",
+            err.lines().last().unwrap_or("")
+        );
         if code == Some(2) {
             assert!(err.contains("error: "), "case {case} {args:?}: no message");
         }
@@ -234,14 +255,23 @@ fn hostile_combinations_exit_cleanly_within_bounds_and_destroy_nothing() {
                 .filter(|(n, _)| !before.iter().any(|(b, _)| b == n))
                 .map(|(n, _)| n.clone())
                 .collect();
-            assert!(new.is_empty(), "case {case} {args:?}: a failed run wrote {new:?}");
+            assert!(
+                new.is_empty(),
+                "case {case} {args:?}: a failed run wrote {new:?}"
+            );
         }
         assert!(
             !after.iter().any(|(n, _)| n.contains(".fibrefit-")),
             "case {case} {args:?}: a temporary was left"
         );
-        assert!(fs::symlink_metadata(d.join("pipe")).unwrap().file_type().is_fifo());
-        assert!(fs::metadata("/dev/null").unwrap().file_type().is_char_device());
+        assert!(fs::symlink_metadata(d.join("pipe"))
+            .unwrap()
+            .file_type()
+            .is_fifo());
+        assert!(fs::metadata("/dev/null")
+            .unwrap()
+            .file_type()
+            .is_char_device());
     }
     // the sweep exercised both outcomes
     assert!(exits[0] > 0 && exits[1] > 0, "exits 0/2: {exits:?}");

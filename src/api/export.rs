@@ -219,4 +219,3 @@ fn preview(object: &str, psi_deg: f64) -> Result<FramedMesh> {
         o => bail!("--object {o}: expected swatch, sphere, torus or a .obj mesh"),
     }
 }
-

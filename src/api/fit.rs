@@ -277,9 +277,8 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
                 .map(|f| f.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             // of the bytes the loader read, not of the file as it is now
-            sha256: crate::load::sha256_read(&req.data).with_context(|| {
-                format!("{}: its loader recorded no hash", req.data.display())
-            })?,
+            sha256: crate::load::sha256_read(&req.data)
+                .with_context(|| format!("{}: its loader recorded no hash", req.data.display()))?,
             kind: match samples.kind {
                 DataKind::Gonio => "goniometric".into(),
                 DataKind::Capture => "image capture".into(),
@@ -397,7 +396,9 @@ impl FitTargets {
                 let mut files = ReportFiles::reserve(outs, dir)?;
                 // a residual map per capture image
                 if crate::load::is_capture(&req.data) {
-                    let n = crate::load::capture::CaptureFile::load(&req.data)?.images.len();
+                    let n = crate::load::capture::CaptureFile::load(&req.data)?
+                        .images
+                        .len();
                     files.add_images(outs, 0..n as u32)?;
                 }
                 Some((dir.to_path_buf(), files))

@@ -101,9 +101,7 @@ impl Render {
             }
         }
         let texel_maps = match &maps {
-            Some(dir) => {
-                Some(TexelMapsIn::load(dir, None).map_err(|e| anyhow!("--maps: {e:#}"))?)
-            }
+            Some(dir) => Some(TexelMapsIn::load(dir, None).map_err(|e| anyhow!("--maps: {e:#}"))?),
             None => None,
         };
         Ok(Self {
@@ -256,7 +254,10 @@ fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
 pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<(Picture, f32)> {
     let size = 256usize;
     let deg = |t: f64, p: f64| direction_from_angles(t.to_radians(), p.to_radians());
-    let lightings = [vec![deg(35.0, 120.0)], vec![deg(70.0, 20.0), deg(30.0, 250.0)]];
+    let lightings = [
+        vec![deg(35.0, 120.0)],
+        vec![deg(70.0, 20.0), deg(30.0, 250.0)],
+    ];
     let map = TopologyMap {
         width: 256,
         height: 256,

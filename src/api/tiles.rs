@@ -126,8 +126,12 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
     }
     let store = crate::load::capture_store::CaptureStore::load(&req.data, req.load.subsample)?;
     let channels = store.channels;
-    let set =
-        crate::export::result_json::result_from_value(&g, &globals.display().to_string(), channels)?.set;
+    let set = crate::export::result_json::result_from_value(
+        &g,
+        &globals.display().to_string(),
+        channels,
+    )?
+    .set;
     let (w, h) = (store.width, store.height);
     let rows = tile_rows(i, n, h);
     // the global stage's expected residual variance (older globals: none, every minimum kept)
@@ -172,10 +176,8 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
         if !(name.starts_with("tile_") && name.ends_with(".json")) {
             continue;
         }
-        let t: TileFile = serde_json::from_str(
-            &crate::load::input::read_text(&p)?,
-        )
-        .map_err(|e| anyhow!("{}: not a tile file: {e}", p.display()))?;
+        let t: TileFile = serde_json::from_str(&crate::load::input::read_text(&p)?)
+            .map_err(|e| anyhow!("{}: not a tile file: {e}", p.display()))?;
         if t.schema != TILE_SCHEMA {
             bail!(
                 "{}: schema `{}` is not {TILE_SCHEMA}",
@@ -247,9 +249,12 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
         serde_json::from_str(&g_text).map_err(|e| anyhow!("{}: {e}", args.globals.display()))?;
     let (width, height, channels, global_free) =
         (first.width, first.height, first.channels, first.global_free);
-    let set =
-        crate::export::result_json::result_from_value(&g, &args.globals.display().to_string(), channels)?
-            .set;
+    let set = crate::export::result_json::result_from_value(
+        &g,
+        &args.globals.display().to_string(),
+        channels,
+    )?
+    .set;
     let h_max =
         crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Shape::Spacing));
     let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();

@@ -59,7 +59,12 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: &EvalArgs) -> Result<()> {
-    let eval = Evaluation::load(&args.params, args.model.as_deref(), &args.queries, args.quiet)?;
+    let eval = Evaluation::load(
+        &args.params,
+        args.model.as_deref(),
+        &args.queries,
+        args.quiet,
+    )?;
     // the output reserved before the work; it is never an input
     let mut outs = Outputs::new(&eval.inputs());
     let out = match &args.out {

@@ -168,7 +168,10 @@ pub fn run_tile(
             data: req.data,
             config: req.config,
             load: req.load,
-            globals: args.globals.clone().expect("clap: --tile requires --globals"),
+            globals: args
+                .globals
+                .clone()
+                .expect("clap: --tile requires --globals"),
             dir: args.maps.clone().expect("clap: --tile requires --maps"),
             tile,
             progress: req.progress,

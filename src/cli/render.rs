@@ -147,7 +147,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             .collect::<Result<_>>()?
     };
     let req = RenderRequest {
-        params: args.params.clone().expect("clap: --params unless --seed001"),
+        params: args
+            .params
+            .clone()
+            .expect("clap: --params unless --seed001"),
         model: args.model.clone(),
         scene: match &args.scene {
             Some(path) => SceneSource::File(path.clone()),

@@ -223,7 +223,12 @@ fn new_temp(dir: &Path) -> std::io::Result<(PathBuf, File)> {
             temp_nonce() & 0xffff_ffff_ffff
         ));
         lock(&LIVE).push(temp.clone());
-        match OpenOptions::new().write(true).read(true).create_new(true).open(&temp) {
+        match OpenOptions::new()
+            .write(true)
+            .read(true)
+            .create_new(true)
+            .open(&temp)
+        {
             Ok(f) => return Ok((temp, f)),
             Err(e) => {
                 forget(&temp);
@@ -408,14 +413,21 @@ impl Outputs {
             Some(m) => {
                 let t = m.file_type();
                 let kind = if m.is_dir() {
-                    bail!("{}: is a directory, expected a file path", flagged(flag, path))
+                    bail!(
+                        "{}: is a directory, expected a file path",
+                        flagged(flag, path)
+                    )
                 } else if t.is_fifo() || t.is_char_device() {
                     Kind::Stream
                 } else if t.is_block_device() || t.is_socket() {
                     bail!(
                         "{}: is a {}; refusing to write an output there",
                         flagged(flag, path),
-                        if t.is_socket() { "socket" } else { "block device" }
+                        if t.is_socket() {
+                            "socket"
+                        } else {
+                            "block device"
+                        }
                     )
                 } else if m.nlink() > 1 {
                     Kind::InPlace
@@ -485,7 +497,9 @@ impl Outputs {
     }
 
     fn entry(&mut self, id: OutputId) -> &mut Entry {
-        self.entries[id.0].as_mut().expect("a discarded output is not written")
+        self.entries[id.0]
+            .as_mut()
+            .expect("a discarded output is not written")
     }
 
     /// A writer for the output whose errors name it.
@@ -611,7 +625,6 @@ impl Outputs {
         self.made_dirs.clear();
         Ok(())
     }
-
 }
 
 /// Remove the staged files of `entries` (after a failed commit).

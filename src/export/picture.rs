@@ -115,11 +115,8 @@ pub fn reserve_aovs(outs: &mut Outputs, dir: &Path, with_height: bool) -> Result
 
 /// Write the AOVs of `pic` into their reserved files (committed with the picture).
 pub fn write_aovs(outs: &mut Outputs, ids: &[OutputId], pic: &Picture) -> Result<()> {
-    let layers: [(&[[f32; 3]], usize); 3] = [
-        (&pic.normal, 3),
-        (&pic.tangent, 3),
-        (&pic.position, 3),
-    ];
+    let layers: [(&[[f32; 3]], usize); 3] =
+        [(&pic.normal, 3), (&pic.tangent, 3), (&pic.position, 3)];
     for (k, &id) in ids.iter().enumerate() {
         let data: Vec<f32> = match layers.get(k) {
             Some((v, _)) => v.iter().flatten().copied().collect(),
@@ -131,4 +128,3 @@ pub fn write_aovs(outs: &mut Outputs, ids: &[OutputId], pic: &Picture) -> Result
     }
     Ok(())
 }
-

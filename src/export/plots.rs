@@ -213,12 +213,7 @@ pub fn histogram(
 
 /// A residual map: blue (model below data) - white - red (model above), scaled to the largest
 /// |value|; `None` pixels (not used in the fit) grey.
-pub fn residual_map(
-    path: Sink,
-    width: usize,
-    height: usize,
-    values: &[Option<f64>],
-) -> Result<()> {
+pub fn residual_map(path: Sink, width: usize, height: usize, values: &[Option<f64>]) -> Result<()> {
     let scale = values
         .iter()
         .flatten()

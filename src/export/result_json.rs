@@ -150,7 +150,6 @@ pub fn result_from_value(
     })
 }
 
-
 /// The parameters of a `fibrefit fit` result (schema `fibrefit-result/1`).
 pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
     let schema = v.get("schema").and_then(|s| s.as_str()).unwrap_or_default();
@@ -194,7 +193,6 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
     }
     serde_json::from_value(serde_json::Value::Object(flat)).map_err(|e| anyhow!("{e}"))
 }
-
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ResultFile {

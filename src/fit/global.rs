@@ -17,9 +17,9 @@
 //! What comes out is the list of distinct competitive basins, best first; the final stage
 //! polishes each on all samples.
 
+pub use super::basins::{box_distance, Basin, BASIN_SEPARATION};
 use super::config::Optimizer;
 use super::parameters::ParamSet;
-pub use super::basins::{box_distance, Basin, BASIN_SEPARATION};
 use super::polish::run_lm;
 use super::problem::FitProblem;
 use anyhow::Result;

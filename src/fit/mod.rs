@@ -38,7 +38,6 @@ use rand::SeedableRng;
 use std::sync::Arc;
 use std::time::Instant;
 
-
 /// One parameter after the fit, in external units.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ParamRecord {

@@ -322,7 +322,6 @@ pub(crate) fn check_no_negatives(path: &Path, img: &LinearImage) -> Result<()> {
     Ok(())
 }
 
-
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -25,7 +25,10 @@ pub const MAX_DECODE_BYTES: u64 = 4 << 30;
 pub fn check_pixels(path: &Path, what: &str, width: u64, height: u64) -> Result<()> {
     let pixels = width.checked_mul(height);
     if width == 0 || height == 0 {
-        bail!("{}: {what} is {width}x{height} pixels: empty", path.display());
+        bail!(
+            "{}: {what} is {width}x{height} pixels: empty",
+            path.display()
+        );
     }
     if pixels.is_none_or(|p| p > MAX_IMAGE_PIXELS) {
         bail!(

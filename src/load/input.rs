@@ -124,8 +124,8 @@ pub fn open(path: &Path, limit: u64) -> Result<Input> {
 pub fn open_as(path: &Path, limit: u64, what: &str) -> Result<Input> {
     let name = path.display();
     let sep = if what.is_empty() { "" } else { " " };
-    let file = std::fs::File::open(path)
-        .map_err(|e| anyhow!("{name}: cannot open{sep}{what}: {e}"))?;
+    let file =
+        std::fs::File::open(path).map_err(|e| anyhow!("{name}: cannot open{sep}{what}: {e}"))?;
     let meta = file
         .metadata()
         .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
@@ -237,7 +237,9 @@ impl Input {
         if let Some(size) = self.size() {
             into.reserve(usize::try_from(size.saturating_sub(self.read)).unwrap_or(0));
         }
-        self.read_to_end(into).map(|_| ()).map_err(|e| io_error(&self.path, e))
+        self.read_to_end(into)
+            .map(|_| ())
+            .map_err(|e| io_error(&self.path, e))
     }
 }
 
@@ -338,13 +340,15 @@ pub fn read_text_as(path: &Path, what: &str) -> Result<String> {
 pub fn read_text_hashed(path: &Path, what: &str) -> Result<(String, String)> {
     let b = read_input_as(path, MAX_TEXT_BYTES, what)?;
     let sha256 = b.sha256;
-    String::from_utf8(b.bytes).map(|t| (t, sha256)).map_err(|e| {
-        anyhow!(
-            "{}: not UTF-8 text (byte {} is invalid)",
-            path.display(),
-            e.utf8_error().valid_up_to() + 1
-        )
-    })
+    String::from_utf8(b.bytes)
+        .map(|t| (t, sha256))
+        .map_err(|e| {
+            anyhow!(
+                "{}: not UTF-8 text (byte {} is invalid)",
+                path.display(),
+                e.utf8_error().valid_up_to() + 1
+            )
+        })
 }
 
 #[cfg(test)]

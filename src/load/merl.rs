@@ -11,13 +11,13 @@
 //! and counted.
 
 use super::rgl::MeasuredOptions;
+use super::rgl::MAX_MAGNITUDE;
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::{direction_from_angles, Vec3};
-use super::rgl::MAX_MAGNITUDE;
 use anyhow::{bail, Result};
-use std::io::Read;
 use rand::{Rng, SeedableRng};
 use std::f64::consts::{FRAC_PI_2, PI};
+use std::io::Read;
 use std::path::Path;
 
 /// Per-channel scale from the stored numbers to 1/sr.
@@ -63,7 +63,12 @@ impl MerlBrdf {
             bail!("{name}: not a MERL .binary BRDF: shorter than its 12-byte header");
         }
         let dim = |k: usize| {
-            i32::from_le_bytes([header[4 * k], header[4 * k + 1], header[4 * k + 2], header[4 * k + 3]])
+            i32::from_le_bytes([
+                header[4 * k],
+                header[4 * k + 1],
+                header[4 * k + 2],
+                header[4 * k + 3],
+            ])
         };
         let dims = [dim(0), dim(1), dim(2)];
         if dims.iter().any(|&d| !(1..=4096).contains(&d)) {

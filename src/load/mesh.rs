@@ -180,7 +180,10 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
             logical.push_str(head);
             logical.push(' ');
             if logical.len() > MAX_OBJ_LINE {
-                bail!("{name}:{line_no}: a continued line longer than {} bytes", MAX_OBJ_LINE);
+                bail!(
+                    "{name}:{line_no}: a continued line longer than {} bytes",
+                    MAX_OBJ_LINE
+                );
             }
             continue;
         }
@@ -192,10 +195,7 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
         let at = |what: String| anyhow!("{name}:{line_no}: {what}");
         // OBJ statements are lower-case words (v, vt, f, usemtl, c_interp, ...): anything else
         // is not an OBJ file (a binary file or a device is refused at its first line)
-        if !key
-            .bytes()
-            .all(|b| b.is_ascii_alphanumeric() || b == b'_')
-        {
+        if !key.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
             let shown: String = key.chars().take(20).collect();
             return Err(at(format!(
                 "'{shown}' is not an OBJ statement (expected v, vt, vn, f, o, g, ...)"
@@ -206,7 +206,10 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
                 let mut c = [0.0f64; 3];
                 for (k, x) in c.iter_mut().enumerate() {
                     let t = tok.next().ok_or_else(|| {
-                        at(format!("a vertex needs x, y and z; coordinate {} is missing", k + 1))
+                        at(format!(
+                            "a vertex needs x, y and z; coordinate {} is missing",
+                            k + 1
+                        ))
                     })?;
                     let v: f32 = t
                         .parse()
@@ -255,12 +258,17 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
                 corners.clear();
                 for t in tok {
                     let mut parts = t.split('/');
-                    let index = |s: Option<&str>, count: usize, what: &str| -> Result<Option<usize>> {
+                    let index = |s: Option<&str>,
+                                 count: usize,
+                                 what: &str|
+                     -> Result<Option<usize>> {
                         let Some(s) = s.filter(|s| !s.is_empty()) else {
                             return Ok(None);
                         };
                         let i: i64 = s.parse().map_err(|_| {
-                            at(format!("face corner '{t}': {what} index '{s}' is not an integer"))
+                            at(format!(
+                                "face corner '{t}': {what} index '{s}' is not an integer"
+                            ))
                         })?;
                         match i {
                             0 => Err(at(format!(
@@ -279,9 +287,8 @@ pub fn load_obj(path: &Path) -> Result<Mesh> {
                             }
                         }
                     };
-                    let v = index(parts.next(), positions.len(), "vertex")?.ok_or_else(|| {
-                        at(format!("face corner '{t}' has no vertex index"))
-                    })?;
+                    let v = index(parts.next(), positions.len(), "vertex")?
+                        .ok_or_else(|| at(format!("face corner '{t}' has no vertex index")))?;
                     let uv = index(parts.next(), texcoords.len(), "texture")?;
                     if v >= max_v.0 {
                         max_v = (v, line_no);

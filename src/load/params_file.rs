@@ -38,4 +38,3 @@ impl RawParams {
         Ok(raw)
     }
 }
-

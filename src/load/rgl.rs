@@ -119,9 +119,10 @@ fn read_tensor_file(path: &Path) -> Result<HashMap<String, Field>> {
         let mut shape = Vec::with_capacity(ndim.min(16));
         for _ in 0..ndim {
             let d = u64_at(take(&mut p, 8)?);
-            shape.push(usize::try_from(d).map_err(|_| {
-                bad(&format!("field `{fname}` has a dimension of {d}"))
-            })?);
+            shape.push(
+                usize::try_from(d)
+                    .map_err(|_| bad(&format!("field `{fname}` has a dimension of {d}")))?,
+            );
         }
         // types: 1 u8, 2 i8, 3 u16, 4 i16, 5 u32, 6 i32, 7 u64, 8 i64, 9 f16, 10 f32, 11 f64
         let size: usize = match dtype {
@@ -159,7 +160,10 @@ fn read_tensor_file(path: &Path) -> Result<HashMap<String, Field>> {
                 .collect(),
             _ => vec![], // not needed by the BRDF
         };
-        if fields.insert(fname.clone(), Field { shape, values }).is_some() {
+        if fields
+            .insert(fname.clone(), Field { shape, values })
+            .is_some()
+        {
             return Err(bad(&format!("field `{fname}` appears twice")));
         }
     }
@@ -225,7 +229,11 @@ impl Table2D {
                     m[y + 1] = sum;
                 }
                 // a slice with no mass (padding at the horizon) stays zero rather than NaN
-                let norm = if m[ny - 1] > 0.0 { 1.0 / m[ny - 1] } else { 0.0 };
+                let norm = if m[ny - 1] > 0.0 {
+                    1.0 / m[ny - 1]
+                } else {
+                    0.0
+                };
                 c.iter_mut().for_each(|v| *v *= norm);
                 m.iter_mut().for_each(|v| *v *= norm);
                 d.iter_mut().for_each(|v| *v *= norm);
@@ -377,7 +385,12 @@ impl RglBsdf {
             );
         }
         // every table at least 2 x 2 (bilinear interpolation needs two nodes each way)
-        for (k, field) in [("ndf", &ndf), ("sigma", &sigma), ("vndf", &vndf), ("rgb", &rgb)] {
+        for (k, field) in [
+            ("ndf", &ndf),
+            ("sigma", &sigma),
+            ("vndf", &vndf),
+            ("rgb", &rgb),
+        ] {
             let r = field.shape.len();
             if field.shape[r - 2] < 2 || field.shape[r - 1] < 2 {
                 bail!(

@@ -17,8 +17,8 @@
 //! shadows overlap, so a whole row is one interval however many fibres it holds (grazing light).
 //! This handles ALL occluders in O(1), with no neighbour window.
 
-use super::numerics::elementary;
 use super::frame::Local;
+use super::numerics::elementary;
 
 /// Upper bound on disjoint arcs: <= 3 shadow intervals leave <= 4 gaps; the intersection of two
 /// such sets has <= 7 intervals.

@@ -104,7 +104,6 @@ pub const MAX_QUADRATURE_ORDER: usize = 1024;
 pub const MAX_HISTOGRAM_BINS: usize = 65536;
 pub const DEFAULT_HISTOGRAM_BINS: usize = 16;
 
-
 /// Validated parameters in model units.
 #[derive(Clone, Debug)]
 pub struct ModelParams {

@@ -20,8 +20,8 @@ use super::cross_section::{
     compact_gaps, for_each_seen_and_lit, lobe_half_width, substrate_fractions, DiffuseArc,
     DiffuseArcs, Fibre, FibreOcclusions, Pattern, Projected, SectionPair, SubstrateProblem,
 };
-use super::numerics::elementary;
 use super::frame::Local;
+use super::numerics::elementary;
 use super::numerics::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
 use super::numerics::quadrature::GaussLegendre;
 use super::topology::elevation_from_height;

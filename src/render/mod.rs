@@ -31,11 +31,18 @@ pub const MAX_RAYS: usize = 1 << 28;
 
 /// Refuse a picture size and supersampling beyond [`MAX_PIXELS`] and [`MAX_RAYS`] (computed
 /// without overflow), with the estimate; `what` names the setting in the message.
-pub fn check_budget(width: usize, height: usize, supersample: usize, what: &str) -> anyhow::Result<()> {
+pub fn check_budget(
+    width: usize,
+    height: usize,
+    supersample: usize,
+    what: &str,
+) -> anyhow::Result<()> {
     if !(1..=16).contains(&supersample) {
         anyhow::bail!("{what}: supersample {supersample}: expected 1 to 16");
     }
-    let pixels = width.checked_mul(height).filter(|&p| p > 0 && p <= MAX_PIXELS);
+    let pixels = width
+        .checked_mul(height)
+        .filter(|&p| p > 0 && p <= MAX_PIXELS);
     let Some(pixels) = pixels else {
         anyhow::bail!(
             "{what}: size {width} x {height}: expected 1 to {} M pixels (about {} bytes each in memory)",

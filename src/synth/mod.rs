@@ -278,7 +278,12 @@ pub fn run(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo>
 }
 
 /// [`run`], with `force`: write into a folder synth did not make, over files it did not write.
-pub fn write_set(config_path: &Path, out_dir: &Path, quiet: bool, force: bool) -> Result<SynthInfo> {
+pub fn write_set(
+    config_path: &Path,
+    out_dir: &Path,
+    quiet: bool,
+    force: bool,
+) -> Result<SynthInfo> {
     use crate::export::atomic::Outputs;
     let mut outs = Outputs::new(&[config_path.to_path_buf()]);
     let dir = outs.dir(out_dir, "--out")?;
@@ -379,7 +384,12 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
         let name = format!("topology.{ext}");
         let dest = out_dir.join(&name);
         if std::fs::canonicalize(&src).ok() != std::fs::canonicalize(&dest).ok() {
-            let bytes = crate::load::input::read_input_as(&src, crate::load::input::MAX_INPUT_BYTES, "topology map")?.bytes;
+            let bytes = crate::load::input::read_input_as(
+                &src,
+                crate::load::input::MAX_INPUT_BYTES,
+                "topology map",
+            )?
+            .bytes;
             write_file(&dest, &bytes)?;
         }
         files.push(name);
@@ -835,8 +845,7 @@ fn render_capture(
         if !src.exists() {
             return Ok(None);
         }
-        let bytes =
-            crate::load::read_input(&src, crate::load::input::MAX_INPUT_BYTES)?.bytes;
+        let bytes = crate::load::read_input(&src, crate::load::input::MAX_INPUT_BYTES)?.bytes;
         write_file(&out_dir.join(name), &bytes)?;
         files.push(name.to_string());
         Ok(Some(PathBuf::from(name)))

@@ -205,7 +205,11 @@ pub fn crc32(data: &[u8]) -> u32 {
     for &b in data {
         c ^= b as u32;
         for _ in 0..8 {
-            c = if c & 1 != 0 { 0xEDB8_8320 ^ (c >> 1) } else { c >> 1 };
+            c = if c & 1 != 0 {
+                0xEDB8_8320 ^ (c >> 1)
+            } else {
+                c >> 1
+            };
         }
     }
     !c
@@ -227,7 +231,10 @@ pub fn png_claiming(w: u32, h: u32) -> Vec<u8> {
     ihdr.extend([8, 0, 0, 0, 0]);
     chunk(b"IHDR", &ihdr);
     // zlib stream of a few zero bytes
-    chunk(b"IDAT", &[0x78, 0x9c, 0x63, 0x00, 0x00, 0x00, 0x01, 0x00, 0x01]);
+    chunk(
+        b"IDAT",
+        &[0x78, 0x9c, 0x63, 0x00, 0x00, 0x00, 0x01, 0x00, 0x01],
+    );
     chunk(b"IEND", &[]);
     b
 }
@@ -258,4 +265,3 @@ pub fn snapshot(d: &std::path::Path) -> Vec<(String, Vec<u8>)> {
     v.sort();
     v
 }
-

@@ -17,8 +17,20 @@ impl Lcg {
 }
 
 pub const EXTREMES: [&str; 14] = [
-    "1e308", "-1e308", "nan", "inf", "-inf", "-0", "1e-320", "0", "99999", "-5", "90",
-    "18446744073709551615", "4294967296", "1e39",
+    "1e308",
+    "-1e308",
+    "nan",
+    "inf",
+    "-inf",
+    "-0",
+    "1e-320",
+    "0",
+    "99999",
+    "-5",
+    "90",
+    "18446744073709551615",
+    "4294967296",
+    "1e39",
 ];
 
 /// Binary values written over 1, 2, 4 or 8 bytes: sizes, offsets and floats at their extremes.

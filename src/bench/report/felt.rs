@@ -2,10 +2,10 @@
 //! against cost, and for the chosen rung, Ward and the best fit with the optional components,
 //! slices and hemisphere maps against the measured file.
 
+use crate::bench::felt::{FeltRow, FeltRun};
 use crate::export::atomic::AtomicFile;
 use crate::export::brdf_plots::{self, Curve};
 use crate::export::plots::{self, Series};
-use crate::bench::felt::{FeltRow, FeltRun};
 use anyhow::Result;
 use std::io::Write;
 use std::path::Path;

@@ -1,8 +1,8 @@
 //! `reports/fit_robustness.md` (+ CSV and a PNG) from the runs of the robustness study.
 
+use crate::bench::robustness::{summary, Run, StudySize, CASES};
 use crate::export::atomic::AtomicFile;
 use crate::export::plots::{self, Series};
-use crate::bench::robustness::{summary, Run, StudySize, CASES};
 use anyhow::Result;
 use std::io::Write;
 use std::path::Path;

@@ -1,8 +1,8 @@
 //! `reports/speed_accuracy.md` (+ CSVs and PNG plots) from measured rows; nothing typed in.
 
+use crate::bench::{FitRow, ForwardRow};
 use crate::export::atomic::AtomicFile;
 use crate::export::plots::{self, Series};
-use crate::bench::{FitRow, ForwardRow};
 use anyhow::Result;
 use std::collections::BTreeMap;
 use std::io::Write;

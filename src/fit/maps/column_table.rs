@@ -128,7 +128,11 @@ pub(super) struct TableCache {
 }
 
 impl TableCache {
-    pub(super) fn get(&self, key: Vec<u64>, make: impl FnOnce() -> ColumnTable) -> Option<Arc<ColumnTable>> {
+    pub(super) fn get(
+        &self,
+        key: Vec<u64>,
+        make: impl FnOnce() -> ColumnTable,
+    ) -> Option<Arc<ColumnTable>> {
         {
             let mut tables = self.tables.lock().expect("table cache");
             match tables.get(&key) {

@@ -77,7 +77,6 @@ pub fn fitted_all(
     Ok(fitted)
 }
 
-
 /// The `method` block of a result's `maps`.
 pub fn method(cfg: &FitConfig, costs: &[f64], texel_variance: f64) -> serde_json::Value {
     serde_json::json!({

@@ -213,7 +213,12 @@ impl Texel {
     }
 
     /// Residuals and solved values at nonlinear values `u`.
-    pub(super) fn residuals_at(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> (Vec<f64>, TexelValues) {
+    pub(super) fn residuals_at(
+        &self,
+        g: &Globals,
+        base: &TexelValues,
+        u: &[f64],
+    ) -> (Vec<f64>, TexelValues) {
         let mut v = self.at_nonlinear(g, base, u);
         let cols = self.columns(g, v.height, v.psi);
         (self.solve(g, &cols, &mut v), v)

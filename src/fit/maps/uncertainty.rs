@@ -37,7 +37,11 @@ impl Texel {
     /// The Jacobian of the texel's residuals (its pixels' rows, then any prior rows) over its
     /// unknowns (nonlinear by differences, albedos analytic), one column each, with what each
     /// column is: (0 height | 1 psi | 2 kd | 3 ks, channel).
-    pub(super) fn jacobian(&self, g: &Globals, v: &TexelValues) -> (Vec<Vec<f64>>, Vec<(u8, usize)>) {
+    pub(super) fn jacobian(
+        &self,
+        g: &Globals,
+        v: &TexelValues,
+    ) -> (Vec<Vec<f64>>, Vec<(u8, usize)>) {
         let cols = self.columns(g, v.height, v.psi);
         let r0 = self.residuals(g, &cols, v);
         let mut jcols: Vec<Vec<f64>> = Vec::new();
@@ -142,7 +146,11 @@ pub(super) fn map_inflation(
 /// Widen the global records' standard errors by the square root of `inflation` (per column of
 /// the full parameter vector, as [`map_inflation`] gives it); a warning when any grows more than
 /// twofold.
-pub(super) fn inflate_records(outcome: &mut FitOutcome, set: &ParamSet, inflation: &[f64]) -> Option<String> {
+pub(super) fn inflate_records(
+    outcome: &mut FitOutcome,
+    set: &ParamSet,
+    inflation: &[f64],
+) -> Option<String> {
     let mut col = 0;
     let mut worst: (f64, String) = (1.0, String::new());
     let mut widen = |r: &mut crate::fit::ParamRecord, c: usize, f: f64| {
