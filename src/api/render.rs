@@ -187,7 +187,7 @@ pub fn object(name: &str, tangents: &str, params: &ModelParams) -> Result<Object
 
 /// The maps directory: --maps, else the one a `fit --maps` result names (relative to the
 /// result file, then to the working directory), with a warning when it cannot be found.
-fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Option<PathBuf>> {
+pub fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Option<PathBuf>> {
     if let Some(d) = given {
         return Ok(Some(d.to_path_buf()));
     }
