@@ -16,6 +16,7 @@ pub mod numerics;
 pub mod params;
 pub mod poulin_fournier;
 pub mod reference;
+pub mod sampling;
 pub mod topology;
 pub mod varying_topology;
 pub mod ward;
