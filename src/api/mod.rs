@@ -5,6 +5,7 @@
 pub mod eval;
 pub mod export;
 pub mod fit;
+pub mod material;
 pub mod render;
 pub mod score;
 pub mod tiles;

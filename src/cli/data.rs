@@ -1,7 +1,7 @@
 //! Loading flags shared by every command that reads measurements.
 
 use crate::load::{capture::Subsample, gonio::GonioOptions, rgl::MeasuredOptions, LoadOptions};
-use anyhow::{bail, Result};
+use anyhow::Result;
 use clap::Args;
 
 #[derive(Debug, Args, Clone)]
@@ -36,22 +36,14 @@ pub struct LoadArgs {
 impl LoadArgs {
     /// Loading options; `stride` and `fraction` fall back to the given defaults (a config's).
     pub fn options_with(&self, stride: usize, fraction: f64) -> Result<LoadOptions> {
-        let stride = self.stride.unwrap_or(stride);
-        let fraction = self.fraction.unwrap_or(fraction);
-        if stride == 0 {
-            bail!("--stride must be at least 1");
-        }
-        if !(fraction > 0.0 && fraction <= 1.0) {
-            bail!("--fraction must lie in (0, 1], got {fraction}");
-        }
-        Ok(LoadOptions {
+        LoadOptions {
             gonio: GonioOptions {
                 skip_bad_rows: self.skip_bad_rows,
                 small_angles_ok: self.small_angles_ok,
             },
             subsample: Subsample {
-                stride,
-                fraction,
+                stride: self.stride.unwrap_or(stride),
+                fraction: self.fraction.unwrap_or(fraction),
                 seed: self.subsample_seed,
             },
             measured: MeasuredOptions {
@@ -59,7 +51,8 @@ impl LoadArgs {
                 seed: self.direction_seed,
                 max_theta_deg: self.max_theta,
             },
-        })
+        }
+        .checked()
     }
 
     pub fn options(&self) -> Result<LoadOptions> {

@@ -374,3 +374,52 @@ mod tests {
         assert!(t.keeps(0, 8, 4) && !t.keeps(0, 8, 5));
     }
 }
+
+/// A capture's geometry as JSON, for renderers outside fibrefit (the Python package's Mitsuba
+/// scenes): the swatch (`size_mm`, `fibre_azimuth_deg`), and per image its file (absolute),
+/// `width` and `height` in pixels (read from the file's header), `exposure`, `light` and
+/// `camera` as the capture TOML gives them (units: mm, degrees; a point light's intensity in
+/// the capture's units with r in metres).
+pub fn geometry_json(path: &Path) -> Result<String> {
+    let desc = CaptureFile::load(path)?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut images = Vec::new();
+    for spec in &desc.images {
+        let file = resolve(base, &spec.file);
+        let img = super::image_io::read(&file, spec.encoding, spec.saturation)?;
+        let mut v = serde_json::to_value(spec)?;
+        v["file"] = serde_json::json!(std::path::absolute(&file)?.display().to_string());
+        v["width"] = serde_json::json!(img.width);
+        v["height"] = serde_json::json!(img.height);
+        v["channels"] = serde_json::json!(img.channels);
+        images.push(v);
+    }
+    let mut swatch = serde_json::to_value(&desc.swatch)?;
+    swatch["fibre_azimuth_deg"] = serde_json::json!(desc.swatch.fibre_azimuth_deg);
+    Ok(serde_json::to_string(&serde_json::json!({
+        "capture": std::path::absolute(path)?.display().to_string(),
+        "swatch": swatch,
+        "images": images,
+    }))?)
+}
+
+/// Image `index` of a capture as the fit reads it: linear values times the image's exposure
+/// (radiance per unit irradiance), channels interleaved, row 0 at the top; with its width,
+/// height and channel count, and per pixel whether it is saturated.
+pub fn radiance_image(path: &Path, index: usize) -> Result<LinearImage> {
+    let desc = CaptureFile::load(path)?;
+    let spec = desc.images.get(index).ok_or_else(|| {
+        anyhow!(
+            "{}: image {index} asked for, but the capture has {} images",
+            path.display(),
+            desc.images.len()
+        )
+    })?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut img =
+        super::image_io::read(&resolve(base, &spec.file), spec.encoding, spec.saturation)?;
+    for x in &mut img.data {
+        *x *= spec.exposure as f32;
+    }
+    Ok(img)
+}

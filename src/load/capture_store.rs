@@ -478,3 +478,47 @@ fn load_unit_map(
     }
     Ok(Some(m))
 }
+
+/// The per-texel fields a capture's swatch gives (registered to its images), for rendering it:
+/// the fibre azimuth psi in degrees (from `fibre_azimuth_map`, or `tangent_map` as
+/// -90 + 180 m) and the height H in fibre radii (`height_map`); `None` where it gives none.
+pub struct SwatchFields {
+    pub psi_deg: Option<LinearImage>,
+    pub height: Option<LinearImage>,
+}
+
+/// [`SwatchFields`] of the capture TOML at `path`, checked as [`CaptureStore::load`] checks
+/// them.
+pub fn swatch_fields(path: &Path) -> Result<SwatchFields> {
+    let desc = CaptureFile::load(path)?;
+    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
+    let first = read_image(&base, &desc.images[0])?;
+    let size = (first.width, first.height);
+    let height = load_unit_map(
+        &base,
+        &desc.swatch.height_map,
+        "height map (fibre radii)",
+        (0.0, 20.0),
+        size,
+    )?;
+    let mut psi_deg = load_unit_map(
+        &base,
+        &desc.swatch.fibre_azimuth_map,
+        "fibre azimuth map (degrees)",
+        (-90.0, 90.0),
+        size,
+    )?;
+    if let (None, Some(p)) = (&psi_deg, &desc.swatch.tangent_map) {
+        let full = resolve(&base, p);
+        let m = TopologyMap::load_as(&full, "tangent map")?;
+        check_size("tangent map", &full, (m.width, m.height), size)?;
+        psi_deg = Some(LinearImage {
+            width: m.width,
+            height: m.height,
+            channels: 1,
+            data: m.values.iter().map(|&v| -90.0 + 180.0 * v).collect(),
+            saturated: vec![false; m.width * m.height],
+        });
+    }
+    Ok(SwatchFields { psi_deg, height })
+}

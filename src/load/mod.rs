@@ -29,6 +29,20 @@ pub struct LoadOptions {
     pub measured: rgl::MeasuredOptions,
 }
 
+impl LoadOptions {
+    /// The options, refused when a value is out of range (named as the command line's flag).
+    pub fn checked(self) -> Result<Self> {
+        if self.subsample.stride == 0 {
+            bail!("--stride must be at least 1");
+        }
+        let f = self.subsample.fraction;
+        if !(f > 0.0 && f <= 1.0) {
+            bail!("--fraction must lie in (0, 1], got {f}");
+        }
+        Ok(self)
+    }
+}
+
 /// Every file loading `path` reads: the file itself and, for a capture, its images and maps
 /// (so that no output of the run can replace one of them). Unreadable descriptions give just
 /// the file; loading then reports the problem.

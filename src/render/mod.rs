@@ -18,7 +18,7 @@ pub mod scene;
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{FibreFrame, Vec3};
 use crate::model::topology::{max_height, TopologyMap};
-use crate::model::{Albedos, DirectionPair, ShadingModel};
+use crate::model::{Albedos, Basis, DirectionPair, ShadingModel};
 use objects::{Object, Ray};
 use rayon::prelude::*;
 
@@ -229,37 +229,86 @@ impl Material<'_> {
         }
     }
 
-    /// Radiance per channel towards `v` at a hit under `lights`.
-    pub fn radiance(&self, hit: &objects::Hit, v: &Vec3, lights: &[Light]) -> [f64; 3] {
+    /// What shades a hit: its fibre frame (the texel maps' azimuth applied), albedos and height.
+    pub fn point(&self, hit: &objects::Hit) -> ShadingPoint {
         let hit = &self.mapped(hit);
-        let albedos = self.albedos_at(hit);
         let n = hit.normal;
         let t = hit.tangent;
-        let b = n.cross(&t);
-        let local = |d: &Vec3| Vec3::new(d.dot(&t), d.dot(&b), d.dot(&n));
-        let height = self.height_at(hit);
-        let frame = FibreFrame::from_azimuth(0.0);
+        ShadingPoint {
+            t,
+            b: n.cross(&t),
+            n,
+            albedos: self.albedos_at(hit),
+            height: self.height_at(hit),
+            ward_alphas: self.ward_curvature.zip(hit.curvature).map(|(f, [k1, k2])| {
+                let alpha = |k: f64| (f * k).clamp(0.01, 1.0);
+                (alpha(k1), alpha(k2))
+            }),
+        }
+    }
+
+    /// The basis at a shading point for a pair in its fibre frame.
+    pub fn basis(&self, sp: &ShadingPoint, pair: &DirectionPair) -> Basis {
+        match (sp.height, sp.ward_alphas) {
+            (_, Some((ax, ay))) => crate::model::ward::Ward::new(ax, ay).basis(pair),
+            (Some(h), None) => self.model.basis_at_height(pair, h).unwrap_or_default(),
+            (None, None) => self.model.basis(pair),
+        }
+    }
+
+    /// The BRDF per channel (1/sr) at a shading point for world directions `l`, `v` (zero
+    /// below the horizon).
+    pub fn brdf(&self, sp: &ShadingPoint, l: &Vec3, v: &Vec3) -> [f64; 3] {
+        let pair = DirectionPair::new(&FibreFrame::from_azimuth(0.0), &sp.local(l), &sp.local(v));
+        let basis = self.basis(sp, &pair);
+        let mut out = [0.0; 3];
+        for (c, o) in out.iter_mut().enumerate() {
+            *o = basis.brdf(&sp.albedos, c.min(self.channels - 1));
+        }
+        out
+    }
+
+    /// Radiance per channel towards `v` at a hit under `lights`.
+    pub fn radiance(&self, hit: &objects::Hit, v: &Vec3, lights: &[Light]) -> [f64; 3] {
+        let sp = self.point(hit);
         let mut out = [0.0; 3];
         for light in lights {
             let (l, irradiance) = light.at(&hit.position);
-            let cos_i = n.dot(&l);
+            let cos_i = sp.n.dot(&l);
             if cos_i <= 0.0 {
                 continue;
             }
-            let pair = DirectionPair::new(&frame, &local(&l), &local(v));
-            let basis = match (height, self.ward_curvature.zip(hit.curvature)) {
-                (_, Some((f, [k1, k2]))) => {
-                    let alpha = |k: f64| (f * k).clamp(0.01, 1.0);
-                    crate::model::ward::Ward::new(alpha(k1), alpha(k2)).basis(&pair)
-                }
-                (Some(h), None) => self.model.basis_at_height(&pair, h).unwrap_or_default(),
-                (None, None) => self.model.basis(&pair),
-            };
-            for (c, o) in out.iter_mut().enumerate() {
-                *o += basis.brdf(&albedos, c.min(self.channels - 1)) * irradiance * cos_i;
+            let f = self.brdf(&sp, &l, v);
+            for c in 0..3 {
+                out[c] += f[c] * irradiance * cos_i;
             }
         }
         out
+    }
+}
+
+/// A surface point as the material shades it: the fibre frame (T, B = N x T, N) in world
+/// coordinates, the albedos and the fibre height there, Ward's alphas where they follow the
+/// curvature.
+#[derive(Clone, Copy, Debug)]
+pub struct ShadingPoint {
+    pub t: Vec3,
+    pub b: Vec3,
+    pub n: Vec3,
+    pub albedos: Albedos,
+    pub height: Option<f64>,
+    pub ward_alphas: Option<(f64, f64)>,
+}
+
+impl ShadingPoint {
+    /// A world direction in the point's (T, B, N) components.
+    pub fn local(&self, d: &Vec3) -> Vec3 {
+        Vec3::new(d.dot(&self.t), d.dot(&self.b), d.dot(&self.n))
+    }
+
+    /// A direction given in the point's (T, B, N) components, in world coordinates.
+    pub fn world(&self, d: &Vec3) -> Vec3 {
+        self.t * d.x + self.b * d.y + self.n * d.z
     }
 }
 

@@ -2,9 +2,7 @@
 //! machine has (on CI machines the CPU driver llvmpipe, Debian package `mesa-vulkan-drivers`):
 //! the proof that the shader equals the Rust model, and its measured speed.
 
-use anyhow::{anyhow, bail, Context, Result};
-use std::time::Instant;
-use wgpu::util::DeviceExt;
+use anyhow::Result;
 
 /// One evaluation: unit directions, normal and tangent in any frame; `at` = (height, azimuth
 /// offset) evaluates `fibrefit_*_at`.
@@ -26,6 +24,7 @@ pub struct Output {
 }
 
 /// The compute harness appended to an exported library: reads 4 vec4 per case, writes 2.
+#[cfg_attr(not(feature = "gpu"), allow(dead_code))]
 const HARNESS: &str = "
 @group(0) @binding(0) var<storage, read> fibrefit_check_in: array<vec4<f32>>;
 @group(0) @binding(1) var<storage, read_write> fibrefit_check_out: array<vec4<f32>>;
@@ -72,232 +71,279 @@ fn fibrefit_speed_main(@builtin(global_invocation_id) id: vec3<u32>) {
 
 /// Workgroups per row of the dispatch (65535 is the limit per dimension; 65535 x 64 =
 /// 4194240 invocations per row, as the harness assumes).
+#[cfg_attr(not(feature = "gpu"), allow(dead_code))]
 const GROUPS_PER_ROW: u32 = 65535;
 
-/// A GPU device to run exported shaders on.
-pub struct Gpu {
-    device: wgpu::Device,
-    queue: wgpu::Queue,
-    /// "name (driver, backend, device type)".
-    pub adapter: String,
-}
+#[cfg(feature = "gpu")]
+pub use device::Gpu;
 
-impl Gpu {
-    /// The first Vulkan adapter (a clear error when the machine has none).
-    pub fn new() -> Result<Self> {
-        // the Vulkan loader warns on stderr without it; nothing here needs a runtime directory
-        if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
-            // SAFETY: set before any thread of ours reads the environment (wgpu starts none yet)
-            unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
-        }
-        let instance = wgpu::Instance::new(&wgpu::InstanceDescriptor {
-            backends: wgpu::Backends::VULKAN,
-            ..Default::default()
-        });
-        let adapter = pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
-            power_preference: wgpu::PowerPreference::HighPerformance,
-            ..Default::default()
-        }))
-        .map_err(|e| {
-            anyhow!(
+#[cfg(feature = "gpu")]
+mod device {
+    use super::*;
+    use anyhow::{anyhow, bail, Context};
+    use std::time::Instant;
+    use wgpu::util::DeviceExt;
+
+    /// A GPU device to run exported shaders on.
+    pub struct Gpu {
+        device: wgpu::Device,
+        queue: wgpu::Queue,
+        /// "name (driver, backend, device type)".
+        pub adapter: String,
+    }
+
+    impl Gpu {
+        /// The first Vulkan adapter (a clear error when the machine has none).
+        pub fn new() -> Result<Self> {
+            // the Vulkan loader warns on stderr without it; nothing here needs a runtime directory
+            if std::env::var_os("XDG_RUNTIME_DIR").is_none() {
+                // SAFETY: set before any thread of ours reads the environment (wgpu starts none yet)
+                unsafe { std::env::set_var("XDG_RUNTIME_DIR", std::env::temp_dir()) };
+            }
+            let instance = wgpu::Instance::new(&wgpu::InstanceDescriptor {
+                backends: wgpu::Backends::VULKAN,
+                ..Default::default()
+            });
+            let adapter =
+                pollster::block_on(instance.request_adapter(&wgpu::RequestAdapterOptions {
+                    power_preference: wgpu::PowerPreference::HighPerformance,
+                    ..Default::default()
+                }))
+                .map_err(|e| {
+                    anyhow!(
                 "no GPU adapter: wgpu found no Vulkan device ({e}). On Debian/Ubuntu the CPU \
                  driver llvmpipe comes with `apt-get install mesa-vulkan-drivers`"
             )
-        })?;
-        let info = adapter.get_info();
-        let name = format!(
-            "{} ({} {}, {:?}, {:?})",
-            info.name, info.driver, info.driver_info, info.backend, info.device_type
-        );
-        let limits = wgpu::Limits {
-            max_storage_buffer_binding_size: adapter.limits().max_storage_buffer_binding_size,
-            max_buffer_size: adapter.limits().max_buffer_size,
-            ..wgpu::Limits::default()
-        };
-        let (device, queue) = pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
-            label: Some("fibrefit"),
-            required_limits: limits,
-            ..Default::default()
-        }))
-        .with_context(|| format!("cannot open the GPU device {name}"))?;
-        Ok(Self {
-            device,
-            queue,
-            adapter: name,
-        })
-    }
-
-    fn pipeline(&self, wgsl: &str, entry: &str) -> Result<wgpu::ComputePipeline> {
-        let src = format!("{wgsl}{HARNESS}");
-        super::validate(&src)?;
-        self.device.push_error_scope(wgpu::ErrorFilter::Validation);
-        let module = self
-            .device
-            .create_shader_module(wgpu::ShaderModuleDescriptor {
-                label: Some("fibrefit export"),
-                source: wgpu::ShaderSource::Wgsl(src.into()),
-            });
-        let pipeline = self
-            .device
-            .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
-                label: Some("fibrefit check"),
-                layout: None,
-                module: &module,
-                entry_point: Some(entry),
-                compilation_options: Default::default(),
-                cache: None,
-            });
-        if let Some(e) = pollster::block_on(self.device.pop_error_scope()) {
-            bail!("the GPU driver rejected the shader: {e}");
-        }
-        Ok(pipeline)
-    }
-
-    fn input(cases: &[Case]) -> Vec<[f32; 4]> {
-        let mut data = Vec::with_capacity(4 * cases.len());
-        for c in cases {
-            let (h, off, flag) = match c.at {
-                Some((h, o)) => (h, o, 1.0),
-                None => (0.0, 0.0, 0.0),
+                })?;
+            let info = adapter.get_info();
+            let name = format!(
+                "{} ({} {}, {:?}, {:?})",
+                info.name, info.driver, info.driver_info, info.backend, info.device_type
+            );
+            let limits = wgpu::Limits {
+                max_storage_buffer_binding_size: adapter.limits().max_storage_buffer_binding_size,
+                max_buffer_size: adapter.limits().max_buffer_size,
+                ..wgpu::Limits::default()
             };
-            data.push([c.l[0], c.l[1], c.l[2], h]);
-            data.push([c.v[0], c.v[1], c.v[2], off]);
-            data.push([c.n[0], c.n[1], c.n[2], flag]);
-            data.push([c.t[0], c.t[1], c.t[2], 0.0]);
+            let (device, queue) =
+                pollster::block_on(adapter.request_device(&wgpu::DeviceDescriptor {
+                    label: Some("fibrefit"),
+                    required_limits: limits,
+                    ..Default::default()
+                }))
+                .with_context(|| format!("cannot open the GPU device {name}"))?;
+            Ok(Self {
+                device,
+                queue,
+                adapter: name,
+            })
         }
-        data
-    }
 
-    /// Run `entry` of the harness over `cases`; returns the output buffer and the time from
-    /// submission to completion (seconds).
-    fn dispatch(
-        &self,
-        wgsl: &str,
-        entry: &str,
-        cases: &[Case],
-        uniform: Option<&[u8]>,
-    ) -> Result<(Vec<[f32; 4]>, f64)> {
-        if cases.is_empty() {
-            return Ok((vec![], 0.0));
+        fn pipeline(&self, wgsl: &str, entry: &str) -> Result<wgpu::ComputePipeline> {
+            let src = format!("{wgsl}{HARNESS}");
+            crate::export::shader::validate(&src)?;
+            self.device.push_error_scope(wgpu::ErrorFilter::Validation);
+            let module = self
+                .device
+                .create_shader_module(wgpu::ShaderModuleDescriptor {
+                    label: Some("fibrefit export"),
+                    source: wgpu::ShaderSource::Wgsl(src.into()),
+                });
+            let pipeline = self
+                .device
+                .create_compute_pipeline(&wgpu::ComputePipelineDescriptor {
+                    label: Some("fibrefit check"),
+                    layout: None,
+                    module: &module,
+                    entry_point: Some(entry),
+                    compilation_options: Default::default(),
+                    cache: None,
+                });
+            if let Some(e) = pollster::block_on(self.device.pop_error_scope()) {
+                bail!("the GPU driver rejected the shader: {e}");
+            }
+            Ok(pipeline)
         }
-        let pipeline = self.pipeline(wgsl, entry)?;
-        let input = Self::input(cases);
-        let inbuf = self
-            .device
-            .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                label: Some("cases"),
-                contents: bytemuck::cast_slice(&input),
-                usage: wgpu::BufferUsages::STORAGE,
-            });
-        let out_bytes = (cases.len() * 2 * 16) as u64;
-        let outbuf = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("results"),
-            size: out_bytes,
-            usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
-            mapped_at_creation: false,
-        });
-        let read = self.device.create_buffer(&wgpu::BufferDescriptor {
-            label: Some("readback"),
-            size: out_bytes,
-            usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
-            mapped_at_creation: false,
-        });
-        let ubuf = uniform.map(|bytes| {
-            self.device
+
+        fn input(cases: &[Case]) -> Vec<[f32; 4]> {
+            let mut data = Vec::with_capacity(4 * cases.len());
+            for c in cases {
+                let (h, off, flag) = match c.at {
+                    Some((h, o)) => (h, o, 1.0),
+                    None => (0.0, 0.0, 0.0),
+                };
+                data.push([c.l[0], c.l[1], c.l[2], h]);
+                data.push([c.v[0], c.v[1], c.v[2], off]);
+                data.push([c.n[0], c.n[1], c.n[2], flag]);
+                data.push([c.t[0], c.t[1], c.t[2], 0.0]);
+            }
+            data
+        }
+
+        /// Run `entry` of the harness over `cases`; returns the output buffer and the time from
+        /// submission to completion (seconds).
+        fn dispatch(
+            &self,
+            wgsl: &str,
+            entry: &str,
+            cases: &[Case],
+            uniform: Option<&[u8]>,
+        ) -> Result<(Vec<[f32; 4]>, f64)> {
+            if cases.is_empty() {
+                return Ok((vec![], 0.0));
+            }
+            let pipeline = self.pipeline(wgsl, entry)?;
+            let input = Self::input(cases);
+            let inbuf = self
+                .device
                 .create_buffer_init(&wgpu::util::BufferInitDescriptor {
-                    label: Some("parameters"),
-                    contents: bytes,
-                    usage: wgpu::BufferUsages::UNIFORM,
-                })
-        });
-        let mut entries = vec![
-            wgpu::BindGroupEntry {
-                binding: 0,
-                resource: inbuf.as_entire_binding(),
-            },
-            wgpu::BindGroupEntry {
-                binding: 1,
-                resource: outbuf.as_entire_binding(),
-            },
-        ];
-        if let Some(u) = &ubuf {
-            entries.push(wgpu::BindGroupEntry {
-                binding: 2,
-                resource: u.as_entire_binding(),
+                    label: Some("cases"),
+                    contents: bytemuck::cast_slice(&input),
+                    usage: wgpu::BufferUsages::STORAGE,
+                });
+            let out_bytes = (cases.len() * 2 * 16) as u64;
+            let outbuf = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("results"),
+                size: out_bytes,
+                usage: wgpu::BufferUsages::STORAGE | wgpu::BufferUsages::COPY_SRC,
+                mapped_at_creation: false,
             });
+            let read = self.device.create_buffer(&wgpu::BufferDescriptor {
+                label: Some("readback"),
+                size: out_bytes,
+                usage: wgpu::BufferUsages::MAP_READ | wgpu::BufferUsages::COPY_DST,
+                mapped_at_creation: false,
+            });
+            let ubuf = uniform.map(|bytes| {
+                self.device
+                    .create_buffer_init(&wgpu::util::BufferInitDescriptor {
+                        label: Some("parameters"),
+                        contents: bytes,
+                        usage: wgpu::BufferUsages::UNIFORM,
+                    })
+            });
+            let mut entries = vec![
+                wgpu::BindGroupEntry {
+                    binding: 0,
+                    resource: inbuf.as_entire_binding(),
+                },
+                wgpu::BindGroupEntry {
+                    binding: 1,
+                    resource: outbuf.as_entire_binding(),
+                },
+            ];
+            if let Some(u) = &ubuf {
+                entries.push(wgpu::BindGroupEntry {
+                    binding: 2,
+                    resource: u.as_entire_binding(),
+                });
+            }
+            let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
+                label: None,
+                layout: &pipeline.get_bind_group_layout(0),
+                entries: &entries,
+            });
+            let groups = cases.len().div_ceil(64) as u32;
+            let (gx, gy) = if groups <= GROUPS_PER_ROW {
+                (groups, 1)
+            } else {
+                (GROUPS_PER_ROW, groups.div_ceil(GROUPS_PER_ROW))
+            };
+            let mut enc = self.device.create_command_encoder(&Default::default());
+            {
+                let mut pass = enc.begin_compute_pass(&Default::default());
+                pass.set_pipeline(&pipeline);
+                pass.set_bind_group(0, &group, &[]);
+                pass.dispatch_workgroups(gx, gy, 1);
+            }
+            enc.copy_buffer_to_buffer(&outbuf, 0, &read, 0, out_bytes);
+            let start = Instant::now();
+            self.queue.submit([enc.finish()]);
+            let slice = read.slice(..);
+            let (tx, rx) = std::sync::mpsc::channel();
+            slice.map_async(wgpu::MapMode::Read, move |r| {
+                tx.send(r).ok();
+            });
+            self.device
+                .poll(wgpu::PollType::Wait)
+                .map_err(|e| anyhow!("the GPU did not finish: {e}"))?;
+            rx.recv()
+                .map_err(|_| anyhow!("the GPU readback was dropped"))?
+                .map_err(|e| anyhow!("cannot read the GPU results back: {e}"))?;
+            let seconds = start.elapsed().as_secs_f64();
+            let out: Vec<[f32; 4]> = bytemuck::cast_slice(&slice.get_mapped_range()).to_vec();
+            read.unmap();
+            Ok((out, seconds))
         }
-        let group = self.device.create_bind_group(&wgpu::BindGroupDescriptor {
-            label: None,
-            layout: &pipeline.get_bind_group_layout(0),
-            entries: &entries,
-        });
-        let groups = cases.len().div_ceil(64) as u32;
-        let (gx, gy) = if groups <= GROUPS_PER_ROW {
-            (groups, 1)
-        } else {
-            (GROUPS_PER_ROW, groups.div_ceil(GROUPS_PER_ROW))
-        };
-        let mut enc = self.device.create_command_encoder(&Default::default());
-        {
-            let mut pass = enc.begin_compute_pass(&Default::default());
-            pass.set_pipeline(&pipeline);
-            pass.set_bind_group(0, &group, &[]);
-            pass.dispatch_workgroups(gx, gy, 1);
+
+        /// `fibrefit_brdf` and `fibrefit_basis` (or the `_at` forms) of an exported WGSL library at
+        /// each case.
+        pub fn evaluate(&self, wgsl: &str, cases: &[Case]) -> Result<Vec<Output>> {
+            self.evaluate_with_uniform(wgsl, cases, None)
         }
-        enc.copy_buffer_to_buffer(&outbuf, 0, &read, 0, out_bytes);
-        let start = Instant::now();
-        self.queue.submit([enc.finish()]);
-        let slice = read.slice(..);
-        let (tx, rx) = std::sync::mpsc::channel();
-        slice.map_async(wgpu::MapMode::Read, move |r| {
-            tx.send(r).ok();
-        });
-        self.device
-            .poll(wgpu::PollType::Wait)
-            .map_err(|e| anyhow!("the GPU did not finish: {e}"))?;
-        rx.recv()
-            .map_err(|_| anyhow!("the GPU readback was dropped"))?
-            .map_err(|e| anyhow!("cannot read the GPU results back: {e}"))?;
-        let seconds = start.elapsed().as_secs_f64();
-        let out: Vec<[f32; 4]> = bytemuck::cast_slice(&slice.get_mapped_range()).to_vec();
-        read.unmap();
-        Ok((out, seconds))
+
+        /// [`Gpu::evaluate`] with `uniform` bound at group 0, binding 2 (a library whose parameters
+        /// come from a `var<uniform>` it declares there).
+        pub fn evaluate_with_uniform(
+            &self,
+            wgsl: &str,
+            cases: &[Case],
+            uniform: Option<&[u8]>,
+        ) -> Result<Vec<Output>> {
+            let (out, _) = self.dispatch(wgsl, "fibrefit_check_main", cases, uniform)?;
+            Ok(out
+                .chunks_exact(2)
+                .map(|c| Output {
+                    brdf: [c[0][0], c[0][1], c[0][2]],
+                    basis: c[1],
+                })
+                .collect())
+        }
+
+        /// Seconds for `fibrefit_brdf` at every case, one dispatch (submission to results mapped),
+        /// the median of `repeats`; the pipeline is built once beforehand.
+        pub fn time_brdf(&self, wgsl: &str, cases: &[Case], repeats: usize) -> Result<f64> {
+            let mut times = Vec::new();
+            // the first run compiles the pipeline in the driver; not counted
+            self.dispatch(wgsl, "fibrefit_speed_main", cases, None)?;
+            for _ in 0..repeats.max(1) {
+                times.push(self.dispatch(wgsl, "fibrefit_speed_main", cases, None)?.1);
+            }
+            times.sort_by(f64::total_cmp);
+            Ok(times[times.len() / 2])
+        }
+    }
+}
+
+/// Without the `gpu` feature (the Python package's build): no device; [`Gpu::new`] says so.
+#[cfg(not(feature = "gpu"))]
+pub struct Gpu {
+    pub adapter: String,
+    never: std::convert::Infallible,
+}
+
+#[cfg(not(feature = "gpu"))]
+impl Gpu {
+    pub fn new() -> Result<Self> {
+        anyhow::bail!(
+            "this fibrefit was built without its `gpu` feature (wgpu), so it cannot run shaders on a GPU driver; the command-line tool has it (cargo build --release)"
+        )
     }
 
-    /// `fibrefit_brdf` and `fibrefit_basis` (or the `_at` forms) of an exported WGSL library at
-    /// each case.
-    pub fn evaluate(&self, wgsl: &str, cases: &[Case]) -> Result<Vec<Output>> {
-        self.evaluate_with_uniform(wgsl, cases, None)
+    pub fn evaluate(&self, _wgsl: &str, _cases: &[Case]) -> Result<Vec<Output>> {
+        match self.never {}
     }
 
-    /// [`Gpu::evaluate`] with `uniform` bound at group 0, binding 2 (a library whose parameters
-    /// come from a `var<uniform>` it declares there).
     pub fn evaluate_with_uniform(
         &self,
-        wgsl: &str,
-        cases: &[Case],
-        uniform: Option<&[u8]>,
+        _wgsl: &str,
+        _cases: &[Case],
+        _uniform: Option<&[u8]>,
     ) -> Result<Vec<Output>> {
-        let (out, _) = self.dispatch(wgsl, "fibrefit_check_main", cases, uniform)?;
-        Ok(out
-            .chunks_exact(2)
-            .map(|c| Output {
-                brdf: [c[0][0], c[0][1], c[0][2]],
-                basis: c[1],
-            })
-            .collect())
+        match self.never {}
     }
 
-    /// Seconds for `fibrefit_brdf` at every case, one dispatch (submission to results mapped),
-    /// the median of `repeats`; the pipeline is built once beforehand.
-    pub fn time_brdf(&self, wgsl: &str, cases: &[Case], repeats: usize) -> Result<f64> {
-        let mut times = Vec::new();
-        // the first run compiles the pipeline in the driver; not counted
-        self.dispatch(wgsl, "fibrefit_speed_main", cases, None)?;
-        for _ in 0..repeats.max(1) {
-            times.push(self.dispatch(wgsl, "fibrefit_speed_main", cases, None)?.1);
-        }
-        times.sort_by(f64::total_cmp);
-        Ok(times[times.len() / 2])
+    pub fn time_brdf(&self, _wgsl: &str, _cases: &[Case], _repeats: usize) -> Result<f64> {
+        match self.never {}
     }
 }

@@ -1,0 +1,310 @@
+"""fibrefit: fit fibre reflectance models to measurements, and use the fits in renderers.
+
+The model, the fitter and the loaders are fibrefit's Rust library (the same code as the
+``fibrefit`` command line); this package converts numpy arrays and Python values to and from it.
+
+- ``load(result_json, maps=None) -> Material``: a fitted material. ``Material.eval(l, v, uv)``
+  gives the BRDF (1/sr) as an (N, C) array, ``Material.sample(v, u, uv)`` importance-samples light
+  directions ``(l, weight, pdf)``, ``Material.pdf(v, l, uv)`` their density (1/sr).
+- ``fit(data, config=None, model=None, **options) -> Result``: a fit, as ``fibrefit fit``.
+- ``load_data(path, **options) -> dict``: a measurement's samples as numpy arrays.
+- ``fibrefit.mitsuba``: a Mitsuba 3 BSDF plugin backed by ``Material`` and the Mitsuba scene of a
+  capture image.
+
+Frames and units: directions are unit vectors in the swatch frame (z the macro normal, x the
+swatch's x axis, as the command line's angles); ``l`` points towards the light and ``v``
+towards the viewer, both away from the surface. Texture coordinates ``uv`` in [0, 1]^2 span a
+result's per-texel maps, v up the image. Every error is a ``FibrefitError`` (a ``ValueError``)
+with the message the command line prints.
+"""
+
+from __future__ import annotations
+
+import json as _json
+import os as _os
+from dataclasses import dataclass as _dataclass, field as _field
+from typing import Any, Dict, List, Optional, Tuple, Union
+
+import numpy as np
+
+from . import _native
+from ._native import FibrefitError
+
+__all__ = [
+    "FibrefitError",
+    "Material",
+    "Parameter",
+    "Result",
+    "fit",
+    "load",
+    "load_data",
+    "__version__",
+]
+
+__version__ = _native.version()
+
+PathLike = Union[str, "_os.PathLike[str]"]
+
+
+def _f64(name: str, a: Any, width: int) -> np.ndarray:
+    """`a` as a C-contiguous float64 (N, width) array; one row is accepted as (width,)."""
+    try:
+        arr = np.ascontiguousarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise FibrefitError(f"{name}: not an array of numbers ({e})") from None
+    if arr.ndim == 1 and arr.shape[0] == width:
+        arr = arr.reshape(1, width)
+    if arr.ndim != 2 or arr.shape[1] != width:
+        raise FibrefitError(f"{name}: expected an (N, {width}) array, got shape {arr.shape}")
+    return arr
+
+
+class Material:
+    """A fitted material: BRDF, importance sampler and pdf (see the module docs for frames).
+
+    Load one with :func:`load` or :meth:`Result.material`. Every method takes arrays of N rows,
+    runs without the GIL and in parallel.
+    """
+
+    def __init__(self, native: "_native.Material"):
+        self._m = native
+
+    def eval(self, l: Any, v: Any, uv: Any = None) -> np.ndarray:
+        """The BRDF f(l, v) in 1/sr: an (N, C) array (C = 3 for RGB results, 1 for grey).
+
+        ``l``, ``v``: (N, 3) unit vectors (light, view); ``uv``: (N, 2) texture coordinates
+        into the maps (None: the global parameters). Zero where either direction is at or
+        below the horizon.
+        """
+        return self._m.eval(_f64("l", l, 3), _f64("v", v, 3), None if uv is None else _f64("uv", uv, 2))
+
+    def sample(self, v: Any, u: Any, uv: Any = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Importance-sample light directions for views ``v`` from uniforms ``u`` ((N, 2) in [0, 1)).
+
+        Returns ``(l, weight, pdf)``: ``l`` (N, 3) unit vectors, ``weight`` (N, C) =
+        f(l, v) cos(theta_l) / pdf, ``pdf`` (N,) in 1/sr (solid angle). A failed sample (the view
+        or the sampled direction below the horizon) has l = 0, weight 0, pdf 0.
+        """
+        return self._m.sample(_f64("v", v, 3), _f64("u", u, 2), None if uv is None else _f64("uv", uv, 2))
+
+    def pdf(self, v: Any, l: Any, uv: Any = None) -> np.ndarray:
+        """The density (1/sr) with which :meth:`sample` picks ``l`` given ``v``: an (N,) array."""
+        return self._m.pdf(_f64("v", v, 3), _f64("l", l, 3), None if uv is None else _f64("uv", uv, 2))
+
+    def render_capture(self, capture_toml: PathLike, image_index: int) -> np.ndarray:
+        """Image ``image_index`` of a capture as this material renders it, noise-free: an
+        (H, W, C) float32 array of radiance per unit irradiance (exposure applied, as
+        ``fibrefit.mitsuba.captured_image``), the maps looked up at each pixel's texel."""
+        return self._m.render_capture(_os.fspath(capture_toml), int(image_index))
+
+    @property
+    def model(self) -> str:
+        """The rung's id, e.g. ``"varying-topology"``."""
+        return self._m.model
+
+    @property
+    def channels(self) -> int:
+        """3 for RGB results, 1 for grey."""
+        return self._m.channels
+
+    @property
+    def has_maps(self) -> bool:
+        """Whether per-texel maps are looked up at ``uv``."""
+        return self._m.has_maps
+
+    @property
+    def maps_size(self) -> Optional[Tuple[int, int]]:
+        """(width, height) of the maps in texels, or None."""
+        return self._m.maps_size
+
+    @property
+    def fibre_azimuth_deg(self) -> float:
+        """The global fibre direction, degrees from x towards y."""
+        return self._m.fibre_azimuth_deg
+
+    @property
+    def source(self) -> str:
+        return self._m.source
+
+    @property
+    def warnings(self) -> List[str]:
+        """Notes made while loading (parameters the rung does not use, maps not found)."""
+        return list(self._m.warnings)
+
+    def __repr__(self) -> str:
+        return repr(self._m)
+
+
+def load(result_json: PathLike, maps: Optional[PathLike] = None, capture: Optional[PathLike] = None) -> Material:
+    """The material of a ``fibrefit fit`` result (or a parameter file).
+
+    ``maps``: the directory of per-texel maps (``fit --maps``); default: the one the result
+    names, looked for beside it. ``capture``: a capture TOML whose per-texel fields (its
+    tangent or fibre-azimuth map, its height map) fill in where the result has no maps, so the
+    capture renders as it was fitted.
+    """
+    return Material(
+        _native.load(
+            _os.fspath(result_json),
+            None if maps is None else _os.fspath(maps),
+            None if capture is None else _os.fspath(capture),
+        )
+    )
+
+
+_LOAD_OPTIONS = (
+    "stride",
+    "fraction",
+    "subsample_seed",
+    "directions",
+    "direction_seed",
+    "max_theta",
+    "skip_bad_rows",
+    "small_angles_ok",
+)
+
+
+def _load_options(options: Dict[str, Any]) -> Dict[str, Any]:
+    unknown = sorted(set(options) - set(_LOAD_OPTIONS))
+    if unknown:
+        raise FibrefitError(
+            f"unknown option(s) {', '.join(unknown)}; expected one of: {', '.join(_LOAD_OPTIONS)}"
+        )
+    return dict(options)
+
+
+def load_data(path: PathLike, **options: Any) -> Dict[str, Any]:
+    """The samples of a goniometric CSV, capture TOML or measured-BRDF file as numpy arrays.
+
+    Keys: ``l``, ``v`` ((N, 3) unit vectors), ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
+    (degrees), ``value`` ((N, C) BRDF, 1/sr), ``sigma`` ((N, C) or None), ``weight``,
+    ``fibre_azimuth_deg`` (NaN where the file gives none), ``origin`` (CSV line, or
+    (image, x, y) per pixel), ``channels``, ``kind``, ``source``, ``image_size``.
+    Options: ``stride``, ``fraction``, ``subsample_seed`` (captures), ``directions``,
+    ``direction_seed``, ``max_theta`` (measured files), ``skip_bad_rows``, ``small_angles_ok``
+    (CSV), as the command line's flags.
+    """
+    return _native.load_data(_os.fspath(path), _load_options(options))
+
+
+@_dataclass
+class Parameter:
+    """One fitted parameter, in lmfit's vocabulary.
+
+    ``value`` and ``stderr`` are floats, or (3,) arrays for RGB albedos; ``stderr`` is None
+    for fixed parameters. ``correl`` maps other parameters' names to the correlation
+    coefficient with this one.
+    """
+
+    name: str
+    value: Union[float, np.ndarray]
+    stderr: Optional[Union[float, np.ndarray]]
+    min: float
+    max: float
+    vary: bool
+    at_bound: bool
+    correl: Dict[str, float] = _field(default_factory=dict)
+
+
+def _number(x: Any) -> Any:
+    if isinstance(x, list):
+        return np.array(x, dtype=float)
+    return x if x is None else float(x)
+
+
+class Result:
+    """A finished fit (:func:`fit`): ``params``, ``report()``, ``to_json(path)``, ``material()``."""
+
+    def __init__(self, native: "_native.FitResult"):
+        self._r = native
+        self.result: Dict[str, Any] = _json.loads(native.json())
+        corr: Dict[str, Dict[str, float]] = {}
+        for c in self.result.get("correlations", []):
+            corr.setdefault(c["a"], {})[c["b"]] = c["r"]
+            corr.setdefault(c["b"], {})[c["a"]] = c["r"]
+        self.params: Dict[str, Parameter] = {}
+        for name, p in self.result["parameters"].items():
+            fixed = bool(p.get("fixed", False))
+            self.params[name] = Parameter(
+                name=name,
+                value=_number(p["value"]),
+                stderr=None if fixed else _number(p.get("std_error")),
+                min=float(p["min"]),
+                max=float(p["max"]),
+                vary=not fixed,
+                at_bound=bool(p.get("at_bound", False)),
+                correl=corr.get(name, {}),
+            )
+
+    @property
+    def model(self) -> str:
+        """The fitted rung's id (auto's choice for ``model="auto"``)."""
+        return self._r.model
+
+    @property
+    def statistics(self) -> Dict[str, Any]:
+        """RMSE, relative RMSE, reduced chi-square, ... as in the result JSON."""
+        return self.result["statistics"]
+
+    @property
+    def warnings(self) -> List[str]:
+        """What the fit's quality checks and stages found (printed by the CLI)."""
+        return list(self._r.warnings)
+
+    @property
+    def has_maps(self) -> bool:
+        return self._r.has_maps
+
+    def report(self) -> str:
+        """The fit report, as ``fibrefit fit`` prints it (lmfit's layout)."""
+        return self._r.report()
+
+    def to_json(self, path: PathLike, report: Optional[PathLike] = None) -> None:
+        """Write the result JSON (atomically; never over an input), the maps into the directory
+        given to ``fit(maps=...)``, and a report directory when ``report`` is given."""
+        self._r.to_json(_os.fspath(path), None if report is None else _os.fspath(report))
+
+    def material(self) -> Material:
+        """The fitted material (with its maps once :meth:`to_json` has written them)."""
+        return Material(self._r.material())
+
+    def __repr__(self) -> str:
+        s = self.statistics
+        return (
+            f"Result(model={self.model!r}, samples={self.result['data']['samples']}, "
+            f"reduced_chi_square={s.get('reduced_chi_square')}, warnings={len(self.warnings)})"
+        )
+
+
+def fit(
+    data: PathLike,
+    config: Optional[PathLike] = None,
+    model: Optional[str] = None,
+    *,
+    metric: Optional[str] = None,
+    fuzz: bool = False,
+    maps: Optional[PathLike] = None,
+    progress: bool = False,
+    **options: Any,
+) -> Result:
+    """Fit ``data`` (goniometric CSV, capture TOML, RGL ``.bsdf`` or MERL ``.binary``), as
+    ``fibrefit fit`` does.
+
+    ``config``: a fit config TOML (``configs/fit_*.toml``); ``model``: a rung id or ``"auto"``
+    (overrides the config's; needed without a config); ``metric``: ``"linear"``, ``"log"`` or
+    ``"cosine"``; ``fuzz``: add the fuzz layer; ``maps``: a directory for per-texel maps
+    (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr.
+    Further keyword options are loading options (see :func:`load_data`).
+    """
+    return Result(
+        _native.fit(
+            _os.fspath(data),
+            None if config is None else _os.fspath(config),
+            model,
+            metric,
+            fuzz,
+            None if maps is None else _os.fspath(maps),
+            progress,
+            _load_options(options),
+        )
+    )

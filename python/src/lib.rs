@@ -1,0 +1,580 @@
+//! `fibrefit._native`: the Python bindings of fibrefit's library API (`fibrefit::api`). Arrays
+//! in and out as numpy arrays; the work runs with the GIL released, in parallel (rayon). This
+//! layer converts and checks shapes only: the science is in the crate. Every error is a
+//! `fibrefit.FibrefitError` (a `ValueError`) carrying the message the CLI would print.
+
+use fibrefit::api::fit::{self as fit_api, FitRequest, FitRun, FitTargets, Maps};
+use fibrefit::api::material::{Material as MaterialCore, Sampled};
+use fibrefit::export::atomic::Outputs;
+use fibrefit::load::capture::Subsample;
+use fibrefit::load::gonio::GonioOptions;
+use fibrefit::load::rgl::MeasuredOptions;
+use fibrefit::load::samples::{DataKind, Origin};
+use fibrefit::load::LoadOptions;
+use numpy::{
+    IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
+};
+use pyo3::exceptions::PyValueError;
+use pyo3::prelude::*;
+use pyo3::types::PyDict;
+use std::path::{Path, PathBuf};
+
+pyo3::create_exception!(
+    _native,
+    FibrefitError,
+    PyValueError,
+    "An error of fibrefit: bad input, a failed fit or an unwritable output. The message is the one the command line prints."
+);
+
+/// The CLI's rendering of an error (`error: {e:#}` without the prefix).
+fn err(e: anyhow::Error) -> PyErr {
+    FibrefitError::new_err(format!("{e:#}"))
+}
+
+/// An (N, width) float64 array as rows; the error names the argument and the shape.
+fn rows<const W: usize>(a: &PyReadonlyArrayDyn<'_, f64>, name: &str) -> PyResult<Vec<[f64; W]>> {
+    let shape = a.shape();
+    if shape.len() != 2 || shape[1] != W {
+        return Err(FibrefitError::new_err(format!(
+            "{name}: expected an (N, {W}) array, got shape {shape:?}"
+        )));
+    }
+    let view = a.as_array();
+    Ok(view
+        .outer_iter()
+        .map(|r| std::array::from_fn(|i| r[i]))
+        .collect())
+}
+
+fn table<'py, const W: usize>(
+    py: Python<'py>,
+    data: &[[f64; W]],
+    cols: usize,
+) -> PyResult<Bound<'py, PyArray2<f64>>> {
+    let flat: Vec<f64> = data
+        .iter()
+        .flat_map(|r| r[..cols].iter().copied())
+        .collect();
+    flat.into_pyarray(py)
+        .reshape([data.len(), cols])
+        .map_err(|e| FibrefitError::new_err(e.to_string()))
+}
+
+/// A fitted material: the BRDF, an importance sampler and its pdf at directions in the swatch
+/// frame (z the normal, x the swatch's x axis; l towards the light, v towards the viewer), with
+/// the result's per-texel maps looked up at texture coordinates uv in [0, 1]^2.
+#[pyclass(frozen, module = "fibrefit._native")]
+struct Material {
+    inner: MaterialCore,
+    warnings: Vec<String>,
+}
+
+impl Material {
+    fn uv(uv: Option<PyReadonlyArrayDyn<'_, f64>>) -> PyResult<Option<Vec<[f64; 2]>>> {
+        uv.map(|a| rows::<2>(&a, "uv")).transpose()
+    }
+}
+
+#[pymethods]
+impl Material {
+    /// The BRDF (1/sr), an (N, C) array (C = 3 for RGB results, 1 for grey), of the light
+    /// directions `l` and view directions `v`, (N, 3) arrays of unit vectors.
+    #[pyo3(signature = (l, v, uv=None))]
+    fn eval<'py>(
+        &self,
+        py: Python<'py>,
+        l: PyReadonlyArrayDyn<'py, f64>,
+        v: PyReadonlyArrayDyn<'py, f64>,
+        uv: Option<PyReadonlyArrayDyn<'py, f64>>,
+    ) -> PyResult<Bound<'py, PyArray2<f64>>> {
+        let (l, v, uv) = (rows::<3>(&l, "l")?, rows::<3>(&v, "v")?, Self::uv(uv)?);
+        let out = py
+            .detach(|| self.inner.eval_many(&l, &v, uv.as_deref()))
+            .map_err(err)?;
+        table(py, &out, self.inner.channels)
+    }
+
+    /// Sample light directions for the views `v` ((N, 3)) from uniforms `u` ((N, 2) in
+    /// [0, 1)): returns (l (N, 3), weight (N, C) = f cos(theta_l) / pdf, pdf (N,) in 1/sr). A
+    /// failed sample (below the horizon) has l = 0, weight 0, pdf 0.
+    #[pyo3(signature = (v, u, uv=None))]
+    fn sample<'py>(
+        &self,
+        py: Python<'py>,
+        v: PyReadonlyArrayDyn<'py, f64>,
+        u: PyReadonlyArrayDyn<'py, f64>,
+        uv: Option<PyReadonlyArrayDyn<'py, f64>>,
+    ) -> PyResult<(
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray2<f64>>,
+        Bound<'py, PyArray1<f64>>,
+    )> {
+        let (v, u, uv) = (rows::<3>(&v, "v")?, rows::<2>(&u, "u")?, Self::uv(uv)?);
+        let out: Vec<Sampled> = py
+            .detach(|| self.inner.sample_many(&v, &u, uv.as_deref()))
+            .map_err(err)?;
+        let l: Vec<[f64; 3]> = out.iter().map(|s| s.l).collect();
+        let w: Vec<[f64; 3]> = out.iter().map(|s| s.weight).collect();
+        let pdf: Vec<f64> = out.iter().map(|s| s.pdf).collect();
+        Ok((
+            table(py, &l, 3)?,
+            table(py, &w, self.inner.channels)?,
+            pdf.into_pyarray(py),
+        ))
+    }
+
+    /// The sampler's density (1/sr, solid angle) of the light directions `l` given the views
+    /// `v`, an (N,) array.
+    #[pyo3(signature = (v, l, uv=None))]
+    fn pdf<'py>(
+        &self,
+        py: Python<'py>,
+        v: PyReadonlyArrayDyn<'py, f64>,
+        l: PyReadonlyArrayDyn<'py, f64>,
+        uv: Option<PyReadonlyArrayDyn<'py, f64>>,
+    ) -> PyResult<Bound<'py, PyArray1<f64>>> {
+        let (v, l, uv) = (rows::<3>(&v, "v")?, rows::<3>(&l, "l")?, Self::uv(uv)?);
+        let out = py
+            .detach(|| self.inner.pdf_many(&v, &l, uv.as_deref()))
+            .map_err(err)?;
+        Ok(out.into_pyarray(py))
+    }
+
+    /// Image `index` of a capture TOML as this material renders it, noise-free: an (H, W, C)
+    /// float32 array of radiance per unit irradiance (the units of `capture_image`).
+    fn render_capture<'py>(
+        &self,
+        py: Python<'py>,
+        capture: PathBuf,
+        index: usize,
+    ) -> PyResult<Bound<'py, numpy::PyArray3<f32>>> {
+        let img = py
+            .detach(|| self.inner.render_capture(&capture, index))
+            .map_err(err)?;
+        let (w, h, c) = (img.width, img.height, img.channels);
+        img.data
+            .into_pyarray(py)
+            .reshape([h, w, c])
+            .map_err(|e| FibrefitError::new_err(e.to_string()))
+    }
+
+    /// The rung's id (e.g. "varying-topology").
+    #[getter]
+    fn model(&self) -> &'static str {
+        self.inner.model.as_str()
+    }
+
+    /// 3 for RGB results, 1 for grey.
+    #[getter]
+    fn channels(&self) -> usize {
+        self.inner.channels
+    }
+
+    /// Whether per-texel maps are looked up at uv.
+    #[getter]
+    fn has_maps(&self) -> bool {
+        self.inner.has_maps()
+    }
+
+    /// (width, height) of the maps in texels, or None.
+    #[getter]
+    fn maps_size(&self) -> Option<(usize, usize)> {
+        self.inner.maps_size()
+    }
+
+    /// The maps directory used, or None.
+    #[getter]
+    fn maps_dir(&self) -> Option<String> {
+        self.inner
+            .maps_dir
+            .as_ref()
+            .map(|d| d.display().to_string())
+    }
+
+    /// The global fibre direction psi, degrees from x towards y.
+    #[getter]
+    fn fibre_azimuth_deg(&self) -> f64 {
+        self.inner.params.fibre_azimuth.to_degrees()
+    }
+
+    /// The file the material came from.
+    #[getter]
+    fn source(&self) -> String {
+        self.inner.source.display().to_string()
+    }
+
+    /// Notes made while loading (parameters the rung does not use, maps not found).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        self.warnings.clone()
+    }
+
+    fn __repr__(&self) -> String {
+        format!(
+            "Material(model={:?}, channels={}, maps={}, source={:?})",
+            self.inner.model.as_str(),
+            self.inner.channels,
+            self.inner.has_maps(),
+            self.inner.source.display().to_string()
+        )
+    }
+}
+
+/// Load the material of a result JSON (or a parameter file): `maps` a maps directory, else the
+/// one the result names (beside it).
+/// `capture`: a capture TOML whose per-texel fields (tangent or azimuth map, height map) fill
+/// in where the result has no maps (the capture rendered as it was fitted).
+#[pyfunction]
+#[pyo3(signature = (result, maps=None, capture=None))]
+fn load(
+    py: Python<'_>,
+    result: PathBuf,
+    maps: Option<PathBuf>,
+    capture: Option<PathBuf>,
+) -> PyResult<Material> {
+    let (inner, warnings) = py
+        .detach(|| {
+            let (m, w) = MaterialCore::load(&result, maps.as_deref())?;
+            Ok::<_, anyhow::Error>((
+                match &capture {
+                    Some(c) => m.with_capture(c)?,
+                    None => m,
+                },
+                w,
+            ))
+        })
+        .map_err(err)?;
+    Ok(Material { inner, warnings })
+}
+
+fn load_options(o: &Bound<'_, PyDict>) -> PyResult<LoadOptions> {
+    fn get<'py, T: FromPyObjectOwned<'py>>(o: &Bound<'py, PyDict>, k: &str, d: T) -> PyResult<T> {
+        match o.get_item(k)? {
+            Some(v) if !v.is_none() => v.extract::<T>().map_err(|e| {
+                FibrefitError::new_err(format!("option `{k}`: {}", Into::<PyErr>::into(e)))
+            }),
+            _ => Ok(d),
+        }
+    }
+    let m = MeasuredOptions::default();
+    LoadOptions {
+        gonio: GonioOptions {
+            skip_bad_rows: get(o, "skip_bad_rows", false)?,
+            small_angles_ok: get(o, "small_angles_ok", false)?,
+        },
+        subsample: Subsample {
+            stride: get(o, "stride", 1usize)?,
+            fraction: get(o, "fraction", 1.0f64)?,
+            seed: get(o, "subsample_seed", 0u64)?,
+        },
+        measured: MeasuredOptions {
+            directions: get(o, "directions", m.directions)?,
+            seed: get(o, "direction_seed", m.seed)?,
+            max_theta_deg: get(o, "max_theta", m.max_theta_deg)?,
+        },
+    }
+    .checked()
+    .map_err(err)
+}
+
+/// The samples of a goniometric CSV, image capture TOML or measured-BRDF file as numpy arrays:
+/// a dict with `l`, `v` ((N, 3) unit vectors, swatch frame), `theta_i`, `phi_i`, `theta_o`,
+/// `phi_o` (degrees), `value` ((N, C) BRDF in 1/sr), `sigma` ((N, C), or None where the file
+/// gives none), `weight`, `fibre_azimuth_deg` (NaN where the file gives none), `origin` (the
+/// CSV line, or (image, x, y) of a pixel), `channels`, `kind`, `source`, `image_size`.
+/// Options as `fit`'s loading options (stride, fraction, subsample_seed, directions,
+/// direction_seed, max_theta, skip_bad_rows, small_angles_ok).
+#[pyfunction]
+#[pyo3(signature = (path, options))]
+fn load_data<'py>(
+    py: Python<'py>,
+    path: PathBuf,
+    options: Bound<'py, PyDict>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let opts = load_options(&options)?;
+    let s = py
+        .detach(|| fibrefit::load::load_data(&path, &opts))
+        .map_err(err)?;
+    let c = s.channels;
+    let d = PyDict::new(py);
+    let deg = |x: f64| x.to_degrees();
+    let theta = |w: &fibrefit::model::Vec3| deg(w.z.clamp(-1.0, 1.0).acos());
+    let phi = |w: &fibrefit::model::Vec3| {
+        let p = deg(w.y.atan2(w.x));
+        if p < 0.0 {
+            p + 360.0
+        } else {
+            p
+        }
+    };
+    let col = |f: &dyn Fn(&fibrefit::load::samples::Sample) -> f64| -> Vec<f64> {
+        s.samples.iter().map(f).collect()
+    };
+    let l: Vec<[f64; 3]> = s.samples.iter().map(|x| [x.l.x, x.l.y, x.l.z]).collect();
+    let v: Vec<[f64; 3]> = s.samples.iter().map(|x| [x.v.x, x.v.y, x.v.z]).collect();
+    let value: Vec<[f64; 3]> = s.samples.iter().map(|x| x.value).collect();
+    d.set_item("l", table(py, &l, 3)?)?;
+    d.set_item("v", table(py, &v, 3)?)?;
+    d.set_item("theta_i", col(&|x| theta(&x.l)).into_pyarray(py))?;
+    d.set_item("phi_i", col(&|x| phi(&x.l)).into_pyarray(py))?;
+    d.set_item("theta_o", col(&|x| theta(&x.v)).into_pyarray(py))?;
+    d.set_item("phi_o", col(&|x| phi(&x.v)).into_pyarray(py))?;
+    d.set_item("value", table(py, &value, c)?)?;
+    if s.samples.iter().any(|x| x.sigma.is_some()) {
+        let sigma: Vec<[f64; 3]> = s
+            .samples
+            .iter()
+            .map(|x| x.sigma.unwrap_or([f64::NAN; 3]))
+            .collect();
+        d.set_item("sigma", table(py, &sigma, c)?)?;
+    } else {
+        d.set_item("sigma", py.None())?;
+    }
+    d.set_item("weight", col(&|x| x.weight).into_pyarray(py))?;
+    d.set_item(
+        "fibre_azimuth_deg",
+        col(&|x| x.fibre_azimuth.map_or(f64::NAN, deg)).into_pyarray(py),
+    )?;
+    if s.kind == DataKind::Capture {
+        let o: Vec<[f64; 3]> = s
+            .samples
+            .iter()
+            .map(|x| match x.origin {
+                Origin::Pixel { image, x, y } => [image as f64, x as f64, y as f64],
+                Origin::Line(n) => [n as f64, f64::NAN, f64::NAN],
+            })
+            .collect();
+        d.set_item("origin", table(py, &o, 3)?)?;
+    } else {
+        let o: Vec<f64> = s
+            .samples
+            .iter()
+            .map(|x| match x.origin {
+                Origin::Line(n) => n as f64,
+                Origin::Pixel { image, .. } => image as f64,
+            })
+            .collect();
+        d.set_item("origin", o.into_pyarray(py))?;
+    }
+    d.set_item("channels", c)?;
+    d.set_item(
+        "kind",
+        match s.kind {
+            DataKind::Gonio => "goniometric",
+            DataKind::Capture => "image capture",
+            DataKind::Measured => "measured BRDF file",
+        },
+    )?;
+    d.set_item("source", s.source.display().to_string())?;
+    d.set_item("image_size", s.image_size)?;
+    Ok(d)
+}
+
+/// A finished fit (see `fibrefit.fit`).
+#[pyclass(unsendable, module = "fibrefit._native")]
+struct FitResult {
+    run: FitRun,
+    request: FitRequest,
+    config_file: Option<PathBuf>,
+    /// Where `to_json` wrote the result (and so the maps), once it has.
+    written: Option<PathBuf>,
+}
+
+#[pymethods]
+impl FitResult {
+    /// The result (schema fibrefit-result/1) as a JSON string, as `to_json` writes it.
+    fn json(&self) -> PyResult<String> {
+        serde_json::to_string_pretty(&self.run.result)
+            .map_err(|e| FibrefitError::new_err(e.to_string()))
+    }
+
+    /// The fit report (lmfit's layout), as the CLI prints it.
+    fn report(&self) -> String {
+        self.run.report_text.clone()
+    }
+
+    /// Warnings of the fit (quality checks included).
+    #[getter]
+    fn warnings(&self) -> Vec<String> {
+        let mut w = self.run.warnings.clone();
+        for q in &self.run.outcome.quality.warnings {
+            if !w.contains(q) {
+                w.push(q.clone());
+            }
+        }
+        w
+    }
+
+    /// The fitted rung's id.
+    #[getter]
+    fn model(&self) -> &'static str {
+        self.run.model.as_str()
+    }
+
+    /// Whether per-texel maps were recovered (written by `to_json`).
+    #[getter]
+    fn has_maps(&self) -> bool {
+        self.run.maps.is_some()
+    }
+
+    /// Write the result JSON to `path` (atomically; refused if it is an input), with the maps
+    /// into the directory given to `fit(maps=...)` and a report into `report` when given.
+    #[pyo3(signature = (path, report=None))]
+    fn to_json(&mut self, path: PathBuf, report: Option<PathBuf>) -> PyResult<()> {
+        let inputs = fit_api::inputs(&self.request, self.config_file.as_deref());
+        let mut outs = Outputs::new(&inputs);
+        let targets = FitTargets::reserve(&mut outs, &self.request, Some(&path), report.as_deref())
+            .map_err(err)?;
+        self.run.write(&mut outs, &targets).map_err(err)?;
+        outs.commit().map_err(err)?;
+        self.written = Some(path);
+        Ok(())
+    }
+
+    /// The fitted material (`fibrefit.Material`). A maps fit's material carries its maps once
+    /// `to_json` has written them.
+    fn material(&self, py: Python<'_>) -> PyResult<Material> {
+        let maps = match (&self.request.maps, &self.written) {
+            (Maps::Into(dir), Some(_)) => Some(dir.clone()),
+            _ => None,
+        };
+        let source = self
+            .written
+            .clone()
+            .unwrap_or_else(|| PathBuf::from("<fit result>"));
+        let value = serde_json::to_value(&self.run.result)
+            .map_err(|e| FibrefitError::new_err(e.to_string()))?;
+        let (inner, mut warnings) = py
+            .detach(|| MaterialCore::from_result(&value, &source, maps))
+            .map_err(err)?;
+        if self.run.maps.is_some() && self.written.is_none() {
+            warnings.push(
+                "the maps are not written yet: this material has the global parameters only (call to_json first)".into(),
+            );
+        }
+        Ok(Material { inner, warnings })
+    }
+}
+
+/// Fit `data` (goniometric CSV, capture TOML or measured-BRDF file): `config` a fit config
+/// TOML, `model` a rung id or "auto" (overrides the config's), `metric` (linear, log, cosine),
+/// `fuzz` (add the fuzz layer), `maps` a directory for per-texel maps (captures), `progress`
+/// (bars on stderr), loading options as `load_data`.
+#[pyfunction]
+#[pyo3(signature = (data, config=None, model=None, metric=None, fuzz=false, maps=None, progress=false, options=None))]
+#[allow(clippy::too_many_arguments)]
+fn fit(
+    py: Python<'_>,
+    data: PathBuf,
+    config: Option<PathBuf>,
+    model: Option<String>,
+    metric: Option<String>,
+    fuzz: bool,
+    maps: Option<PathBuf>,
+    progress: bool,
+    options: Option<Bound<'_, PyDict>>,
+) -> PyResult<FitResult> {
+    let cfg = fit_api::configure(
+        config.as_deref(),
+        model.as_deref(),
+        metric.as_deref(),
+        fuzz,
+        &data,
+    )
+    .map_err(err)?;
+    let mut load = match &options {
+        Some(o) => load_options(o)?,
+        None => LoadOptions::default(),
+    };
+    let given = |k: &str| -> PyResult<bool> {
+        Ok(match &options {
+            Some(o) => o.get_item(k)?.is_some_and(|v| !v.is_none()),
+            None => false,
+        })
+    };
+    // the config's stride and fraction unless given
+    if !given("stride")? {
+        load.subsample.stride = cfg.knobs.stride;
+    }
+    if !given("fraction")? {
+        load.subsample.fraction = cfg.knobs.fraction;
+    }
+    let load = load.checked().map_err(err)?;
+    let request = FitRequest {
+        data,
+        config: cfg,
+        load,
+        maps: match maps {
+            Some(d) => Maps::Into(d),
+            None => Maps::None,
+        },
+        progress,
+    };
+    fit_api::check(&request).map_err(err)?;
+    let req = request.clone();
+    let run = py.detach(move || fit_api::fit(&req)).map_err(err)?;
+    Ok(FitResult {
+        run,
+        request,
+        config_file: config,
+        written: None,
+    })
+}
+
+/// The crate's version.
+#[pyfunction]
+fn version() -> &'static str {
+    env!("CARGO_PKG_VERSION")
+}
+
+fn path_str(p: &Path) -> String {
+    p.display().to_string()
+}
+
+/// The geometry of an image capture TOML as plain data (for `fibrefit.mitsuba.capture_scene`):
+/// a JSON string (see `fibrefit::load::capture::CaptureFile::geometry_json`).
+#[pyfunction]
+fn capture_geometry(py: Python<'_>, capture: PathBuf) -> PyResult<String> {
+    py.detach(|| fibrefit::load::capture::geometry_json(&capture))
+        .map_err(|e| err(e.context(path_str(&capture))))
+}
+
+/// Image `index` of a capture as the fit reads it, times its exposure: an (H, W, C) float32
+/// array of radiance per unit irradiance (row 0 at the top), and an (H, W) bool array of
+/// saturated pixels.
+#[pyfunction]
+fn capture_image<'py>(
+    py: Python<'py>,
+    capture: PathBuf,
+    index: usize,
+) -> PyResult<(Bound<'py, numpy::PyArray3<f32>>, Bound<'py, PyArray2<bool>>)> {
+    let img = py
+        .detach(|| fibrefit::load::capture::radiance_image(&capture, index))
+        .map_err(err)?;
+    let (w, h, c) = (img.width, img.height, img.channels);
+    let data = img
+        .data
+        .into_pyarray(py)
+        .reshape([h, w, c])
+        .map_err(|e| FibrefitError::new_err(e.to_string()))?;
+    let sat = img
+        .saturated
+        .into_pyarray(py)
+        .reshape([h, w])
+        .map_err(|e| FibrefitError::new_err(e.to_string()))?;
+    Ok((data, sat))
+}
+
+#[pymodule]
+fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    m.add("FibrefitError", m.py().get_type::<FibrefitError>())?;
+    m.add_class::<Material>()?;
+    m.add_class::<FitResult>()?;
+    m.add_function(wrap_pyfunction!(load, m)?)?;
+    m.add_function(wrap_pyfunction!(load_data, m)?)?;
+    m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(version, m)?)?;
+    m.add_function(wrap_pyfunction!(capture_geometry, m)?)?;
+    m.add_function(wrap_pyfunction!(capture_image, m)?)?;
+    Ok(())
+}

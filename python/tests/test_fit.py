@@ -1,0 +1,95 @@
+"""fibrefit.fit / load_data: the library's fit (the CLI's), lmfit's vocabulary, outputs that
+never replace inputs, and errors as exceptions."""
+
+import json
+
+import numpy as np
+import pytest
+
+import fibrefit
+from conftest import CONFIGS, DATA
+
+
+def test_load_data_gonio():
+    d = fibrefit.load_data(DATA / "brushed" / "gonio.csv")
+    n = d["l"].shape[0]
+    assert d["kind"] == "goniometric" and n > 1000
+    assert d["l"].shape == (n, 3) and d["v"].shape == (n, 3)
+    np.testing.assert_allclose(np.linalg.norm(d["l"], axis=1), 1, rtol=1e-12)
+    assert d["value"].shape == (n, d["channels"])
+    np.testing.assert_allclose(np.cos(np.radians(d["theta_i"])), d["l"][:, 2], atol=1e-12)
+    assert d["origin"][0] == 2  # CSV line of the first sample (after the header)
+
+
+def test_load_data_capture_and_options():
+    d = fibrefit.load_data(DATA / "brushed" / "capture.toml", stride=2)
+    assert d["kind"] == "image capture" and d["image_size"] == (64, 64)
+    assert d["origin"].shape[1] == 3
+    assert d["l"].shape[0] <= 4 * 32 * 32
+    with pytest.raises(fibrefit.FibrefitError, match="--stride must be at least 1"):
+        fibrefit.load_data(DATA / "brushed" / "capture.toml", stride=0)
+    with pytest.raises(fibrefit.FibrefitError, match="unknown option"):
+        fibrefit.load_data(DATA / "brushed" / "capture.toml", strde=2)
+
+
+def test_fit_recovers_the_truth_and_reports(tmp_path):
+    truth = json.loads((DATA / "brushed" / "truth.json").read_text())
+    r = fibrefit.fit(DATA / "brushed" / "gonio.csv", config=CONFIGS / "fit_brushed.toml")
+    assert r.model == truth["model"]
+    assert "[[Fit Statistics]]" in r.report()
+    for name in ["exponent", "fibre_azimuth_deg"]:
+        p = r.params[name]
+        assert p.vary and p.stderr is not None and p.stderr > 0
+        assert abs(p.value - truth[name]) < 5 * p.stderr + 1e-6 * abs(truth[name]), (name, p, truth[name])
+    kd = r.params["kd"]
+    assert np.allclose(kd.value, truth["kd"], atol=0.02)
+    assert all(isinstance(x, float) for x in kd.correl.values())
+    out = tmp_path / "fit.json"
+    r.to_json(out)
+    written = json.loads(out.read_text())
+    assert written["schema"] == "fibrefit-result/1" and written["model"] == r.model
+    m = r.material()
+    assert m.model == r.model and m.channels == written["data"]["channels"]
+
+
+def test_fit_without_model_or_config_is_refused():
+    with pytest.raises(fibrefit.FibrefitError, match="--model"):
+        fibrefit.fit(DATA / "brushed" / "gonio.csv")
+
+
+def test_missing_data_names_the_file(tmp_path):
+    with pytest.raises(fibrefit.FibrefitError, match="nothing.csv"):
+        fibrefit.fit(tmp_path / "nothing.csv", model="lambert")
+
+
+def test_output_never_replaces_an_input(tmp_path):
+    data = tmp_path / "gonio.csv"
+    data.write_bytes((DATA / "brushed" / "gonio.csv").read_bytes())
+    before = data.read_bytes()
+    r = fibrefit.fit(data, model="lambert")
+    with pytest.raises(fibrefit.FibrefitError, match="is an input of this run"):
+        r.to_json(data)
+    assert data.read_bytes() == before
+
+
+def test_maps_fit_material_looks_up_the_maps(tmp_path):
+    maps = tmp_path / "maps"
+    cfg = tmp_path / "maps.toml"
+    cfg.write_text(
+        (CONFIGS / "fit_brushed.toml").read_text()
+        + "\n[maps]\nheight = false\nfibre_azimuth = true\nkd = true\n"
+    )
+    r = fibrefit.fit(DATA / "brushed" / "capture.toml", config=cfg, maps=maps)
+    assert r.has_maps
+    m0 = r.material()
+    assert not m0.has_maps and any("not written" in w for w in m0.warnings)
+    r.to_json(tmp_path / "fit.json")
+    m = r.material()
+    assert m.has_maps and m.maps_size == (64, 64)
+    again = fibrefit.load(tmp_path / "fit.json")
+    assert again.has_maps
+    # the maps matter: two texels with their own kd give their own values
+    l = np.array([[0.0, 0.0, 1.0]] * 2)
+    uv = np.array([[0.1, 0.1], [0.9, 0.8]])
+    f = m.eval(l, l, uv)
+    assert f.shape == (2, m.channels) and not np.allclose(f[0], f[1], rtol=1e-9)

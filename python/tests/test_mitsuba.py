@@ -1,0 +1,197 @@
+"""fibrefit.mitsuba: the BSDF plugin under Mitsuba's own chi-square test, a white furnace, and
+capture images reproduced by Mitsuba from the result alone."""
+
+import json
+import os
+
+import numpy as np
+import pytest
+
+import fibrefit
+
+mi = pytest.importorskip("mitsuba")
+import fibrefit.mitsuba as fm  # noqa: E402  (sets DRJIT_LIBLLVM_PATH before the variant loads)
+
+from conftest import CONFIGS, DATA, write_params  # noqa: E402
+
+VARIANT = os.environ.get("FIBREFIT_MITSUBA_VARIANT", "llvm_ad_rgb")
+
+
+@pytest.fixture(scope="module", autouse=True)
+def variant():
+    if VARIANT not in mi.variants():
+        pytest.skip(f"Mitsuba variant {VARIANT} not available")
+    mi.set_variant(VARIANT)
+    fm.register()
+    yield
+
+
+RUNGS = {
+    "lambert": '{"model": "lambert", "kd": [0.6, 0.4, 0.3]}',
+    "ward": '{"model": "ward", "rho_d": 0.2, "rho_s": 0.3, "alpha_x": 0.08, "alpha_y": 0.3, "fibre_azimuth_deg": 25}',
+    "max-normal": '{"model": "max-normal", "kd": 0.3, "ks": 0.5, "exponent": 300, "fibre_azimuth_deg": 10}',
+    "poulin-fournier": '{"model": "poulin-fournier", "kd": 0.3, "ks": 0.4, "exponent": 100, "spacing": 2.0, "fibre_azimuth_deg": -30, "azimuth_spread_deg": 15}',
+}
+
+
+@pytest.mark.parametrize("rung", sorted(RUNGS))
+@pytest.mark.parametrize("theta", [0.0, 45.0, 80.0])
+def test_chi2_of_the_sampler_in_mitsuba(tmp_path, rung, theta):
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
+
+    params = write_params(tmp_path, f"{rung}.json", RUNGS[rung])
+    t = np.radians(theta)
+    wi = [float(np.sin(t) * np.cos(0.4)), float(np.sin(t) * np.sin(0.4)), float(np.cos(t))]
+    sample, pdf = BSDFAdapter("fibrefit", {"type": "fibrefit", "filename": str(params)}, wi=wi)
+    chi2 = ChiSquareTest(
+        domain=SphericalDomain(),
+        sample_func=sample,
+        pdf_func=pdf,
+        sample_dim=3,
+        sample_count=200_000,
+        res=41,
+        ires=4,
+    )
+    assert chi2.run(), chi2.messages
+
+
+def test_white_furnace_lambert_conserves_and_fibres_do_not_gain(tmp_path):
+    # a sphere in a uniform environment of radiance 1 seen by direct lighting with BSDF sampling
+    # only: each pixel is the directional albedo, 1 for a white Lambertian, <= 1 for the fibres
+    for text, expect_one in [
+        ('{"model": "lambert", "kd": 1.0}', True),
+        ('{"model": "poulin-fournier", "kd": 0.5, "ks": 0.5, "substrate_albedo": 1.0, "exponent": 50, "spacing": 2.5}', False),
+    ]:
+        p = write_params(tmp_path, "white.json", text)
+        scene = mi.load_dict(
+            {
+                "type": "scene",
+                "integrator": {"type": "direct", "emitter_samples": 0, "bsdf_samples": 4},
+                "sensor": {
+                    "type": "orthographic",
+                    "to_world": mi.ScalarTransform4f().look_at(origin=[0, 0, 5], target=[0, 0, 0], up=[0, 1, 0]),
+                    "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}},
+                    "sampler": {"type": "independent", "sample_count": 64},
+                },
+                "sphere": {"type": "sphere", "bsdf": {"type": "fibrefit", "filename": str(p)}},
+                "env": {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}},
+            }
+        )
+        img = np.array(mi.render(scene))[..., :3]
+        centre = img[8:16, 8:16].mean()
+        if expect_one:
+            assert abs(centre - 1.0) < 0.01, centre
+        else:
+            assert centre < 1.0 + 0.01, centre
+        assert np.all(img <= 1.0 + 0.2)  # per-pixel noise at 256 samples
+
+
+WHITE = '{"model": "lambert", "kd": 1.0}'
+
+
+def noise_variance(tmp_path, capture, k, clean):
+    """Per-pixel variance of image k of a shipped synthetic capture whose noise-free image is
+    `clean`: the synth noise (relative and floor, on the BRDF; synth_info.json) times
+    (E cos theta_i)^2, plus the quantisation of 8-bit sRGB PNGs."""
+    info = json.loads((capture.parent / "synth_info.json").read_text())
+    rel, floor = info["noise"]["relative"], info["noise"]["floor"]
+    # E cos(theta_i) per pixel: pi times a white Lambertian's rendering of the same image
+    white = fibrefit.load(write_params(tmp_path, "white.json", WHITE))
+    e_cos = np.pi * white.render_capture(capture, k).astype(np.float64)[..., :1]
+    var = (rel * clean) ** 2 + (floor * e_cos) ** 2
+    img = fm.capture_geometry(capture)["images"][k]
+    if img["file"].lower().endswith(".png"):
+        exposure = img["exposure"]
+        s = np.clip(linear_to_srgb(clean / exposure), 0, 1)
+        slope = np.where(s <= 0.04045, 1 / 12.92, 2.4 / 1.055 * ((s + 0.055) / 1.055) ** 1.4)
+        var = var + (slope / 255.0 * exposure) ** 2 / 12.0
+    return var
+
+
+def linear_to_srgb(x):
+    x = np.clip(x, 0, None)
+    return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
+
+
+CAPTURES = {"brushed": "fit_brushed.toml", "loose": "fit_loose.toml", "silk": "fit_silk.toml"}
+
+
+@pytest.fixture(scope="module")
+def fitted(tmp_path_factory):
+    """Each shipped capture fitted with its config by fibrefit.fit, written as a result JSON."""
+    out = {}
+    for name, cfg in CAPTURES.items():
+        d = tmp_path_factory.mktemp(name)
+        r = fibrefit.fit(DATA / name / "capture.toml", config=CONFIGS / cfg)
+        r.to_json(d / "fit.json")
+        out[name] = d / "fit.json"
+    return out
+
+
+def check_reproduction(tmp_path, capture, result, maps=None):
+    m = fibrefit.load(result, maps, capture=capture)
+    for k in range(len(fm.capture_geometry(capture)["images"])):
+        scene = mi.load_dict(fm.capture_scene(capture, result, k, maps=maps))
+        rendered = np.array(mi.render(scene), dtype=np.float64)[..., : m.channels]
+        own = m.render_capture(capture, k).astype(np.float64)
+        # fibrefit's own rendering of the same scene equals Mitsuba's
+        rel = np.max(np.abs(rendered - own)) / np.abs(own).max()
+        assert rel <= 1e-4, (capture, k, rel)
+        captured, saturated = fm.captured_image(capture, k)
+        captured = captured.astype(np.float64)[..., : m.channels]
+        var = noise_variance(tmp_path, capture, k, own)
+        ok = ~saturated
+        ratio = np.mean((captured - rendered)[ok] ** 2) / np.mean(var[ok])
+        assert ratio < 1.2, (capture, k, ratio)
+
+
+@pytest.mark.parametrize("name", sorted(CAPTURES))
+def test_capture_reproduced_by_mitsuba(tmp_path, fitted, name):
+    check_reproduction(tmp_path, DATA / name / "capture.toml", fitted[name])
+
+
+def test_maps_capture_reproduced_by_mitsuba(tmp_path):
+    # per-texel heights of the climbing fibres recovered from the silk capture (fit --maps),
+    # looked up by the plugin at the rectangle's uv
+    cfg = tmp_path / "maps.toml"
+    text = (CONFIGS / "fit_silk.toml").read_text().replace("../data_synthetic", str(DATA))
+    cfg.write_text(text + "\n[maps]\nheight = true\nfibre_azimuth = false\n")
+    capture = DATA / "silk" / "capture.toml"
+    r = fibrefit.fit(capture, config=cfg, maps=tmp_path / "maps")
+    r.to_json(tmp_path / "fit.json")
+    assert fibrefit.load(tmp_path / "fit.json").has_maps
+    check_reproduction(tmp_path, capture, tmp_path / "fit.json")
+
+
+def test_pinhole_and_point_light_scene_matches_fibrefit(tmp_path):
+    # the geometry of the perspective sensor and point emitter: a capture with a pinhole camera
+    # and a point light (the image files only give the size), a broad material
+    png = (DATA / "brushed" / "img_000.png").resolve()
+    cap = tmp_path / "capture.toml"
+    cap.write_text(
+        f"""[swatch]
+size_mm = [30.0, 30.0]
+
+[[images]]
+file = "{png}"
+encoding = "srgb"
+exposure = 1.0
+[images.light]
+type = "point"
+position_mm = [-60.0, 40.0, 250.0]
+intensity = 0.05
+[images.camera]
+type = "pinhole"
+position_mm = [35.0, -20.0, 300.0]
+"""
+    )
+    p = write_params(tmp_path, "w.json", '{"model": "ward", "rho_d": 0.3, "rho_s": 0.2, "alpha_x": 0.3, "alpha_y": 0.5, "fibre_azimuth_deg": 30}')
+    m = fibrefit.load(p)
+    own = m.render_capture(cap, 0).astype(np.float64)
+    # one ray through each pixel's centre: the capture's own definition of a pixel
+    rendered = np.array(mi.render(mi.load_dict(fm.capture_scene(cap, p, 0))), dtype=np.float64)[..., :1]
+    assert np.max(np.abs(rendered - own)) / np.abs(own).max() < 1e-4
+    # rays over each pixel's area (a box filter) average directions that change across it
+    area = np.array(mi.render(mi.load_dict(fm.capture_scene(cap, p, 0, spp=64))), dtype=np.float64)[..., :1]
+    rel = np.abs(area - own) / np.abs(own).max()
+    assert rel.max() < 2e-3 and rel.mean() < 2e-4, (rel.max(), rel.mean())

@@ -1,0 +1,441 @@
+//! A fitted material as a renderer sees it: the BRDF, an importance sampler and its pdf at
+//! directions in the swatch frame, with the result's per-texel maps looked up at texture
+//! coordinates. The Python package's `fibrefit.Material` and its Mitsuba 3 plugin call this;
+//! the shading itself is `render::Material` (the same code `fibrefit render` shades with) and
+//! the sampler `model::sampling`.
+//!
+//! Frames: the swatch frame of the CLI's angles (z the macro normal, x the swatch's x axis,
+//! the fibres at `fibre_azimuth_deg` from x towards y); `l` points towards the light, `v`
+//! towards the viewer, both away from the surface. Texture coordinates (u, v) in [0, 1] span
+//! the maps with v up the image (row 0 of a map at v = 1), as `render`'s swatch.
+
+use crate::load::image_io::LinearImage;
+use crate::load::texel_maps::TexelMapsIn;
+use crate::model::frame::{Local, Vec3};
+use crate::model::params::ModelParams;
+use crate::model::sampling::Sampler;
+use crate::model::{self, ModelId, ShadingModel};
+use crate::render::objects::Hit;
+use crate::render::{Material as Shading, ShadingPoint};
+use anyhow::{anyhow, bail, Result};
+use rayon::prelude::*;
+use std::path::{Path, PathBuf};
+
+/// How far from unit length a given direction may be (it is normalised).
+pub const UNIT_TOLERANCE: f64 = 1e-3;
+
+/// A loaded material (see the module docs).
+pub struct Material {
+    pub model: ModelId,
+    pub params: ModelParams,
+    /// 3 for RGB results, 1 for grey.
+    pub channels: usize,
+    /// The result (or parameter) file it came from, and the maps directory used.
+    pub source: PathBuf,
+    pub maps_dir: Option<PathBuf>,
+    shading: Box<dyn ShadingModel>,
+    sampler: Sampler,
+    texel_maps: Option<TexelMapsIn>,
+}
+
+/// One sampled direction in the swatch frame: `l`, `weight` = f cos(theta_l) / pdf per
+/// channel, `pdf` in 1/sr. A failed sample (the view or the sampled direction at or below the
+/// horizon) is `l` = 0, weight 0, pdf 0.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Sampled {
+    pub l: [f64; 3],
+    pub weight: [f64; 3],
+    pub pdf: f64,
+}
+
+impl Material {
+    /// The material of a result JSON (or a parameter file), with the maps in `maps` or, when
+    /// `None`, those the result names (beside it); warnings about ignored parameters and maps
+    /// not found are returned, not printed.
+    pub fn load(result: &Path, maps: Option<&Path>) -> Result<(Self, Vec<String>)> {
+        let raw = crate::export::result_json::read_params(result)?;
+        let maps = match maps {
+            Some(d) => Some(d.to_path_buf()),
+            None => crate::api::render::maps_dir(None, result, true)?,
+        };
+        let (m, mut warnings) = Self::from_raw(raw, result, maps)?;
+        if m.texel_maps.is_none() && named_maps(result).is_some() {
+            warnings.push(format!(
+                "{} names a maps directory that is not beside it: the material has no maps (pass maps=DIR)",
+                result.display()
+            ));
+        }
+        Ok((m, warnings))
+    }
+
+    /// The material of a result held in memory (`fibrefit.fit`'s), labelled `source`, with
+    /// the maps in `maps`.
+    pub fn from_result(
+        result: &serde_json::Value,
+        source: &Path,
+        maps: Option<PathBuf>,
+    ) -> Result<(Self, Vec<String>)> {
+        let raw = crate::export::result_json::params_of_result(result)
+            .map_err(|e| anyhow!("{}: {e:#}", source.display()))?;
+        Self::from_raw(raw, source, maps)
+    }
+
+    fn from_raw(
+        raw: crate::model::params::RawParams,
+        result: &Path,
+        maps_dir: Option<PathBuf>,
+    ) -> Result<(Self, Vec<String>)> {
+        let id_text = raw.model.clone().ok_or_else(|| {
+            anyhow!(
+                "{}: names no `model`; a fitted result or a parameter file with `model` is needed",
+                result.display()
+            )
+        })?;
+        let id: ModelId = id_text
+            .parse()
+            .map_err(|e: String| anyhow!("{}: {e}", result.display()))?;
+        let (params, mut warnings) =
+            ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", result.display()))?;
+        for w in &mut warnings {
+            *w = format!("{}: {w}", result.display());
+        }
+        let texel_maps = match &maps_dir {
+            Some(d) => Some(TexelMapsIn::load(d, None).map_err(|e| anyhow!("maps: {e:#}"))?),
+            None => None,
+        };
+        let shading = model::build(id, &params)?;
+        let sampler = Sampler::new(id, &params);
+        Ok((
+            Self {
+                model: id,
+                channels: params.albedos.channels(),
+                params,
+                source: result.to_path_buf(),
+                maps_dir,
+                shading,
+                sampler,
+                texel_maps,
+            },
+            warnings,
+        ))
+    }
+
+    /// The material with the per-texel fields of the capture TOML `capture` (its fibre
+    /// azimuth from a tangent or azimuth map, its height map) where the result's own maps have
+    /// none: what the fit of that capture saw at each pixel, so that the capture can be
+    /// rendered as it was fitted.
+    pub fn with_capture(mut self, capture: &Path) -> Result<Self> {
+        let fields = crate::load::capture_store::swatch_fields(capture)?;
+        if fields.psi_deg.is_none() && fields.height.is_none() {
+            return Ok(self);
+        }
+        let size = fields
+            .psi_deg
+            .as_ref()
+            .or(fields.height.as_ref())
+            .map(|m| (m.width, m.height))
+            .expect("one field");
+        let mut maps = self.texel_maps.take().unwrap_or(TexelMapsIn {
+            height: None,
+            psi: None,
+            kd: None,
+            ks: None,
+            width: size.0,
+            rows: size.1,
+        });
+        if (maps.width, maps.rows) != size {
+            bail!(
+                "{}: its fields are {}x{} but the result's maps are {}x{}; they must be registered to one grid",
+                capture.display(),
+                size.0,
+                size.1,
+                maps.width,
+                maps.rows
+            );
+        }
+        if maps.psi.is_none() {
+            maps.psi = fields.psi_deg;
+        }
+        if maps.height.is_none() && self.model.has_topology() {
+            maps.height = fields.height;
+        }
+        self.texel_maps = Some(maps);
+        Ok(self)
+    }
+
+    /// Whether per-texel maps are looked up at `uv`.
+    pub fn has_maps(&self) -> bool {
+        self.texel_maps.is_some()
+    }
+
+    /// (width, height) of the maps in texels.
+    pub fn maps_size(&self) -> Option<(usize, usize)> {
+        self.texel_maps.as_ref().map(|m| (m.width, m.rows))
+    }
+
+    fn shading(&self) -> Shading<'_> {
+        let p = &self.params;
+        Shading {
+            model: self.shading.as_ref(),
+            albedos: p.albedos,
+            channels: self.channels,
+            spacing: p.spacing,
+            height: p.topology.height,
+            map_scale: p.topology.map_scale,
+            topology_map: p.topology.map.as_deref(),
+            texel_maps: self.texel_maps.as_ref(),
+            fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
+            ward_curvature: None,
+        }
+    }
+
+    /// The shading point of the flat swatch at texture coordinates `uv` (`None`: the global
+    /// parameters, no map lookup).
+    fn point(&self, shading: &Shading, uv: Option<[f64; 2]>) -> ShadingPoint {
+        let psi = self.params.fibre_azimuth;
+        let hit = Hit {
+            t: 0.0,
+            position: Vec3::zeros(),
+            normal: Vec3::z(),
+            tangent: Vec3::new(psi.cos(), psi.sin(), 0.0),
+            uv: uv.unwrap_or([0.5; 2]),
+            height: None,
+            curvature: None,
+        };
+        match uv {
+            Some(_) => shading.point(&hit),
+            None => Shading {
+                texel_maps: None,
+                topology_map: None,
+                ..*shading
+            }
+            .point(&hit),
+        }
+    }
+
+    /// The BRDF per channel (1/sr) for the light `l` and view `v` (unit, swatch frame); zero
+    /// when either is at or below the horizon.
+    pub fn eval(&self, l: &Vec3, v: &Vec3, uv: Option<[f64; 2]>) -> [f64; 3] {
+        let shading = self.shading();
+        let sp = self.point(&shading, uv);
+        shading.brdf(&sp, l, v)
+    }
+
+    /// The sampler's density (1/sr) of `l` given `v`.
+    pub fn pdf(&self, v: &Vec3, l: &Vec3, uv: Option<[f64; 2]>) -> f64 {
+        let shading = self.shading();
+        let sp = self.point(&shading, uv);
+        self.sampler
+            .pdf(&sp.albedos, &local(&sp, v), &local(&sp, l))
+    }
+
+    /// A light direction sampled for the view `v` from the uniforms `u` in [0, 1)^2.
+    pub fn sample(&self, v: &Vec3, u: [f64; 2], uv: Option<[f64; 2]>) -> Sampled {
+        let shading = self.shading();
+        let sp = self.point(&shading, uv);
+        let failed = Sampled {
+            l: [0.0; 3],
+            weight: [0.0; 3],
+            pdf: 0.0,
+        };
+        let Some(s) = self.sampler.sample(
+            self.shading.as_ref(),
+            &sp.albedos,
+            sp.height,
+            &local(&sp, v),
+            u,
+        ) else {
+            return failed;
+        };
+        let l = sp.world(&Vec3::new(s.l.t, s.l.b, s.l.n));
+        let mut weight = s.weight;
+        for c in self.channels..3 {
+            weight[c] = weight[0];
+        }
+        Sampled {
+            l: [l.x, l.y, l.z],
+            weight,
+            pdf: s.pdf,
+        }
+    }
+
+    /// [`Material::eval`] of every row (in parallel), the directions checked first.
+    pub fn eval_many(
+        &self,
+        l: &[[f64; 3]],
+        v: &[[f64; 3]],
+        uv: Option<&[[f64; 2]]>,
+    ) -> Result<Vec<[f64; 3]>> {
+        let (l, v) = (directions(l, "l")?, directions(v, "v")?);
+        same_rows(&[("l", l.len()), ("v", v.len())])?;
+        let uv = coordinates(uv, l.len())?;
+        Ok((0..l.len())
+            .into_par_iter()
+            .map(|i| self.eval(&l[i], &v[i], uv.map(|u| u[i])))
+            .collect())
+    }
+
+    /// [`Material::pdf`] of every row (in parallel), the directions checked first.
+    pub fn pdf_many(
+        &self,
+        v: &[[f64; 3]],
+        l: &[[f64; 3]],
+        uv: Option<&[[f64; 2]]>,
+    ) -> Result<Vec<f64>> {
+        let (v, l) = (directions(v, "v")?, directions(l, "l")?);
+        same_rows(&[("v", v.len()), ("l", l.len())])?;
+        let uv = coordinates(uv, v.len())?;
+        Ok((0..v.len())
+            .into_par_iter()
+            .map(|i| self.pdf(&v[i], &l[i], uv.map(|u| u[i])))
+            .collect())
+    }
+
+    /// [`Material::sample`] of every row (in parallel), the inputs checked first.
+    pub fn sample_many(
+        &self,
+        v: &[[f64; 3]],
+        u: &[[f64; 2]],
+        uv: Option<&[[f64; 2]]>,
+    ) -> Result<Vec<Sampled>> {
+        let v = directions(v, "v")?;
+        same_rows(&[("v", v.len()), ("u", u.len())])?;
+        if let Some((i, x)) = u
+            .iter()
+            .enumerate()
+            .find(|(_, x)| !x.iter().all(|c| (0.0..1.0).contains(c)))
+        {
+            bail!(
+                "u row {i}: ({}, {}) is not in [0, 1)^2 (uniform random numbers are expected)",
+                x[0],
+                x[1]
+            );
+        }
+        let uv = coordinates(uv, v.len())?;
+        Ok((0..v.len())
+            .into_par_iter()
+            .map(|i| self.sample(&v[i], u[i], uv.map(|c| c[i])))
+            .collect())
+    }
+}
+
+impl Material {
+    /// Image `index` of the capture `capture` as this material renders it, noise-free: per
+    /// pixel f(l, v) E cos(theta_i) at the swatch point under the pixel's centre, with the maps
+    /// looked up at the pixel's texel (uv = ((x + 0.5) / W, 1 - (y + 0.5) / H)); in the units of
+    /// `load::capture::radiance_image` (radiance per unit irradiance, the exposure applied).
+    /// Call it on [`Material::with_capture`] of the same capture to see what its fit saw.
+    pub fn render_capture(&self, capture: &Path, index: usize) -> Result<LinearImage> {
+        use crate::load::capture::{self, CaptureFile};
+        let desc = CaptureFile::load(capture)?;
+        let spec = desc.images.get(index).ok_or_else(|| {
+            anyhow!(
+                "{}: image {index} asked for, but the capture has {} images",
+                capture.display(),
+                desc.images.len()
+            )
+        })?;
+        let file = capture::resolve(capture.parent().unwrap_or(Path::new(".")), &spec.file);
+        let size = crate::load::image_io::read(&file, spec.encoding, spec.saturation)?;
+        let (w, h, c) = (size.width, size.height, self.channels);
+        if matches!(spec.camera, capture::Camera::ViewMap { .. }) {
+            bail!(
+                "{}: image {index} has a per-pixel view map; render_capture takes orthographic and pinhole cameras",
+                capture.display()
+            );
+        }
+        let data: Vec<f32> = (0..h)
+            .into_par_iter()
+            .flat_map_iter(|y| {
+                let spec = &spec;
+                (0..w).flat_map(move |x| {
+                    let p = capture::pixel_position(desc.swatch.size_mm, w, h, x, y);
+                    let (l, e) = capture::light_at(&spec.light, &p);
+                    let v = capture::view_at(&spec.camera, &p).expect("not a view map");
+                    let uv = [
+                        (x as f64 + 0.5) / w as f64,
+                        1.0 - (y as f64 + 0.5) / h as f64,
+                    ];
+                    let f = self.eval(&l, &v, Some(uv));
+                    let cos = l.z.max(0.0);
+                    (0..c).map(move |k| (f[k] * e * cos) as f32)
+                })
+            })
+            .collect();
+        Ok(LinearImage {
+            width: w,
+            height: h,
+            channels: c,
+            saturated: vec![false; w * h],
+            data,
+        })
+    }
+}
+
+/// The maps directory a result names, if any.
+fn named_maps(result: &Path) -> Option<String> {
+    let text = crate::load::input::read_text(result).ok()?;
+    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
+    v["maps"]["directory"].as_str().map(str::to_string)
+}
+
+fn local(sp: &ShadingPoint, d: &Vec3) -> Local {
+    let w = sp.local(d);
+    Local {
+        t: w.x,
+        b: w.y,
+        n: w.z,
+    }
+}
+
+/// Rows of unit vectors, normalised; an error names the first row that is not finite or not
+/// of unit length (within [`UNIT_TOLERANCE`]).
+fn directions(rows: &[[f64; 3]], name: &str) -> Result<Vec<Vec3>> {
+    rows.iter()
+        .enumerate()
+        .map(|(i, r)| {
+            let d = Vec3::new(r[0], r[1], r[2]);
+            if !r.iter().all(|x| x.is_finite()) {
+                bail!(
+                    "{name} row {i}: ({}, {}, {}) is not finite",
+                    r[0],
+                    r[1],
+                    r[2]
+                );
+            }
+            let n = d.norm();
+            if (n - 1.0).abs() > UNIT_TOLERANCE {
+                bail!(
+                    "{name} row {i}: ({}, {}, {}) has length {n}; unit vectors are expected",
+                    r[0],
+                    r[1],
+                    r[2]
+                );
+            }
+            Ok(d / n)
+        })
+        .collect()
+}
+
+fn same_rows(arrays: &[(&str, usize)]) -> Result<()> {
+    let (first, n) = arrays[0];
+    for &(name, m) in &arrays[1..] {
+        if m != n {
+            bail!("{first} has {n} rows but {name} has {m}; one row per evaluation is expected");
+        }
+    }
+    Ok(())
+}
+
+fn coordinates(uv: Option<&[[f64; 2]]>, rows: usize) -> Result<Option<&[[f64; 2]]>> {
+    let Some(uv) = uv else { return Ok(None) };
+    same_rows(&[("the directions", rows), ("uv", uv.len())])?;
+    if let Some((i, c)) = uv
+        .iter()
+        .enumerate()
+        .find(|(_, c)| !c.iter().all(|x| x.is_finite()))
+    {
+        bail!("uv row {i}: ({}, {}) is not finite", c[0], c[1]);
+    }
+    Ok(Some(uv))
+}
