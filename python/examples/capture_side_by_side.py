@@ -29,7 +29,7 @@ def main():
     ap.add_argument("--config", default=str(ROOT / "configs/fit_brushed.toml"))
     ap.add_argument("--out", default=str(ROOT / "reports"))
     ap.add_argument("--variant", default="llvm_ad_rgb")
-    ap.add_argument("--spp", type=int, default=16)
+    ap.add_argument("--spp", type=int, default=None, help="rays over each pixel's area [default: one through its centre, as a capture's pixel is defined]")
     a = ap.parse_args()
 
     import matplotlib
@@ -63,9 +63,9 @@ def main():
         diff = (rendered - captured).mean(axis=2)
         top = max(captured.max(), rendered.max())
         show = lambda x: np.clip(x / top, 0, 1) ** (1 / 2.2) if c == 3 else np.clip(x[..., 0] / top, 0, 1) ** (1 / 2.2)
-        axes[k, 0].imshow(show(captured), cmap=None if c == 3 else "gray")
+        axes[k, 0].imshow(show(captured), cmap=None if c == 3 else "gray", vmin=0, vmax=1)
         axes[k, 0].set_title(f"image {k}: captured")
-        axes[k, 1].imshow(show(rendered), cmap=None if c == 3 else "gray")
+        axes[k, 1].imshow(show(rendered), cmap=None if c == 3 else "gray", vmin=0, vmax=1)
         axes[k, 1].set_title("Mitsuba 3 + fibrefit plugin")
         lim = np.abs(diff).max()
         im = axes[k, 2].imshow(diff, cmap="RdBu_r", vmin=-lim, vmax=lim)
@@ -110,9 +110,9 @@ def main():
     t_builtin = median_seconds(swatch({"type": "roughconductor", "distribution": "ggx", "alpha_u": 0.05, "alpha_v": 0.3}))
     with open(out / "mitsuba.md", "w") as f:
         f.write("# A capture re-rendered by Mitsuba 3 with the fibrefit plugin\n\n")
-        f.write(f"Written by `python3 python/examples/capture_side_by_side.py` (variant {a.variant}, {a.spp} spp).\n")
+        f.write(f"Written by `python3 python/examples/capture_side_by_side.py` (variant {a.variant}, {'one ray through each pixel centre' if a.spp is None else f'{a.spp} rays over each pixel'}).\n")
         f.write(f"Capture `{capture.relative_to(ROOT) if capture.is_relative_to(ROOT) else capture}`, fitted with `{pathlib.Path(a.config).name}`: {r.model}, ")
-        f.write(f"reduced chi-square {r.statistics.get('reduced_chi_square'):.3f}.\n\n")
+        f.write(f"relative RMSE {r.statistics['relative_rmse']:.4f}.\n\n")
         f.write("![captured, Mitsuba, difference](mitsuba_capture.png)\n\n")
         f.write("| image | RMS(Mitsuba - captured) | max \\|Mitsuba - fibrefit\\| / max | render s |\n|---|---|---|---|\n")
         for k, rms, rel, sec in rows:
