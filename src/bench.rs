@@ -14,6 +14,7 @@ pub mod felt;
 pub mod maps;
 pub mod report;
 pub mod robustness;
+pub mod sampling;
 pub mod shader;
 
 use crate::fit::config::FitConfig;

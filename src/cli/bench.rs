@@ -54,6 +54,11 @@ pub struct BenchArgs {
     /// OUT/shader_cost.md and .csv
     #[arg(long)]
     pub shader: bool,
+    /// Instead: the importance sampler's variance against cosine sampling per rung and view
+    /// (exponent 1000, the lobe width swept, other exponents) and its samples per second:
+    /// writes OUT/sampling.md and .csv
+    #[arg(long)]
+    pub sampling: bool,
     /// Only these cases of the robustness study (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
@@ -102,9 +107,34 @@ fn robustness(args: &BenchArgs) -> Result<()> {
     Ok(())
 }
 
+fn sampling(args: &BenchArgs) -> Result<()> {
+    let t = Instant::now();
+    let bar = crate::progress::bar(1, "sampling", args.quiet);
+    let run = crate::bench::sampling::run(args.quick, &bar)?;
+    bar.finish_and_clear();
+    let command = if args.quick {
+        "fibrefit bench --sampling --quick"
+    } else {
+        "fibrefit bench --sampling"
+    };
+    crate::bench::report::sampling::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        for (rung, n, least, geo) in crate::bench::sampling::summary(&run.variance) {
+            eprintln!(
+                "{rung:<17} {n:>2} views: variance ratio least {least:.2}, geometric mean {geo:.2}"
+            );
+        }
+        eprintln!("wrote {}", args.out.join("sampling.md").display());
+    }
+    Ok(())
+}
+
 pub fn run(args: &BenchArgs) -> Result<()> {
     if args.robustness {
         return robustness(args);
+    }
+    if args.sampling {
+        return sampling(args);
     }
     if let Some(size) = args.camera {
         if size < 8 {

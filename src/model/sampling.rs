@@ -218,6 +218,16 @@ impl Sampler {
         }
     }
 
+    /// The same sampler with the fibre lobe's Cauchy width c / sqrt(exponent) (default
+    /// [`LOBE_WIDTH`]); for the width study of `fibrefit bench --sampling`. No effect on rungs
+    /// without a fibre lobe.
+    pub fn with_lobe_width(mut self, c: f64) -> Sampler {
+        if let Lobe::Fibre { gamma } = &mut self.lobe {
+            *gamma = c / self.exponent.max(1.0).sqrt();
+        }
+        self
+    }
+
     /// Sample l for the view v (fibre frame) with mixture weights from `albedos`, two uniforms u
     /// in [0,1)^2. weight[c] = f_c(l, v) * l.n / pdf, with f from `model` (at `height` when Some,
     /// via basis_at_height; the plain basis for a model without a topology). None when v is

@@ -6,5 +6,6 @@ pub mod camera;
 pub mod felt;
 pub mod maps;
 pub mod robustness;
+pub mod sampling;
 pub mod shader;
 pub mod speed;

@@ -1,0 +1,101 @@
+//! Importance sampling per rung: `cargo bench --bench sampling`. One `Sampler::sample` (the
+//! direction, its exact pdf over the whole mixture and the rung's evaluation at it) per
+//! iteration over a fixed set of views and uniforms (`sample`), and the sampler alone with a
+//! constant model (`sampler_only`). The variance the sampler buys is `fibrefit bench
+//! --sampling` (reports/sampling.md).
+
+use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
+use fibrefit::model::frame::Local;
+use fibrefit::model::lambert::Lambert;
+use fibrefit::model::params::{ModelParams, RawParams};
+use fibrefit::model::sampling::Sampler;
+use fibrefit::model::{self, ModelId};
+use std::hint::black_box;
+
+fn params(id: ModelId, text: &str) -> ModelParams {
+    let raw: RawParams = toml::from_str(text).unwrap();
+    ModelParams::from_raw(&raw, id).unwrap().0
+}
+
+fn text(id: ModelId) -> &'static str {
+    match id {
+        ModelId::Lambert | ModelId::HastDiffuse => "kd = 0.5\n",
+        ModelId::Ward => "rho_d = 0.3\nrho_s = 0.6\nalpha_x = 0.05\nalpha_y = 0.2\n",
+        ModelId::MaxNormal => "kd = 0.3\nks = 0.6\nexponent = 1000\n",
+        ModelId::PoulinFournier => "kd = 0.3\nks = 0.6\nexponent = 1000\nspacing = 2.6\n",
+        ModelId::VaryingTopology | ModelId::Reference => {
+            "kd = 0.3\nks = 0.6\nexponent = 1000\nspacing = 2.4\nheight = 0.9\nmap_scale = 0.2\n"
+        }
+    }
+}
+
+/// 64 fixed (view, uniforms) draws, views above the horizon.
+fn draws() -> Vec<(Local, [f64; 2])> {
+    let mut s = 0x2545_F491_4F6C_DD1Du64;
+    let mut u = move || {
+        s ^= s << 13;
+        s ^= s >> 7;
+        s ^= s << 17;
+        (s >> 11) as f64 / (1u64 << 53) as f64
+    };
+    (0..64)
+        .map(|_| {
+            let z = 0.05 + 0.95 * u();
+            let r = (1.0 - z * z).sqrt();
+            let p = std::f64::consts::TAU * u();
+            let v = Local {
+                t: r * p.cos(),
+                b: r * p.sin(),
+                n: z,
+            };
+            (v, [u(), u()])
+        })
+        .collect()
+}
+
+fn sampling(c: &mut Criterion) {
+    let d = draws();
+    let mut g = c.benchmark_group("sample");
+    g.throughput(Throughput::Elements(d.len() as u64));
+    let mut variants: Vec<(String, ModelId, String)> = ModelId::ALL
+        .iter()
+        .filter(|&&id| id != ModelId::Reference)
+        .map(|&id| (id.to_string(), id, text(id).to_string()))
+        .collect();
+    variants.push((
+        "poulin-fournier spread 180".into(),
+        ModelId::PoulinFournier,
+        format!("{}azimuth_spread_deg = 180\n", text(ModelId::PoulinFournier)),
+    ));
+    for (name, id, t) in &variants {
+        let p = params(*id, t);
+        let m = model::build(*id, &p).unwrap();
+        let sampler = Sampler::new(*id, &p);
+        g.bench_with_input(BenchmarkId::new("with_eval", name), &d, |b, d| {
+            b.iter(|| {
+                d.iter()
+                    .map(|(v, u)| {
+                        sampler
+                            .sample(m.as_ref(), &p.albedos, None, black_box(v), *u)
+                            .map_or(0.0, |s| s.weight[0])
+                    })
+                    .sum::<f64>()
+            })
+        });
+        g.bench_with_input(BenchmarkId::new("sampler_only", name), &d, |b, d| {
+            b.iter(|| {
+                d.iter()
+                    .map(|(v, u)| {
+                        sampler
+                            .sample(&Lambert, &p.albedos, None, black_box(v), *u)
+                            .map_or(0.0, |s| s.pdf)
+                    })
+                    .sum::<f64>()
+            })
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, sampling);
+criterion_main!(benches);

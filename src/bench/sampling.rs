@@ -1,0 +1,388 @@
+//! `fibrefit bench --sampling`: what the importance sampler of `model::sampling` buys.
+//!
+//! For each rung at exponent 1000 (ward: alpha 0.05 x 0.2) and a set of views, the directional
+//! albedo a(v) = int f(l, v) (N.l) d omega estimated from one-sample weights: the per-sample
+//! variance of the sampler's weight against that of pure cosine sampling (weight = pi f), at the
+//! same sample count and from the same seeds, so the ratio is the factor fewer samples the
+//! sampler needs for the same noise. Also: the fibre lobe's width swept around its default
+//! (max-normal and poulin-fournier), the ratio at other exponents, and samples per second per
+//! rung on one thread (with the model's evaluation, and the sampler alone). Everything but the
+//! timings is deterministic (seeded, one seed per row).
+
+use crate::model::frame::Local;
+use crate::model::params::{ModelParams, RawParams};
+use crate::model::sampling::{Sampler, LOBE_WIDTH};
+use crate::model::{self, lambert::Lambert, DirectionPair, ModelId};
+use anyhow::{anyhow, Result};
+use indicatif::ProgressBar;
+use rayon::prelude::*;
+use std::f64::consts::{PI, TAU};
+use std::time::Instant;
+
+/// One rung at one view: the two estimators' statistics.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct VarianceRow {
+    pub rung: String,
+    pub exponent: f64,
+    /// Cauchy width of the fibre lobe in units of 1/sqrt(exponent).
+    pub lobe_width: f64,
+    pub theta_v_deg: f64,
+    /// Azimuth of v from the fibre tangent T.
+    pub phi_v_deg: f64,
+    pub samples: usize,
+    pub albedo_sampled: f64,
+    pub albedo_cosine: f64,
+    pub variance_sampled: f64,
+    pub variance_cosine: f64,
+    /// variance_cosine / variance_sampled.
+    pub ratio: f64,
+}
+
+/// Cost per sample on one thread.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SpeedRow {
+    pub rung: String,
+    pub variant: String,
+    /// `Sampler::sample` with the rung's own evaluation (what a renderer pays).
+    pub samples_per_second: f64,
+    /// The direction and its pdf alone (`sample` with a constant model).
+    pub sampler_only_per_second: f64,
+    /// The rung's evaluation alone (`basis`), for comparison.
+    pub evals_per_second: f64,
+}
+
+pub struct SamplingRun {
+    pub variance: Vec<VarianceRow>,
+    pub widths: Vec<VarianceRow>,
+    pub exponents: Vec<VarianceRow>,
+    pub speed: Vec<SpeedRow>,
+    pub quick: bool,
+}
+
+/// The views of the study: (theta_v, phi_v from T), degrees.
+pub const VIEWS: [(f64, f64); 10] = [
+    (0.0, 0.0),
+    (30.0, 0.0),
+    (30.0, 45.0),
+    (30.0, 90.0),
+    (60.0, 0.0),
+    (60.0, 45.0),
+    (60.0, 90.0),
+    (80.0, 0.0),
+    (80.0, 45.0),
+    (80.0, 90.0),
+];
+
+/// The parameter text of `rung` at exponent `e`.
+pub fn params_text(id: ModelId, e: f64) -> String {
+    match id {
+        ModelId::Lambert | ModelId::HastDiffuse => "kd = 0.5\n".into(),
+        ModelId::Ward => "rho_d = 0.3\nrho_s = 0.6\nalpha_x = 0.05\nalpha_y = 0.2\n".into(),
+        ModelId::MaxNormal => format!("kd = 0.3\nks = 0.6\nexponent = {e}\n"),
+        ModelId::PoulinFournier => format!("kd = 0.3\nks = 0.6\nexponent = {e}\nspacing = 2.6\n"),
+        ModelId::VaryingTopology | ModelId::Reference => format!(
+            "kd = 0.3\nks = 0.6\nexponent = {e}\nspacing = 2.4\nheight = 0.9\nmap_scale = 0.2\n"
+        ),
+    }
+}
+
+pub fn params(id: ModelId, text: &str) -> Result<ModelParams> {
+    let raw: RawParams = toml::from_str(text).map_err(|e| anyhow!("{e}"))?;
+    Ok(ModelParams::from_raw(&raw, id)?.0)
+}
+
+/// A view at polar angle theta from N and azimuth phi from T (degrees), fibre frame.
+pub fn view(theta_deg: f64, phi_deg: f64) -> Local {
+    let (st, ct) = theta_deg.to_radians().sin_cos();
+    let (sp, cp) = phi_deg.to_radians().sin_cos();
+    Local {
+        t: st * cp,
+        b: st * sp,
+        n: ct,
+    }
+}
+
+/// splitmix64 uniforms in [0, 1): the same stream on every machine and version.
+pub struct Uniforms(u64);
+
+impl Uniforms {
+    pub fn new(seed: u64) -> Self {
+        Uniforms(seed)
+    }
+    pub fn next(&mut self) -> f64 {
+        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        z ^= z >> 31;
+        (z >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// Mean and per-sample variance of `n` weights.
+fn moments(n: usize, mut weight: impl FnMut() -> f64) -> (f64, f64) {
+    // Welford: the weights of a sharp lobe span many orders of magnitude
+    let (mut mean, mut m2) = (0.0, 0.0);
+    for k in 1..=n {
+        let w = weight();
+        let d = w - mean;
+        mean += d / k as f64;
+        m2 += d * (w - mean);
+    }
+    (mean, m2 / n.max(2) as f64)
+}
+
+/// The variance study of one rung at one view.
+pub fn variance_row(
+    id: ModelId,
+    p: &ModelParams,
+    lobe_width: f64,
+    v: (f64, f64),
+    samples: usize,
+    seed: u64,
+) -> Result<VarianceRow> {
+    let m = model::build(id, p)?;
+    let sampler = Sampler::new(id, p).with_lobe_width(lobe_width);
+    let a = p.albedos;
+    let dir = view(v.0, v.1);
+    let mut u = Uniforms::new(seed);
+    let (albedo_sampled, variance_sampled) = moments(samples, || {
+        sampler
+            .sample(m.as_ref(), &a, None, &dir, [u.next(), u.next()])
+            .map_or(0.0, |s| s.weight[0])
+    });
+    let mut u = Uniforms::new(seed ^ 0x5555_5555);
+    let (albedo_cosine, variance_cosine) = moments(samples, || {
+        let (r2, ph) = (u.next(), TAU * u.next());
+        let r = r2.sqrt();
+        let l = Local {
+            t: r * ph.cos(),
+            b: r * ph.sin(),
+            n: (1.0 - r2).sqrt(),
+        };
+        if !(l.n > 0.0) {
+            return 0.0;
+        }
+        // weight f (N.l) / ((N.l) / pi)
+        PI * m.basis(&DirectionPair { l, v: dir }).brdf(&a, 0)
+    });
+    Ok(VarianceRow {
+        rung: id.to_string(),
+        exponent: p.exponent,
+        lobe_width,
+        theta_v_deg: v.0,
+        phi_v_deg: v.1,
+        samples,
+        albedo_sampled,
+        albedo_cosine,
+        variance_sampled,
+        variance_cosine,
+        ratio: variance_cosine / variance_sampled,
+    })
+}
+
+/// Samples per rung and view of the study (cost-limited for the slow rungs).
+fn samples_for(id: ModelId, quick: bool) -> usize {
+    let n = match id {
+        ModelId::VaryingTopology => 40_000,
+        ModelId::Reference => 400,
+        _ => 400_000,
+    };
+    if quick {
+        n / 10
+    } else {
+        n
+    }
+}
+
+/// Samples per second of `sampler` (with `m`'s evaluation, and with a constant model) and
+/// `m`'s evaluations per second, over the study's views, on this thread.
+fn speed_row(id: ModelId, variant: &str, p: &ModelParams, budget: f64) -> Result<SpeedRow> {
+    let m = model::build(id, p)?;
+    let sampler = Sampler::new(id, p);
+    let a = p.albedos;
+    let views: Vec<Local> = VIEWS.iter().map(|&(t, f)| view(t, f)).collect();
+    // run until `budget` seconds have passed, in rounds over the views
+    let time = |f: &mut dyn FnMut(&Local, [f64; 2]) -> f64| {
+        let mut u = Uniforms::new(17);
+        let (mut count, mut sink) = (0usize, 0.0);
+        let t = Instant::now();
+        while t.elapsed().as_secs_f64() < budget || count == 0 {
+            for v in &views {
+                sink += f(v, [u.next(), u.next()]);
+                count += 1;
+            }
+        }
+        std::hint::black_box(sink);
+        count as f64 / t.elapsed().as_secs_f64()
+    };
+    let samples_per_second = time(&mut |v, u| {
+        sampler
+            .sample(m.as_ref(), &a, None, v, u)
+            .map_or(0.0, |s| s.weight[0])
+    });
+    let sampler_only_per_second = time(&mut |v, u| {
+        sampler
+            .sample(&Lambert, &a, None, v, u)
+            .map_or(0.0, |s| s.pdf)
+    });
+    let evals_per_second = time(&mut |v, u| {
+        let z = u[0].max(1e-3);
+        let r = (1.0 - z * z).sqrt();
+        let l = Local {
+            t: r * (TAU * u[1]).cos(),
+            b: r * (TAU * u[1]).sin(),
+            n: z,
+        };
+        m.basis(&DirectionPair { l, v: *v }).specular
+    });
+    Ok(SpeedRow {
+        rung: id.to_string(),
+        variant: variant.to_string(),
+        samples_per_second,
+        sampler_only_per_second,
+        evals_per_second,
+    })
+}
+
+/// The whole study. `quick`: a tenth of the samples and shorter timings.
+pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
+    let e = 1000.0;
+    // the variance table: every rung x every view, in parallel, one seed per row
+    let jobs: Vec<(ModelId, (f64, f64), u64)> = ModelId::ALL
+        .iter()
+        .enumerate()
+        .flat_map(|(i, &id)| {
+            VIEWS
+                .iter()
+                .enumerate()
+                .map(move |(j, &v)| (id, v, 1000 + 100 * i as u64 + j as u64))
+        })
+        .filter(|(id, v, _)| {
+            // the reference's values cost ~0.1 s each: two views
+            *id != ModelId::Reference || matches!(v, (30.0, 0.0) | (60.0, 45.0))
+        })
+        .collect();
+    bar.set_length((jobs.len() + 2 * 5 * 3 + 2 * 4 * 3 + 11) as u64);
+    let variance = jobs
+        .par_iter()
+        .map(|&(id, v, seed)| {
+            let p = params(id, &params_text(id, e))?;
+            let row = variance_row(id, &p, LOBE_WIDTH, v, samples_for(id, quick), seed);
+            bar.inc(1);
+            row
+        })
+        .collect::<Result<Vec<_>>>()?;
+    // the lobe width around its default
+    let width_views = [(30.0, 0.0), (60.0, 45.0), (80.0, 0.0)];
+    let mut width_jobs = Vec::new();
+    let mut exponent_jobs = Vec::new();
+    for (i, id) in [ModelId::MaxNormal, ModelId::PoulinFournier]
+        .into_iter()
+        .enumerate()
+    {
+        for (k, c) in [0.25, 0.5, LOBE_WIDTH, 1.0, 2.0].into_iter().enumerate() {
+            for (j, &v) in width_views.iter().enumerate() {
+                width_jobs.push((
+                    id,
+                    e,
+                    c,
+                    v,
+                    5000 + 100 * i as u64 + 10 * k as u64 + j as u64,
+                ));
+            }
+        }
+        for (k, ex) in [10.0, 100.0, 1000.0, 10000.0].into_iter().enumerate() {
+            for (j, &v) in width_views.iter().enumerate() {
+                exponent_jobs.push((
+                    id,
+                    ex,
+                    LOBE_WIDTH,
+                    v,
+                    7000 + 100 * i as u64 + 10 * k as u64 + j as u64,
+                ));
+            }
+        }
+    }
+    let run_jobs = |jobs: &[(ModelId, f64, f64, (f64, f64), u64)]| {
+        jobs.par_iter()
+            .map(|&(id, ex, c, v, seed)| {
+                let p = params(id, &params_text(id, ex))?;
+                let row = variance_row(id, &p, c, v, samples_for(id, quick), seed);
+                bar.inc(1);
+                row
+            })
+            .collect::<Result<Vec<_>>>()
+    };
+    let widths = run_jobs(&width_jobs)?;
+    let exponents = run_jobs(&exponent_jobs)?;
+    // speed: one thread, one rung after another
+    let budget = if quick { 0.05 } else { 0.5 };
+    let mut speed = Vec::new();
+    for id in ModelId::ALL {
+        let budget = if id == ModelId::Reference {
+            budget * 4.0
+        } else {
+            budget
+        };
+        speed.push(speed_row(
+            id,
+            "-",
+            &params(id, &params_text(id, e))?,
+            budget,
+        )?);
+        bar.inc(1);
+    }
+    for (id, variant, extra) in [
+        (
+            ModelId::MaxNormal,
+            "spread 180",
+            "azimuth_spread_deg = 180\n",
+        ),
+        (
+            ModelId::PoulinFournier,
+            "spread 180",
+            "azimuth_spread_deg = 180\n",
+        ),
+        (
+            ModelId::PoulinFournier,
+            "spread 20",
+            "azimuth_spread_deg = 20\n",
+        ),
+        (
+            ModelId::PoulinFournier,
+            "fuzz + fresnel",
+            "fuzz = 0.5\nfuzz_depth = 0.3\nfresnel_ior = 1.5\n",
+        ),
+    ] {
+        let text = params_text(id, e) + extra;
+        speed.push(speed_row(id, variant, &params(id, &text)?, budget)?);
+        bar.inc(1);
+    }
+    Ok(SamplingRun {
+        variance,
+        widths,
+        exponents,
+        speed,
+        quick,
+    })
+}
+
+/// Per rung: (rung, views, least ratio, geometric-mean ratio) of `rows`.
+pub fn summary(rows: &[VarianceRow]) -> Vec<(String, usize, f64, f64)> {
+    let mut out: Vec<(String, usize, f64, f64)> = Vec::new();
+    for id in ModelId::ALL {
+        let r: Vec<f64> = rows
+            .iter()
+            .filter(|r| r.rung == id.as_str())
+            .map(|r| r.ratio)
+            .collect();
+        if r.is_empty() {
+            continue;
+        }
+        let least = r.iter().copied().fold(f64::INFINITY, f64::min);
+        let geo = (r.iter().map(|x| x.ln()).sum::<f64>() / r.len() as f64).exp();
+        out.push((id.to_string(), r.len(), least, geo));
+    }
+    out
+}
