@@ -229,6 +229,11 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
                 rms_error: w.rms_error,
                 relative_rms_error: w.relative_rms_error,
                 directions: w.directions,
+                warnings: {
+                    // on stderr and in the result's warnings too: a poor fallback must be seen
+                    warnings.extend(w.warnings.iter().cloned());
+                    w.warnings
+                },
             }),
             Err(e) => {
                 warnings.push(format!(
@@ -303,6 +308,10 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
         warnings: warnings.clone(),
     };
     let mut report_text = report::text(&outcome, id.as_str(), &req.data.display().to_string());
+    report_text += &result
+        .ward_fallback
+        .as_ref()
+        .map_or(String::new(), report::ward_text);
     if let Some(s) = &selection {
         report_text += &format!("[[Model selection]]\n{}", fit::selection::table(s));
     }

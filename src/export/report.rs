@@ -95,6 +95,35 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
     t
 }
 
+/// The [[Ward fallback]] section: Ward's parameters fitted to the model, how far off it they are
+/// and the fallback's warnings.
+pub fn ward_text(w: &super::result_json::WardFallback) -> String {
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "[[Ward fallback]] (Ward fitted to this model over {} directions)",
+        w.directions
+    );
+    for (name, v) in &w.parameters {
+        let num = |x: &serde_json::Value| x.as_f64().map_or(x.to_string(), |x| format!("{x:.6}"));
+        let shown = match v.as_array() {
+            Some(a) => format!("[{}]", a.iter().map(num).collect::<Vec<_>>().join(", ")),
+            None => num(v),
+        };
+        let _ = writeln!(t, "    {name:<20} {shown}");
+    }
+    let _ = writeln!(
+        t,
+        "    RMS error          = {:.6e} 1/sr ({:.1} % relative)",
+        w.rms_error,
+        100.0 * w.relative_rms_error
+    );
+    for warning in &w.warnings {
+        let _ = writeln!(t, "    warning: {warning}");
+    }
+    t
+}
+
 /// The [[Quality]] section: noise verdict, distinct minima, residual bins.
 pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
     let mut t = String::new();

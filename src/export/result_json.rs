@@ -308,6 +308,9 @@ pub struct WardFallback {
     pub rms_error: f64,
     pub relative_rms_error: f64,
     pub directions: usize,
+    /// More than 25 % off the model, or a parameter at a bound (absent in files written before).
+    #[serde(default)]
+    pub warnings: Vec<String>,
 }
 
 /// Fixed direction pairs (degrees) for check values: in-plane, cross-plane, grazing, mirror.

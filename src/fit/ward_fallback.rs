@@ -11,6 +11,9 @@ use rand::{Rng, SeedableRng};
 /// Directions the lobe is fitted over (light and view uniform in solid angle up to 80 deg).
 pub const DIRECTIONS: usize = 1500;
 
+/// A fallback whose relative RMS error against the fitted model exceeds this is warned about.
+pub const POOR_RELATIVE_ERROR: f64 = 0.25;
+
 pub struct WardFallback {
     /// Ward's parameters by name, one value or three.
     pub parameters: Vec<(String, Vec<f64>)>,
@@ -18,6 +21,44 @@ pub struct WardFallback {
     pub rms_error: f64,
     pub relative_rms_error: f64,
     pub directions: usize,
+    /// Why the fallback should not stand in for the model: more than [`POOR_RELATIVE_ERROR`]
+    /// off it, or a parameter at a bound of its range (the best Ward lobe lies beyond it).
+    pub warnings: Vec<String>,
+}
+
+/// The warnings of a fallback `relative_rms_error` off the model whose fit ended as `records`.
+pub fn warnings(relative_rms_error: f64, records: &[super::ParamRecord]) -> Vec<String> {
+    let mut out = Vec::new();
+    if !(relative_rms_error <= POOR_RELATIVE_ERROR) {
+        out.push(format!(
+            "the Ward fallback is {:.0} % off the fitted model (relative RMS error {:.3} over {DIRECTIONS} directions, more than {:.0} %): Ward's lobe cannot take this BRDF's shape, so a renderer given only the fallback shows another material",
+            100.0 * relative_rms_error,
+            relative_rms_error,
+            100.0 * POOR_RELATIVE_ERROR
+        ));
+    }
+    for r in records.iter().filter(|r| !r.fixed) {
+        for (c, (&v, &at)) in r.value.iter().zip(&r.at_bound).enumerate() {
+            if !at {
+                continue;
+            }
+            let name = if r.value.len() == 1 {
+                r.name.clone()
+            } else {
+                format!("{}[{}]", r.name, ["r", "g", "b"][c])
+            };
+            let side = if (v - r.min).abs() <= (v - r.max).abs() {
+                ("lower", r.min)
+            } else {
+                ("upper", r.max)
+            };
+            out.push(format!(
+                "the Ward fallback's {name} ended at its {} bound {} (range [{}, {}]): the best Ward lobe lies beyond Ward's range there",
+                side.0, side.1, r.min, r.max
+            ));
+        }
+    }
+    out
 }
 
 /// Fit Ward to `m` (with its albedos, fibres at `psi_deg`) over [`DIRECTIONS`] seeded pairs.
@@ -78,5 +119,6 @@ pub fn fit(
         rms_error: w.statistics.rmse,
         relative_rms_error: w.statistics.relative_rmse,
         directions: DIRECTIONS,
+        warnings: warnings(w.statistics.relative_rmse, &w.records),
     })
 }
