@@ -1,11 +1,12 @@
 //! `export`: the fitted model as shader code a renderer runs (checked on the GPU driver against
-//! the Rust model when asked) and as a glTF material on a preview mesh, built in memory; the
-//! caller writes them into its reserved outputs.
+//! the Rust model when asked) and as a glTF material on a preview mesh (a `fit --maps` result's
+//! maps as its textures), built in memory; the caller writes them into its reserved outputs.
 
 use crate::export::gltf_out::{self, VertexFrames};
 use crate::export::shader::{self, check, gpu::Gpu, Language};
 use crate::fit::gltf_material::{self, FittedMaterial};
 use crate::load::mesh;
+use crate::load::texel_maps::TexelMapsIn;
 use crate::model::topology::max_height;
 use crate::model::{self, ModelId, ModelParams};
 use crate::render::preview_mesh::{self, FramedMesh};
@@ -37,7 +38,26 @@ pub struct ExportOutcome {
     pub model: ModelId,
     pub shader: Option<String>,
     pub glb: Option<(Vec<u8>, FittedMaterial)>,
+    /// The per-texel maps the GLB carries as textures (a `fit --maps` result).
+    pub textures: Option<GlbTextures>,
 }
+
+/// What the GLB's textures were made from.
+#[derive(Clone, Debug)]
+pub struct GlbTextures {
+    /// The maps directory the result names.
+    pub directory: PathBuf,
+    pub width: usize,
+    pub height: usize,
+    /// The textures, in the document's order: "base colour", "metallic-roughness",
+    /// "anisotropy".
+    pub names: Vec<&'static str>,
+    /// The glTF shape refitted at the texels' heights (empty without a height map).
+    pub height_nodes: Vec<gltf_material::HeightNode>,
+}
+
+/// The map files of a maps directory that the textures may be made from.
+const MAP_FILES: [&str; 4] = ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"];
 
 /// Every file an export reads (none may be an output).
 pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
@@ -45,7 +65,32 @@ pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
     if req.object.to_ascii_lowercase().ends_with(".obj") {
         inputs.push(PathBuf::from(&req.object));
     }
+    if req.gltf {
+        // a failure to find them is reported by `export` itself
+        if let Ok(Some(dir)) = crate::api::render::maps_dir(None, &req.result, true) {
+            inputs.extend(MAP_FILES.iter().map(|f| dir.join(f)));
+        }
+    }
     inputs
+}
+
+/// The maps directory a `fit --maps` result names (beside the result, then in the working
+/// directory), with a warning when it names one that is not there.
+fn maps_of(result: &Path, quiet: bool) -> Result<Option<PathBuf>> {
+    let found = crate::api::render::maps_dir(None, result, true)?;
+    if found.is_none() && !quiet {
+        let named = crate::load::input::read_text(result)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+            .and_then(|v| v["maps"]["directory"].as_str().map(str::to_string));
+        if let Some(named) = named {
+            eprintln!(
+                "warning: {} names the maps directory {named}, which is not beside it nor in the working directory: the GLB carries no textures, only the global material",
+                result.display()
+            );
+        }
+    }
+    Ok(found)
 }
 
 /// Build what `req` asks for; a failure (a shader beyond its bound included) builds nothing.
@@ -128,14 +173,39 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
         shader_text = Some(shader::translate(&wgsl_src, lang)?);
     }
     let mut glb = None;
+    let mut textures = None;
     if req.gltf {
         let model = model::build(id, &params)?;
         let psi_deg = params.fibre_azimuth.to_degrees();
         let mesh = preview(&req.object, psi_deg)?;
         let fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1)?;
-        let material = gltf_out::fitted_material(&fitted, id, &lines);
+        let maps = match maps_of(&req.result, req.quiet)? {
+            Some(dir) if mesh.mesh.uvs.is_none() => {
+                if !req.quiet {
+                    eprintln!(
+                        "warning: {} has no texture coordinates: the GLB carries no textures of the maps in {}, only the global material",
+                        req.object,
+                        dir.display()
+                    );
+                }
+                None
+            }
+            other => other,
+        };
+        let mut images = Vec::new();
+        let mut material = gltf_out::fitted_material(&fitted, id, &lines);
+        if let Some(dir) = maps {
+            let loaded = TexelMapsIn::load(&dir, None)
+                .map_err(|e| anyhow!("the maps the result names: {e:#}"))?;
+            let t = map_textures(model.as_ref(), &params, &fitted, &loaded, &dir)?;
+            if let Some((tex, imgs, description)) = t {
+                material = gltf_out::textured_material(&fitted, id, &lines, Some(&description));
+                images = imgs;
+                textures = Some(tex);
+            }
+        }
         let mut bytes = Vec::new();
-        gltf_out::write_glb(
+        gltf_out::write_glb_with_images(
             &mut bytes,
             &mesh.mesh,
             &VertexFrames {
@@ -145,6 +215,7 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
                 undefined: &mesh.undefined,
             },
             Some(material),
+            &images,
             &format!("fibrefit {} export", env!("CARGO_PKG_VERSION")),
         )?;
         glb = Some((bytes, fitted));
@@ -153,8 +224,151 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
         model: id,
         shader: shader_text,
         glb,
+        textures,
     })
 }
+
+/// The textures of a `fit --maps` result's maps (one texel per map pixel, rows from the top: the
+/// mesh's v = 1 is the maps' top row, as `render` reads them):
+/// - base colour (sRGB) where there are kd, ks or height maps: per texel the least-squares base
+///   colour of the glTF shape for the texel's albedos ([`gltf_material::TexelMaterials`]);
+/// - metallic-roughness (G = roughness, B = metallic 0) where there is a height map: the
+///   roughness refitted at the texel's height;
+/// - KHR_materials_anisotropy's texture where there are azimuth or height maps: RG the fibre
+///   direction relative to the TANGENT, a = the texel's azimuth - `fibre_azimuth_deg` (TANGENT
+///   is the global fibre direction, the bitangent N x T, w = +1), as (cos a, sin a) encoded
+///   [-1, 1] -> [0, 1]; B the strength refitted at the texel's height, or the global strength.
+///
+/// A texel without a value (NaN) takes the global one. `None` when the maps give no texture.
+fn map_textures(
+    model: &dyn model::ShadingModel,
+    params: &ModelParams,
+    fitted: &FittedMaterial,
+    maps: &TexelMapsIn,
+    dir: &Path,
+) -> Result<Option<TexturesOut>> {
+    let (w, h) = (maps.width, maps.rows);
+    let h_max = max_height(params.spacing);
+    let topology = model.id().has_topology();
+    let heights = topology.then_some(maps.height.as_ref()).flatten();
+    let range = heights.and_then(|m| {
+        let finite = m.data.iter().filter(|v| v.is_finite());
+        let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+            let v = f64::from(v).clamp(0.0, h_max);
+            (lo.min(v), hi.max(v))
+        });
+        (lo <= hi).then_some((lo, hi))
+    });
+    let albedo_maps = maps.kd.is_some() || maps.ks.is_some();
+    let with_height = range.is_some();
+    let (want_base, want_rough, want_aniso) = (
+        albedo_maps || with_height,
+        with_height,
+        maps.psi.is_some() || with_height,
+    );
+    if !(want_base || want_aniso) {
+        return Ok(None);
+    }
+    let table = gltf_material::TexelMaterials::new(model, &params.albedos, fitted, range, 1)?;
+    let psi_deg = params.fibre_azimuth.to_degrees();
+    let n = w
+        .checked_mul(h)
+        .and_then(|n| n.checked_mul(3))
+        .ok_or_else(|| anyhow!("maps of {w}x{h} texels: too many for textures"))?;
+    let (mut base, mut rough, mut aniso) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+    let global = params.albedos;
+    let tied = global.substrate == global.diffuse;
+    for y in 0..h {
+        for x in 0..w {
+            let mut a = global;
+            for c in 0..3 {
+                if let Some(k) = TexelMapsIn::at(&maps.kd, x, y, c) {
+                    a.diffuse[c] = k;
+                    if tied {
+                        a.substrate[c] = k;
+                    }
+                }
+                if let Some(k) = TexelMapsIn::at(&maps.ks, x, y, c) {
+                    a.specular[c] = k;
+                }
+            }
+            let height = heights
+                .and_then(|_| TexelMapsIn::at(&maps.height, x, y, 0))
+                .map(|v| v.clamp(0.0, h_max));
+            let m = table.at(height, &a);
+            let turn = TexelMapsIn::at(&maps.psi, x, y, 0).map_or(0.0, |p| {
+                ((p - psi_deg + 90.0).rem_euclid(180.0) - 90.0).to_radians()
+            });
+            let i = 3 * (y * w + x);
+            base[i..i + 3].copy_from_slice(&m.base_color.map(gltf_out::srgb8));
+            rough[i..i + 3].copy_from_slice(&[0, gltf_out::unorm8(m.roughness), 0]);
+            aniso[i..i + 3].copy_from_slice(&[
+                gltf_out::unorm8(0.5 * (turn.cos() + 1.0)),
+                gltf_out::unorm8(0.5 * (turn.sin() + 1.0)),
+                gltf_out::unorm8(m.anisotropy_strength),
+            ]);
+        }
+    }
+    let mut images = Vec::new();
+    let mut names = Vec::new();
+    let mut add = |name: &'static str, file: &str, rgb: &[u8]| -> Result<usize> {
+        images.push(gltf_out::TextureImage {
+            name: file.to_string(),
+            png: gltf_out::png_rgb8(w, h, rgb)?,
+        });
+        names.push(name);
+        Ok(images.len() - 1)
+    };
+    let t_base = want_base
+        .then(|| add("base colour", "base_color", &base))
+        .transpose()?;
+    let t_rough = want_rough
+        .then(|| add("metallic-roughness", "metallic_roughness", &rough))
+        .transpose()?;
+    let t_aniso = want_aniso
+        .then(|| add("anisotropy", "anisotropy", &aniso))
+        .transpose()?;
+    let nodes = table.nodes();
+    let description = serde_json::json!({
+        "maps": dir.display().to_string(),
+        "size": [w, h],
+        "registration": "one texel per map pixel; image row 0 is the maps' top row (the mesh's v = 1, TEXCOORD_0 t = 0)",
+        "base_color": t_base.map(|_| "sRGB; per texel the least-squares base colour of the texel's glTF shape for its albedos (kd, ks maps; the global ones where a map has no value), as the global fit solves it"),
+        "metallic_roughness": t_rough.map(|_| "G = roughness refitted to the model at the texel's height (linear between the height nodes), B = metallic 0"),
+        "anisotropy": t_aniso.map(|_| format!(
+            "RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's fibre azimuth - fibre_azimuth_deg {psi_deg} (the TANGENT's direction), turned further by anisotropyRotation; B = strength{}",
+            if with_height { " refitted at the texel's height" } else { ", the global one" }
+        )),
+        "height_nodes": nodes.iter().map(|n| serde_json::json!({
+            "height": n.height,
+            "roughness": n.roughness,
+            "anisotropy_strength": n.anisotropy_strength,
+            "relative_rms_error": n.relative_rms_error,
+        })).collect::<Vec<_>>(),
+    });
+    Ok(Some((
+        GlbTextures {
+            directory: dir.to_path_buf(),
+            width: w,
+            height: h,
+            names,
+            height_nodes: nodes,
+        },
+        images,
+        gltf_out::MaterialTextures {
+            base_color: t_base,
+            metallic_roughness: t_rough,
+            anisotropy: t_aniso,
+            description,
+        },
+    )))
+}
+
+type TexturesOut = (
+    GlbTextures,
+    Vec<gltf_out::TextureImage>,
+    gltf_out::MaterialTextures,
+);
 
 /// One line per fact of where the parameters came from.
 fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> {

@@ -26,7 +26,10 @@ and refuses to write it if it disagrees by more than f32 allows (the bound is pr
 GLTF: a preview mesh (swatch, sphere, seed 001's torus, or an OBJ with curvature-aligned tangents)
 with NORMAL, TANGENT (the fibre direction), TEXCOORD_0 and a glTF material fitted to the model:
 base colour, roughness, KHR_materials_anisotropy and KHR_materials_ior, fitted over 1500
-direction pairs like the result's Ward fallback; the material's extras state its error.")]
+direction pairs like the result's Ward fallback; the material's extras state its error. A
+`fit --maps` result's maps (the directory its `maps.directory` names) become PNG textures in
+the GLB: base colour (sRGB, from kd/ks/height), metallic-roughness (from height) and the
+anisotropy texture (fibre direction from the azimuth map, strength from height).")]
 pub struct ExportArgs {
     /// A fitted result (.json) or any parameter file `eval` accepts
     pub result: PathBuf,
@@ -97,6 +100,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         model: id,
         shader: shader_text,
         glb,
+        textures,
     } = export_api::export(&req)?;
     // write: every file staged, then committed together
     if let (Some(text), Some(id)) = (&shader_text, shader_out) {
@@ -136,6 +140,29 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 100.0 * fitted.with_sheen_relative_rms_error,
                 100.0 * fitted.without_sheen_relative_rms_error
             );
+            if let Some(t) = &textures {
+                eprintln!(
+                    "  textures from the maps in {} ({}x{}): {}{}",
+                    t.directory.display(),
+                    t.width,
+                    t.height,
+                    t.names.join(", "),
+                    if t.height_nodes.is_empty() {
+                        String::new()
+                    } else {
+                        let (lo, hi) =
+                            t.height_nodes.iter().fold((1.0f64, 0.0f64), |(lo, hi), n| {
+                                (lo.min(n.roughness), hi.max(n.roughness))
+                            });
+                        format!(
+                            "; roughness {lo:.3}-{hi:.3} over heights {:.2}-{:.2} ({} nodes)",
+                            t.height_nodes[0].height,
+                            t.height_nodes[t.height_nodes.len() - 1].height,
+                            t.height_nodes.len()
+                        )
+                    }
+                );
+            }
         }
     }
     if let Some((_, fitted)) = &glb {

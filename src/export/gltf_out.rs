@@ -1,7 +1,9 @@
 //! glTF 2.0 binary (.glb) output, through the `gltf` crate's JSON schema types and GLB container:
 //! a mesh with POSITION, NORMAL, TANGENT (the fibre direction; w the handedness of the
 //! bitangent), TEXCOORD_0 where the mesh has texture coordinates, and `_UMBILIC` (1 where the
-//! tangent is undefined: an application-specific attribute, as glTF allows), indexed triangles.
+//! tangent is undefined: an application-specific attribute, as glTF allows), indexed triangles;
+//! and, for a material with texture maps, PNG images embedded in the binary buffer (a buffer
+//! view and `mimeType` each), one sampler and a texture per image.
 
 use crate::load::mesh::Mesh;
 use crate::model::frame::Vec3;
@@ -89,6 +91,12 @@ fn flat(v: &[Vec3]) -> Vec<f32> {
         .collect()
 }
 
+/// A PNG image for the GLB: texture `i` of the document is image `i`.
+pub struct TextureImage {
+    pub name: String,
+    pub png: Vec<u8>,
+}
+
 /// Write `mesh` with `frames` as a GLB to `out`, with `material` (a glTF material object) when
 /// given; `generator` names the tool.
 pub fn write_glb(
@@ -96,6 +104,19 @@ pub fn write_glb(
     mesh: &Mesh,
     frames: &VertexFrames,
     material: Option<Value>,
+    generator: &str,
+) -> Result<()> {
+    write_glb_with_images(out, mesh, frames, material, &[], generator)
+}
+
+/// [`write_glb`] with `images` embedded (after the mesh data, 4-byte aligned), a linear,
+/// mipmapped, clamped sampler and texture `i` = image `i`, for `material` to refer to.
+pub fn write_glb_with_images(
+    out: &mut impl Write,
+    mesh: &Mesh,
+    frames: &VertexFrames,
+    material: Option<Value>,
+    images: &[TextureImage],
     generator: &str,
 ) -> Result<()> {
     let mut b = Builder::default();
@@ -132,6 +153,19 @@ pub fn write_glb(
         .flat_map(|t| t.map(|i| i as u32))
         .collect();
     let idx = b.indices(&idx);
+    let mut image_json = Vec::new();
+    for img in images {
+        while b.bin.len() % 4 != 0 {
+            b.bin.push(0);
+        }
+        b.views.push(json!({
+            "buffer": 0, "byteOffset": b.bin.len(), "byteLength": img.png.len()
+        }));
+        b.bin.extend_from_slice(&img.png);
+        image_json.push(json!({
+            "bufferView": b.views.len() - 1, "mimeType": "image/png", "name": img.name
+        }));
+    }
     let mut primitive = json!({ "attributes": attributes, "indices": idx, "mode": 4 });
     let mut root = json!({
         "asset": { "version": "2.0", "generator": generator },
@@ -142,6 +176,16 @@ pub fn write_glb(
         "bufferViews": b.views,
         "accessors": b.accessors,
     });
+    if !images.is_empty() {
+        // LINEAR, LINEAR_MIPMAP_LINEAR, CLAMP_TO_EDGE: the maps cover the mesh's (u, v) once
+        root["samplers"] = json!([{
+            "magFilter": 9729, "minFilter": 9987, "wrapS": 33071, "wrapT": 33071
+        }]);
+        root["textures"] = json!((0..images.len())
+            .map(|i| json!({ "sampler": 0, "source": i, "name": images[i].name }))
+            .collect::<Vec<_>>());
+        root["images"] = json!(image_json);
+    }
     if let Some(m) = material {
         let mut used = Vec::new();
         if let Some(ext) = m.get("extensions").and_then(Value::as_object) {
@@ -196,6 +240,29 @@ pub fn fitted_material(
     model: crate::model::ModelId,
     provenance: &[String],
 ) -> Value {
+    textured_material(fitted, model, provenance, None)
+}
+
+/// The textures a material samples (indices into the document's textures; all TEXCOORD_0),
+/// and what they hold (`extras.fibrefit.textures`).
+pub struct MaterialTextures {
+    /// sRGB base colour: `baseColorFactor` becomes 1.
+    pub base_color: Option<usize>,
+    /// G = roughness (B = metallic = 0): `roughnessFactor` becomes 1.
+    pub metallic_roughness: Option<usize>,
+    /// KHR_materials_anisotropy: RG = direction in tangent space, B = strength:
+    /// `anisotropyStrength` becomes 1 (`anisotropyRotation` still turns the direction).
+    pub anisotropy: Option<usize>,
+    pub description: Value,
+}
+
+/// [`fitted_material`] sampling `textures` where given.
+pub fn textured_material(
+    fitted: &crate::fit::gltf_material::FittedMaterial,
+    model: crate::model::ModelId,
+    provenance: &[String],
+    textures: Option<&MaterialTextures>,
+) -> Value {
     let m = &fitted.material;
     let c = m.base_color;
     let mut material = json!({
@@ -228,6 +295,23 @@ pub fn fitted_material(
             "source": provenance,
         }},
     });
+    if let Some(tx) = textures {
+        let pbr = &mut material["pbrMetallicRoughness"];
+        if let Some(i) = tx.base_color {
+            pbr["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
+            pbr["baseColorTexture"] = json!({ "index": i, "texCoord": 0 });
+        }
+        if let Some(i) = tx.metallic_roughness {
+            pbr["roughnessFactor"] = json!(1.0);
+            pbr["metallicRoughnessTexture"] = json!({ "index": i, "texCoord": 0 });
+        }
+        if let Some(i) = tx.anisotropy {
+            let an = &mut material["extensions"]["KHR_materials_anisotropy"];
+            an["anisotropyStrength"] = json!(1.0);
+            an["anisotropyTexture"] = json!({ "index": i, "texCoord": 0 });
+        }
+        material["extras"]["fibrefit"]["textures"] = tx.description.clone();
+    }
     if let Some(sh) = m.sheen {
         material["extensions"]["KHR_materials_sheen"] = json!({
             "sheenColorFactor": [sh.colour, sh.colour, sh.colour],
@@ -235,4 +319,34 @@ pub fn fitted_material(
         });
     }
     material
+}
+
+/// sRGB encoding (IEC 61966-2-1) of a linear value in [0, 1] to 8 bits, rounded.
+pub fn srgb8(linear: f64) -> u8 {
+    let c = linear.clamp(0.0, 1.0);
+    let e = if c <= 0.003_130_8 {
+        12.92 * c
+    } else {
+        1.055 * c.powf(1.0 / 2.4) - 0.055
+    };
+    (e * 255.0).round().clamp(0.0, 255.0) as u8
+}
+
+/// A linear value in [0, 1] to 8 bits, rounded.
+pub fn unorm8(v: f64) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// An 8-bit RGB image (`width` x `height`, rows from the top) as PNG bytes.
+pub fn png_rgb8(width: usize, height: usize, rgb: &[u8]) -> Result<Vec<u8>> {
+    use image::ImageEncoder;
+    let (w, h) = (
+        u32::try_from(width).map_err(|_| anyhow!("a texture {width} pixels wide"))?,
+        u32::try_from(height).map_err(|_| anyhow!("a texture {height} pixels high"))?,
+    );
+    let mut png = Vec::new();
+    image::codecs::png::PngEncoder::new(&mut png)
+        .write_image(rgb, w, h, image::ExtendedColorType::Rgb8)
+        .map_err(|e| anyhow!("cannot encode a {width}x{height} PNG texture: {e}"))?;
+    Ok(png)
 }

@@ -199,6 +199,8 @@ pub struct FittedMaterial {
 /// would be ruled by the 1/N.l growth of fibre BRDFs at grazing light).
 struct Targets {
     pairs: Vec<DirectionPair>,
+    /// The model's basis (BRDF per unit albedo of each component) at each pair.
+    bases: Vec<crate::model::Basis>,
     values: Vec<[f64; 3]>,
     weights: Vec<f64>,
     channels: usize,
@@ -206,6 +208,26 @@ struct Targets {
 
 impl Targets {
     fn new(model: &dyn ShadingModel, albedos: &Albedos, seed: u64) -> Self {
+        Self::of(model, albedos, seed, None).expect("the model's own basis")
+    }
+
+    /// The targets of `model` with its fibre topology fixed at `height` (one texel); `None` for
+    /// a model without a topology.
+    fn at_height(
+        model: &dyn ShadingModel,
+        albedos: &Albedos,
+        seed: u64,
+        height: f64,
+    ) -> Option<Self> {
+        Self::of(model, albedos, seed, Some(height))
+    }
+
+    fn of(
+        model: &dyn ShadingModel,
+        albedos: &Albedos,
+        seed: u64,
+        height: Option<f64>,
+    ) -> Option<Self> {
         // xorshift; local directions in the fibre frame, uniform in solid angle up to 80 deg
         let mut s = (seed ^ 0x676c_5446).wrapping_mul(0x9E37_79B9_7F4A_7C15) | 1;
         let mut u = move || {
@@ -229,7 +251,14 @@ impl Targets {
             .map(|_| DirectionPair { l: dir(), v: dir() })
             .collect();
         let mut bases = vec![Default::default(); pairs.len()];
-        model.basis_many(&pairs, &mut bases);
+        match height {
+            None => model.basis_many(&pairs, &mut bases),
+            Some(h) => {
+                if !model.basis_many_at_height(&pairs, h, &mut bases) {
+                    return None;
+                }
+            }
+        }
         let channels = albedos.channels();
         let values = bases
             .iter()
@@ -242,21 +271,20 @@ impl Targets {
             })
             .collect();
         let weights = pairs.iter().map(|p| p.l.n).collect();
-        Self {
+        Some(Self {
             pairs,
+            bases,
             values,
             weights,
             channels,
-        }
+        })
     }
 
-    /// Sum of squared residuals and the best base colour (per channel, least squares, clamped
-    /// to [0, 1]) for a shape.
-    fn cost(&self, shape: &Shape) -> (f64, [f64; 3]) {
+    /// Per pair, the glTF BRDF of a shape as `fixed + diff * base`: the part that does not
+    /// scale with the base colour, and the one that does.
+    fn terms(&self, shape: &Shape) -> Vec<(f64, f64)> {
         let table = shape.sheen.map(|sh| sheen_albedo_table(sh.roughness));
-        // per pair: the part that does not scale with the base colour, and the one that does
-        let terms: Vec<(f64, f64)> = self
-            .pairs
+        self.pairs
             .iter()
             .map(|p| {
                 let (spec, diff) = pbr_terms(
@@ -278,7 +306,33 @@ impl Targets {
                     _ => (spec, diff),
                 }
             })
-            .collect();
+            .collect()
+    }
+
+    /// The least-squares base colour of `shape` as a linear function of the albedos.
+    fn base_law(&self, shape: &Shape) -> BaseColourLaw {
+        let mut law = BaseColourLaw {
+            per_albedo: [0.0; 4],
+            fixed: 0.0,
+            norm: 0.0,
+        };
+        for (((fixed, diff), b), w) in self.terms(shape).iter().zip(&self.bases).zip(&self.weights)
+        {
+            let wd = w * w * diff;
+            law.per_albedo[0] += wd * b.diffuse;
+            law.per_albedo[1] += wd * b.specular;
+            law.per_albedo[2] += wd * b.substrate;
+            law.per_albedo[3] += wd * b.fuzz;
+            law.fixed += wd * fixed;
+            law.norm += wd * diff;
+        }
+        law
+    }
+
+    /// Sum of squared residuals and the best base colour (per channel, least squares, clamped
+    /// to [0, 1]) for a shape.
+    fn cost(&self, shape: &Shape) -> (f64, [f64; 3]) {
+        let terms = self.terms(shape);
         let mut base = [0.0; 3];
         let mut sse = 0.0;
         for c in 0..self.channels {
@@ -532,4 +586,279 @@ pub fn fit(model: &dyn ShadingModel, albedos: &Albedos, seed: u64) -> Result<Fit
         with_sheen_relative_rms_error: relative(cs),
         directions: t.pairs.len(),
     })
+}
+
+/// The least-squares base colour of one shape as a linear function of the albedos. Per pair the
+/// glTF BRDF is `fixed + diff * base` and the model's `sum_k a_k basis_k` (k: diffuse, specular,
+/// substrate, fuzz), so the base colour minimising the weighted squares is
+/// `(sum_k a_k G_k - F) / D`, clamped to [0, 1]: one texel's albedos give its base colour
+/// without another pass over the directions.
+#[derive(Clone, Copy, Debug)]
+struct BaseColourLaw {
+    /// G_k = sum w^2 diff basis_k.
+    per_albedo: [f64; 4],
+    /// F = sum w^2 diff fixed.
+    fixed: f64,
+    /// D = sum w^2 diff^2.
+    norm: f64,
+}
+
+impl BaseColourLaw {
+    fn base(&self, a: &Albedos) -> [f64; 3] {
+        std::array::from_fn(|c| {
+            if self.norm > 0.0 {
+                let g = &self.per_albedo;
+                ((g[0] * a.diffuse[c]
+                    + g[1] * a.specular[c]
+                    + g[2] * a.substrate[c]
+                    + g[3] * a.fuzz[c]
+                    - self.fixed)
+                    / self.norm)
+                    .clamp(0.0, 1.0)
+            } else {
+                0.0
+            }
+        })
+    }
+}
+
+fn shape_of(m: &PbrMaterial) -> Shape {
+    Shape {
+        roughness: m.roughness,
+        strength: m.anisotropy_strength,
+        ior: m.ior,
+        rotation: m.anisotropy_rotation,
+        sheen: m.sheen,
+    }
+}
+
+/// The least-squares base colour of `m`'s shape (everything but its base colour) for `model`
+/// with `albedos`, over the fit's directions (`seed` as in [`fit`]): what [`fit`] gives as the
+/// base colour when its shape is `m`'s.
+pub fn base_color(
+    model: &dyn ShadingModel,
+    albedos: &Albedos,
+    m: &PbrMaterial,
+    seed: u64,
+) -> [f64; 3] {
+    Targets::new(model, albedos, seed).cost(&shape_of(m)).1
+}
+
+/// Height nodes of a [`TexelMaterials`] table at most (over the texels' height range).
+pub const HEIGHT_NODES: usize = 9;
+
+/// The glTF shape refitted at one texel height: roughness and anisotropy strength (ior,
+/// rotation and sheen kept from the global material).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct HeightNode {
+    /// H, fibre radii.
+    pub height: f64,
+    pub roughness: f64,
+    pub anisotropy_strength: f64,
+    /// Relative RMS error of f N.l against the model at this height (the global albedos).
+    pub relative_rms_error: f64,
+}
+
+/// One texel's glTF material parameters.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct TexelMaterial {
+    /// Linear RGB in [0, 1].
+    pub base_color: [f64; 3],
+    pub roughness: f64,
+    pub anisotropy_strength: f64,
+}
+
+/// Per-texel glTF parameters from a `fit --maps` result's maps, given the global material:
+/// - base colour: the least-squares base colour of the texel's shape for the texel's albedos
+///   (its kd and ks maps, the substrate following kd when tied to it), exactly as [`fit`]
+///   solves it for the global albedos (so a texel with the global albedos gets the global
+///   base colour);
+/// - with a height map (rungs with a topology): roughness and anisotropy strength refitted to
+///   the model at [`HEIGHT_NODES`] heights across the texels' range (ior, rotation, sheen the
+///   global ones), linear between the nodes, and the base colour of the nodes' shapes likewise;
+///   a texel without a height takes the global material's shape.
+pub struct TexelMaterials {
+    global: (TexelMaterial, BaseColourLaw),
+    nodes: Vec<(HeightNode, BaseColourLaw)>,
+}
+
+/// Nelder–Mead's objective at one height: x = (roughness, strength), the rest of `base` kept.
+struct NodeObjective<'a> {
+    targets: &'a Targets,
+    base: Shape,
+}
+
+impl NodeObjective<'_> {
+    fn shape(&self, x: &DVector<f64>) -> (Shape, f64) {
+        let r = x[0].clamp(ROUGHNESS_RANGE.0, ROUGHNESS_RANGE.1);
+        let s = x[1].clamp(0.0, 1.0);
+        (
+            Shape {
+                roughness: r,
+                strength: s,
+                ..self.base
+            },
+            (x[0] - r).abs() + (x[1] - s).abs(),
+        )
+    }
+}
+
+impl CostFunction for NodeObjective<'_> {
+    type Param = DVector<f64>;
+    type Output = f64;
+    fn cost(&self, x: &Self::Param) -> Result<f64, ArgminError> {
+        let (shape, outside) = self.shape(x);
+        Ok(self.targets.cost(&shape).0 * (1.0 + outside))
+    }
+}
+
+/// Roughness and strength at one height: the grid of [`search`] from the global shape `base`,
+/// then Nelder–Mead; the cost too.
+fn node_shape(t: &Targets, base: Shape) -> Result<(f64, Shape)> {
+    let mut best = (t.cost(&base).0, base);
+    for k in 0..24 {
+        let roughness =
+            ROUGHNESS_RANGE.0 * (ROUGHNESS_RANGE.1 / ROUGHNESS_RANGE.0).powf(k as f64 / 23.0);
+        for j in 0..=10 {
+            let shape = Shape {
+                roughness,
+                strength: j as f64 / 10.0,
+                ..base
+            };
+            let c = t.cost(&shape).0;
+            if c < best.0 {
+                best = (c, shape);
+            }
+        }
+    }
+    let s0 = best.1;
+    let x0 = DVector::from_vec(vec![s0.roughness, s0.strength]);
+    let mut simplex = vec![x0.clone()];
+    for (k, step) in [0.1 * s0.roughness.max(0.05), 0.1].into_iter().enumerate() {
+        let mut p = x0.clone();
+        p[k] += if p[k] + step > 1.0 { -step } else { step };
+        simplex.push(p);
+    }
+    let objective = NodeObjective { targets: t, base };
+    let solver = NelderMead::new(simplex)
+        .with_sd_tolerance(1e-10)
+        .map_err(|e| anyhow!("glTF material fit at a height: {e}"))?;
+    let res = Executor::new(objective, solver)
+        .configure(|c| c.max_iters(200))
+        .run()
+        .map_err(|e| anyhow!("glTF material fit at a height: {e}"))?;
+    let x = res
+        .state()
+        .get_best_param()
+        .cloned()
+        .ok_or_else(|| anyhow!("glTF material fit at a height: no solution"))?;
+    let (shape, _) = NodeObjective { targets: t, base }.shape(&x);
+    let c = t.cost(&shape).0;
+    Ok(if c <= best.0 { (c, shape) } else { best })
+}
+
+impl TexelMaterials {
+    /// The table for `model` with the global `albedos` and the global material `fitted` (from
+    /// [`fit`] with `seed`), with height nodes over `heights` (the texels' least and largest
+    /// H) when given and the model has a topology.
+    pub fn new(
+        model: &dyn ShadingModel,
+        albedos: &Albedos,
+        fitted: &FittedMaterial,
+        heights: Option<(f64, f64)>,
+        seed: u64,
+    ) -> Result<Self> {
+        use rayon::prelude::*;
+        let m = &fitted.material;
+        let base = shape_of(m);
+        let global = (
+            TexelMaterial {
+                base_color: m.base_color,
+                roughness: m.roughness,
+                anisotropy_strength: m.anisotropy_strength,
+            },
+            Targets::new(model, albedos, seed).base_law(&base),
+        );
+        let mut nodes = Vec::new();
+        if let Some((lo, hi)) = heights.filter(|_| model.id().has_topology()) {
+            let k = if hi - lo > 1e-9 { HEIGHT_NODES } else { 1 };
+            let hs: Vec<f64> = (0..k)
+                .map(|i| {
+                    if k == 1 {
+                        lo
+                    } else {
+                        lo + (hi - lo) * i as f64 / (k - 1) as f64
+                    }
+                })
+                .collect();
+            nodes = hs
+                .par_iter()
+                .map(|&h| -> Result<Option<(HeightNode, BaseColourLaw)>> {
+                    let Some(t) = Targets::at_height(model, albedos, seed, h) else {
+                        return Ok(None);
+                    };
+                    let n = (t.values.len() * t.channels) as f64;
+                    let mean_sq: f64 = t
+                        .values
+                        .iter()
+                        .zip(&t.weights)
+                        .map(|(v, w)| v[..t.channels].iter().map(|x| (w * x).powi(2)).sum::<f64>())
+                        .sum::<f64>()
+                        / n;
+                    let (cost, shape) = node_shape(&t, base)?;
+                    Ok(Some((
+                        HeightNode {
+                            height: h,
+                            roughness: shape.roughness,
+                            anisotropy_strength: shape.strength,
+                            relative_rms_error: (cost / n).sqrt()
+                                / mean_sq.sqrt().max(f64::MIN_POSITIVE),
+                        },
+                        t.base_law(&shape),
+                    )))
+                })
+                .collect::<Result<Vec<_>>>()?
+                .into_iter()
+                .flatten()
+                .collect();
+        }
+        Ok(Self { global, nodes })
+    }
+
+    /// The height nodes (empty without a height map or a topology).
+    pub fn nodes(&self) -> Vec<HeightNode> {
+        self.nodes.iter().map(|(n, _)| *n).collect()
+    }
+
+    /// The material of a texel with `height` (`None`: the model's own topology) and `albedos`.
+    pub fn at(&self, height: Option<f64>, albedos: &Albedos) -> TexelMaterial {
+        let (Some(h), Some(first)) = (height, self.nodes.first()) else {
+            let (g, law) = &self.global;
+            return TexelMaterial {
+                base_color: law.base(albedos),
+                ..*g
+            };
+        };
+        let last = self.nodes.last().expect("non-empty");
+        let (a, b, f) = if self.nodes.len() == 1 || h <= first.0.height {
+            (first, first, 0.0)
+        } else if h >= last.0.height {
+            (last, last, 0.0)
+        } else {
+            let i = self
+                .nodes
+                .windows(2)
+                .position(|w| h <= w[1].0.height)
+                .unwrap_or(self.nodes.len() - 2);
+            let (a, b) = (&self.nodes[i], &self.nodes[i + 1]);
+            (a, b, (h - a.0.height) / (b.0.height - a.0.height))
+        };
+        let lerp = |x: f64, y: f64| x + (y - x) * f;
+        let (ba, bb) = (a.1.base(albedos), b.1.base(albedos));
+        TexelMaterial {
+            base_color: std::array::from_fn(|c| lerp(ba[c], bb[c]).clamp(0.0, 1.0)),
+            roughness: lerp(a.0.roughness, b.0.roughness),
+            anisotropy_strength: lerp(a.0.anisotropy_strength, b.0.anisotropy_strength),
+        }
+    }
 }
