@@ -33,9 +33,12 @@
 //!   the fibres themselves.
 //!
 //! The weights (w_cos, w_tube, w_lobe) are chosen per view from the albedos: each component's
-//! albedo (mean over the channels) times a rough estimate of that component's directional
-//! albedo per unit albedo (the lobe's from its exponent and the view, with the Fresnel factor at
-//! N.v and the fuzz layer's attenuation; the fuzz layer's own from its depth). The weights only
+//! albedo (mean over the channels) times an estimate of that component's directional albedo per
+//! unit albedo at v (max-normal's lobe: pi cos(th_r) times the Wallis integral of cos^e; the
+//! cross-section rungs' lobe, fibre diffuse and substrate: from the rung itself, tabulated per
+//! view angle in the cross-section plane when the sampler is made, the lobe's times cos(th_r);
+//! the Fresnel factor at N.v; the fuzz layer's attenuation, and its own part from its depth;
+//! ward's lobe: 1). The weights only
 //! change the variance, never the expectation, because `pdf` is the density of exactly this
 //! mixture with exactly these weights. Guards: a lobe with a non-zero albedo gets at least
 //! [`LOBE_MIN`] of the samples, and the diffuse techniques together at least [`DIFFUSE_MIN`]
@@ -55,21 +58,46 @@
 //!
 //! spherical coordinates about T (th the latitude from the cross-section plane), so d omega =
 //! cos(th) dth dphi. T lies in the swatch plane, so N.l = cos(th) sin(phi) > 0 exactly when phi is
-//! in (0, pi): drawing phi uniformly there never leaves the hemisphere. th = th_r + delta with the
+//! in (0, pi): drawing phi there never leaves the hemisphere. th and phi are drawn independently:
+//! th = th_r + delta with the
 //! mirror latitude th_r = -asin(v.t) and delta from a Cauchy law of width gamma = c / sqrt(e)
 //! truncated to th in [-pi/2, pi/2]: with A = atan((-pi/2 - th_r)/gamma), B = atan((pi/2 -
 //! th_r)/gamma), delta = gamma tan(A + u (B - A)) and its density is
 //!
 //! ```text
 //! g(delta) = 1 / ((B - A) gamma (1 + (delta/gamma)^2)),
-//! p_lobe(l | v) = g(th - th_r) / (pi cos th),   th = atan2(l.t, |l_p|), cos th = |l_p|.
+//! p_lobe(l | v) = g(th - th_r) q(alpha_l | v) / cos th,   th = atan2(l.t, |l_p|), cos th = |l_p|,
 //! ```
 //!
-//! cos(delta)^e ~ exp(-e delta^2/2) is a normal law of deviation 1/sqrt(e); for a normal target
-//! the Cauchy width minimising the second moment of the weight is sigma/sqrt(2) (at that width the
-//! weight's second moment is sqrt(pi/2) = 1.25 times the ideal), hence c = [`LOBE_WIDTH`] = 1/sqrt(2).
+//! with q the density of the longitude, written by alpha_l = pi/2 - phi = atan2(l.b, l.n), the
+//! angle of l's projection in the cross-section plane (MODEL.md §1).
+//!
+//! - max-normal: q = 1/pi, uniform: its lobe does not depend on the longitude at all.
+//! - cross-section rungs: along the cone the lobe is shaped by hiding and shadowing, strongly
+//!   so at grazing views (at 80 deg across the fibres it is zero over 40 % of the cone and peaks
+//!   at the edge where the reflecting normals stop being visible). Its shape depends on v
+//!   through alpha_v, the view's angle in the cross-section plane (the latitude only scales it:
+//!   the cross-section sees projections), so `Sampler::new` tabulates it from the rung itself:
+//!   [`CONE_ROWS`] / 2 views at latitude 0 with alpha_v >= 0, and for each the lobe's intensity
+//!   f_s (N.l) at l in the plane at [`CONE_BINS`] + 1 equally spaced alpha_l. q is that profile
+//!   interpolated linearly between the nodes, normalised, mixed with the uniform law
+//!   ([`CONE_UNIFORM`] of it: other heights and latitudes, the Fresnel factor, the spread), and
+//!   blended linearly between the two rows whose alpha_v bracket the view's (the lobe's edge moves
+//!   fast with alpha_v at grazing views). Rows for alpha_v < 0 are the mirror images, so q and
+//!   the pdf are exactly invariant under T -> -T. Drawn by picking the row with the rescaled
+//!   uniform, the bin by its cumulative mass, and the position in the bin by inverting the
+//!   linear density's quadratic CDF in closed form. The reference is tabulated through
+//!   varying-topology (equal to it to the quadrature error; the reference itself would take
+//!   seconds); the table costs one batch of (CONE_ROWS / 2) (CONE_BINS + 65) evaluations of
+//!   the rung when the sampler is made.
+//!
+//! cos(delta)^e ~ exp(-e delta^2/2) is a normal law of deviation 1/sqrt(e) (so it is on the
+//! cross-section rungs too, measured); for a normal target the Cauchy width minimising the
+//! second moment of the weight is sigma/sqrt(2) (at that width the weight's second moment is
+//! sqrt(pi/2) = 1.25 times the ideal), hence c = [`LOBE_WIDTH`] = 1/sqrt(2); `fibrefit bench
+//! --sampling` sweeps c on the rungs.
 //! The Cauchy tails are heavier than the lobe's, so the ratio lobe / density stays bounded
-//! everywhere: safe. `p_lobe` integrates to exactly 1 over the hemisphere.
+//! everywhere: safe. `p_lobe` integrates to exactly 1 over the hemisphere (g and q each do).
 //!
 //! The tube density is the same parametrisation with phi uniform on (0, pi) and th drawn with
 //! density cos^2(th) / (pi/2): its CDF is (y - sin y) / (2 pi) with y = 2 th + pi, inverted by
@@ -94,12 +122,16 @@
 //! # Why the density is exact
 //!
 //! Every component is drawn by inverting its own closed-form CDF (the tube's by Newton to full
-//! precision), and `pdf` evaluates the same closed forms at l, for every component and node, not
+//! precision; the cone table's row by its exact cumulative masses and the quadratic within a
+//! bin), and `pdf` evaluates the same closed forms at l, for every component and node, not
 //! only the one that drew l: the density of the mixture is the weighted sum of the densities of
 //! its components whichever produced the sample. The component and node are chosen by rescaling
-//! `u[0]` (the rescaled uniform is again uniform and independent of the choice). The weights
-//! depend only on (albedos, v), never on l, so they are the same in `sample` and `pdf`. Tested
-//! in `tests/sampling.rs` by a chi-square goodness-of-fit test of the directions against `pdf`.
+//! `u[0]` (the rescaled uniform is again uniform and independent of the choice), the cone
+//! table's row by rescaling `u[1]`. The weights and the table's rows depend only on (albedos,
+//! v), never on l, so they are the same in `sample` and `pdf`. `pdf` does not take the texel
+//! height: the sampler is the same at every height (the weight's f is the height's). Tested
+//! in `tests/sampling.rs` by chi-square goodness-of-fit tests of the directions against `pdf`.
+//! Directions with N.l <= [`HORIZON_COS`] count as at the horizon in both.
 
 use super::azimuth_spread::spread_nodes;
 use super::frame::Local;
@@ -114,6 +146,13 @@ pub const LOBE_WIDTH: f64 = std::f64::consts::FRAC_1_SQRT_2;
 pub const LOBE_MIN: f64 = 0.05;
 /// Least share of the samples the diffuse techniques (cosine and tube) get together.
 pub const DIFFUSE_MIN: f64 = 0.1;
+/// Longitude bins of the cross-section rungs' cone table (over alpha_l in (-pi/2, pi/2)).
+pub const CONE_BINS: usize = 64;
+/// Rows of the cone table (alpha_v in (-pi/2, pi/2)), half of them for alpha_v >= 0.
+pub const CONE_ROWS: usize = 64;
+/// The share of the cone's longitude law spread uniformly over the cone (what the table does
+/// not follow: other heights, latitudes, the Fresnel factor, between the rows).
+pub const CONE_UNIFORM: f64 = 0.2;
 /// Directions with N.l at or below this count as at the horizon, in `sample` and `pdf` alike:
 /// the rungs' 1/(N.l) factors overflow on subnormal cosines, and the density left out there is
 /// below 1e-12.
@@ -130,11 +169,29 @@ enum Lobe {
     Ward { ax: f64, ay: f64 },
 }
 
+/// The longitude law along the highlight cone of a cross-section rung: per row of alpha_v (the
+/// view's angle in the cross-section plane), a piecewise-constant law of alpha_l, tabulated from
+/// the rung's own lobe in the cross-section plane (where the cone's latitude is 0).
+#[derive(Clone, Debug)]
+struct ConeTable {
+    /// Probability of each alpha_l bin, per row (each row sums to 1).
+    /// The density (per radian) of alpha_l at the bin ends -pi/2 + j pi / CONE_BINS, per row;
+    /// linear between them (continuous), integrating to 1.
+    density: Vec<[f64; CONE_BINS + 1]>,
+    /// Cumulative masses of the bins per row (the last is 1).
+    cumulative: Vec<[f64; CONE_BINS]>,
+    /// Per row, for the weights: the lobe's directional albedo per unit ks at latitude 0, and
+    /// the diffuse and the substrate directional albedos per unit albedo.
+    albedo: Vec<[f64; 3]>,
+}
+
 /// The importance sampler of one rung with its parameters.
 #[derive(Clone, Debug)]
 pub struct Sampler {
     id: ModelId,
     lobe: Lobe,
+    /// The cone's longitude law (cross-section rungs; uniform without one).
+    cone: Option<ConeTable>,
     exponent: f64,
     /// Fresnel index of refraction on the lobe (0: none).
     fresnel_ior: f64,
@@ -205,9 +262,15 @@ impl Sampler {
             _ => (0.0, 1.0),
         };
         let fresnel = p.fresnel_ior > 0.0 && id.parameter_names().contains(&"fresnel_ior");
+        let cone = if id.is_cross_section() {
+            ConeTable::new(id, p)
+        } else {
+            None
+        };
         Sampler {
             id,
             lobe,
+            cone,
             exponent: p.exponent,
             fresnel_ior: if fresnel { p.fresnel_ior } else { 0.0 },
             fuzz_depth: p.fuzz_depth,
@@ -293,7 +356,10 @@ impl Sampler {
                 tube_direction([r, u1])
             } else {
                 match self.lobe {
-                    Lobe::Fibre { gamma } => fibre_lobe_direction(gamma, &turn(v, c, s), [r, u1]),
+                    Lobe::Fibre { gamma } => {
+                        let vj = turn(v, c, s);
+                        fibre_lobe_direction(gamma, self.cone.as_ref(), &vj, [r, u1])
+                    }
                     Lobe::Ward { ax, ay } => ward_direction(ax, ay, &turn(v, c, s), [r, u1]),
                     Lobe::None => unreachable!("a lobe weight without a lobe"),
                 }
@@ -319,7 +385,9 @@ impl Sampler {
                     let vj = turn(v, c, s);
                     q += w.lobe
                         * match self.lobe {
-                            Lobe::Fibre { gamma } => fibre_lobe_pdf(gamma, &vj, &lj),
+                            Lobe::Fibre { gamma } => {
+                                fibre_lobe_pdf(gamma, self.cone.as_ref(), &vj, &lj)
+                            }
                             Lobe::Ward { ax, ay } => ward_pdf(ax, ay, &vj, &lj),
                             Lobe::None => 0.0,
                         };
@@ -347,8 +415,16 @@ impl Sampler {
         } else {
             (1.0, 0.0)
         };
+        // the cross-section rungs' diffuse and substrate albedos from their table
+        let (kd_cos, sub_albedo) = match &self.cone {
+            Some(t) => {
+                let a = t.albedos(v);
+                (a[1], a[2])
+            }
+            None => (self.kd_cos, 1.0),
+        };
         let tube = kd * self.kd_tube * attenuation;
-        let cos = (kd * self.kd_cos + sub) * attenuation + fuzz_albedo;
+        let cos = (kd * kd_cos + sub * sub_albedo) * attenuation + fuzz_albedo;
         let lobe_albedo = if ks > 0.0 {
             ks * attenuation * self.lobe_albedo(v)
         } else {
@@ -391,14 +467,232 @@ impl Sampler {
             (Lobe::None, _) => 0.0,
             // int cos^e(th - th_r) cos(th) dth dphi ~ pi cos(th_r) W(e), W the Wallis integral
             (_, ModelId::MaxNormal) => {
-                let w = (TAU / (self.exponent + 0.5)).sqrt();
+                let w = wallis(self.exponent);
                 PI * w * v.projected_len().max(0.5 * w)
             }
+            // the cross-section rungs: the lobe at latitude 0 times cos(th_r) (the lobe's
+            // integral over the fibre's normals goes like 1 / sqrt(|l_p| |v_p|))
+            (_, id) if id.is_cross_section() => match &self.cone {
+                Some(t) => t.albedos(v)[0] * v.projected_len(),
+                None => 1.0,
+            },
             // normalised lobes
             _ => 1.0,
         };
         fresnel * shape
     }
+}
+
+impl ConeTable {
+    /// The table of rung `id` (a cross-section rung) with parameters `p`, from the aligned rung
+    /// (no spread, Fresnel or fuzz: those the mixture and the uniform share absorb; the
+    /// reference through varying-topology, which is it to the quadrature error), for v in the
+    /// cross-section plane at the centre of each row with alpha_v >= 0: the lobe's intensity
+    /// f_s (N.l) at l in the plane (latitude 0, the cone of v) at each alpha_l bin's centre, and
+    /// the diffuse and substrate directional albedos per unit albedo by an 8 x 8 cosine-weighted
+    /// product rule. The rows of alpha_v < 0 are their mirror images (T -> -T), exactly. `None`
+    /// if the rung cannot be built (then the cone's longitude law is uniform).
+    fn new(id: ModelId, p: &ModelParams) -> Option<ConeTable> {
+        let mut q = p.clone();
+        q.azimuth_spread_deg = 0.0;
+        q.fresnel_ior = 0.0;
+        q.fuzz_depth = 0.0;
+        let rung = if id == ModelId::Reference {
+            ModelId::VaryingTopology
+        } else {
+            id
+        };
+        let m = super::build(rung, &q).ok()?;
+        const GRID: usize = 8;
+        let half = CONE_ROWS / 2;
+        let bin = PI / CONE_BINS as f64;
+        let in_plane = |alpha: f64| {
+            let (s, c) = alpha.sin_cos();
+            Local { t: 0.0, b: s, n: c }
+        };
+        let per_row = CONE_BINS + 1 + GRID * GRID;
+        let mut pairs = Vec::with_capacity(half * per_row);
+        for i in 0..half {
+            let v = in_plane((i as f64 + 0.5) * FRAC_PI_2 / half as f64);
+            for j in 0..=CONE_BINS {
+                let alpha = -FRAC_PI_2 + j as f64 * bin;
+                pairs.push(DirectionPair {
+                    l: in_plane(alpha),
+                    v,
+                });
+            }
+            for a in 0..GRID {
+                for b in 0..GRID {
+                    let u = [
+                        (a as f64 + 0.5) / GRID as f64,
+                        (b as f64 + 0.5) / GRID as f64,
+                    ];
+                    pairs.push(DirectionPair {
+                        l: cosine_direction(u),
+                        v,
+                    });
+                }
+            }
+        }
+        let mut out = vec![super::Basis::default(); pairs.len()];
+        m.basis_many(&pairs, &mut out);
+        let finite = |x: f64| if x.is_finite() && x > 0.0 { x } else { 0.0 };
+        let w = wallis(p.exponent);
+        // per row with alpha_v >= 0: masses, lobe albedo, diffuse and substrate albedos
+        let mut upper = Vec::with_capacity(half);
+        for i in 0..half {
+            let row = &out[i * per_row..(i + 1) * per_row];
+            let row_pairs = &pairs[i * per_row..(i + 1) * per_row];
+            let mut t = [0.0; CONE_BINS + 1];
+            for (j, tj) in t.iter_mut().enumerate() {
+                *tj = finite(row[j].specular * row_pairs[j].l.n);
+            }
+            // the integral of the linear interpolant
+            let total: f64 = t.windows(2).map(|w| 0.5 * (w[0] + w[1]) * bin).sum();
+            let floor = if total > 0.0 { CONE_UNIFORM } else { 1.0 };
+            let density = t.map(|tj| {
+                let share = if total > 0.0 { tj / total } else { 0.0 };
+                (1.0 - floor) * share + floor * FRAC_1_PI
+            });
+            // cosine-weighted rule: a(v) = mean of pi f
+            let grid = &row[CONE_BINS + 1..];
+            let mean = |f: &dyn Fn(&super::Basis) -> f64| {
+                PI * grid.iter().map(|b| finite(f(b))).sum::<f64>() / grid.len() as f64
+            };
+            upper.push(Row {
+                density,
+                // the lobe's albedo at latitude 0: its integral over alpha_l times its width
+                // in latitude (cos^e)
+                lobe: total * w,
+                diffuse: mean(&|b| b.diffuse),
+                substrate: mean(&|b| b.substrate),
+            });
+        }
+        // rows k < half are the mirror images of rows CONE_ROWS - 1 - k
+        let rows: Vec<Row> = (0..CONE_ROWS)
+            .map(|k| {
+                if k < half {
+                    let mut r = upper[half - 1 - k].clone();
+                    r.density.reverse();
+                    r
+                } else {
+                    upper[k - half].clone()
+                }
+            })
+            .collect();
+        let cumulative = rows
+            .iter()
+            .map(|row| {
+                let mut c = [0.0; CONE_BINS];
+                let mut acc = 0.0;
+                for (j, cj) in c.iter_mut().enumerate() {
+                    acc += 0.5 * (row.density[j] + row.density[j + 1]) * bin;
+                    *cj = acc;
+                }
+                // the masses sum to 1 up to rounding
+                c.iter_mut().for_each(|x| *x /= acc);
+                c[CONE_BINS - 1] = 1.0;
+                c
+            })
+            .collect();
+        Some(ConeTable {
+            density: rows.iter().map(|r| r.density).collect(),
+            cumulative,
+            albedo: rows
+                .iter()
+                .map(|r| [r.lobe, r.diffuse, r.substrate])
+                .collect(),
+        })
+    }
+}
+
+/// One row of a [`ConeTable`] while it is built.
+#[derive(Clone)]
+struct Row {
+    density: [f64; CONE_BINS + 1],
+    lobe: f64,
+    diffuse: f64,
+    substrate: f64,
+}
+
+impl ConeTable {
+    /// The two rows that bracket the view's cross-section angle `alpha_v` and the weight of the
+    /// second: the law is the blend of the rows at the neighbouring row centres (linear in
+    /// alpha_v; the lobe's edge moves fast with alpha_v at grazing views). Computed from
+    /// |alpha_v| and its sign, so -alpha_v gives the mirror rows with the same weight.
+    fn blend(&self, alpha_v: f64) -> (usize, usize, f64) {
+        let half = CONE_ROWS / 2;
+        // position among the row centres (i + 1/2) of the rows with alpha_v >= 0, in row units;
+        // -1 is the mirror of row 0
+        let q = alpha_v.abs() / FRAC_PI_2 * half as f64 - 0.5;
+        let lo = q.floor().clamp(-1.0, half as f64 - 1.0);
+        let w = (q - lo).clamp(0.0, 1.0);
+        let lo = lo as isize;
+        let hi = (lo + 1).min(half as isize - 1);
+        let row = |j: isize| {
+            if alpha_v.is_sign_negative() {
+                (half as isize - 1 - j) as usize
+            } else {
+                (half as isize + j) as usize
+            }
+        };
+        (row(lo), row(hi), w)
+    }
+
+    /// The row albedos (lobe, diffuse, substrate; see `albedo`) blended for the view v.
+    fn albedos(&self, v: &Local) -> [f64; 3] {
+        let (a, b, w) = self.blend(v.b.atan2(v.n));
+        let (x, y) = (self.albedo[a], self.albedo[b]);
+        [0, 1, 2].map(|k| (1.0 - w) * x[k] + w * y[k])
+    }
+
+    /// The density (per radian) of alpha_l given alpha_v.
+    fn density(&self, alpha_v: f64, alpha_l: f64) -> f64 {
+        let (a, b, w) = self.blend(alpha_v);
+        // the nodes either side of alpha_l, from |alpha_l| and its sign (exact mirror images)
+        let half = CONE_BINS / 2;
+        let y = alpha_l.abs() / PI * CONE_BINS as f64;
+        let k = (y.floor() as usize).min(half - 1);
+        let f = (y - k as f64).clamp(0.0, 1.0);
+        let (n0, n1) = if alpha_l.is_sign_negative() {
+            (half - k, half - k - 1)
+        } else {
+            (half + k, half + k + 1)
+        };
+        let at = |d: &[f64; CONE_BINS + 1]| (1.0 - f) * d[n0] + f * d[n1];
+        (1.0 - w) * at(&self.density[a]) + w * at(&self.density[b])
+    }
+
+    /// alpha_l drawn from the blend for alpha_v with the uniform `u` (the row by its rescaled
+    /// value, then the bin by inversion, uniform within the bin).
+    fn sample(&self, alpha_v: f64, u: f64) -> f64 {
+        let (a, b, w) = self.blend(alpha_v);
+        let (row, u) = if u < 1.0 - w {
+            (a, rescale(u, 0.0, 1.0 - w))
+        } else {
+            (b, rescale(u, 1.0 - w, 1.0))
+        };
+        let cumulative = &self.cumulative[row];
+        let j = cumulative.partition_point(|&c| c <= u).min(CONE_BINS - 1);
+        let lo = if j == 0 { 0.0 } else { cumulative[j - 1] };
+        let r = rescale(u, lo, cumulative[j]);
+        // within the bin the density runs linearly from a to b: its CDF a x + (b - a) x^2 / 2
+        // = r (a + b) / 2 solved in the cancellation-free form
+        let (a, b) = (self.density[row][j], self.density[row][j + 1]);
+        let root = (a * a * (1.0 - r) + b * b * r).sqrt();
+        let x = if a + root > 0.0 {
+            (r * (a + b) / (a + root)).clamp(0.0, 1.0)
+        } else {
+            r
+        };
+        -FRAC_PI_2 + (j as f64 + x) * (PI / CONE_BINS as f64)
+    }
+}
+
+/// The Wallis integral int_{-pi/2}^{pi/2} cos^e(x) dx, approximately (2 % at e = 1, exact as
+/// e grows): the lobe's width in latitude, for the weights only.
+fn wallis(e: f64) -> f64 {
+    (TAU / (e + 0.5)).sqrt()
 }
 
 /// The largest f64 below 1.
@@ -508,23 +802,40 @@ fn fibre_lobe_law(gamma: f64, v: &Local) -> (f64, f64, f64) {
     (th_r, a, b - a)
 }
 
-/// The fibre lobe technique for the view v (fibre frame of the node).
-fn fibre_lobe_direction(gamma: f64, v: &Local, u: [f64; 2]) -> Local {
+/// The fibre lobe technique for the view v (fibre frame of the node): the latitude from the
+/// Cauchy law, the longitude uniform or from the cone table's row `row`.
+fn fibre_lobe_direction(gamma: f64, cone: Option<&ConeTable>, v: &Local, u: [f64; 2]) -> Local {
     let (th_r, a, width) = fibre_lobe_law(gamma, v);
     let delta = gamma * (a + u[0] * width).tan();
     let th = (th_r + delta).clamp(-FRAC_PI_2, FRAC_PI_2);
     let (s, c) = th.sin_cos();
-    about_tangent(s, c, PI * u[1])
+    // alpha_l = pi/2 - phi, the longitude's angle in the cross-section plane from N
+    // alpha_l = pi/2 - phi, the longitude's angle in the cross-section plane from N
+    let alpha = match cone {
+        None => FRAC_PI_2 - PI * u[1],
+        Some(table) => table.sample(v.b.atan2(v.n), u[1]),
+    };
+    let (sa, ca) = alpha.sin_cos();
+    Local {
+        t: s,
+        b: c * sa,
+        n: c * ca,
+    }
 }
 
 /// Density of [`fibre_lobe_direction`] at l (above the horizon).
-fn fibre_lobe_pdf(gamma: f64, v: &Local, l: &Local) -> f64 {
+fn fibre_lobe_pdf(gamma: f64, cone: Option<&ConeTable>, v: &Local, l: &Local) -> f64 {
     let (th_r, _, width) = fibre_lobe_law(gamma, v);
     let lp = l.projected_len();
     let th = l.t.atan2(lp);
     let x = (th - th_r) / gamma;
     let g = 1.0 / (width * gamma * (1.0 + x * x));
-    g * FRAC_1_PI / lp
+    // the longitude's density per radian
+    let longitude = match cone {
+        None => FRAC_1_PI,
+        Some(table) => table.density(v.b.atan2(v.n), l.b.atan2(l.n)),
+    };
+    g * longitude / lp
 }
 
 /// Walter's half vector for Ward, reflected: l (may be below the horizon).
