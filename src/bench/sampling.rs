@@ -372,21 +372,38 @@ pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
     })
 }
 
-/// Per rung: (rung, views, least ratio, geometric-mean ratio) of `rows`.
-pub fn summary(rows: &[VarianceRow]) -> Vec<(String, usize, f64, f64)> {
-    let mut out: Vec<(String, usize, f64, f64)> = Vec::new();
+/// Whether the sampler's weight is constant in `r` (zero variance up to rounding).
+pub fn is_exact(r: &VarianceRow) -> bool {
+    r.variance_sampled <= 1e-24 * r.albedo_sampled * r.albedo_sampled
+}
+
+/// One rung's summary over its views.
+pub struct Summary {
+    pub rung: String,
+    pub views: usize,
+    /// Every view's weight constant (the ratios are then infinite or undefined).
+    pub exact: bool,
+    pub least: f64,
+    pub geometric_mean: f64,
+}
+
+/// Per rung: the views, the least and the geometric-mean variance ratio of `rows`.
+pub fn summary(rows: &[VarianceRow]) -> Vec<Summary> {
+    let mut out = Vec::new();
     for id in ModelId::ALL {
-        let r: Vec<f64> = rows
-            .iter()
-            .filter(|r| r.rung == id.as_str())
-            .map(|r| r.ratio)
-            .collect();
-        if r.is_empty() {
+        let rs: Vec<&VarianceRow> = rows.iter().filter(|r| r.rung == id.as_str()).collect();
+        if rs.is_empty() {
             continue;
         }
-        let least = r.iter().copied().fold(f64::INFINITY, f64::min);
-        let geo = (r.iter().map(|x| x.ln()).sum::<f64>() / r.len() as f64).exp();
-        out.push((id.to_string(), r.len(), least, geo));
+        let least = rs.iter().map(|r| r.ratio).fold(f64::INFINITY, f64::min);
+        let geometric_mean = (rs.iter().map(|r| r.ratio.ln()).sum::<f64>() / rs.len() as f64).exp();
+        out.push(Summary {
+            rung: id.to_string(),
+            views: rs.len(),
+            exact: rs.iter().all(|r| is_exact(r)),
+            least,
+            geometric_mean,
+        });
     }
     out
 }

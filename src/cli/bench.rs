@@ -119,10 +119,19 @@ fn sampling(args: &BenchArgs) -> Result<()> {
     };
     crate::bench::report::sampling::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
     if !args.quiet {
-        for (rung, n, least, geo) in crate::bench::sampling::summary(&run.variance) {
-            eprintln!(
-                "{rung:<17} {n:>2} views: variance ratio least {least:.2}, geometric mean {geo:.2}"
-            );
+        for r in crate::bench::sampling::summary(&run.variance) {
+            if r.exact {
+                eprintln!(
+                    "{:<17} {:>2} views: exact (a constant weight)",
+                    r.rung, r.views
+                );
+            } else {
+                eprintln!(
+                    "{:<17} {:>2} views: variance ratio against cosine sampling least {:.2}, \
+                     geometric mean {:.2}",
+                    r.rung, r.views, r.least, r.geometric_mean
+                );
+            }
         }
         eprintln!("wrote {}", args.out.join("sampling.md").display());
     }

@@ -490,13 +490,18 @@ impl ConeTable {
     /// cross-section plane at the centre of each row with alpha_v >= 0: the lobe's intensity
     /// f_s (N.l) at l in the plane (latitude 0, the cone of v) at each alpha_l bin's centre, and
     /// the diffuse and substrate directional albedos per unit albedo by an 8 x 8 cosine-weighted
-    /// product rule. The rows of alpha_v < 0 are their mirror images (T -> -T), exactly. `None`
-    /// if the rung cannot be built (then the cone's longitude law is uniform).
+    /// product rule (at most 16 heights and 16 lobe nodes). The rows of alpha_v < 0 are their
+    /// mirror images (T -> -T), exactly. `None` if the rung cannot be built (then the cone's
+    /// longitude law is uniform).
     fn new(id: ModelId, p: &ModelParams) -> Option<ConeTable> {
         let mut q = p.clone();
         q.azimuth_spread_deg = 0.0;
         q.fresnel_ior = 0.0;
         q.fuzz_depth = 0.0;
+        // the table is a proposal's shape: 16 heights and 16 lobe nodes are plenty, and keep
+        // its cost bounded whatever the rung's own knobs (up to 65536 heights)
+        q.histogram_bins = q.histogram_bins.min(16);
+        q.quadrature_order = q.quadrature_order.min(16);
         let rung = if id == ModelId::Reference {
             ModelId::VaryingTopology
         } else {

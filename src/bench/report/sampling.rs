@@ -1,7 +1,7 @@
 //! `reports/sampling.md` (+ `sampling.csv`, `sampling_speed.csv`) from `fibrefit bench
 //! --sampling`: every number measured by the run.
 
-use crate::bench::sampling::{summary, SamplingRun, VarianceRow};
+use crate::bench::sampling::{is_exact, summary, SamplingRun, VarianceRow};
 use crate::model::sampling::{DIFFUSE_MIN, LOBE_MIN, LOBE_WIDTH};
 use anyhow::Result;
 use std::path::Path;
@@ -9,9 +9,9 @@ use std::path::Path;
 /// The ratio, or "exact" where the sampler's weight is constant (zero variance up to rounding).
 fn ratio(r: &VarianceRow) -> String {
     let tiny = 1e-24 * r.albedo_sampled * r.albedo_sampled;
-    if r.variance_sampled <= tiny && r.variance_cosine <= tiny {
+    if is_exact(r) && r.variance_cosine <= tiny {
         "- (both exact)".into()
-    } else if r.variance_sampled <= tiny {
+    } else if is_exact(r) {
         "exact (0 variance)".into()
     } else {
         format!("{:.3}", r.ratio)
@@ -44,17 +44,6 @@ fn table(rows: &[VarianceRow], first: &str) -> String {
     md
 }
 
-fn geo_ratio(rows: &[VarianceRow]) -> String {
-    if rows
-        .iter()
-        .all(|r| r.variance_sampled <= 1e-24 * r.albedo_sampled * r.albedo_sampled)
-    {
-        return "exact".into();
-    }
-    let g = (rows.iter().map(|r| r.ratio.ln()).sum::<f64>() / rows.len() as f64).exp();
-    format!("{g:.2}")
-}
-
 pub fn write(dir: &Path, run: &SamplingRun, command: &str, seconds: f64) -> Result<()> {
     std::fs::create_dir_all(dir)?;
     let mut all = run.variance.clone();
@@ -80,27 +69,23 @@ pub fn write(dir: &Path, run: &SamplingRun, command: &str, seconds: f64) -> Resu
          share >= {DIFFUSE_MIN}. The cosine estimate's own variance is noisy where the lobe is \
          sharp (it rests on the few cosine samples that hit the lobe): read the ratios to a \
          factor of ~1.5, not the digits.\n\n",
-        if run.quick {
-            " (quick: a tenth of the samples)"
-        } else {
-            ""
+        match (run.quick, cfg!(debug_assertions)) {
+            (true, true) => " (quick: a tenth of the samples; built with debug assertions, so \
+                             the timings are below a release build's)",
+            (true, false) => " (quick: a tenth of the samples)",
+            (false, true) => " (built with debug assertions, so the timings are below a \
+                              release build's)",
+            (false, false) => "",
         }
     );
 
     md += "## Summary at exponent 1000\n\n| rung | views | least ratio | geometric mean ratio | goal |\n|---|---|---|---|---|\n";
-    for (rung, n, least, geo) in summary(&run.variance) {
-        let rows: Vec<VarianceRow> = run
-            .variance
-            .iter()
-            .filter(|r| r.rung == rung)
-            .cloned()
-            .collect();
-        let exact = geo_ratio(&rows) == "exact";
-        let goal = match rung.as_str() {
+    for r in summary(&run.variance) {
+        let goal = match r.rung.as_str() {
             "max-normal" | "poulin-fournier" => {
-                if least >= 10.0 {
+                if r.least >= 10.0 {
                     "10x: met at every view"
-                } else if geo >= 10.0 {
+                } else if r.geometric_mean >= 10.0 {
                     "10x: met on the geometric mean, not at every view"
                 } else {
                     "10x: MISSED"
@@ -108,15 +93,15 @@ pub fn write(dir: &Path, run: &SamplingRun, command: &str, seconds: f64) -> Resu
             }
             _ => "(figure)",
         };
-        md += &format!(
-            "| {rung} | {n} | {} | {} | {goal} |\n",
-            if exact {
-                "exact".to_string()
-            } else {
-                format!("{least:.2}")
-            },
-            geo_ratio(&rows)
-        );
+        let (least, geo) = if r.exact {
+            ("exact".to_string(), "exact".to_string())
+        } else {
+            (
+                format!("{:.2}", r.least),
+                format!("{:.2}", r.geometric_mean),
+            )
+        };
+        md += &format!("| {} | {} | {least} | {geo} | {goal} |\n", r.rung, r.views);
     }
     md += "\nreference: not measured (its values cost ~10 ms each); its sampler is \
            varying-topology's (the same cone table, built from varying-topology, and the same \
