@@ -294,7 +294,8 @@ impl Sampler {
     /// Sample l for the view v (fibre frame) with mixture weights from `albedos`, two uniforms u
     /// in [0,1)^2. weight[c] = f_c(l, v) * l.n / pdf, with f from `model` (at `height` when Some,
     /// via basis_at_height; the plain basis for a model without a topology). None when v is
-    /// at/below the horizon or the sampled l is (the pdf then integrates to < 1 — allowed).
+    /// at/below the horizon or the sampled l is (N.l <= [`HORIZON_COS`] counts as the horizon;
+    /// the pdf then integrates to < 1 — allowed).
     pub fn sample(
         &self,
         model: &dyn ShadingModel,
@@ -893,6 +894,58 @@ mod tests {
             let f = y_minus_sin(y) / TAU;
             assert!((f - u).abs() < 1e-13, "u {u}: F {f}");
             assert!(((l.t * l.t + l.b * l.b + l.n * l.n) - 1.0).abs() < 1e-14);
+        }
+    }
+
+    #[test]
+    fn the_cone_law_integrates_to_one_and_its_draws_invert_its_cdf() {
+        let raw: crate::model::params::RawParams =
+            toml::from_str("kd = 0.3\nks = 0.6\nexponent = 300\nspacing = 2.6\n").unwrap();
+        let p = ModelParams::from_raw(&raw, ModelId::PoulinFournier)
+            .unwrap()
+            .0;
+        let sampler = Sampler::new(ModelId::PoulinFournier, &p);
+        let table = sampler
+            .cone
+            .as_ref()
+            .expect("a cross-section rung has a table");
+        let bin = PI / CONE_BINS as f64;
+        for row in 0..CONE_ROWS {
+            let d = &table.density[row];
+            let total: f64 = d.windows(2).map(|w| 0.5 * (w[0] + w[1]) * bin).sum();
+            assert!((total - 1.0).abs() < 1e-12, "row {row}: {total}");
+            // the mirror row
+            let mut m = table.density[CONE_ROWS - 1 - row];
+            m.reverse();
+            assert_eq!(&m, d);
+        }
+        // at a row's centre the law is that row alone: F(draw(u)) = u
+        for i in [0usize, 5, 20, 31] {
+            let alpha_v = (i as f64 + 0.5) * FRAC_PI_2 / (CONE_ROWS / 2) as f64;
+            let (lo, hi, w) = table.blend(alpha_v);
+            // one of the two rows, to rounding
+            let a = if w < 0.5 { lo } else { hi };
+            assert!(w.min(1.0 - w) < 1e-9, "{w}");
+            let d = &table.density[a];
+            let cdf = |alpha: f64| {
+                let x = (alpha + FRAC_PI_2) / bin;
+                let j = (x.floor() as usize).min(CONE_BINS - 1);
+                let f = x - j as f64;
+                let full: f64 = (0..j).map(|k| 0.5 * (d[k] + d[k + 1]) * bin).sum();
+                full + (d[j] * f + 0.5 * (d[j + 1] - d[j]) * f * f) * bin
+            };
+            for k in 0..200 {
+                let u = (k as f64 + 0.5) / 200.0;
+                let alpha = table.sample(alpha_v, u);
+                assert!(
+                    (cdf(alpha) - u).abs() < 1e-9,
+                    "row {a} u {u}: {}",
+                    cdf(alpha)
+                );
+                // the density at the draw is the blend's
+                let q = table.density(alpha_v, alpha);
+                assert!(q > 0.0 && q.is_finite());
+            }
         }
     }
 
