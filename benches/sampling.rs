@@ -65,7 +65,10 @@ fn sampling(c: &mut Criterion) {
     variants.push((
         "poulin-fournier spread 180".into(),
         ModelId::PoulinFournier,
-        format!("{}azimuth_spread_deg = 180\n", text(ModelId::PoulinFournier)),
+        format!(
+            "{}azimuth_spread_deg = 180\n",
+            text(ModelId::PoulinFournier)
+        ),
     ));
     for (name, id, t) in &variants {
         let p = params(*id, t);
