@@ -1,7 +1,10 @@
 //! `fibrefit fit CAPTURE --maps DIR`: per-texel maps recovered from a small synthetic capture
 //! whose maps are known, with honest standard errors; requests the rung cannot honour refused.
 
+mod common;
+
 use assert_cmd::Command;
+use common::SYNTH;
 use fibrefit::load::image_io;
 use fibrefit::model::topology::TopologyMap;
 use std::path::Path;
@@ -9,55 +12,6 @@ use std::path::Path;
 fn fibrefit() -> Command {
     Command::cargo_bin("fibrefit").expect("binary built")
 }
-
-const SYNTH: &str = r#"
-model = "varying-topology"
-[params]
-kd = 0.4
-ks = 0.3
-exponent = 40
-spacing = 2.0
-height = 0.9
-map_scale = 0.6
-fibre_azimuth_deg = 0
-[topology_map]
-width = 16
-height = 16
-seed = 3
-[capture]
-width = 16
-height = 16
-size_mm = [20.0, 20.0]
-format = "exr"
-tangent = { from_deg = -30, to_deg = 40 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 30, phi_deg = 110, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 0, phi_deg = 0 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 60, phi_deg = 100, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 30, phi_deg = 290 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 45, phi_deg = 20, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 45, phi_deg = 200 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 70, phi_deg = 300, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 20, phi_deg = 110 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 50, phi_deg = 180, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 50, phi_deg = 0 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 20, phi_deg = 200, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 60, phi_deg = 20 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 65, phi_deg = 240, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 40, phi_deg = 60 }
-[[capture.images]]
-light = { type = "directional", theta_deg = 40, phi_deg = 330, irradiance = 1.0 }
-camera = { type = "orthographic", theta_deg = 55, phi_deg = 150 }
-[noise]
-relative = 0.01
-seed = 5
-"#;
 
 const FIT: &str = r#"
 model = "varying-topology"

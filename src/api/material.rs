@@ -9,6 +9,8 @@
 //! towards the viewer, both away from the surface. Texture coordinates (u, v) in [0, 1] span
 //! the maps with v up the image (row 0 of a map at v = 1), as `render`'s swatch.
 
+use crate::load::capture::Subsample;
+use crate::load::capture_store::CaptureStore;
 use crate::load::image_io::LinearImage;
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{Local, Vec3};
@@ -125,7 +127,7 @@ impl Material {
     /// none: what the fit of that capture saw at each pixel, so that the capture can be
     /// rendered as it was fitted.
     pub fn with_capture(mut self, capture: &Path) -> Result<Self> {
-        let fields = crate::load::capture_store::swatch_fields(capture)?;
+        let fields = CaptureStore::load(capture, Subsample::default())?.swatch_fields();
         if fields.psi_deg.is_none() && fields.height.is_none() {
             return Ok(self);
         }
@@ -326,38 +328,29 @@ impl Material {
     /// `load::capture::radiance_image` (radiance per unit irradiance, the exposure applied).
     /// Call it on [`Material::with_capture`] of the same capture to see what its fit saw.
     pub fn render_capture(&self, capture: &Path, index: usize) -> Result<LinearImage> {
-        use crate::load::capture::{self, CaptureFile};
-        let desc = CaptureFile::load(capture)?;
-        let spec = desc.images.get(index).ok_or_else(|| {
-            anyhow!(
+        let store = CaptureStore::load(capture, Subsample::default())?;
+        if index >= store.images() {
+            bail!(
                 "{}: image {index} asked for, but the capture has {} images",
                 capture.display(),
-                desc.images.len()
-            )
-        })?;
-        let file = capture::resolve(capture.parent().unwrap_or(Path::new(".")), &spec.file);
-        let size = crate::load::image_io::read(&file, spec.encoding, spec.saturation)?;
-        let (w, h, c) = (size.width, size.height, self.channels);
-        if matches!(spec.camera, capture::Camera::ViewMap { .. }) {
-            bail!(
-                "{}: image {index} has a per-pixel view map; render_capture takes orthographic and pinhole cameras",
-                capture.display()
+                store.images()
             );
         }
+        let (w, h, c) = (store.width, store.height, self.channels);
         let data: Vec<f32> = (0..h)
             .into_par_iter()
             .flat_map_iter(|y| {
-                let spec = &spec;
+                let store = &store;
                 (0..w).flat_map(move |x| {
-                    let p = capture::pixel_position(desc.swatch.size_mm, w, h, x, y);
-                    let (l, e) = capture::light_at(&spec.light, &p);
-                    let v = capture::view_at(&spec.camera, &p).expect("not a view map");
                     let uv = [
                         (x as f64 + 0.5) / w as f64,
                         1.0 - (y as f64 + 0.5) / h as f64,
                     ];
-                    let f = self.eval(&l, &v, Some(uv));
-                    let cos = l.z.max(0.0);
+                    // NaN where a view map has no direction (no pixel there)
+                    let (f, e, cos) = match store.geometry(index, x, y) {
+                        Some((l, v, e)) => (self.eval(&l, &v, Some(uv)), e, l.z.max(0.0)),
+                        None => ([f64::NAN; 3], 1.0, 1.0),
+                    };
                     (0..c).map(move |k| (f[k] * e * cos) as f32)
                 })
             })

@@ -239,7 +239,7 @@ impl CaptureStore {
 
     /// Light direction, view direction and perpendicular irradiance of image `k` at pixel
     /// (x, y); `None` where a view map has no direction.
-    fn geometry(&self, k: usize, x: usize, y: usize) -> Option<(Vec3, Vec3, f64)> {
+    pub fn geometry(&self, k: usize, x: usize, y: usize) -> Option<(Vec3, Vec3, f64)> {
         let spec = &self.desc.images[k];
         let p = pixel_position(self.desc.swatch.size_mm, self.width, self.height, x, y);
         let (l, e) = light_at(&spec.light, &p);
@@ -487,38 +487,21 @@ pub struct SwatchFields {
     pub height: Option<LinearImage>,
 }
 
-/// [`SwatchFields`] of the capture TOML at `path`, checked as [`CaptureStore::load`] checks
-/// them.
-pub fn swatch_fields(path: &Path) -> Result<SwatchFields> {
-    let desc = CaptureFile::load(path)?;
-    let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
-    let first = read_image(&base, &desc.images[0])?;
-    let size = (first.width, first.height);
-    let height = load_unit_map(
-        &base,
-        &desc.swatch.height_map,
-        "height map (fibre radii)",
-        (0.0, 20.0),
-        size,
-    )?;
-    let mut psi_deg = load_unit_map(
-        &base,
-        &desc.swatch.fibre_azimuth_map,
-        "fibre azimuth map (degrees)",
-        (-90.0, 90.0),
-        size,
-    )?;
-    if let (None, Some(p)) = (&psi_deg, &desc.swatch.tangent_map) {
-        let full = resolve(&base, p);
-        let m = TopologyMap::load_as(&full, "tangent map")?;
-        check_size("tangent map", &full, (m.width, m.height), size)?;
-        psi_deg = Some(LinearImage {
-            width: m.width,
-            height: m.height,
-            channels: 1,
-            data: m.values.iter().map(|&v| -90.0 + 180.0 * v).collect(),
-            saturated: vec![false; m.width * m.height],
+impl CaptureStore {
+    /// The swatch's per-texel fields, as this store read and checked them.
+    pub fn swatch_fields(&self) -> SwatchFields {
+        let psi_deg = self.azimuth_map.clone().or_else(|| {
+            self.tangent.as_ref().map(|m| LinearImage {
+                width: m.width,
+                height: m.height,
+                channels: 1,
+                data: m.values.iter().map(|&v| -90.0 + 180.0 * v).collect(),
+                saturated: vec![false; m.width * m.height],
+            })
         });
+        SwatchFields {
+            psi_deg,
+            height: self.height_map.clone(),
+        }
     }
-    Ok(SwatchFields { psi_deg, height })
 }
