@@ -360,6 +360,7 @@ impl Material {
             height: h,
             channels: c,
             saturated: vec![false; w * h],
+            clip: f32::INFINITY,
             data,
         })
     }

@@ -57,7 +57,14 @@ pub struct Swatch {
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ImageSpec {
-    pub file: PathBuf,
+    /// The image (EXR, PNG or TIFF); or, instead, `bracket`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub file: Option<PathBuf>,
+    /// An exposure bracket instead of `file`: two or more frames of this light and view, each
+    /// with its own exposure (pixel value x frame exposure x `exposure` = radiance), merged into
+    /// one linear image (`capture_store::merge_bracket`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub bracket: Vec<BracketFrame>,
     /// PNG only: `linear` or `srgb`.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub encoding: Option<Encoding>,
@@ -73,6 +80,46 @@ pub struct ImageSpec {
 
 fn one() -> f64 {
     1.0
+}
+
+/// One frame of an exposure bracket.
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct BracketFrame {
+    pub file: PathBuf,
+    /// Factor from this frame's pixel value to radiance (before the image's `exposure`): a
+    /// frame exposed 4 times longer has a quarter of the factor.
+    pub exposure: f64,
+}
+
+impl ImageSpec {
+    /// The image's files with their exposure factors relative to `exposure`: the file with 1,
+    /// or the bracket's frames with theirs.
+    pub fn frames(&self) -> Vec<(&Path, f64)> {
+        match &self.file {
+            Some(f) => vec![(f.as_path(), 1.0)],
+            None => self
+                .bracket
+                .iter()
+                .map(|b| (b.file.as_path(), b.exposure))
+                .collect(),
+        }
+    }
+
+    /// The image as messages name it: its file, or its bracket's files.
+    pub fn label(&self) -> String {
+        match &self.file {
+            Some(f) => f.display().to_string(),
+            None => format!(
+                "bracket of {}",
+                self.bracket
+                    .iter()
+                    .map(|b| b.file.display().to_string())
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ),
+        }
+    }
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -227,7 +274,29 @@ pub(crate) fn check_size(
 /// finite and in [0, 90) degrees from the normal, irradiance, intensity and exposure finite and
 /// positive, a saturation level only for EXR images and then finite and positive.
 pub(crate) fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result<()> {
-    let at = format!("{name}: [[images]] {} ({})", k + 1, spec.file.display());
+    let at = format!("{name}: [[images]] {} ({})", k + 1, spec.label());
+    match (&spec.file, spec.bracket.len()) {
+        (Some(_), 0) => {}
+        (Some(_), _) => bail!("{at}: give `file` or `bracket`, not both"),
+        (None, 0) => {
+            bail!("{at}: needs `file` (one image) or `bracket` (frames with their exposures)")
+        }
+        (None, 1) => {
+            bail!("{at}: a bracket needs two or more frames; for one, give `file` and `exposure`")
+        }
+        (None, _) => {
+            for (j, b) in spec.bracket.iter().enumerate() {
+                if !(b.exposure.is_finite() && b.exposure > 0.0) {
+                    bail!(
+                        "{at}: bracket frame {} ({}): exposure = {} must be a finite positive number",
+                        j + 1,
+                        b.file.display(),
+                        b.exposure
+                    );
+                }
+            }
+        }
+    }
     let theta = |what: &str, t: f64| -> Result<()> {
         if !(t.is_finite() && (0.0..90.0).contains(&t)) {
             bail!("{at}: {what}.theta_deg = {t} must be a finite angle in [0, 90) degrees from the normal (90 is the horizon)");
@@ -283,13 +352,13 @@ pub(crate) fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result
         Camera::ViewMap { .. } => {}
     }
     if let Some(sat) = spec.saturation {
-        let exr = spec
-            .file
-            .extension()
-            .and_then(|e| e.to_str())
-            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-        if !exr {
-            bail!("{at}: `saturation` applies to EXR images only (8/16-bit PNGs saturate at their largest code)");
+        let float = spec.frames().iter().all(|(f, _)| {
+            f.extension()
+                .and_then(|e| e.to_str())
+                .is_some_and(|e| ["exr", "tif", "tiff"].contains(&e.to_ascii_lowercase().as_str()))
+        });
+        if !float {
+            bail!("{at}: `saturation` applies to EXR images only (and floating-point TIFFs; 8/16-bit PNGs and TIFFs saturate at their largest code)");
         }
         positive("saturation", sat as f64)?;
     }
@@ -385,7 +454,8 @@ pub fn geometry_json(path: &Path) -> Result<String> {
     let base = path.parent().unwrap_or(Path::new("."));
     let mut images = Vec::new();
     for spec in &desc.images {
-        let file = resolve(base, &spec.file);
+        let (first, _) = spec.frames()[0];
+        let file = resolve(base, first);
         let img = super::image_io::read(&file, spec.encoding, spec.saturation)?;
         let mut v = serde_json::to_value(spec)?;
         v["file"] = serde_json::json!(std::path::absolute(&file)?.display().to_string());
@@ -416,8 +486,7 @@ pub fn radiance_image(path: &Path, index: usize) -> Result<LinearImage> {
         )
     })?;
     let base = path.parent().unwrap_or(Path::new("."));
-    let mut img =
-        super::image_io::read(&resolve(base, &spec.file), spec.encoding, spec.saturation)?;
+    let mut img = super::capture_store::read_image(base, spec)?.image;
     for x in &mut img.data {
         *x *= spec.exposure as f32;
     }

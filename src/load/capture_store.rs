@@ -17,9 +17,10 @@
 //! values are exact in f32), so nothing is lost: samples made from the store equal, bit for
 //! bit, those of the loader before the store existed.
 
+use super::bracket::{self, ImageNoise};
 use super::capture::{
     check_image_spec, check_no_negatives, check_size, light_at, pixel_position, resolve, view_at,
-    Camera, CaptureFile, Subsample,
+    Camera, CaptureFile, ImageSpec, Subsample,
 };
 use super::image_io::{self, LinearImage};
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
@@ -54,6 +55,9 @@ pub struct CaptureStore {
     height_map: Option<LinearImage>,
     azimuth_map: Option<LinearImage>,
     view_maps: Vec<Option<LinearImage>>,
+    /// Per image, the noise of its values when the capture has exposure brackets (empty when
+    /// it has none: then samples carry no sigma).
+    noise: Vec<ImageNoise>,
 }
 
 impl CaptureStore {
@@ -63,7 +67,11 @@ impl CaptureStore {
         let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         let name = path.display().to_string();
         check_description(&name, &desc, subsample)?;
-        let first = read_image(&base, &desc.images[0])?;
+        let ReadImage {
+            image: first,
+            noise: first_noise,
+            rows: first_rows,
+        } = read_image(&base, &desc.images[0])?;
         let (w, h, channels) = (first.width, first.height, first.channels);
         let load_map = |p: &Option<PathBuf>, what: &str| -> Result<Option<TopologyMap>> {
             match p {
@@ -149,24 +157,34 @@ impl CaptureStore {
             height_map,
             azimuth_map,
             view_maps,
+            noise: vec![],
         };
-        let mut img = Some(first);
+        let mut img = Some(ReadImage {
+            image: first,
+            noise: first_noise,
+            rows: first_rows,
+        });
+        let mut noise = Vec::with_capacity(images);
+        let mut noise_rows: Vec<Vec<[f64; 9]>> = vec![vec![]; channels];
         for k in 0..images {
-            let img_k = match img.take() {
+            let read = match img.take() {
                 Some(i) => i,
                 None => read_image(&base, &store.desc.images[k])?,
             };
+            let img_k = read.image;
+            if let Some(r) = read.rows {
+                for (c, rows) in r.0.into_iter().enumerate() {
+                    noise_rows[c].extend(rows);
+                }
+            }
+            noise.push((read.noise, img_k.clip));
             let spec = &store.desc.images[k];
-            check_size(
-                "image",
-                &resolve(&base, &spec.file),
-                (img_k.width, img_k.height),
-                (w, h),
-            )?;
+            let file = resolve(&base, spec.frames()[0].0);
+            check_size("image", &file, (img_k.width, img_k.height), (w, h))?;
             if img_k.channels != channels {
                 bail!(
                     "{}: has {} channels, the first image {channels}; all images must match",
-                    spec.file.display(),
+                    file.display(),
                     img_k.channels
                 );
             }
@@ -234,6 +252,7 @@ impl CaptureStore {
         store.texels.shrink_to_fit();
         store.values = values;
         store.dropped = dropped;
+        store.noise = capture_noise(&name, noise, &noise_rows)?;
         Ok(store)
     }
 
@@ -320,6 +339,14 @@ impl CaptureStore {
         for (c, out) in value.iter_mut().enumerate() {
             *out = px[c.min(ch - 1)] as f64 * to_brdf;
         }
+        let sigma = self.noise.get(k).map(|n| {
+            let s = n.sigmas(px);
+            let mut out = [0.0; 3];
+            for (c, o) in out.iter_mut().enumerate() {
+                *o = s[c.min(ch - 1)] * to_brdf;
+            }
+            out
+        });
         let texel_height = self.height_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
         let texel_psi = self.azimuth_map.as_ref().map(|m| m.pixel(x, y)[0] as f64);
         Some(Sample {
@@ -334,7 +361,7 @@ impl CaptureStore {
             map_value: self.topology.as_ref().map(|t| t.texel(x, y)),
             texel_height,
             value,
-            sigma: None,
+            sigma,
             weight: 1.0,
             origin: Origin::Pixel {
                 image: k as u32,
@@ -394,14 +421,115 @@ impl CaptureStore {
         ids.sort_unstable();
         ids
     }
+
+    /// Per image, the noise model of its values: empty unless the capture has exposure
+    /// brackets.
+    pub fn noise(&self) -> &[ImageNoise] {
+        &self.noise
+    }
 }
 
-/// Image `spec`, checked for negative values.
-fn read_image(base: &Path, spec: &super::capture::ImageSpec) -> Result<LinearImage> {
-    let full = resolve(base, &spec.file);
-    let img = image_io::read(&full, spec.encoding, spec.saturation)?;
-    check_no_negatives(&full, &img)?;
-    Ok(img)
+/// An image as read: its linear values, and for a bracket the noise model its frames gave
+/// alone and their pixel pairs (for the capture's estimate).
+pub(crate) struct ReadImage {
+    pub image: LinearImage,
+    pub noise: Option<ImageNoise>,
+    pub rows: Option<bracket::NoiseRows>,
+}
+
+/// Image `spec` (its file, or its bracket merged), checked for negative values.
+pub(crate) fn read_image(base: &Path, spec: &ImageSpec) -> Result<ReadImage> {
+    let frames = spec.frames();
+    if frames.len() == 1 {
+        let full = resolve(base, frames[0].0);
+        let image = image_io::read(&full, spec.encoding, spec.saturation)?;
+        check_no_negatives(&full, &image)?;
+        return Ok(ReadImage {
+            image,
+            noise: None,
+            rows: None,
+        });
+    }
+    let mut read = Vec::with_capacity(frames.len());
+    for (file, factor) in &frames {
+        let full = resolve(base, file);
+        let img = image_io::read(&full, spec.encoding, spec.saturation)?;
+        check_no_negatives(&full, &img)?;
+        if let Some((first, _, first_file)) = read.first() {
+            let first: &LinearImage = first;
+            check_size(
+                &format!("bracket frame (like {})", Path::new(first_file).display()),
+                &full,
+                (img.width, img.height),
+                (first.width, first.height),
+            )?;
+            if img.channels != first.channels {
+                bail!(
+                    "{}: has {} channels, the bracket's first frame {}; a bracket's frames must match",
+                    full.display(),
+                    img.channels,
+                    first.channels
+                );
+            }
+        }
+        read.push((img, *factor, full.display().to_string()));
+    }
+    let frames: Vec<(LinearImage, f64)> = read.into_iter().map(|(i, f, _)| (i, f)).collect();
+    let (image, noise, rows) =
+        bracket::merge(&frames).map_err(|e| anyhow::anyhow!("{}: {e}", spec.label()))?;
+    Ok(ReadImage {
+        image,
+        noise: Some(noise),
+        rows: Some(rows),
+    })
+}
+
+/// Every image's noise model once the brackets are read (with each image's saturation level),
+/// from the pixel pairs of all the capture's brackets pooled (one camera): none when no image
+/// is a bracket; images without a bracket get the model with one frame.
+fn capture_noise(
+    name: &str,
+    noise: Vec<(Option<ImageNoise>, f32)>,
+    rows: &[Vec<[f64; 9]>],
+) -> Result<Vec<ImageNoise>> {
+    if noise.iter().all(|(n, _)| n.is_none()) {
+        return Ok(vec![]);
+    }
+    let mut var0 = [0.0; 3];
+    let mut gain = [0.0; 3];
+    let mut pairs = 0;
+    for (c, r) in rows.iter().enumerate() {
+        let Some((v, g, used)) = bracket::fit_noise(r) else {
+            bail!(
+                "{name}: the brackets' frames share too few pixels that adjacent exposures both \
+                 resolve (neither clipped nor black, channel {c}: at least {} over a range of \
+                 values) to estimate the camera's noise; give exposures that overlap",
+                bracket::MIN_NOISE_PAIRS
+            );
+        };
+        var0[c] = v;
+        gain[c] = g;
+        pairs += used;
+    }
+    for c in rows.len()..3 {
+        var0[c] = var0[rows.len() - 1];
+        gain[c] = gain[rows.len() - 1];
+    }
+    Ok(noise
+        .into_iter()
+        .map(|(n, clip)| {
+            let (frames, weights) = n.map_or((vec![(1.0, clip)], [(0.0, 1.0); 3]), |n| {
+                (n.frames, n.weights)
+            });
+            ImageNoise {
+                frames,
+                var0,
+                gain,
+                weights,
+                pairs,
+            }
+        })
+        .collect())
 }
 
 /// The description's own checks: images, swatch size, fibre direction and topology given once,
@@ -497,6 +625,7 @@ impl CaptureStore {
                 channels: 1,
                 data: m.values.iter().map(|&v| -90.0 + 180.0 * v).collect(),
                 saturated: vec![false; m.width * m.height],
+                clip: f32::INFINITY,
             })
         });
         SwatchFields {

@@ -1,4 +1,5 @@
-//! Reading captured images into linear values: PNG (8/16 bit, linear or sRGB encoded) and EXR.
+//! Reading captured images into linear values: PNG and TIFF (8/16 bit, linear or sRGB encoded;
+//! TIFF also 32-bit float) and EXR.
 //!
 //! Every image (captures, masks, tangent, topology, height and view maps, result maps) is read
 //! once through [`super::input`] (at most [`super::input::MAX_INPUT_BYTES`], hashed), its size
@@ -42,14 +43,19 @@ pub fn check_pixels(path: &Path, what: &str, width: u64, height: u64) -> Result<
 /// The bytes of `path` (a `what`) when they start with `magic`: the signature is read first, so
 /// that a device or another kind of file is refused after a few bytes, not after the limit.
 fn read_with_magic(path: &Path, what: &str, magic: &[u8], kind: &str) -> Result<Vec<u8>> {
+    read_with_any_magic(path, what, &[magic], kind)
+}
+
+/// [`read_with_magic`] for formats with several signatures (TIFF: little or big endian).
+fn read_with_any_magic(path: &Path, what: &str, magics: &[&[u8]], kind: &str) -> Result<Vec<u8>> {
     use std::io::Read;
     let mut input = super::input::open_as(path, super::input::MAX_INPUT_BYTES, what)?;
     let mut bytes = Vec::new();
     (&mut input)
-        .take(magic.len() as u64)
+        .take(magics[0].len() as u64)
         .read_to_end(&mut bytes)
         .map_err(|e| super::input::io_error(path, e))?;
-    if bytes != magic {
+    if !magics.contains(&&bytes[..]) {
         bail!(
             "{}: cannot read {kind} {what}: not a{} {kind} file (no {kind} signature)",
             path.display(),
@@ -65,6 +71,20 @@ fn read_with_magic(path: &Path, what: &str, magic: &[u8], kind: &str) -> Result<
 /// [`MAX_DECODE_BYTES`] as the limit.
 pub fn decode_png(path: &Path, what: &str) -> Result<image::DynamicImage> {
     let bytes = read_with_magic(path, what, b"\x89PNG\r\n\x1a\n", "PNG")?;
+    decode_limited(path, what, bytes)
+}
+
+/// A TIFF at `path` (a `what`; little- or big-endian, uncompressed, LZW or Deflate as raw
+/// converters write them), its size checked from the header before decoding, decoded with
+/// [`MAX_DECODE_BYTES`] as the limit.
+pub fn decode_tiff(path: &Path, what: &str) -> Result<image::DynamicImage> {
+    let bytes = read_with_any_magic(path, what, &[b"II*\0", b"MM\0*"], "TIFF")?;
+    decode_limited(path, what, bytes)
+}
+
+/// `bytes` of an image (a `what` at `path`) decoded by the `image` crate, its size taken from
+/// the header first.
+fn decode_limited(path: &Path, what: &str, bytes: Vec<u8>) -> Result<image::DynamicImage> {
     let name = path.display();
     let reader = || {
         image::ImageReader::new(Cursor::new(&bytes[..]))
@@ -142,6 +162,9 @@ pub struct LinearImage {
     pub data: Vec<f32>,
     /// Per pixel: a channel hit the sensor's top code (PNG) or the given saturation level (EXR).
     pub saturated: Vec<bool>,
+    /// The value at which a pixel saturates: 1 (the top code of an 8/16-bit image, linear or
+    /// sRGB), a float image's `saturation` level, or infinity.
+    pub clip: f32,
 }
 
 impl LinearImage {
@@ -189,6 +212,34 @@ pub fn read(
             })?;
             read_png(path, encoding)
         }
+        Some("tif" | "tiff") => {
+            let img = decode_tiff(path, "image")?;
+            if matches!(
+                img,
+                image::DynamicImage::ImageRgb32F(_) | image::DynamicImage::ImageRgba32F(_)
+            ) {
+                if encoding == Some(Encoding::Srgb) {
+                    bail!(
+                        "{}: a floating-point TIFF is linear; `encoding = \"srgb\"` does not apply",
+                        path.display()
+                    );
+                }
+                return from_float(path, img, saturation);
+            }
+            let encoding = encoding.ok_or_else(|| {
+                anyhow!(
+                    "{}: 8/16-bit TIFF images need `encoding = \"linear\"` (raw converters' linear output) or `\"srgb\"`",
+                    path.display()
+                )
+            })?;
+            if saturation.is_some() {
+                bail!(
+                    "{}: `saturation` applies to floating-point images only (8/16-bit images saturate at their largest code)",
+                    path.display()
+                );
+            }
+            from_codes(path, img, encoding, "TIFF")
+        }
         Some("exr") => {
             if encoding == Some(Encoding::Srgb) {
                 bail!(
@@ -198,12 +249,59 @@ pub fn read(
             }
             read_exr(path, saturation)
         }
-        _ => bail!("{}: images must be .png or .exr", path.display()),
+        _ => bail!(
+            "{}: images must be .png, .exr or .tif/.tiff",
+            path.display()
+        ),
     }
 }
 
 fn read_png(path: &Path, encoding: Encoding) -> Result<LinearImage> {
-    let img = decode_png(path, "image")?;
+    from_codes(path, decode_png(path, "image")?, encoding, "PNG")
+}
+
+/// A 32-bit float image (TIFF) as linear values; `saturation` marks values at or above it.
+fn from_float(
+    path: &Path,
+    img: image::DynamicImage,
+    saturation: Option<f32>,
+) -> Result<LinearImage> {
+    let (width, height) = (img.width() as usize, img.height() as usize);
+    let data: Vec<f32> = match img {
+        image::DynamicImage::ImageRgb32F(b) => b.into_raw(),
+        image::DynamicImage::ImageRgba32F(b) => b
+            .into_raw()
+            .chunks_exact(4)
+            .flat_map(|p| [p[0], p[1], p[2]])
+            .collect(),
+        other => bail!(
+            "{}: unsupported floating-point pixel format {:?}",
+            path.display(),
+            other.color()
+        ),
+    };
+    let saturated = data
+        .chunks_exact(3)
+        .map(|p| saturation.is_some_and(|level| p.iter().any(|&v| v >= level)))
+        .collect();
+    Ok(LinearImage {
+        width,
+        height,
+        channels: 3,
+        data,
+        saturated,
+        clip: saturation.unwrap_or(f32::INFINITY),
+    })
+}
+
+/// An 8/16-bit image's codes as linear values in [0, 1] (`encoding`: how the codes relate to
+/// light); a pixel with a channel at the top code is saturated.
+fn from_codes(
+    path: &Path,
+    img: image::DynamicImage,
+    encoding: Encoding,
+    kind: &str,
+) -> Result<LinearImage> {
     let (width, height) = (img.width() as usize, img.height() as usize);
     let (channels, codes, top): (usize, Vec<u16>, u16) = match img {
         image::DynamicImage::ImageLuma8(b) => {
@@ -242,7 +340,7 @@ fn read_png(path: &Path, encoding: Encoding) -> Result<LinearImage> {
             65535,
         ),
         other => bail!(
-            "{}: unsupported PNG pixel format {:?}",
+            "{}: unsupported {kind} pixel format {:?}",
             path.display(),
             other.color()
         ),
@@ -268,6 +366,7 @@ fn read_png(path: &Path, encoding: Encoding) -> Result<LinearImage> {
         channels,
         data,
         saturated,
+        clip: 1.0,
     })
 }
 
@@ -313,5 +412,6 @@ fn read_exr(path: &Path, saturation: Option<f32>) -> Result<LinearImage> {
         channels,
         data,
         saturated,
+        clip: saturation.unwrap_or(f32::INFINITY),
     })
 }

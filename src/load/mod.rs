@@ -1,5 +1,6 @@
 //! Loaders: files in, validated [`samples::Samples`] out. No model code here.
 
+pub mod bracket;
 pub mod capture;
 pub mod capture_store;
 pub mod gonio;
@@ -68,7 +69,9 @@ pub fn input_files(path: &Path) -> Vec<std::path::PathBuf> {
             out.push(base.join(p));
         }
         for im in &desc.images {
-            out.push(base.join(&im.file));
+            for (f, _) in im.frames() {
+                out.push(base.join(f));
+            }
             if let capture::Camera::ViewMap { file } = &im.camera {
                 out.push(base.join(file));
             }

@@ -829,7 +829,8 @@ fn render_capture(
         }
         files.push(file.clone());
         specs.push(ImageSpec {
-            file: file.into(),
+            file: Some(file.into()),
+            bracket: vec![],
             encoding,
             exposure,
             saturation: None,
