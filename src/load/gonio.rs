@@ -1022,7 +1022,7 @@ mod tests {
         for (text, d) in [
             ("theta_i\tphi_i\ttheta_o\tphi_o\tbrdf\n30\t0\t30\t180\t0.2\n40\t10\t20\t90\t0.3\n", Delimiter::Tab),
             ("theta_i;phi_i;theta_o;phi_o;brdf\n30;0;30;180;0.2\n40;10;20;90;0.3\n", Delimiter::Semicolon),
-            ("# c\ntheta_i  phi_i theta_o\tphi_o brdf\n  30 0   30 180 0.2\n# x y\n40 10 20 90 0.3  \n", Delimiter::Whitespace),
+            ("# c\ntheta_i  phi_i theta_o phi_o brdf\n  30 0\t  30 180 0.2\n# x y\n40 10 20 90 0.3  \n", Delimiter::Whitespace),
         ] {
             let (s, f) = read_with_format(text.as_bytes(), "g.csv", &GonioOptions::default())
                 .unwrap();
