@@ -507,3 +507,48 @@ fn help_texts_and_a_data_file_as_params() {
     }
     assert_eq!(fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+/// Run `args` under a pseudo-terminal (util-linux `script`): stdout and stderr both terminals,
+/// as a user sees them. `None` where `script` is missing.
+fn on_a_terminal(args: &[&str]) -> Option<String> {
+    let script = ["/usr/bin/script", "/bin/script"]
+        .into_iter()
+        .find(|p| Path::new(p).exists())?;
+    let cmd = std::iter::once(env!("CARGO_BIN_EXE_fibrefit"))
+        .chain(args.iter().copied())
+        .map(|a| format!("'{a}'"))
+        .collect::<Vec<_>>()
+        .join(" ");
+    let o = std::process::Command::new(script)
+        .args(["-qec", &cmd, "/dev/null"])
+        .env_remove("FIBREFIT_PROGRESS")
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stdout));
+    Some(text(&o.stdout))
+}
+
+#[test]
+fn on_a_terminal_progress_shows_and_quality_warnings_print_once() {
+    let data = root().join("data_synthetic/brushed/gonio.csv");
+    let data = data.to_str().unwrap();
+    let Some(t) = on_a_terminal(&["fit", data, "--model", "lambert"]) else {
+        eprintln!("no `script` here: skipped");
+        return;
+    };
+    // lambert does not fit the brushed swatch: the banner says so, the warnings are in the report
+    assert!(
+        t.contains("FIT QUALITY: DOES NOT FIT WITHIN THE NOISE"),
+        "{t}"
+    );
+    assert!(t.contains("see [[Warnings]] in the report above"), "{t}");
+    assert_eq!(
+        t.matches("the model does not fit within the noise: reduced chi-square")
+            .count(),
+        1,
+        "{t}"
+    );
+    let cfg = root().join("configs/fit_brushed.toml");
+    let t = on_a_terminal(&["fit", data, "--config", cfg.to_str().unwrap()]).unwrap();
+    assert!(t.contains("progress: fit: global search over"), "{t}");
+}

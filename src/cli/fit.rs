@@ -183,8 +183,14 @@ pub fn run(args: &FitArgs) -> Result<()> {
             eprintln!("warning: {w}");
         }
     }
-    // what the quality checks found is printed even with --quiet: it must not be missed
-    quality_banner(&outcome.quality);
+    // what the quality checks found is printed even with --quiet: it must not be missed; when
+    // the report was just printed on the terminal, the banner points to its [[Warnings]] instead
+    // of repeating them
+    use std::io::IsTerminal;
+    quality_banner(
+        &outcome.quality,
+        report_printed && std::io::stdout().is_terminal(),
+    );
     printed.with_context(|| match &out_path {
         Some(p) => format!("the outputs were written ({})", p.display()),
         None => "the fit ran (nothing was written)".to_string(),
@@ -239,8 +245,9 @@ pub fn run_tile(
     Ok(())
 }
 
-/// The quality warnings as a banner on stderr (bold red on a terminal).
-pub fn quality_banner(q: &fit::quality::Quality) {
+/// The quality warnings as a banner on stderr (bold red on a terminal); `listed_above`: the
+/// report on the terminal lists them already, so the banner names their count only.
+pub fn quality_banner(q: &fit::quality::Quality, listed_above: bool) {
     use std::io::IsTerminal;
     if q.warnings.is_empty() {
         return;
@@ -253,8 +260,16 @@ pub fn quality_banner(q: &fit::quality::Quality) {
     let rule = "=".repeat(78);
     eprintln!("{on}{rule}");
     eprintln!("FIT QUALITY: {}", q.verdict.to_uppercase());
-    for w in &q.warnings {
-        eprintln!("WARNING: {w}");
+    if listed_above {
+        let n = q.warnings.len();
+        eprintln!(
+            "{n} warning{}: see [[Warnings]] in the report above",
+            if n == 1 { "" } else { "s" }
+        );
+    } else {
+        for w in &q.warnings {
+            eprintln!("WARNING: {w}");
+        }
     }
     eprintln!("{rule}{off}");
 }

@@ -65,18 +65,20 @@ pub fn check_columns(columns: &[(String, String)]) -> Result<()> {
     for (k, (ours, theirs)) in columns.iter().enumerate() {
         if !COLUMNS.contains(&ours.as_str()) {
             bail!(
-                "--columns {ours}={theirs}: `{ours}` is not a column fibrefit reads; the columns are {}",
+                "column map (--columns or [columns]) {ours}={theirs}: `{ours}` is not a column fibrefit reads; the columns are {}",
                 COLUMNS.join(", ")
             );
         }
         if theirs.is_empty() {
-            bail!("--columns {ours}=: give the file's name of the column `{ours}`");
+            bail!("column map (--columns or [columns]) {ours}=: give the file's name of the column `{ours}`");
         }
         if columns[..k].iter().any(|(o, _)| o == ours) {
-            bail!("--columns: `{ours}` is mapped twice");
+            bail!("column map (--columns or [columns]): `{ours}` is mapped twice");
         }
         if columns[..k].iter().any(|(_, t)| t == theirs) {
-            bail!("--columns: the file's column `{theirs}` is mapped twice");
+            bail!(
+                "column map (--columns or [columns]): the file's column `{theirs}` is mapped twice"
+            );
         }
     }
     Ok(())
