@@ -112,6 +112,32 @@ pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, 
     Ok(((se / n).sqrt(), (se / sy).sqrt(), (sl / n).sqrt(), ns))
 }
 
+/// Single-thread cost (ns per sample) of `rc`'s model at its start values on up to 200 samples
+/// of `s`, at least 1 (1000 when the rung cannot be set up for these data).
+fn probe_ns(s: &Samples, rc: &FitConfig) -> f64 {
+    let Ok(st) = super::setup::setup(s, rc) else {
+        return 1000.0;
+    };
+    let model = super::problem::model_for(
+        &st.template,
+        rc.knobs.quadrature_order,
+        rc.knobs.histogram_bins,
+        rc.knobs.azimuth_nodes,
+        st.map.clone(),
+    );
+    let frame = crate::model::frame::FibreFrame::from_azimuth(0.0);
+    let k = s.samples.len().min(200);
+    let pairs: Vec<crate::model::DirectionPair> = s.samples[..k]
+        .iter()
+        .map(|x| crate::model::DirectionPair::new(&frame, &x.l, &x.v))
+        .collect();
+    let mut bases = vec![crate::model::Basis::default(); k];
+    let t = Instant::now();
+    model.basis_many(&pairs, &mut bases);
+    std::hint::black_box(&bases);
+    (t.elapsed().as_nanos() as f64 / k.max(1) as f64).max(1.0)
+}
+
 pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
     select_with(samples, cfg, true, &mut |_| {})
 }
@@ -165,21 +191,28 @@ pub fn select_with(
     let mut fits: Vec<Option<(f64, f64, f64)>> = Vec::new();
     let started = Instant::now();
     let rungs = &cfg.selection.rungs;
-    // the time left, estimated from the seconds per planned evaluation of the rungs done
-    let planned: Vec<f64> = rungs
-        .iter()
-        .map(|r| match r.parse::<ModelId>() {
-            Ok(id) => cfg.for_rung(id).planned_evaluations(train.samples.len()),
-            Err(_) => 0.0,
-        })
-        .collect();
+    // the time left, estimated from the seconds per unit of planned work of the rungs done; a
+    // rung's work: its planned evaluations times the cost of one (timed at its start values)
+    let planned: Vec<f64> = match crate::progress::shown(quiet) {
+        false => vec![0.0; rungs.len()],
+        true => rungs
+            .iter()
+            .map(|r| match r.parse::<ModelId>() {
+                Ok(id) => {
+                    let rc = cfg.for_rung(id);
+                    rc.planned_evaluations(train.samples.len()) * probe_ns(&train, &rc)
+                }
+                Err(_) => 0.0,
+            })
+            .collect(),
+    };
     for (k, name) in rungs.iter().enumerate() {
         let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
         let rc = cfg.for_rung(id);
         let elapsed = started.elapsed().as_secs_f64();
         let estimate = match planned[..k].iter().sum::<f64>() {
             done if k > 0 && done > 0.0 => format!(
-                ", about {} left (estimate)",
+                "; estimate: {} left",
                 crate::progress::seconds(elapsed / done * planned[k..].iter().sum::<f64>())
             ),
             _ => String::new(),
