@@ -45,7 +45,7 @@ fn load(c: &mut Criterion) {
     g.sample_size(10);
     g.bench_function("gonio-csv/1e6-rows-rgb-sigma", |b| {
         b.iter(|| {
-            gonio::load(file.path(), GonioOptions::default())
+            gonio::load(file.path(), &GonioOptions::default())
                 .unwrap()
                 .samples
                 .len()

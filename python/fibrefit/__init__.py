@@ -161,6 +161,7 @@ _LOAD_OPTIONS = (
     "max_theta",
     "skip_bad_rows",
     "small_angles_ok",
+    "columns",
 )
 
 
@@ -181,8 +182,9 @@ def load_data(path: PathLike, **options: Any) -> Dict[str, Any]:
     ``fibre_azimuth_deg`` (NaN where the file gives none), ``origin`` (CSV line, or
     (image, x, y) per pixel), ``channels``, ``kind``, ``source``, ``image_size``.
     Options: ``stride``, ``fraction``, ``subsample_seed`` (captures), ``directions``,
-    ``direction_seed``, ``max_theta`` (measured files), ``skip_bad_rows``, ``small_angles_ok``
-    (CSV), as the command line's flags.
+    ``direction_seed``, ``max_theta`` (measured files), ``skip_bad_rows``, ``small_angles_ok``,
+    ``columns`` (CSV: a dict of our column names to the file's, as ``--columns``), as the
+    command line's flags.
     """
     return _native.load_data(_os.fspath(path), _load_options(options))
 

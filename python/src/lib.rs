@@ -261,6 +261,14 @@ fn load_options(o: &Bound<'_, PyDict>) -> PyResult<LoadOptions> {
         gonio: GonioOptions {
             skip_bad_rows: get(o, "skip_bad_rows", false)?,
             small_angles_ok: get(o, "small_angles_ok", false)?,
+            // {ours: theirs}, as `--columns`
+            columns: get(
+                o,
+                "columns",
+                std::collections::BTreeMap::<String, String>::new(),
+            )?
+            .into_iter()
+            .collect(),
         },
         subsample: Subsample {
             stride: get(o, "stride", 1usize)?,
@@ -283,7 +291,7 @@ fn load_options(o: &Bound<'_, PyDict>) -> PyResult<LoadOptions> {
 /// gives none), `weight`, `fibre_azimuth_deg` (NaN where the file gives none), `origin` (the
 /// CSV line, or (image, x, y) of a pixel), `channels`, `kind`, `source`, `image_size`.
 /// Options as `fit`'s loading options (stride, fraction, subsample_seed, directions,
-/// direction_seed, max_theta, skip_bad_rows, small_angles_ok).
+/// direction_seed, max_theta, skip_bad_rows, small_angles_ok, columns).
 #[pyfunction]
 #[pyo3(signature = (path, options))]
 fn load_data<'py>(
@@ -498,6 +506,14 @@ fn fit(
     }
     if !given("fraction")? {
         load.subsample.fraction = cfg.knobs.fraction;
+    }
+    // the config's [columns] unless given
+    if !given("columns")? {
+        load.gonio.columns = cfg
+            .columns
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
     }
     let load = load.checked().map_err(err)?;
     let request = FitRequest {

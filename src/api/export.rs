@@ -330,7 +330,8 @@ fn map_textures(
         .transpose()?;
     let nodes = table.nodes();
     let description = serde_json::json!({
-        "maps": dir.display().to_string(),
+        // the folder's name, not where it lies on this machine (no absolute paths in exports)
+        "maps": file_name(dir),
         "size": [w, h],
         "registration": "one texel per map pixel; image row 0 is the maps' top row (the mesh's v = 1, TEXCOORD_0 t = 0)",
         "base_color": t_base.map(|_| "sRGB; per texel the least-squares base colour of the texel's glTF shape for its albedos (kd, ks maps; the global ones where a map has no value), as the global fit solves it"),
@@ -370,6 +371,14 @@ type TexturesOut = (
     gltf_out::MaterialTextures,
 );
 
+/// The last component of `path` (the whole path when it has none): what an export names.
+fn file_name(path: &Path) -> String {
+    path.file_name().map_or_else(
+        || path.display().to_string(),
+        |n| n.to_string_lossy().into_owned(),
+    )
+}
+
 /// One line per fact of where the parameters came from.
 fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> {
     // the hash of the bytes the parameters were read from
@@ -407,7 +416,7 @@ fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> 
             p.topology.map_scale,
             p.topology.map.as_ref().map_or(String::new(), |m| format!(
                 ", topology map {} ({} bins)",
-                m.source.display(),
+                file_name(&m.source),
                 p.histogram_bins
             ))
         ));

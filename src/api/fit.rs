@@ -129,8 +129,149 @@ fn fit_texel_sample(store: &CaptureStore, cfg: &FitConfig) -> Vec<usize> {
     store.sample_texels(n, cfg.seed ^ 0x6669_7474)
 }
 
+/// What a `--model auto` run has finished so far: what an interrupted run writes, marked
+/// partial ([`AutoProgress::partial_json`], [`write_partial`]).
+#[derive(Clone, Debug, Default)]
+pub struct AutoProgress {
+    /// The rungs to try, in order.
+    pub rungs: Vec<String>,
+    /// Every rung finished (fitted or failed), as the model-selection table lists them.
+    pub candidates: Vec<crate::fit::selection::Candidate>,
+    /// The training fit's parameters of every rung fitted, as a result states them.
+    pub fits: Vec<(String, serde_json::Value)>,
+    pub train_samples: usize,
+    pub heldout_samples: usize,
+    /// Set once every rung is done: the rung being refitted on all samples.
+    pub chosen: Option<String>,
+    /// The data file's name (no directory) and sample count.
+    pub data_file: String,
+    pub samples: usize,
+}
+
+/// An [`AutoProgress`] shared between a fit and a signal handler.
+pub type AutoSink = std::sync::Arc<std::sync::Mutex<AutoProgress>>;
+
+impl AutoProgress {
+    /// Where the run stood, in words.
+    pub fn stage(&self) -> String {
+        match &self.chosen {
+            Some(c) => format!(
+                "every rung fitted ({}); interrupted while refitting the chosen rung `{c}` on all samples",
+                self.candidates.len()
+            ),
+            None => format!(
+                "interrupted during model selection: {} of {} rungs finished",
+                self.candidates.len(),
+                self.rungs.len()
+            ),
+        }
+    }
+
+    /// The partial result: `"partial": true`, the rungs finished with their held-out errors
+    /// and training-fit parameters. Not a result the other commands read (no fitted model).
+    pub fn partial_json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "schema": "fibrefit-partial/1",
+            "partial": true,
+            "tool": format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
+            "model": "auto",
+            "interrupted": self.stage(),
+            "note": "an interrupted `fibrefit fit --model auto`: the rungs finished before the \
+                     signal, fitted on the training split; no rung was refitted on all samples, so \
+                     this is no result to render, export or score: run the fit again to finish",
+            "data": { "file": self.data_file, "samples": self.samples },
+            "rungs_done": self.candidates.iter().map(|c| c.rung.clone()).collect::<Vec<_>>(),
+            "rungs_not_done": self.rungs.iter().skip(self.candidates.len()).cloned().collect::<Vec<_>>(),
+            "chosen": self.chosen,
+            "train_samples": self.train_samples,
+            "heldout_samples": self.heldout_samples,
+            "model_selection": self.candidates,
+            "training_fits": self.fits.iter().map(|(r, p)| serde_json::json!({ "rung": r, "parameters": p })).collect::<Vec<_>>(),
+        })
+    }
+
+    /// The partial report (markdown): PARTIAL, where the run stood, the rungs finished.
+    pub fn partial_report(&self) -> String {
+        let mut t = format!(
+            "# PARTIAL: interrupted `fibrefit fit --model auto` on {}\n\n{}.\n\n",
+            self.data_file,
+            self.stage()
+        );
+        t += "| rung | free parameters | held-out RMSE [1/sr] | held-out relative RMSE | held-out log error | fit time [s] |\n|---|---|---|---|---|---|\n";
+        for c in &self.candidates {
+            match &c.error {
+                Some(e) => {
+                    t += &format!(
+                        "| {} | - | failed: {e} | | | {:.2} |\n",
+                        c.rung, c.fit_seconds
+                    )
+                }
+                None => {
+                    t += &format!(
+                        "| {} | {} | {:.4e} | {:.2} % | {:.4} | {:.2} |\n",
+                        c.rung,
+                        c.free_parameters,
+                        c.heldout_rmse,
+                        100.0 * c.heldout_relative_rmse,
+                        c.heldout_log_error,
+                        c.fit_seconds
+                    )
+                }
+            }
+        }
+        let left: Vec<&str> = self
+            .rungs
+            .iter()
+            .skip(self.candidates.len())
+            .map(String::as_str)
+            .collect();
+        if !left.is_empty() {
+            t += &format!("\nNot fitted: {}.\n", left.join(", "));
+        }
+        t
+    }
+}
+
+/// Write the partial result of an interrupted auto run to `json` and `dir/report.md` (each
+/// optional), committed together through outputs that refuse `inputs`. Nothing when no rung
+/// had finished. Returns the files written.
+pub fn write_partial(
+    p: &AutoProgress,
+    json: Option<&Path>,
+    report: Option<&Path>,
+    inputs: &[PathBuf],
+) -> Result<Vec<PathBuf>> {
+    if p.candidates.is_empty() {
+        return Ok(vec![]);
+    }
+    let mut outs = Outputs::new(inputs);
+    let mut written = Vec::new();
+    if let Some(path) = json {
+        let id = outs.file(path, "--out")?;
+        outs.put(
+            id,
+            (serde_json::to_string_pretty(&p.partial_json())? + "\n").as_bytes(),
+        )?;
+        written.push(path.to_path_buf());
+    }
+    if let Some(dir) = report {
+        let dir = outs.dir(dir, "--report")?;
+        let path = dir.join("report.md");
+        let id = outs.file(&path, "--report")?;
+        outs.put(id, p.partial_report().as_bytes())?;
+        written.push(path);
+    }
+    outs.commit()?;
+    Ok(written)
+}
+
 /// Run the fit `req` asks for.
 pub fn fit(req: &FitRequest) -> Result<FitRun> {
+    fit_reporting(req, None)
+}
+
+/// [`fit`], keeping `sink` up to date with what an auto run has finished (for a partial result).
+pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun> {
     check(req)?;
     let quiet = !req.progress;
     let mut cfg = req.config.clone();
@@ -146,8 +287,43 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
     };
     cfg.check_work(samples.samples.len())
         .map_err(|e| anyhow!("{}: {e}", req.data.display()))?;
+    let with_sink = |f: &mut dyn FnMut(&mut AutoProgress)| {
+        if let Some(s) = sink {
+            f(&mut s.lock().unwrap_or_else(|p| p.into_inner()));
+        }
+    };
     let selection = if cfg.model == "auto" {
-        let s = fit::selection::select(&samples, &cfg)?;
+        with_sink(&mut |p| {
+            p.rungs = cfg.selection.rungs.clone();
+            p.data_file = req
+                .data
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default();
+            p.samples = samples.samples.len();
+        });
+        let s = fit::selection::select_with(&samples, &cfg, quiet, &mut |d| {
+            with_sink(&mut |p| {
+                p.candidates = d.candidates.to_vec();
+                p.train_samples = d.train_samples;
+                p.heldout_samples = d.heldout_samples;
+                if let (Some(o), Some(c)) = (d.outcome, d.candidates.last()) {
+                    p.fits.push((
+                        c.rung.clone(),
+                        serde_json::to_value(rj::params_out(o)).unwrap_or_default(),
+                    ));
+                }
+            })
+        })?;
+        with_sink(&mut |p| p.chosen = Some(s.chosen.clone()));
+        crate::progress::line(
+            quiet,
+            &format!(
+                "auto: chose {}; refitting it on all {} samples",
+                s.chosen,
+                samples.samples.len()
+            ),
+        );
         cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow!(e))?);
         if req.progress {
             eprintln!("{}", fit::selection::table(&s));
@@ -166,6 +342,13 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
             let store = store.as_ref().ok_or_else(|| {
                 anyhow!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels")
             })?;
+            crate::progress::line(
+                quiet,
+                &format!(
+                    "maps: global stage ({} of {}x{} texels)",
+                    cfg.maps.global_texels, store.width, store.height
+                ),
+            );
             let st = fit::maps::global_stage(store, &cfg, &cfg.maps, quiet).with_context(|| {
                 format!("recovering maps with {} from {}", id, req.data.display())
             })?;
@@ -185,6 +368,13 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
     if let (Some(st), Some(ids), None) = (&store, &fit_texels, &stage_costs) {
         let fitted_texels = ids.len();
         if fitted_texels < st.texels().len() {
+            crate::progress::line(
+                quiet,
+                &format!(
+                    "fit: checking the fit of {fitted_texels} texels on all {}",
+                    st.texels().len()
+                ),
+            );
             let all = fit::all_pixels::statistics(st, &cfg, &outcome, quiet)?;
             if let Some(w) =
                 fit::all_pixels::warning(&all, outcome.statistics.reduced_chi_square, fitted_texels)
@@ -218,6 +408,7 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
     let ward = if id == ModelId::Ward {
         None
     } else {
+        crate::progress::line(quiet, "fit: the Ward fallback");
         match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
             Ok(w) => Some(rj::WardFallback {
                 model: "ward".into(),
@@ -336,6 +527,7 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
                 .set;
                 let store = store.as_ref().expect("the global stage needed the capture");
                 let (w, h) = (store.width, store.height);
+                crate::progress::line(quiet, &format!("maps: texel stage ({w}x{h} texels)"));
                 let part = fit::maps::texel_stage(
                     store,
                     &cfg,
@@ -345,6 +537,7 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
                     *texel_variance,
                     quiet,
                 )?;
+                crate::progress::line(quiet, "maps: standard errors and flags");
                 let (texel_maps, variance, warns) = fit::maps::finish_maps(
                     vec![part],
                     w,
@@ -377,6 +570,28 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
         maps,
         warnings,
         data: req.data.clone(),
+    })
+}
+
+/// `path` relative to the directory `dir` (both resolved; `None` when either cannot be).
+pub fn relative_to(path: &Path, dir: &Path) -> Option<PathBuf> {
+    use std::path::Component;
+    let path = std::fs::canonicalize(path).ok()?;
+    let dir = std::fs::canonicalize(dir).ok()?;
+    let (p, d): (Vec<Component>, Vec<Component>) =
+        (path.components().collect(), dir.components().collect());
+    let common = p.iter().zip(&d).take_while(|(a, b)| a == b).count();
+    let mut out = PathBuf::new();
+    for _ in common..d.len() {
+        out.push("..");
+    }
+    for c in &p[common..] {
+        out.push(c.as_os_str());
+    }
+    Some(if out.as_os_str().is_empty() {
+        PathBuf::from(".")
+    } else {
+        out
     })
 }
 
@@ -446,6 +661,29 @@ impl FitRun {
         }
         if let Some(id) = targets.json {
             let name = outs.name(id).to_path_buf();
+            // no absolute paths in the result: the topology map and the maps directory are
+            // named relative to the result's folder (where readers look for them)
+            let folder = match name.parent() {
+                Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+                _ => PathBuf::from("."),
+            };
+            if let Some(map) = &self.result.knobs.topology_map {
+                if let Some(rel) = relative_to(Path::new(map), &folder) {
+                    self.result.knobs.topology_map = Some(rel.display().to_string());
+                }
+            }
+            if let Some(dir) = self
+                .result
+                .maps
+                .as_ref()
+                .and_then(|m| m["directory"].as_str())
+                .map(PathBuf::from)
+            {
+                if let Some(rel) = relative_to(&dir, &folder) {
+                    self.result.maps.as_mut().expect("read above")["directory"] =
+                        serde_json::json!(rel.display().to_string());
+                }
+            }
             serde_json::to_writer_pretty(outs.writer(id), &self.result)
                 .with_context(|| format!("--out {}: cannot write the result", name.display()))?;
         }

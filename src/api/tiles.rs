@@ -9,7 +9,7 @@ use crate::fit::maps::{self, TexelPart};
 use crate::load::LoadOptions;
 use anyhow::{anyhow, bail, Context, Result};
 use serde::{Deserialize, Serialize};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Schema of a tile file.
 pub const TILE_SCHEMA: &str = "fibrefit-map-tile/1";
@@ -269,6 +269,24 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     g["maps"] = desc;
     if let Some(w) = g["warnings"].as_array_mut() {
         w.extend(warns.iter().map(|x| serde_json::json!(x)));
+    }
+    // paths in the result are relative to its folder: from the globals' folder to --out's
+    let folder = |p: &Path| match p.parent() {
+        Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let out_folder = folder(&args.out);
+    if let Some(map) = g["knobs"]["topology_map"].as_str().map(PathBuf::from) {
+        let at = match map.is_relative() {
+            true => folder(&args.globals).join(map),
+            false => map,
+        };
+        if let Some(rel) = crate::api::fit::relative_to(&at, &out_folder) {
+            g["knobs"]["topology_map"] = serde_json::json!(rel.display().to_string());
+        }
+    }
+    if let Some(rel) = crate::api::fit::relative_to(&args.maps, &out_folder) {
+        g["maps"]["directory"] = serde_json::json!(rel.display().to_string());
     }
     serde_json::to_writer_pretty(outs.writer(json_out), &g)?;
     outs.commit()?;

@@ -12,6 +12,10 @@ pub struct LoadArgs {
     /// Goniometric CSV: the angles really are small degrees (do not stop on radian-looking data)
     #[arg(long)]
     pub small_angles_ok: bool,
+    /// Goniometric CSV: the file's own column names, e.g. theta_i=theta_in,phi_i=phi_in,brdf=f
+    /// (beside a fit config's [columns], which these override)
+    #[arg(long, value_name = "OURS=THEIRS,...")]
+    pub columns: Option<String>,
     /// Image captures: use every STRIDE-th pixel in x and y [default: 1, or the fit config's]
     #[arg(long, value_name = "STRIDE")]
     pub stride: Option<usize>,
@@ -34,12 +38,29 @@ pub struct LoadArgs {
 }
 
 impl LoadArgs {
-    /// Loading options; `stride` and `fraction` fall back to the given defaults (a config's).
-    pub fn options_with(&self, stride: usize, fraction: f64) -> Result<LoadOptions> {
+    /// Loading options; `stride` and `fraction` fall back to the given defaults (a config's),
+    /// `--columns` extends and overrides `columns` (a config's `[columns]`).
+    pub fn options_with(
+        &self,
+        stride: usize,
+        fraction: f64,
+        columns: &std::collections::BTreeMap<String, String>,
+    ) -> Result<LoadOptions> {
+        let mut map: Vec<(String, String)> = columns
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        if let Some(text) = &self.columns {
+            for (ours, theirs) in crate::load::gonio::parse_columns(text)? {
+                map.retain(|(o, _)| *o != ours);
+                map.push((ours, theirs));
+            }
+        }
         LoadOptions {
             gonio: GonioOptions {
                 skip_bad_rows: self.skip_bad_rows,
                 small_angles_ok: self.small_angles_ok,
+                columns: map,
             },
             subsample: Subsample {
                 stride: self.stride.unwrap_or(stride),
@@ -56,6 +77,6 @@ impl LoadArgs {
     }
 
     pub fn options(&self) -> Result<LoadOptions> {
-        self.options_with(1, 1.0)
+        self.options_with(1, 1.0, &Default::default())
     }
 }

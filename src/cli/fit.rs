@@ -25,7 +25,12 @@ polished, every competitive basin polished on all samples), so the fit is the gl
 when it does not fit within the noise, when other minima are as good, or when residuals are
 systematic, a FIT QUALITY banner says so on stderr (even with --quiet). Check a fit on other
 data with `fibrefit score`.
-The result JSON (schema fibrefit-result/1) is written atomically: a failed fit writes nothing.")]
+Without --out the report is printed and nothing is written. The result JSON (schema
+fibrefit-result/1) is written atomically: a failed fit writes nothing. An auto run interrupted
+(Ctrl-C, SIGTERM) after a rung finished writes the rungs it finished to --out, marked
+`\"partial\": true` (schema fibrefit-partial/1, no fitted model), and a PARTIAL report.md into
+--report; it exits 130. Progress (per rung, per stage) goes to stderr on a terminal;
+FIBREFIT_PROGRESS=1 shows it elsewhere too, FIBREFIT_PROGRESS=0 hides it.")]
 pub struct FitArgs {
     /// Goniometric CSV, capture TOML or measured BRDF (.bsdf)
     pub data: PathBuf,
@@ -45,12 +50,13 @@ pub struct FitArgs {
     /// rung `auto` tries. Real felt and brushed cloth need it (reports/felt.md)
     #[arg(long)]
     pub fuzz: bool,
-    /// Result JSON for renderers (and `fibrefit eval --params`) [not with --tile]
-    #[arg(long, value_name = "FILE", required_unless_present = "tile")]
+    /// Result JSON for renderers (and `fibrefit eval --params`) [default: none: the report is
+    /// printed, nothing is written; not with --tile]
+    #[arg(long, value_name = "FILE", conflicts_with = "tile")]
     pub out: Option<PathBuf>,
     /// With [maps] in the config: only the first stage of map recovery, the global parameters
     /// (from `[maps] global_texels` texels), written to --out for `--tile` runs
-    #[arg(long, conflicts_with_all = ["maps", "tile"])]
+    #[arg(long, conflicts_with_all = ["maps", "tile"], requires = "out")]
     pub map_globals: bool,
     /// Fit the per-texel maps of the rows of tile I of N (I from 0) given --globals, writing
     /// DIR/tile_I_of_N.json for `fibrefit merge-maps` (use with --maps DIR)
@@ -84,9 +90,9 @@ pub fn run(args: &FitArgs) -> Result<()> {
         args.fuzz,
         &args.data,
     )?;
-    let load = args
-        .load
-        .options_with(config.knobs.stride, config.knobs.fraction)?;
+    let load =
+        args.load
+            .options_with(config.knobs.stride, config.knobs.fraction, &config.columns)?;
     let req = FitRequest {
         data: args.data.clone(),
         load,
@@ -104,10 +110,46 @@ pub fn run(args: &FitArgs) -> Result<()> {
     }
     fit_api::check(&req)?;
     // every output reserved before the work (none an input or another output), written together
-    let out_path = args.out.clone().expect("clap: --out unless --tile");
+    let out_path = args.out.clone();
     let mut outs = Outputs::new(&inputs);
-    let targets = FitTargets::reserve(&mut outs, &req, Some(&out_path), args.report.as_deref())?;
-    let mut run = fit_api::fit(&req)?;
+    let targets =
+        FitTargets::reserve(&mut outs, &req, out_path.as_deref(), args.report.as_deref())?;
+    // an interrupted auto run writes the rungs it finished, marked partial
+    let sink = (req.config.model == "auto").then(fit_api::AutoSink::default);
+    if let Some(sink) = &sink {
+        let (sink, json, report, inputs) = (
+            sink.clone(),
+            out_path.clone(),
+            args.report.clone(),
+            inputs.clone(),
+        );
+        crate::export::atomic::set_interrupt_hook(Box::new(move || {
+            let p = sink.lock().unwrap_or_else(|p| p.into_inner()).clone();
+            if p.candidates.is_empty() {
+                return;
+            }
+            eprintln!("\n{}", p.partial_report());
+            match fit_api::write_partial(&p, json.as_deref(), report.as_deref(), &inputs) {
+                Ok(files) if files.is_empty() => {
+                    eprintln!("PARTIAL: nothing written (no --out or --report)")
+                }
+                Ok(files) => eprintln!(
+                    "PARTIAL: wrote {} (marked partial: {})",
+                    files
+                        .iter()
+                        .map(|f| f.display().to_string())
+                        .collect::<Vec<_>>()
+                        .join(", "),
+                    p.stage()
+                ),
+                Err(e) => eprintln!("PARTIAL: the partial result could not be written: {e:#}"),
+            }
+        }));
+    }
+    let fitted = fit_api::fit_reporting(&req, sink.as_ref());
+    // from here on the run writes its own outputs (the handler waits if it is writing)
+    crate::export::atomic::clear_interrupt_hook();
+    let mut run = fitted?;
     run.write(&mut outs, &targets)?;
     outs.commit()?;
     // stdout's failure (a closed pipe, a full disk) is reported after the banner, never instead
@@ -118,7 +160,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
         printed = super::print_out(&format!(
             "{}\n",
             serde_json::json!({
-                "model": run.model.as_str(), "out": out_path.display().to_string(), "samples": run.samples.samples.len(),
+                "model": run.model.as_str(), "out": out_path.as_ref().map(|p| p.display().to_string()), "samples": run.samples.samples.len(),
                 "rmse": s.rmse, "relative_rmse": s.relative_rmse, "reduced_chi_square": s.reduced_chi_square,
                 "iterations": outcome.iterations, "evaluations": outcome.evaluations,
                 "seconds": outcome.elapsed_seconds, "warnings": outcome.warnings.len()
@@ -126,20 +168,33 @@ pub fn run(args: &FitArgs) -> Result<()> {
         ));
     } else if !args.quiet {
         printed = super::print_out(&run.report_text);
-        eprintln!("wrote {}", out_path.display());
+        match &out_path {
+            Some(p) => eprintln!("wrote {}", p.display()),
+            None => eprintln!("nothing written: add --out FILE to save the result JSON"),
+        }
     }
+    // a warning once: not again on stderr when the report just printed says it
+    let report_printed = !(args.quiet || args.json);
     if !args.quiet {
-        for w in run
-            .warnings
-            .iter()
-            .filter(|w| !outcome.quality.warnings.contains(w))
-        {
+        for w in run.warnings.iter().filter(|w| {
+            !outcome.quality.warnings.contains(w)
+                && !(report_printed && run.report_text.contains(*w))
+        }) {
             eprintln!("warning: {w}");
         }
     }
-    // what the quality checks found is printed even with --quiet: it must not be missed
-    quality_banner(&outcome.quality);
-    printed.with_context(|| format!("the outputs were written ({})", out_path.display()))
+    // what the quality checks found is printed even with --quiet: it must not be missed; when
+    // the report was just printed on the terminal, the banner points to its [[Warnings]] instead
+    // of repeating them
+    use std::io::IsTerminal;
+    quality_banner(
+        &outcome.quality,
+        report_printed && std::io::stdout().is_terminal(),
+    );
+    printed.with_context(|| match &out_path {
+        Some(p) => format!("the outputs were written ({})", p.display()),
+        None => "the fit ran (nothing was written)".to_string(),
+    })
 }
 
 fn parse_tile(text: &str) -> Result<(u32, u32)> {
@@ -190,8 +245,9 @@ pub fn run_tile(
     Ok(())
 }
 
-/// The quality warnings as a banner on stderr (bold red on a terminal).
-pub fn quality_banner(q: &fit::quality::Quality) {
+/// The quality warnings as a banner on stderr (bold red on a terminal); `listed_above`: the
+/// report on the terminal lists them already, so the banner names their count only.
+pub fn quality_banner(q: &fit::quality::Quality, listed_above: bool) {
     use std::io::IsTerminal;
     if q.warnings.is_empty() {
         return;
@@ -204,8 +260,16 @@ pub fn quality_banner(q: &fit::quality::Quality) {
     let rule = "=".repeat(78);
     eprintln!("{on}{rule}");
     eprintln!("FIT QUALITY: {}", q.verdict.to_uppercase());
-    for w in &q.warnings {
-        eprintln!("WARNING: {w}");
+    if listed_above {
+        let n = q.warnings.len();
+        eprintln!(
+            "{n} warning{}: see [[Warnings]] in the report above",
+            if n == 1 { "" } else { "s" }
+        );
+    } else {
+        for w in &q.warnings {
+            eprintln!("WARNING: {w}");
+        }
     }
     eprintln!("{rule}{off}");
 }

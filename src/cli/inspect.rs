@@ -1,7 +1,7 @@
 //! `fibrefit inspect`: load measurements exactly as `fit` does and summarise them.
 
 use super::data::LoadArgs;
-use crate::load::{load_data, summary::Summary};
+use crate::load::{load_data_with_format, summary::Summary};
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -9,7 +9,9 @@ use std::path::PathBuf;
 #[derive(Debug, Args)]
 #[command(after_help = "\
 DATA is a goniometric CSV (.csv: theta_i,phi_i,theta_o,phi_o in degrees and brdf or radiance with
-irradiance) or an image capture description (.toml). Bad input gives the same errors as `fit`.")]
+irradiance; comma-, tab-, semicolon- or whitespace-separated, the delimiter read off the header
+and named in the summary; the file's own column names mapped with --columns) or an image capture
+description (.toml). Bad input gives the same errors as `fit`.")]
 pub struct InspectArgs {
     /// Goniometric CSV or capture TOML
     pub data: PathBuf,
@@ -21,8 +23,12 @@ pub struct InspectArgs {
 }
 
 pub fn run(args: &InspectArgs) -> Result<()> {
-    let samples = load_data(&args.data, &args.load.options()?)?;
-    let summary = Summary::of(&samples);
+    let (samples, format) = load_data_with_format(&args.data, &args.load.options()?)?;
+    let mut summary = Summary::of(&samples);
+    if let Some(f) = format {
+        summary.delimiter = Some(f.delimiter.name());
+        summary.format = Some(f.describe());
+    }
     if args.json {
         super::print_out(&(serde_json::to_string_pretty(&summary)? + "\n"))?;
     } else {

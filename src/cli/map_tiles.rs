@@ -26,6 +26,7 @@ pub struct MergeMapsArgs {
     /// Result JSON: the globals with the maps block
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
+    /// No messages on stderr: neither the summary of what was written nor the warnings
     #[arg(long, short)]
     pub quiet: bool,
 }

@@ -24,7 +24,7 @@ hit); .png: 8-bit sRGB of radiance x exposure, with alpha. No cast shadows, no i
 outside the object) and, for fibre rungs with a topology, height.exr (H in fibre radii; NaN
 outside) from each pixel's centre ray.")]
 pub struct RenderArgs {
-    /// Parameter file `eval` accepts (.toml or a fitted result .json)
+    /// A result JSON written by `fibrefit fit`, or a parameter TOML (MODEL.md §5)
     #[arg(long, value_name = "FILE", required_unless_present = "seed001")]
     pub params: Option<PathBuf>,
     /// Model id [default: the parameter file's `model`]
@@ -41,7 +41,7 @@ pub struct RenderArgs {
     /// [default: 40,120]
     #[arg(long, value_name = "THETA,PHI", allow_hyphen_values = true)]
     pub light: Vec<String>,
-    /// An orthographic camera looking from THETA,PHI degrees [default: 50,270]
+    /// An orthographic camera looking from THETA,PHI degrees
     #[arg(
         long,
         value_name = "THETA,PHI",

@@ -14,8 +14,10 @@ counts, chi-square and reduced chi-square when DATA has sigmas (else the sum of 
 in 1/sr and relative RMSE (RMSE / RMS data), per channel RMSE, relative RMSE and log error
 (RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median value), and the mean residual in
 bins of the half-vector angle and of its azimuth from the fibres (* = systematic, > 4 standard
-errors). Scoring a fit's own training data reproduces its statistics; scoring held-out data is
-how a fit is checked. Writes nothing.")]
+errors), and ends with the verdict in the fit report's words: \"fits within the noise\", \"does
+not fit within the noise\" or \"noise unknown\" (no sigmas, repeated directions or neighbouring
+pixels to judge the noise by). Scoring a fit's own training data reproduces its statistics;
+scoring held-out data is how a fit is checked. Writes nothing.")]
 pub struct ScoreArgs {
     /// Result JSON written by `fibrefit fit`
     pub result: PathBuf,

@@ -15,7 +15,9 @@
 //!   is written as a stream, at the commit; a block device or socket is refused.
 //! - Signals: SIGINT and SIGTERM remove the run's temporary files and exit 130; a signal during
 //!   the commit waits for it to finish, so the outputs are all old or all new, and the message
-//!   says which. Files left by a run killed with SIGKILL (`.fibrefit-<pid>-<random>.tmp`) are
+//!   says which. A run may register what it has finished so far ([`set_interrupt_hook`]: an
+//!   interrupted `fit --model auto` writes its finished rungs, marked partial); the hook runs
+//!   first, its own outputs committed the same way. Files left by a run killed with SIGKILL (`.fibrefit-<pid>-<random>.tmp`) are
 //!   removed by the next run that writes into the same directory, once their process is gone.
 //! - Permissions a user expects: a new file gets 0666 less the umask; an existing file keeps its
 //!   mode, and its owner and group where the process may set them.
@@ -38,6 +40,22 @@ static MADE_DIRS: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
 static COMMIT: Mutex<()> = Mutex::new(());
 /// Outputs this process has put in place (for the signal handler's message).
 static COMMITTED: Mutex<Vec<PathBuf>> = Mutex::new(Vec::new());
+/// What the signal handler writes before it exits (a run's finished part), if anything.
+type InterruptHook = Box<dyn FnMut() + Send>;
+static ON_INTERRUPT: Mutex<Option<InterruptHook>> = Mutex::new(None);
+
+/// On SIGINT or SIGTERM, run `hook` (it writes what the run has finished, through its own
+/// [`Outputs`]) before the cleanup and exit 130. Replaces any earlier hook.
+pub fn set_interrupt_hook(hook: Box<dyn FnMut() + Send>) {
+    *lock(&ON_INTERRUPT) = Some(hook);
+}
+
+/// No hook any more: the run goes on to write its real outputs. If the handler is running the
+/// hook already, this waits for it (and the process then exits), so a partial output never
+/// replaces the finished one.
+pub fn clear_interrupt_hook() {
+    lock(&ON_INTERRUPT).take();
+}
 
 const PREFIX: &str = ".fibrefit-";
 const SUFFIX: &str = ".tmp";
@@ -50,6 +68,12 @@ fn lock<T>(m: &Mutex<T>) -> std::sync::MutexGuard<'_, T> {
 /// Call once, early in `main`.
 pub fn install_signal_cleanup() {
     let _ = ctrlc::set_handler(|| {
+        // what the run finished, written first; held until the exit, so the run cannot clear
+        // it and commit its own outputs over the partial ones meanwhile
+        let mut hook = lock(&ON_INTERRUPT);
+        if let Some(h) = hook.as_mut() {
+            h();
+        }
         // a commit in progress finishes first: outputs are all old or all new
         let _commit = lock(&COMMIT);
         remove_live_temporaries();

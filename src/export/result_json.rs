@@ -50,7 +50,12 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
     let text = crate::load::input::read_text_as(path, "result file")?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
-    result_from_value(&v, &path.display().to_string(), channels)
+    let mut r = result_from_value(&v, &path.display().to_string(), channels)?;
+    // a relative topology map lies beside the result (as fit writes it)
+    if let Some(map) = r.knobs.topology_map.as_mut().filter(|m| m.is_relative()) {
+        *map = path.parent().unwrap_or(Path::new(".")).join(&*map);
+    }
+    Ok(r)
 }
 
 /// [`read_result`] of a result already parsed; `name` labels errors.
@@ -60,6 +65,12 @@ pub fn result_from_value(
     channels: usize,
 ) -> Result<FittedResult> {
     let at = |what: &str| anyhow!("{}: {what}", name);
+    if v.get("partial").and_then(|p| p.as_bool()) == Some(true) {
+        return Err(at(
+            "a partial result of an interrupted `fit --model auto` (it lists the rungs finished, \
+             but no fitted model): run the fit again to finish it",
+        ));
+    }
     match v.get("schema").and_then(|s| s.as_str()) {
         Some(SCHEMA) => {}
         Some(other) => bail!(
@@ -139,6 +150,7 @@ pub fn result_from_value(
         components: Default::default(),
         selection: Default::default(),
         maps: Default::default(),
+        columns: Default::default(),
     };
     cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
     let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;

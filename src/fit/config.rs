@@ -194,6 +194,9 @@ pub struct FitConfig {
     /// Per-texel maps recovered from an image capture (`fibrefit fit --maps DIR`).
     #[serde(default)]
     pub maps: MapsConfig,
+    /// `[columns]`: a goniometric CSV's own column names, `ours = "theirs"` (as `--columns`).
+    #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
+    pub columns: BTreeMap<String, String>,
 }
 
 /// `[maps]`: which per-texel maps `fit --maps` recovers beside the global parameters, and how.

@@ -141,7 +141,23 @@ pub fn fit_with_hints(
             }
             forced.push(sub.theta_of(&set));
         }
+        let stage = |what: String| {
+            let took = crate::progress::seconds(t0.elapsed().as_secs_f64());
+            crate::progress::line_above(&bar, quiet, &format!("fit: {what} (at {took})"));
+        };
+        stage(format!(
+            "global search over {} free parameters on {} of {} samples",
+            full.dim(),
+            idx.len(),
+            all.len()
+        ));
         let basins = global::search(&sub, &template, forced, opt, cfg.starts, &mut rng, &bar)?;
+        stage(format!(
+            "polishing {} basin{} on all {} samples",
+            basins.len(),
+            if basins.len() == 1 { "" } else { "s" },
+            all.len()
+        ));
         for b in &basins {
             starts.push((free_values(&sub.set_at(&b.theta, &template)), b.cost));
         }
@@ -158,6 +174,13 @@ pub fn fit_with_hints(
         minima_theta = minima.into_iter().map(|m| (m.theta, m.cost)).collect();
     }
     bar.finish_and_clear();
+    crate::progress::line(
+        quiet,
+        &format!(
+            "fit: standard errors and quality checks (at {})",
+            crate::progress::seconds(t0.elapsed().as_secs_f64())
+        ),
+    );
     let minima: Vec<(ParamSet, f64)> = minima_theta
         .iter()
         .map(|(th, c)| (full.set_at(th, &template), *c))

@@ -46,6 +46,11 @@ pub struct Score {
     pub statistics: Statistics,
     pub channels: Vec<ChannelScore>,
     pub residual_bins: Vec<quality::ResidualBin>,
+    /// The fit's verdict on these data, in its words (quality::assess): "fits within the
+    /// noise", "does not fit within the noise" or "noise unknown".
+    pub verdict: String,
+    /// How the noise was judged (sigmas, repeated directions, neighbouring pixels, none).
+    pub noise: quality::NoiseCheck,
 }
 
 /// Score `result` against `samples`.
@@ -134,6 +139,8 @@ pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
         statistics: stats,
         channels,
         residual_bins: q.residual_bins,
+        verdict: q.verdict,
+        noise: q.noise,
     })
 }
 
@@ -171,5 +178,10 @@ pub fn text(s: &Score) -> String {
         );
     }
     t += &quality::bins_text(&s.residual_bins);
+    // the verdict last, in the fit report's words
+    t += &format!(
+        "[[Verdict]]\n    verdict            = {}\n    noise ({})  {}\n",
+        s.verdict, s.noise.source, s.noise.note
+    );
     t
 }

@@ -112,7 +112,56 @@ pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, 
     Ok(((se / n).sqrt(), (se / sy).sqrt(), (sl / n).sqrt(), ns))
 }
 
+/// Single-thread cost (ns per sample) of `rc`'s model at its start values on up to 200 samples
+/// of `s`, at least 1 (1000 when the rung cannot be set up for these data).
+fn probe_ns(s: &Samples, rc: &FitConfig) -> f64 {
+    let Ok(st) = super::setup::setup(s, rc) else {
+        return 1000.0;
+    };
+    let model = super::problem::model_for(
+        &st.template,
+        rc.knobs.quadrature_order,
+        rc.knobs.histogram_bins,
+        rc.knobs.azimuth_nodes,
+        st.map.clone(),
+    );
+    let frame = crate::model::frame::FibreFrame::from_azimuth(0.0);
+    let k = s.samples.len().min(200);
+    let pairs: Vec<crate::model::DirectionPair> = s.samples[..k]
+        .iter()
+        .map(|x| crate::model::DirectionPair::new(&frame, &x.l, &x.v))
+        .collect();
+    let mut bases = vec![crate::model::Basis::default(); k];
+    let t = Instant::now();
+    model.basis_many(&pairs, &mut bases);
+    std::hint::black_box(&bases);
+    (t.elapsed().as_nanos() as f64 / k.max(1) as f64).max(1.0)
+}
+
 pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
+    select_with(samples, cfg, true, &mut |_| {})
+}
+
+/// A rung of `--model auto` just finished (fitted or failed).
+pub struct RungDone<'a> {
+    /// Every rung finished so far, this one last.
+    pub candidates: &'a [Candidate],
+    /// This rung's training fit (`None` when it failed).
+    pub outcome: Option<&'a FitOutcome>,
+    /// The rungs to try, in order.
+    pub rungs: &'a [String],
+    pub train_samples: usize,
+    pub heldout_samples: usize,
+}
+
+/// [`select`], with a progress line per rung on stderr (unless `quiet`: name, elapsed time, an
+/// estimate of the time left) and `on_rung` called as each rung finishes (partial results).
+pub fn select_with(
+    samples: &Samples,
+    cfg: &FitConfig,
+    quiet: bool,
+    on_rung: &mut dyn FnMut(&RungDone),
+) -> Result<SelectionOutcome> {
     let n = samples.samples.len();
     if n < 10 {
         bail!("--model auto needs at least 10 samples to hold some out; got {n}");
@@ -140,16 +189,53 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
     let mut candidates = Vec::new();
     let mut hints: Vec<Vec<(Shape, f64)>> = Vec::new();
     let mut fits: Vec<Option<(f64, f64, f64)>> = Vec::new();
-    for name in &cfg.selection.rungs {
+    let started = Instant::now();
+    let rungs = &cfg.selection.rungs;
+    // the time left, estimated from the seconds per unit of planned work of the rungs done; a
+    // rung's work: its planned evaluations times the cost of one (timed at its start values)
+    let planned: Vec<f64> = match crate::progress::shown(quiet) {
+        false => vec![0.0; rungs.len()],
+        true => rungs
+            .iter()
+            .map(|r| match r.parse::<ModelId>() {
+                Ok(id) => {
+                    let rc = cfg.for_rung(id);
+                    rc.planned_evaluations(train.samples.len()) * probe_ns(&train, &rc)
+                }
+                Err(_) => 0.0,
+            })
+            .collect(),
+    };
+    for (k, name) in rungs.iter().enumerate() {
         let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
         let rc = cfg.for_rung(id);
+        let elapsed = started.elapsed().as_secs_f64();
+        let estimate = match planned[..k].iter().sum::<f64>() {
+            done if k > 0 && done > 0.0 => format!(
+                "; estimate: {} left",
+                crate::progress::seconds(elapsed / done * planned[k..].iter().sum::<f64>())
+            ),
+            _ => String::new(),
+        };
+        crate::progress::line(
+            quiet,
+            &format!(
+                "auto: rung {}/{} {name} (elapsed {}{estimate})",
+                k + 1,
+                rungs.len(),
+                crate::progress::seconds(elapsed)
+            ),
+        );
         let t = Instant::now();
+        let mut fitted = None;
         // every simpler rung's optimum is a start: a rung nested in a richer one (poulin-fournier
         // is varying-topology at height 0) then never ends worse than it on the training data
         let result = fit_with_hints(&train, &rc, true, &hints).and_then(|o| {
             let (rmse, rel, log, ns) = heldout(&o, &rc, &test)?;
             hints.push(o.set.shapes.iter().map(|s| (s.kind, s.value)).collect());
-            Ok((o.statistics.free_parameters, rmse, rel, log, ns))
+            let p = o.statistics.free_parameters;
+            fitted = Some(o);
+            Ok((p, rmse, rel, log, ns))
         });
         match result {
             Ok((p, rmse, rel, log, ns)) => {
@@ -181,6 +267,28 @@ pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
                 fits.push(None);
             }
         }
+        let c = candidates.last().expect("pushed");
+        crate::progress::line(
+            quiet,
+            &match &c.error {
+                None => format!(
+                    "auto: {name} fitted in {}: held-out relative RMSE {:.2} %",
+                    crate::progress::seconds(c.fit_seconds),
+                    100.0 * c.heldout_relative_rmse
+                ),
+                Some(e) => format!(
+                    "auto: {name} failed after {}: {e}",
+                    crate::progress::seconds(c.fit_seconds)
+                ),
+            },
+        );
+        on_rung(&RungDone {
+            candidates: &candidates,
+            outcome: fitted.as_ref(),
+            rungs,
+            train_samples: train.samples.len(),
+            heldout_samples: test.samples.len(),
+        });
     }
     let Some((best_rmse, best_rel, _)) = fits
         .iter()

@@ -5,6 +5,10 @@
 //! with the `irradiance` that produced it, measured perpendicular to the light: then
 //! f = radiance / (irradiance cos theta_i). Optional `sigma` (or `sigma_r,sigma_g,sigma_b`), the
 //! standard deviation of each value in the same units as the values, or `weight`.
+//!
+//! The delimiter is read off the header line (comma, tab, semicolon or runs of whitespace:
+//! [`Delimiter::sniff`]); a file's own column names map to these with
+//! [`GonioOptions::columns`] (`--columns theta_i=theta_in,...`).
 
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::direction_from_angles;
@@ -12,15 +16,165 @@ use anyhow::{anyhow, bail, Result};
 use std::path::Path;
 
 /// Options a user can set on loading.
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Debug, Default)]
 pub struct GonioOptions {
     /// Skip rows with problems (and count them) instead of failing.
     pub skip_bad_rows: bool,
     /// The angles really are small degrees: do not stop on radian-looking data.
     pub small_angles_ok: bool,
+    /// The file's own column names: (our name, the file's name), e.g. ("theta_i", "theta_in").
+    pub columns: Vec<(String, String)>,
+}
+
+/// Every column name fibrefit reads.
+pub const COLUMNS: [&str; 18] = [
+    "theta_i",
+    "phi_i",
+    "theta_o",
+    "phi_o",
+    "brdf",
+    "brdf_r",
+    "brdf_g",
+    "brdf_b",
+    "radiance",
+    "radiance_r",
+    "radiance_g",
+    "radiance_b",
+    "irradiance",
+    "sigma",
+    "sigma_r",
+    "sigma_g",
+    "sigma_b",
+    "weight",
+];
+
+/// Parse `--columns theta_i=theta_in,phi_i=phi_in,...`: pairs of our name and the file's.
+pub fn parse_columns(text: &str) -> Result<Vec<(String, String)>> {
+    let mut out = Vec::new();
+    for part in text.split(',').map(str::trim).filter(|p| !p.is_empty()) {
+        let (ours, theirs) = part.split_once('=').ok_or_else(|| {
+            anyhow!("--columns {text}: `{part}` is not OURS=THEIRS (e.g. theta_i=theta_in)")
+        })?;
+        out.push((ours.trim().to_owned(), theirs.trim().to_owned()));
+    }
+    Ok(out)
+}
+
+/// Refuse a column map that names no column of ours, maps one twice, or maps two to one.
+pub fn check_columns(columns: &[(String, String)]) -> Result<()> {
+    for (k, (ours, theirs)) in columns.iter().enumerate() {
+        if !COLUMNS.contains(&ours.as_str()) {
+            bail!(
+                "column map (--columns or [columns]) {ours}={theirs}: `{ours}` is not a column fibrefit reads; the columns are {}",
+                COLUMNS.join(", ")
+            );
+        }
+        if theirs.is_empty() {
+            bail!("column map (--columns or [columns]) {ours}=: give the file's name of the column `{ours}`");
+        }
+        if columns[..k].iter().any(|(o, _)| o == ours) {
+            bail!("column map (--columns or [columns]): `{ours}` is mapped twice");
+        }
+        if columns[..k].iter().any(|(_, t)| t == theirs) {
+            bail!(
+                "column map (--columns or [columns]): the file's column `{theirs}` is mapped twice"
+            );
+        }
+    }
+    Ok(())
+}
+
+/// How the fields of a line are separated.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Delimiter {
+    #[default]
+    Comma,
+    Tab,
+    Semicolon,
+    /// Runs of spaces or tabs.
+    Whitespace,
+}
+
+impl Delimiter {
+    pub fn name(self) -> &'static str {
+        match self {
+            Delimiter::Comma => "comma",
+            Delimiter::Tab => "tab",
+            Delimiter::Semicolon => "semicolon",
+            Delimiter::Whitespace => "whitespace",
+        }
+    }
+
+    /// The delimiter of a header line: the most frequent of tab, semicolon and comma (ties to
+    /// tab, then comma), or whitespace when there is none of them but several words.
+    pub fn sniff(header: &str) -> Self {
+        let count = |c: char| header.matches(c).count();
+        let (comma, tab, semi) = (count(','), count('\t'), count(';'));
+        if tab > 0 && tab >= comma && tab >= semi {
+            Delimiter::Tab
+        } else if semi > comma {
+            Delimiter::Semicolon
+        } else if comma > 0 {
+            Delimiter::Comma
+        } else if header.split_ascii_whitespace().count() > 1 {
+            Delimiter::Whitespace
+        } else {
+            Delimiter::Comma
+        }
+    }
+
+    fn split(self, line: &str) -> Vec<String> {
+        let clean = |h: &str| h.trim().trim_matches('"').to_owned();
+        match self {
+            Delimiter::Comma => line.split(',').map(clean).collect(),
+            Delimiter::Tab => line.split('\t').map(clean).collect(),
+            Delimiter::Semicolon => line.split(';').map(clean).collect(),
+            Delimiter::Whitespace => line.split_ascii_whitespace().map(clean).collect(),
+        }
+    }
+
+    /// The byte the CSV reader splits on (whitespace-separated lines are rewritten with commas).
+    fn byte(self) -> u8 {
+        match self {
+            Delimiter::Tab => b'\t',
+            Delimiter::Semicolon => b';',
+            Delimiter::Comma | Delimiter::Whitespace => b',',
+        }
+    }
+}
+
+/// What a goniometric file's header says: its delimiter, the columns as read and as mapped.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Format {
+    pub delimiter: Delimiter,
+    /// The header's names as in the file.
+    pub header: Vec<String>,
+    /// (the file's name, ours) of every column mapped by [`GonioOptions::columns`].
+    pub mapped: Vec<(String, String)>,
+}
+
+impl Format {
+    /// One line for `inspect`.
+    pub fn describe(&self) -> String {
+        let mut t = format!(
+            "{}-separated, columns {}",
+            self.delimiter.name(),
+            self.header.join(", ")
+        );
+        if !self.mapped.is_empty() {
+            let m: Vec<String> = self
+                .mapped
+                .iter()
+                .map(|(theirs, ours)| format!("{theirs} -> {ours}"))
+                .collect();
+            t += &format!(" (mapped: {})", m.join(", "));
+        }
+        t
+    }
 }
 
 struct Layout {
+    delimiter: Delimiter,
     angles: [usize; 4],
     values: Vec<usize>,
     irradiance: Option<usize>,
@@ -36,25 +190,7 @@ fn layout(header: &[String], name: &str) -> Result<Layout> {
         if header[..i].contains(h) {
             bail!("{name}:1: column `{h}` appears twice");
         }
-        let known = ANGLES.contains(&h.as_str())
-            || matches!(
-                h.as_str(),
-                "brdf"
-                    | "brdf_r"
-                    | "brdf_g"
-                    | "brdf_b"
-                    | "radiance"
-                    | "radiance_r"
-                    | "radiance_g"
-                    | "radiance_b"
-                    | "irradiance"
-                    | "sigma"
-                    | "sigma_r"
-                    | "sigma_g"
-                    | "sigma_b"
-                    | "weight"
-            );
-        if !known {
+        if !COLUMNS.contains(&h.as_str()) {
             bail!(
                 "{name}:1: unknown column `{h}`; expected theta_i, phi_i, theta_o, phi_o, then brdf \
                  (or brdf_r, brdf_g, brdf_b) or radiance (or radiance_r, _g, _b) with irradiance, \
@@ -116,6 +252,7 @@ fn layout(header: &[String], name: &str) -> Result<Layout> {
         bail!("{name}:1: give either sigma or weight, not both");
     }
     Ok(Layout {
+        delimiter: Delimiter::Comma,
         angles,
         values,
         irradiance,
@@ -158,14 +295,19 @@ const NEGATIVE_FRACTION: f64 = 0.01;
 /// own per-sample arrays several hundred bytes in all; about 5 GB at this limit).
 pub const MAX_ROWS: usize = 10_000_000;
 
-pub fn load(path: &Path, opts: GonioOptions) -> Result<Samples> {
+pub fn load(path: &Path, opts: &GonioOptions) -> Result<Samples> {
+    Ok(load_with_format(path, opts)?.0)
+}
+
+/// [`load`], and what the header said (delimiter, columns as read and as mapped).
+pub fn load_with_format(path: &Path, opts: &GonioOptions) -> Result<(Samples, Format)> {
     // read once through load::input: limited, hashed as parsed, checked unchanged at the end
     // (a file cut or rewritten while it was read is an error, not a partial sample set)
     let mut input = super::input::open(path, super::input::MAX_INPUT_BYTES)?;
-    let mut s = read(&mut input, &path.display().to_string(), opts)?;
+    let (mut s, format) = read_with_format(&mut input, &path.display().to_string(), opts)?;
     input.finish()?;
     s.source = path.to_path_buf();
-    Ok(s)
+    Ok((s, format))
 }
 
 /// Bytes read per block: memory for loading is this plus the samples kept, whatever the file size.
@@ -173,7 +315,16 @@ const BLOCK: usize = 32 << 20;
 
 /// Parse from any reader, streaming it in blocks; `name` labels errors as `name:line: problem`.
 /// (A quoted field may not span lines across a block boundary; numeric CSVs have none.)
-pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Result<Samples> {
+pub fn read(input: impl std::io::Read, name: &str, opts: &GonioOptions) -> Result<Samples> {
+    Ok(read_with_format(input, name, opts)?.0)
+}
+
+/// [`read`], and what the header said.
+pub fn read_with_format(
+    mut input: impl std::io::Read,
+    name: &str,
+    opts: &GonioOptions,
+) -> Result<(Samples, Format)> {
     let mut buf: Vec<u8> = Vec::with_capacity(BLOCK);
     let mut eof = false;
     // fill `buf` with up to BLOCK more bytes; false at the end of the input
@@ -216,7 +367,7 @@ pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Re
             None => fill(&mut buf, &mut eof)?,
         }
     }
-    let mut state = parse_header(&buf, name)?;
+    let mut state = parse_header(&buf, name, opts)?;
     let mut rest = buf.split_off(state.body_start);
     drop(buf);
     loop {
@@ -243,7 +394,8 @@ pub fn read(mut input: impl std::io::Read, name: &str, opts: GonioOptions) -> Re
         }
         fill(&mut rest, &mut eof)?;
     }
-    state.finish(name, opts)
+    let format = state.format.clone();
+    Ok((state.finish(name, opts)?, format))
 }
 
 /// What one chunk of rows yields.
@@ -262,7 +414,7 @@ fn parse_chunk(
     lay: &Layout,
     header: &[String],
     name: &str,
-    opts: GonioOptions,
+    opts: &GonioOptions,
 ) -> Chunk {
     // rows ~ bytes / bytes per line, so the sample vector is allocated once
     let per_line = memchr::memchr(b'\n', bytes)
@@ -272,8 +424,17 @@ fn parse_chunk(
         samples: Vec::with_capacity(bytes.len() / per_line + 16),
         ..Chunk::default()
     };
+    // whitespace-separated lines are read as comma-separated ones (line breaks kept)
+    let rewritten;
+    let bytes = if lay.delimiter == Delimiter::Whitespace {
+        rewritten = commas_for_whitespace(bytes);
+        &rewritten[..]
+    } else {
+        bytes
+    };
     let mut reader = csv::ReaderBuilder::new()
         .has_headers(false)
+        .delimiter(lay.delimiter.byte())
         .comment(Some(b'#'))
         .flexible(true)
         .from_reader(bytes);
@@ -328,6 +489,29 @@ fn parse_chunk(
     out
 }
 
+/// `bytes` with every run of spaces and tabs inside a line replaced by one comma (and the runs
+/// at a line's ends dropped), line breaks kept: whitespace-separated rows as CSV rows.
+fn commas_for_whitespace(bytes: &[u8]) -> Vec<u8> {
+    let mut out = Vec::with_capacity(bytes.len());
+    for (k, line) in bytes.split(|&b| b == b'\n').enumerate() {
+        if k > 0 {
+            out.push(b'\n');
+        }
+        let mut first = true;
+        for word in line
+            .split(|b| matches!(b, b' ' | b'\t' | b'\r'))
+            .filter(|w| !w.is_empty())
+        {
+            if !first {
+                out.push(b',');
+            }
+            out.extend_from_slice(word);
+            first = false;
+        }
+    }
+    out
+}
+
 /// Chunks of whole lines for parallel parsing: (bytes, number of the chunk's first line).
 /// Only when no field can span lines (no quote characters); otherwise one chunk.
 fn split_lines(body: &[u8], first_line: u64) -> Vec<(&[u8], u64)> {
@@ -369,6 +553,7 @@ fn header_end(bytes: &[u8]) -> Option<usize> {
 /// What parsing has gathered so far.
 struct ParseState {
     header: Vec<String>,
+    format: Format,
     lay: Layout,
     /// Where the rows start in the first buffer.
     body_start: usize,
@@ -380,7 +565,7 @@ struct ParseState {
     examples: Vec<String>,
 }
 
-fn parse_header(bytes: &[u8], name: &str) -> Result<ParseState> {
+fn parse_header(bytes: &[u8], name: &str, opts: &GonioOptions) -> Result<ParseState> {
     // A UTF-8 byte-order mark (spreadsheet exports) is not part of the first column's name.
     let bom = if bytes.starts_with(b"\xEF\xBB\xBF") {
         3
@@ -411,21 +596,54 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<ParseState> {
         .position(|&b| b == b'\n')
         .map(|p| offset + p + 1)
         .unwrap_or(bytes.len());
-    let header: Vec<String> = String::from_utf8_lossy(&bytes[offset..header_end])
-        .trim_end_matches(['\n', '\r'])
-        .split(',')
-        .map(|h| h.trim().trim_matches('"').to_owned())
-        .collect();
-    if header.len() == 1 && header[0].is_empty() {
+    let text = String::from_utf8_lossy(&bytes[offset..header_end]);
+    let text = text.trim_end_matches(['\n', '\r']);
+    let delimiter = Delimiter::sniff(text);
+    let read_header = delimiter.split(text);
+    if read_header.is_empty() || (read_header.len() == 1 && read_header[0].is_empty()) {
         bail!("{name}: empty file; expected a header line");
     }
-    let lay = layout(&header, name).map_err(|e| {
-        anyhow!(e
+    // the file's own names mapped to ours
+    let mut header = read_header.clone();
+    let mut mapped = Vec::new();
+    for (ours, theirs) in &opts.columns {
+        match read_header.iter().position(|h| h == theirs) {
+            Some(i) => {
+                header[i] = ours.clone();
+                mapped.push((theirs.clone(), ours.clone()));
+            }
+            None => bail!(
+                "{name}:{line}: --columns {ours}={theirs}: the header has no column `{theirs}`; \
+                 the header read ({}-separated): {}",
+                delimiter.name(),
+                quoted(&read_header)
+            ),
+        }
+    }
+    let mut lay = layout(&header, name).map_err(|e| {
+        let msg = e
             .to_string()
-            .replacen(&format!("{name}:1:"), &format!("{name}:{line}:"), 1))
+            .replacen(&format!("{name}:1:"), &format!("{name}:{line}:"), 1);
+        anyhow!(
+            "{msg}\n  the header read ({}-separated, {} column{}): {}\n  expected the columns: \
+             {}\n  (fibrefit reads comma-, tab-, semicolon- or whitespace-separated files; map \
+             the file's own names with --columns OURS=THEIRS,..., e.g. --columns \
+             theta_i=theta_in,phi_i=phi_in)",
+            delimiter.name(),
+            read_header.len(),
+            if read_header.len() == 1 { "" } else { "s" },
+            quoted(&read_header),
+            COLUMNS.join(", ")
+        )
     })?;
+    lay.delimiter = delimiter;
     Ok(ParseState {
         header,
+        format: Format {
+            delimiter,
+            header: read_header,
+            mapped,
+        },
         lay,
         body_start: header_end,
         next_line: line + 1,
@@ -438,7 +656,7 @@ fn parse_header(bytes: &[u8], name: &str) -> Result<ParseState> {
 
 impl ParseState {
     /// Parse whole lines (in parallel chunks) and keep their samples.
-    fn parse_lines(&mut self, body: &[u8], name: &str, opts: GonioOptions) -> Result<()> {
+    fn parse_lines(&mut self, body: &[u8], name: &str, opts: &GonioOptions) -> Result<()> {
         use rayon::prelude::*;
         let (lay, header) = (&self.lay, &self.header);
         let chunks: Vec<Chunk> = split_lines(body, self.next_line)
@@ -469,7 +687,7 @@ impl ParseState {
         Ok(())
     }
 
-    fn finish(self, name: &str, opts: GonioOptions) -> Result<Samples> {
+    fn finish(self, name: &str, opts: &GonioOptions) -> Result<Samples> {
         let ParseState {
             header,
             lay,
@@ -525,6 +743,15 @@ impl ParseState {
             image_size: None,
         })
     }
+}
+
+/// Names as `a`, `b`, `c` (a long header cut after 12).
+fn quoted(names: &[String]) -> String {
+    let mut v: Vec<String> = names.iter().take(12).map(|h| format!("`{h}`")).collect();
+    if names.len() > 12 {
+        v.push(format!("... ({} more)", names.len() - 12));
+    }
+    v.join(", ")
 }
 
 type Negative = Option<(f64, usize)>;
@@ -690,7 +917,7 @@ mod tests {
     use super::*;
 
     fn parse(text: &str) -> Result<Samples> {
-        read(text.as_bytes(), "g.csv", GonioOptions::default())
+        read(text.as_bytes(), "g.csv", &GonioOptions::default())
     }
 
     #[test]
@@ -744,7 +971,7 @@ mod tests {
         assert!(read(
             text.as_bytes(),
             "g.csv",
-            GonioOptions {
+            &GonioOptions {
                 small_angles_ok: true,
                 ..Default::default()
             }
@@ -760,7 +987,7 @@ mod tests {
         let s = read(
             text.as_bytes(),
             "g.csv",
-            GonioOptions {
+            &GonioOptions {
                 skip_bad_rows: true,
                 ..Default::default()
             },
@@ -788,5 +1015,48 @@ mod tests {
         .unwrap_err()
         .to_string();
         assert!(e.contains("sigma"), "{e}");
+    }
+
+    #[test]
+    fn delimiters_are_sniffed_and_columns_mapped() {
+        let comma =
+            parse("theta_i,phi_i,theta_o,phi_o,brdf\n30,0,30,180,0.2\n40,10,20,90,0.3\n").unwrap();
+        for (text, d) in [
+            ("theta_i\tphi_i\ttheta_o\tphi_o\tbrdf\n30\t0\t30\t180\t0.2\n40\t10\t20\t90\t0.3\n", Delimiter::Tab),
+            ("theta_i;phi_i;theta_o;phi_o;brdf\n30;0;30;180;0.2\n40;10;20;90;0.3\n", Delimiter::Semicolon),
+            ("# c\ntheta_i  phi_i theta_o phi_o brdf\n  30 0\t  30 180 0.2\n# x y\n40 10 20 90 0.3  \n", Delimiter::Whitespace),
+        ] {
+            let (s, f) = read_with_format(text.as_bytes(), "g.csv", &GonioOptions::default())
+                .unwrap();
+            assert_eq!(f.delimiter, d, "{text}");
+            assert_eq!(s.samples.len(), 2);
+            for (a, b) in s.samples.iter().zip(&comma.samples) {
+                assert_eq!((a.l, a.v, a.value), (b.l, b.v, b.value));
+            }
+        }
+        let opts = GonioOptions {
+            columns: parse_columns("theta_i=ti, phi_i=pi,theta_o=to,phi_o=po,brdf=f").unwrap(),
+            ..Default::default()
+        };
+        check_columns(&opts.columns).unwrap();
+        let (s, f) = read_with_format(
+            "ti,pi,to,po,f\n30,0,30,180,0.2\n".as_bytes(),
+            "g.csv",
+            &opts,
+        )
+        .unwrap();
+        assert_eq!(s.samples[0].value, comma.samples[0].value);
+        assert!(f.describe().contains("ti -> theta_i"), "{}", f.describe());
+        let e = parse("theta_in,phi_in,theta_out,phi_out,f\n30,0,30,180,0.2\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("unknown column `theta_in`")
+                && e.contains("`phi_out`")
+                && e.contains("theta_i, phi_i"),
+            "{e}"
+        );
+        assert!(check_columns(&parse_columns("theta=x").unwrap()).is_err());
+        assert!(parse_columns("theta_i").is_err());
     }
 }

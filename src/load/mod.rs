@@ -40,6 +40,7 @@ impl LoadOptions {
         if !(f > 0.0 && f <= 1.0) {
             bail!("--fraction must lie in (0, 1], got {f}");
         }
+        gonio::check_columns(&self.gonio.columns)?;
         Ok(self)
     }
 }
@@ -90,17 +91,28 @@ pub fn is_capture(path: &Path) -> bool {
 /// Load a goniometric CSV (`.csv`), an image capture description (`.toml`) or an RGL measured
 /// BRDF (`.bsdf`, sampled at seeded directions).
 pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
+    Ok(load_data_with_format(path, opts)?.0)
+}
+
+/// [`load_data`], and for a goniometric CSV what its header said (delimiter, columns).
+pub fn load_data_with_format(
+    path: &Path,
+    opts: &LoadOptions,
+) -> Result<(samples::Samples, Option<gonio::Format>)> {
+    let plain = |s: samples::Samples| (s, None);
     match path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase)
         .as_deref()
     {
-        Some("csv") => gonio::load(path, opts.gonio),
+        Some("csv") => gonio::load_with_format(path, &opts.gonio).map(|(s, f)| (s, Some(f))),
         // every pixel as a sample (image by image, rows from the top), via the compact store
-        Some("toml") => Ok(capture_store::CaptureStore::load(path, opts.subsample)?.to_samples()),
-        Some("bsdf") => rgl::load(path, opts.measured),
-        Some("binary") => merl::load(path, opts.measured),
+        Some("toml") => Ok(plain(
+            capture_store::CaptureStore::load(path, opts.subsample)?.to_samples(),
+        )),
+        Some("bsdf") => rgl::load(path, opts.measured).map(plain),
+        Some("binary") => merl::load(path, opts.measured).map(plain),
         _ => bail!(
             "{}: unknown data file type; expected a goniometric .csv, an image capture .toml, an RGL measured BRDF .bsdf or a MERL .binary",
             path.display()

@@ -22,6 +22,12 @@ pub struct Summary {
     pub phi_view_hist: [u64; 12],
     pub dropped: Dropped,
     pub skipped_examples: Vec<String>,
+    /// Goniometric CSV: the delimiter and columns its header gave (and any mapped).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub format: Option<String>,
+    /// Goniometric CSV: the delimiter sniffed from the header (comma, tab, semicolon, whitespace).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub delimiter: Option<&'static str>,
 }
 
 impl Summary {
@@ -64,6 +70,8 @@ impl Summary {
             phi_view_hist: ph.1,
             dropped: s.dropped.clone(),
             skipped_examples: s.skipped_examples.clone(),
+            format: None,
+            delimiter: None,
         }
     }
 
@@ -77,6 +85,9 @@ impl Summary {
         };
         t += &format!("{} ({})\n", self.source, self.kind);
         t += &format!("  samples          {}\n", self.samples);
+        if let Some(f) = &self.format {
+            t += &format!("  format           {f}\n");
+        }
         t += &format!("  channels         {} ({ch})\n", self.channels);
         for (c, (lo, hi)) in self.brdf_range.iter().enumerate() {
             let name = if self.channels == 1 {
