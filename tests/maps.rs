@@ -108,7 +108,7 @@ fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
     for name in ["height", "fibre_azimuth", "kd"] {
         let line = report
             .lines()
-            .skip_while(|l| !l.contains("[[Maps]]"))
+            .skip_while(|l| !l.starts_with("[[Maps]]"))
             .find(|l| l.trim_start().starts_with(&format!("{name} ")))
             .unwrap_or_else(|| panic!("no summary of {name} in {report}"));
         assert!(line.contains("% of 256 texels"), "{line}");
