@@ -450,6 +450,35 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
             "{f} differs between the single run and the merged tiles"
         );
     }
+    // and so does the maps' summary in the result
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(d.join(f)).unwrap()).unwrap()
+    };
+    let summary = read("single.json")["maps"]["summary"].clone();
+    assert!(
+        summary.as_array().is_some_and(|s| s.len() == 2),
+        "{summary}"
+    );
+    // (to the last bits: the tiles' values pass through JSON)
+    let merged = read("merged.json")["maps"]["summary"].clone();
+    for (a, b) in summary
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(merged.as_array().unwrap())
+    {
+        assert_eq!(a["name"], b["name"]);
+        for k in [
+            "median",
+            "p5",
+            "p95",
+            "median_std_error",
+            "flagged_fraction",
+        ] {
+            let (x, y) = (a[k].as_f64().unwrap(), b[k].as_f64().unwrap());
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{k}: {a} vs {b}");
+        }
+    }
     // refused, writing nothing: a tile index out of range, a missing tile, other globals
     let o = fit(&[
         "--globals",
