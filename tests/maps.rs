@@ -63,7 +63,6 @@ fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
         .arg(dir.path().join("r.json"))
         .arg("--maps")
         .arg(&out)
-        .arg("-q")
         .output()
         .unwrap();
     assert!(
@@ -71,6 +70,49 @@ fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
         "{}",
         String::from_utf8_lossy(&run.stderr)
     );
+    // the report (stdout) names the mapped parameters per texel, with the real work of both
+    // stages and a summary of each map (issue 22 item 6)
+    let report = String::from_utf8_lossy(&run.stdout).into_owned();
+    for name in ["height", "map_scale", "fibre_azimuth_deg", "kd"] {
+        let line = report
+            .lines()
+            .find(|l| l.trim_start().starts_with(&format!("{name} ")))
+            .unwrap_or_else(|| panic!("no {name} in {report}"));
+        assert!(
+            line.contains("per texel") && !line.contains("fixed"),
+            "{line}"
+        );
+    }
+    let iterations: u64 = report
+        .lines()
+        .find(|l| l.contains("# iterations"))
+        .and_then(|l| l.split('=').nth(1))
+        .and_then(|v| v.split_whitespace().next())
+        .and_then(|v| v.parse().ok())
+        .unwrap();
+    assert!(iterations > 0, "{report}");
+    assert!(!report.contains("wall time          = 0.000 s"), "{report}");
+    assert!(report.contains("[[Maps]]"), "{report}");
+    let stage = report
+        .lines()
+        .find(|l| l.contains("global stage       ="))
+        .unwrap();
+    assert!(
+        stage.contains("LM iterations") && !stage.contains(" 0 LM"),
+        "{stage}"
+    );
+    assert!(
+        report.contains("texel stage        = 256 texels"),
+        "{report}"
+    );
+    for name in ["height", "fibre_azimuth", "kd"] {
+        let line = report
+            .lines()
+            .skip_while(|l| !l.starts_with("[[Maps]]"))
+            .find(|l| l.trim_start().starts_with(&format!("{name} ")))
+            .unwrap_or_else(|| panic!("no summary of {name} in {report}"));
+        assert!(line.contains("% of 256 texels"), "{line}");
+    }
     let read = |n: &str| image_io::read(&out.join(n), None, None).unwrap();
     let (h, h_se, p, p_se) = (
         read("height.exr"),
@@ -123,6 +165,35 @@ fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
         .as_str()
         .unwrap()
         .contains("degrees"));
+    // the maps' summary in the result: median and 5-95 % range, fraction flagged
+    let summary = r["maps"]["summary"].as_array().unwrap();
+    let h = summary.iter().find(|m| m["name"] == "height").unwrap();
+    let (med, p5, p95) = (
+        h["median"].as_f64().unwrap(),
+        h["p5"].as_f64().unwrap(),
+        h["p95"].as_f64().unwrap(),
+    );
+    assert!(p5 < med && med < p95 && (med - 0.9).abs() < 0.2, "{h}");
+    assert!(
+        (0.0..0.5).contains(&h["flagged_fraction"].as_f64().unwrap()),
+        "{h}"
+    );
+    assert!(
+        r["maps"]["method"]["global_stage_seconds"]
+            .as_f64()
+            .unwrap()
+            > 0.0
+    );
+    assert!(r["maps"]["method"]["texel_stage_seconds"].as_f64().unwrap() > 0.0);
+    assert_eq!(
+        r["parameters"]["height"]["fixed_reason"]
+            .as_str()
+            .unwrap()
+            .split(' ')
+            .take(2)
+            .collect::<Vec<_>>(),
+        ["per", "texel"]
+    );
     let e = &r["parameters"]["exponent"];
     let (v, se) = (
         e["value"].as_f64().unwrap(),
@@ -378,6 +449,35 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
             a == b,
             "{f} differs between the single run and the merged tiles"
         );
+    }
+    // and so does the maps' summary in the result
+    let read = |f: &str| -> serde_json::Value {
+        serde_json::from_slice(&std::fs::read(d.join(f)).unwrap()).unwrap()
+    };
+    let summary = read("single.json")["maps"]["summary"].clone();
+    assert!(
+        summary.as_array().is_some_and(|s| s.len() == 2),
+        "{summary}"
+    );
+    // (to the last bits: the tiles' values pass through JSON)
+    let merged = read("merged.json")["maps"]["summary"].clone();
+    for (a, b) in summary
+        .as_array()
+        .unwrap()
+        .iter()
+        .zip(merged.as_array().unwrap())
+    {
+        assert_eq!(a["name"], b["name"]);
+        for k in [
+            "median",
+            "p5",
+            "p95",
+            "median_std_error",
+            "flagged_fraction",
+        ] {
+            let (x, y) = (a[k].as_f64().unwrap(), b[k].as_f64().unwrap());
+            assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{k}: {a} vs {b}");
+        }
     }
     // refused, writing nothing: a tile index out of range, a missing tile, other globals
     let o = fit(&[

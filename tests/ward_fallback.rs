@@ -116,6 +116,7 @@ fn a_ward_fallback_of_a_ward_truth_has_no_warning() {
         max: 1.0,
         fixed,
         at_bound: vec![at],
+        fixed_reason: None,
     };
     let bound = fibrefit::fit::ward_fallback::warnings(
         0.1,

@@ -21,7 +21,10 @@ use std::path::{Path, PathBuf};
 
 /// The configuration of a fit: a config file, or the defaults of a rung (`model`), with
 /// `model`, `metric` and `fuzz` overriding it; validated. Without a config a measured-BRDF file
-/// (.bsdf, .binary) is fitted with the log metric.
+/// (.bsdf, .binary) is fitted with the log metric, and a named rung frees every shape parameter
+/// as `auto` does ([`FitConfig::free_unlisted_shapes`]: starts and bounds there). `--model`
+/// over a config written for another rung ignores the parameters that rung lacks, with a note
+/// ([`FitConfig::retarget`]).
 pub fn configure(
     config: Option<&Path>,
     model: Option<&str>,
@@ -44,7 +47,11 @@ pub fn configure(
         (None, None) => bail!("give --config FILE, or --model ID|auto to fit with the defaults"),
     };
     if let Some(m) = model {
-        cfg.model = m.to_string();
+        match (config.is_some(), m.parse::<ModelId>()) {
+            // a config written for another rung (or for auto) tried with this one
+            (true, Ok(id)) if cfg.model != m => cfg.retarget(id)?,
+            _ => cfg.model = m.to_string(),
+        }
     }
     if let Some(m) = metric {
         cfg.metric = serde_json::from_value(serde_json::Value::String(m.to_string()))
@@ -54,6 +61,12 @@ pub fn configure(
         cfg.parameters.entry("fuzz_depth".into()).or_default();
     }
     cfg.validate().map_err(|e| anyhow!("--model: {e}"))?;
+    if config.is_none() && cfg.model != "auto" {
+        // no config: a named rung fits what the data can determine, as auto's rungs do
+        let id = cfg.model_id()?;
+        cfg.free_unlisted_shapes(id);
+        cfg.validate().map_err(|e| anyhow!("--model: {e}"))?;
+    }
     Ok(cfg)
 }
 
@@ -354,7 +367,13 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
             })?;
             let mut global = st.outcome;
             global.warnings.extend(st.warnings.iter().cloned());
-            (global, Some((st.costs, st.texel_variance)))
+            let work = (
+                st.costs.len().saturating_sub(1),
+                st.texels,
+                st.iterations,
+                st.seconds,
+            );
+            (global, Some((st.costs, st.texel_variance, work)))
         }
         false => (
             fit::fit_with_hints(&samples, &cfg, quiet, &hints)
@@ -362,6 +381,17 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
             None,
         ),
     };
+    // what configuring decided (parameters of another rung ignored) is read with the warnings
+    for (k, n) in cfg.notes.iter().enumerate() {
+        if !outcome.warnings.contains(n) {
+            outcome.warnings.insert(k, n.clone());
+        }
+    }
+    // parameters recovered per texel are not fixed: say so
+    if stage_costs.is_some() {
+        let per_texel = per_texel_names(&cfg.maps);
+        fit::parameters::explain_fixed(&mut outcome.records, &cfg, &samples, &per_texel);
+    }
     let channels = samples.channels;
     // a fit on a sample of a capture's texels, checked on every pixel
     let mut all_pixels = None;
@@ -507,7 +537,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         report_text += &format!("[[Model selection]]\n{}", fit::selection::table(s));
     }
     let mut maps = None;
-    if let Some((costs, texel_variance)) = &stage_costs {
+    if let Some((costs, texel_variance, work)) = &stage_costs {
         let method = fit::maps::method(&cfg, costs, *texel_variance);
         match &req.maps {
             Maps::Globals => {
@@ -528,6 +558,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                 let store = store.as_ref().expect("the global stage needed the capture");
                 let (w, h) = (store.width, store.height);
                 crate::progress::line(quiet, &format!("maps: texel stage ({w}x{h} texels)"));
+                let t0 = std::time::Instant::now();
                 let part = fit::maps::texel_stage(
                     store,
                     &cfg,
@@ -547,9 +578,25 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                     outcome.statistics.free_parameters,
                     crate::model::topology::max_height(globals.shape_value(Shape::Spacing)),
                 )?;
+                let texel_seconds = t0.elapsed().as_secs_f64();
+                let h_max = crate::model::topology::max_height(globals.shape_value(Shape::Spacing));
+                let summaries = fit::maps::summary(&texel_maps, &cfg.maps, h_max);
+                let sweeps = match cfg.maps.smoothness > 0.0 {
+                    true => 1 + fit::maps::PRIOR_SWEEPS,
+                    false => 1,
+                };
+                report_text += &fit::maps::report_text(
+                    *work,
+                    (texel_maps.values.len(), sweeps, texel_seconds),
+                    &summaries,
+                );
                 let mut desc = maps_out::describe(dir, &cfg.maps.requested(), &texel_maps);
                 desc["method"] = method;
                 desc["method"]["residual_variance"] = serde_json::json!(variance);
+                desc["method"]["global_stage_iterations"] = serde_json::json!(work.2);
+                desc["method"]["global_stage_seconds"] = serde_json::json!(work.3);
+                desc["method"]["texel_stage_seconds"] = serde_json::json!(texel_seconds);
+                desc["summary"] = serde_json::to_value(&summaries)?;
                 result.maps = Some(desc);
                 result.warnings.extend(warns);
                 outcome.fitted =
@@ -593,6 +640,24 @@ pub fn relative_to(path: &Path, dir: &Path) -> Option<PathBuf> {
     } else {
         out
     })
+}
+
+/// The global parameters a `[maps]` request recovers per texel instead.
+fn per_texel_names(req: &crate::fit::config::MapsConfig) -> Vec<&'static str> {
+    let mut v = Vec::new();
+    if req.height {
+        v.extend(["height", "map_scale"]);
+    }
+    if req.fibre_azimuth {
+        v.push("fibre_azimuth_deg");
+    }
+    if req.kd {
+        v.extend(["kd", "rho_d"]);
+    }
+    if req.ks {
+        v.extend(["ks", "rho_s"]);
+    }
+    v
 }
 
 /// The files a fit writes, reserved before the work.

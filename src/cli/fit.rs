@@ -38,7 +38,8 @@ pub struct FitArgs {
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
     /// Rung id, or `auto`: choose the cheapest rung that the held-out data do not reject
-    /// [default: the config's `model`]
+    /// [default: the config's `model`]. Without a config a rung fits every shape parameter
+    /// (as auto's rungs do); over a config for another rung, the parameters it lacks are ignored
     #[arg(long, value_name = "ID|auto")]
     pub model: Option<String>,
     /// Residual metric: linear, log or cosine [default: the config's; without a config, log for

@@ -2,6 +2,7 @@
 //! parameter as `value +/- stderr (pct) (init)`, and correlations above 0.1 sorted by size.
 
 use super::atomic::{OutputId, Outputs, Sink};
+use crate::fit::parameters::PER_TEXEL;
 use crate::fit::FitOutcome;
 use std::fmt::Write;
 
@@ -49,8 +50,13 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
             } else {
                 format!("{}[{}]", r.name, ["r", "g", "b"][c])
             };
-            let line = if r.fixed {
-                format!("{v:.6} (fixed)")
+            let line = if r.fixed && r.fixed_reason.as_deref() == Some(PER_TEXEL) {
+                format!("per texel (recovered as a map; {v:.6} is its global start: see [[Maps]])")
+            } else if r.fixed {
+                match &r.fixed_reason {
+                    Some(why) => format!("{v:.6} (fixed: {why})"),
+                    None => format!("{v:.6} (fixed)"),
+                }
             } else if r.at_bound[c] {
                 format!(
                     "{v:.6} (init = {:.6}) at a bound of [{}, {}]: no standard error",
@@ -133,7 +139,8 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
     if q.minima.len() > 1 {
         let _ = writeln!(
             t,
-            "    distinct minima (free shape parameters, cost, cost above the best in residual variances):"
+            "    distinct minima within {} residual variances of the best (free shape parameters, cost, cost above the best in residual variances):",
+            crate::fit::quality::AMBIGUOUS_DELTA
         );
         for m in &q.minima {
             let ps: Vec<String> = m
@@ -149,6 +156,14 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
                 m.delta
             );
         }
+    }
+    if q.minima_beyond > 0 {
+        let _ = writeln!(
+            t,
+            "    other minima found: {} more than {} residual variances above the best (ruled out by the data, not listed)",
+            q.minima_beyond,
+            crate::fit::quality::AMBIGUOUS_DELTA
+        );
     }
     t += &crate::fit::quality::bins_text(&q.residual_bins);
     t

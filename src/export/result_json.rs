@@ -151,6 +151,7 @@ pub fn result_from_value(
         selection: Default::default(),
         maps: Default::default(),
         columns: Default::default(),
+        notes: Vec::new(),
     };
     cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
     let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
@@ -191,6 +192,12 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
             .ok_or_else(|| anyhow!("parameter `{name}` has no value"))?;
         flat.insert(name.clone(), value);
     }
+    // a result records every knob of its fit; only those its model reads are parameters (the
+    // rest would be warned about as unused, though the user never wrote them)
+    let model: Option<crate::model::ModelId> = v
+        .get("model")
+        .and_then(|m| m.as_str())
+        .and_then(|m| m.parse().ok());
     if let Some(k) = v.get("knobs") {
         for key in [
             "quadrature_order",
@@ -198,7 +205,8 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
             "azimuth_nodes",
             "topology_map",
         ] {
-            if let Some(x) = k.get(key) {
+            let used = model.is_none_or(|id| crate::model::params::uses(id, key));
+            if let Some(x) = k.get(key).filter(|_| used) {
                 flat.insert(key.into(), x.clone());
             }
         }
@@ -264,6 +272,10 @@ pub struct ParamOut {
     pub max: f64,
     pub fixed: bool,
     pub at_bound: bool,
+    /// Why a fixed parameter is fixed: the config, the data, a component switched off, or
+    /// recovered per texel (a map).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub fixed_reason: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -385,6 +397,7 @@ pub fn params_out(outcome: &FitOutcome) -> BTreeMap<String, ParamOut> {
                 max: r.max,
                 fixed: r.fixed,
                 at_bound: r.at_bound.iter().any(|&b| b),
+                fixed_reason: r.fixed_reason.clone().filter(|_| r.fixed),
             },
         );
     }

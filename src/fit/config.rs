@@ -197,7 +197,25 @@ pub struct FitConfig {
     /// `[columns]`: a goniometric CSV's own column names, `ours = "theirs"` (as `--columns`).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub columns: BTreeMap<String, String>,
+    /// What configuring decided that the user should read (parameters another rung lacks,
+    /// ignored): shown with the fit's warnings. Not a key of the file.
+    #[serde(skip)]
+    pub notes: Vec<String>,
 }
+
+/// Parameters no fit frees unless `[parameters]` lists them: the albedos (solved, always free),
+/// the Fresnel factor and the fuzz layer (optional components, on only when listed).
+const NOT_SHAPES: [&str; 9] = [
+    "kd",
+    "ks",
+    "substrate_albedo",
+    "rho_d",
+    "rho_s",
+    "fresnel_ior",
+    "fuzz",
+    "fuzz_depth",
+    "fuzz_asymmetry",
+];
 
 /// `[maps]`: which per-texel maps `fit --maps` recovers beside the global parameters, and how.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -348,10 +366,38 @@ impl FitConfig {
         let text = crate::load::input::read_text_as(path, "fit config")?;
         let mut cfg: FitConfig = toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
-        if let Some(map) = &cfg.knobs.topology_map {
-            if map.is_relative() {
-                cfg.knobs.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
+        if let Some(map) = cfg.knobs.topology_map.clone() {
+            // relative to the config's folder, wherever fibrefit runs: say so when it is missing
+            let resolved = match map.is_relative() {
+                true => path.parent().unwrap_or(Path::new(".")).join(&map),
+                false => map.clone(),
+            };
+            if cfg.components.topology_map && !resolved.exists() {
+                let folder = path.parent().filter(|p| !p.as_os_str().is_empty());
+                let folder = folder
+                    .and_then(|p| std::fs::canonicalize(p).ok())
+                    .unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
+                let shown = match map.is_relative() {
+                    true => folder.join(&map),
+                    false => map.clone(),
+                };
+                bail!(
+                    "{}: knobs.topology_map = {:?}: no such file {}{}",
+                    path.display(),
+                    map.display().to_string(),
+                    shown.display(),
+                    if map.is_relative() {
+                        format!(
+                            " (a relative path in a config is resolved relative to the config's folder, {}, \
+                             not the working directory)",
+                            folder.display()
+                        )
+                    } else {
+                        String::new()
+                    }
+                );
             }
+            cfg.knobs.topology_map = Some(resolved);
         }
         cfg.validate()
             .map_err(|e| anyhow!("{}: {e}", path.display()))?;
@@ -448,40 +494,74 @@ impl FitConfig {
     }
 
     /// This config with `model` set to `id`, keeping only the parameters that rung has. From an
-    /// `auto` config, every shape parameter of the rung the config does not list is free, over
-    /// its whole range (MODEL.md §5) from its default start: `exponent` [1, 1e4] from 20,
-    /// `spacing` [2, 20] from 2, `height` [0, H_max] from H_max(2)/2, `map_scale` [0, H_max]
-    /// from 0, `fibre_azimuth_deg` over its period from 0, `alpha_x`, `alpha_y` (0.001, 1] from
-    /// 0.2. `[components]` still fix what they switch off.
+    /// `auto` config, every shape parameter of the rung the config does not list is free
+    /// ([`FitConfig::free_unlisted_shapes`]).
     pub fn for_rung(&self, id: ModelId) -> FitConfig {
         let mut c = self.clone();
         c.model = id.to_string();
         let allowed = id.parameter_names();
         c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
         if self.model == "auto" {
-            for name in allowed {
-                // albedos are solved; the Fresnel factor and the fuzz layer are optional
-                // components (on only when listed)
-                let shape = !matches!(
-                    name,
-                    "kd" | "ks"
-                        | "substrate_albedo"
-                        | "rho_d"
-                        | "rho_s"
-                        | "fresnel_ior"
-                        | "fuzz"
-                        | "fuzz_depth"
-                        | "fuzz_asymmetry"
-                );
-                if shape {
-                    c.parameters.entry(name.to_string()).or_insert(ParamEntry {
+            c.free_unlisted_shapes(id);
+        }
+        c
+    }
+
+    /// Free every shape parameter of rung `id` that `[parameters]` does not list, over its whole
+    /// range (MODEL.md §5) from its default start: `exponent` [1, 1e4] from 20 (fitted in log
+    /// space), `spacing` [2, 20] from 2, `height` [0, H_max(d)] from H_max(2)/2 = 0.866,
+    /// `map_scale` [0, H_max(d)] from 0, `fibre_azimuth_deg` over its period (180 deg, periodic)
+    /// from 0, `azimuth_spread_deg` [0, 180] from 0, `alpha_x`, `alpha_y` [0.0011, 1] from 0.2
+    /// (log space). The albedos are always free (solved exactly); the Fresnel factor and the fuzz
+    /// layer stay off unless listed. What the data fix anyway (a fibre direction every sample
+    /// carries) and what `[components]` switch off are still held fixed, and the report says why.
+    /// `--model auto` and a named rung without a config fit this way.
+    pub fn free_unlisted_shapes(&mut self, id: ModelId) {
+        for name in id.parameter_names() {
+            if !NOT_SHAPES.contains(&name) {
+                self.parameters
+                    .entry(name.to_string())
+                    .or_insert(ParamEntry {
                         vary: Some(true),
                         ..Default::default()
                     });
-                }
             }
         }
-        c
+    }
+
+    /// `--model id` over a config written for another rung: drop the parameters `id` lacks, with
+    /// one note naming them. A name that is no rung's parameter (a typo) is still refused.
+    pub fn retarget(&mut self, id: ModelId) -> Result<()> {
+        let allowed = id.parameter_names();
+        let mut ignored = Vec::new();
+        for name in self.parameters.keys() {
+            if allowed.contains(&name.as_str()) {
+                continue;
+            }
+            if !ModelId::ALL
+                .iter()
+                .any(|r| r.parameter_names().contains(&name.as_str()))
+            {
+                bail!(
+                    "parameters.{name}: not a parameter of any rung (of `{id}`: {})",
+                    allowed.join(", ")
+                );
+            }
+            ignored.push(name.clone());
+        }
+        if !ignored.is_empty() {
+            self.parameters.retain(|k, _| allowed.contains(&k.as_str()));
+            self.notes.push(format!(
+                "--model {id}: the config's parameters {} are not parameters of `{id}` and are ignored",
+                ignored
+                    .iter()
+                    .map(|n| format!("`{n}`"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            ));
+        }
+        self.model = id.to_string();
+        Ok(())
     }
 
     fn validate_rung(&self) -> Result<()> {

@@ -93,6 +93,7 @@ pub fn finish(
             max: s.max,
             fixed: !s.vary,
             at_bound: vec![ab],
+            fixed_reason: None,
         });
     }
     for (i, a) in set.albedos.iter().enumerate() {
@@ -119,6 +120,7 @@ pub fn finish(
             max: a.max,
             fixed: !a.vary,
             at_bound: ab,
+            fixed_reason: None,
         });
     }
     for r in &records {

@@ -50,6 +50,10 @@ pub struct ParamRecord {
     pub max: f64,
     pub fixed: bool,
     pub at_bound: Vec<bool>,
+    /// Why a fixed parameter is fixed (the config, the data, a component, per texel), for the
+    /// report and the result ([`parameters::explain_fixed`]).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fixed_reason: Option<String>,
 }
 
 /// Everything a fit produced.
@@ -186,6 +190,7 @@ pub fn fit_with_hints(
         .map(|(th, c)| (full.set_at(th, &template), *c))
         .collect();
     let mut outcome = finish::finish(&full, samples, channels, &minima, notes)?;
+    parameters::explain_fixed(&mut outcome.records, cfg, samples, &[]);
     outcome.iterations = iterations;
     outcome.evaluations += evaluations;
     outcome.starts = starts;

@@ -370,3 +370,56 @@ impl ParamSet {
         out
     }
 }
+
+/// Per texel: the parameters a `[maps]` request recovers per texel (their global value is only
+/// the maps' start).
+pub const PER_TEXEL: &str = "per texel (recovered as a map: see [[Maps]])";
+
+/// Set each fixed record's `fixed_reason`: recovered per texel (`per_texel` names), the data give
+/// the fibre direction, a `[components]` switch, `vary = false` or equal bounds in the config,
+/// an optional component off unless listed, or not listed in a config (held at its default).
+pub fn explain_fixed(
+    records: &mut [super::ParamRecord],
+    cfg: &FitConfig,
+    samples: &crate::load::samples::Samples,
+    per_texel: &[&str],
+) {
+    let data_azimuth = samples.samples.iter().all(|s| s.fibre_azimuth.is_some());
+    let comp = &cfg.components;
+    for r in records.iter_mut() {
+        if !r.fixed {
+            r.fixed_reason = None;
+            continue;
+        }
+        let name = r.name.as_str();
+        let entry = cfg.parameters.get(name);
+        let why = if per_texel.contains(&name) {
+            PER_TEXEL.to_string()
+        } else if name == "fibre_azimuth_deg" && data_azimuth {
+            "the data give the fibre direction (every sample carries it)".to_string()
+        } else if !comp.specular && matches!(name, "ks" | "exponent") {
+            match name {
+                "ks" => "components.specular = false (no specular lobe)".to_string(),
+                _ => "components.specular = false: without a lobe the exponent means nothing"
+                    .to_string(),
+            }
+        } else if name == "spacing" && comp.spacing_free == Some(false) {
+            "components.spacing_free = false (touching fibres, d = 2)".to_string()
+        } else if name == "substrate_albedo" && comp.substrate.as_deref() == Some("off") {
+            "components.substrate = \"off\"".to_string()
+        } else if entry.is_some_and(|e| e.vary == Some(false)) {
+            "vary = false in the config".to_string()
+        } else if r.min >= r.max {
+            format!("its bounds are equal ([{}, {}])", r.min, r.max)
+        } else if matches!(name, "fresnel_ior" | "azimuth_spread_deg") && entry.is_none() {
+            format!("an optional component, off unless [parameters] lists `{name}`")
+        } else if entry.is_none() {
+            format!(
+                "not listed in the config's [parameters]: held at its default (list `{name}` to fit it)"
+            )
+        } else {
+            "held fixed".to_string()
+        };
+        r.fixed_reason = Some(why);
+    }
+}

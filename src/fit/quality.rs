@@ -31,8 +31,13 @@ pub struct Quality {
     /// "fits within the noise", "does not fit within the noise", or "noise unknown".
     pub verdict: String,
     pub noise: NoiseCheck,
-    /// Distinct minima on all samples, best first (the first is the fit).
+    /// Distinct minima on all samples, best first (the first is the fit): the best and those
+    /// within [`AMBIGUOUS_DELTA`] residual variances of it, the ones the data do not decide
+    /// between.
     pub minima: Vec<MinimumOut>,
+    /// Other distinct minima found, more than [`AMBIGUOUS_DELTA`] residual variances above the
+    /// best (not listed: the data rule them out).
+    pub minima_beyond: usize,
     /// True when another minimum's cost is within 4 residual variances of the best.
     pub ambiguous: bool,
     pub residual_bins: Vec<ResidualBin>,
@@ -291,7 +296,7 @@ pub fn assess(inp: &Inputs) -> Quality {
 
     // distinct minima
     let best = inp.minima.first().map_or(cost, |m| m.1);
-    let minima: Vec<MinimumOut> = inp
+    let all: Vec<MinimumOut> = inp
         .minima
         .iter()
         .map(|(ps, c)| MinimumOut {
@@ -300,11 +305,16 @@ pub fn assess(inp: &Inputs) -> Quality {
             delta: (c - best) / s2.max(f64::MIN_POSITIVE),
         })
         .collect();
-    let close: Vec<&MinimumOut> = minima
-        .iter()
-        .skip(1)
-        .filter(|m| m.delta < AMBIGUOUS_DELTA)
+    // only the minima the data do not decide against are listed (the best first)
+    let found = all.len();
+    let minima: Vec<MinimumOut> = all
+        .into_iter()
+        .enumerate()
+        .filter(|(k, m)| *k == 0 || m.delta < AMBIGUOUS_DELTA)
+        .map(|x| x.1)
         .collect();
+    let minima_beyond = found - minima.len();
+    let close: Vec<&MinimumOut> = minima.iter().skip(1).collect();
     let ambiguous = !close.is_empty();
     if ambiguous {
         let list: Vec<String> = std::iter::once(&minima[0])
@@ -374,6 +384,7 @@ pub fn assess(inp: &Inputs) -> Quality {
         verdict: verdict.into(),
         noise,
         minima,
+        minima_beyond,
         ambiguous,
         residual_bins,
         warnings,
@@ -419,6 +430,53 @@ mod tests {
             weight: 1.0,
             origin,
         }
+    }
+
+    #[test]
+    fn only_minima_within_the_threshold_are_listed() {
+        let v = direction_from_angles(0.2, 2.0);
+        let samples: Vec<Sample> = (0..50)
+            .map(|k| {
+                sample(
+                    direction_from_angles(0.01 * k as f64, 0.1),
+                    v,
+                    1.0,
+                    Origin::Line(2),
+                )
+            })
+            .collect();
+        let refs: Vec<&Sample> = samples.iter().collect();
+        // residual variance 1e-4 * 50 / 49: minima +2 and +7430 residual variances above
+        let s2 = 1e-4 * 50.0 / 49.0;
+        let best = 50.0 * 1e-4;
+        let minima = [
+            (vec![("height".to_string(), 0.1)], best),
+            (vec![("height".to_string(), 1.6)], best + 2.0 * s2),
+            (vec![("height".to_string(), 0.9)], best + 7430.0 * s2),
+        ];
+        let q = assess(&Inputs {
+            samples: &refs,
+            scale: &vec![[1.0; 3]; 50],
+            residuals: &vec![0.01; 50],
+            channels: 1,
+            free_parameters: 1,
+            sigmas_given: true,
+            psi: 0.0,
+            minima: &minima,
+        });
+        assert_eq!(q.minima.len(), 2, "{:?}", q.minima);
+        assert!(q.minima.iter().all(|m| m.delta < AMBIGUOUS_DELTA));
+        assert_eq!(q.minima_beyond, 1);
+        assert!(q.ambiguous);
+        let w = q
+            .warnings
+            .iter()
+            .find(|w| w.contains("do not decide"))
+            .unwrap();
+        assert!(
+            w.contains("between 2 distinct minima") && !w.contains("7430"),
+            "{w}"
+        );
     }
 
     #[test]

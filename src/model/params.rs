@@ -145,8 +145,9 @@ fn check_albedo(name: &str, a: &Albedo) -> Result<()> {
     Ok(())
 }
 
-/// Which parameters each model reads (for warnings about ignored ones).
-fn uses(id: ModelId, name: &str) -> bool {
+/// Which parameters and knobs each model reads (for warnings about ignored ones, and so a
+/// fit's result carries only the knobs its model reads).
+pub fn uses(id: ModelId, name: &str) -> bool {
     use ModelId::*;
     match name {
         "kd" => id != Ward,

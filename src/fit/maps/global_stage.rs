@@ -13,6 +13,13 @@ pub struct GlobalStage {
     /// the texel stage expects of the whole capture ([`texel_stage`]'s `variance_hint`).
     pub texel_variance: f64,
     pub warnings: Vec<String>,
+    /// Levenberg–Marquardt iterations of the stage: the plain global fit's final run plus the
+    /// global fit given the maps in every round (also `outcome.iterations`).
+    pub iterations: u64,
+    /// Wall time of the stage, seconds (also `outcome.elapsed_seconds`).
+    pub seconds: f64,
+    /// Texels the stage sampled.
+    pub texels: usize,
 }
 
 /// Stage 1 of map recovery: the global parameters, alternating per-texel fits and the global
@@ -23,6 +30,7 @@ pub fn global_stage(
     req: &MapsConfig,
     quiet: bool,
 ) -> Result<GlobalStage> {
+    let t0 = std::time::Instant::now();
     check_request(cfg, req)?;
     if cfg.metric != crate::fit::config::Metric::Linear {
         bail!("--maps fits captures with the linear metric; set metric = \"linear\"");
@@ -43,6 +51,8 @@ pub fn global_stage(
     let all: Vec<usize> = (0..sub_layout.texels.len()).collect();
     let bar = crate::progress::bar(req.rounds as u64, "maps: globals", quiet);
     let mut costs = vec![first.statistics.chi_square];
+    let mut iterations = first.iterations;
+    let mut evaluations = first.evaluations;
     let mut warnings = Vec::new();
     let mut converged = false;
     for round in 0..req.rounds {
@@ -61,8 +71,9 @@ pub fn global_stage(
         values = fitted.iter().map(|x| x.0).collect();
         let after_texels: f64 = fitted.iter().map(|x| x.1).sum();
         // the globals given the maps; kept if the cost falls
-        let (_, new_set) =
+        let (_, new_set, its) =
             global_given_maps(&sub, cfg, &set, &values, &sub_layout.members, &all, free)?;
+        iterations += its;
         let total_new = if new_set != set {
             total_cost(&sub, cfg, &new_set, &values, &sub_layout.members, free)?
         } else {
@@ -95,6 +106,12 @@ pub fn global_stage(
     if let Some(w) = inflate_records(&mut outcome, &set, &inflation) {
         warnings.push(w);
     }
+    // the stage's own work, not the last (fixed-maps) evaluation's
+    outcome.iterations = iterations;
+    evaluations += outcome.evaluations;
+    outcome.evaluations = evaluations;
+    let seconds = t0.elapsed().as_secs_f64();
+    outcome.elapsed_seconds = seconds;
     let st = &outcome.statistics;
     let unknowns =
         per_texel_unknowns(free, sub.channels) * sub_layout.texels.len() + st.free_parameters;
@@ -108,6 +125,9 @@ pub fn global_stage(
         costs,
         texel_variance,
         warnings,
+        iterations,
+        seconds,
+        texels: sub_layout.texels.len(),
     })
 }
 
@@ -177,7 +197,8 @@ pub(super) fn problem_on<'a>(
     .with_sample_maps(Arc::new(maps))
 }
 
-/// Stage 2: LM from the current globals on the texels `order`, maps fixed.
+/// Stage 2: LM from the current globals on the texels `order`, maps fixed: (cost, globals, LM
+/// iterations).
 pub(super) fn global_given_maps(
     samples: &Samples,
     cfg: &FitConfig,
@@ -186,14 +207,14 @@ pub(super) fn global_given_maps(
     members: &[Vec<usize>],
     order: &[usize],
     free: Free,
-) -> Result<(f64, ParamSet)> {
+) -> Result<(f64, ParamSet, u64)> {
     let (subset, maps) = mapped_samples(samples, values, members, order, free);
     let p = problem_on(cfg, set, &subset, maps);
     if p.dim() == 0 {
-        return Ok((f64::NAN, set.clone()));
+        return Ok((f64::NAN, set.clone(), 0));
     }
     let bar = indicatif::ProgressBar::hidden();
-    let (theta, cost, _) = polish::run_lm(
+    let (theta, cost, iterations) = polish::run_lm(
         &p,
         set,
         p.theta_of(set),
@@ -206,7 +227,7 @@ pub(super) fn global_given_maps(
         let cols = p.columns(&new)?;
         p.solve_albedos(&cols, &mut new);
     }
-    Ok((cost, new))
+    Ok((cost, new, iterations))
 }
 
 /// Sum of squared weighted residuals over every pixel at `set` and the maps.

@@ -99,6 +99,9 @@ pub struct TexelMaps {
     pub std_errors: Vec<TexelValues>,
     /// RMS relative residual (model - data) / data over the texel's pixels and channels.
     pub residual: Vec<f64>,
+    /// Texels with another minimum within [`AMBIGUITY_DELTA`] residual variances of the best
+    /// (their standard errors widened to cover it), same layout.
+    pub ambiguous: Vec<bool>,
     pub channels: usize,
 }
 

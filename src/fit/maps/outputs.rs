@@ -88,3 +88,149 @@ pub fn method(cfg: &FitConfig, costs: &[f64], texel_variance: f64) -> serde_json
         "prior_sweeps": if cfg.maps.smoothness > 0.0 { PRIOR_SWEEPS } else { 0 },
     })
 }
+
+/// One recovered map in a few numbers: its median and 5-95 % range over the texels, and the
+/// fraction of texels flagged (undetermined: a standard error at or above half the value's
+/// range, or not finite; or ambiguous: another minimum within [`AMBIGUITY_DELTA`] residual
+/// variances).
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct MapSummary {
+    /// The map's name, with its channel for per-channel albedos (`kd[g]`).
+    pub name: String,
+    pub unit: &'static str,
+    pub median: f64,
+    pub p5: f64,
+    pub p95: f64,
+    /// Median standard error over the texels with a finite one.
+    pub median_std_error: f64,
+    pub flagged_fraction: f64,
+    pub texels: usize,
+}
+
+/// Quantile `q` of sorted values (linear between ranks); NaN when empty.
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let x = q * (sorted.len() - 1) as f64;
+    let (i, f) = (x.floor() as usize, x - x.floor());
+    let j = (i + 1).min(sorted.len() - 1);
+    sorted[i] + f * (sorted[j] - sorted[i])
+}
+
+/// [`MapSummary`] of every map `req` asks for (per channel for the albedos); `h_max` is the
+/// largest height at the fitted spacing. The fibre azimuth's median and range are taken on the
+/// axial circle: centred on the circular mean, so a direction near +-90 deg is not split.
+pub fn summary(maps: &TexelMaps, req: &MapsConfig, h_max: f64) -> Vec<MapSummary> {
+    let mut out = Vec::new();
+    let n = maps.values.len();
+    let ch = maps.channels;
+    let mut one = |name: String,
+                   unit: &'static str,
+                   value: &dyn Fn(&TexelValues) -> f64,
+                   half_range: f64,
+                   centre: f64| {
+        let mut v: Vec<f64> = maps
+            .values
+            .iter()
+            .map(|x| match unit == "degrees" {
+                // axial: into the half-period around the circular mean
+                true => (value(x) - centre + 90.0).rem_euclid(180.0) - 90.0 + centre,
+                false => value(x),
+            })
+            .collect();
+        v.sort_by(f64::total_cmp);
+        let mut se: Vec<f64> = maps
+            .std_errors
+            .iter()
+            .map(value)
+            .filter(|e| e.is_finite())
+            .collect();
+        se.sort_by(f64::total_cmp);
+        let flagged = (0..n)
+            .filter(|&k| {
+                maps.ambiguous.get(k).copied().unwrap_or(false)
+                    || !(value(&maps.std_errors[k]) < half_range)
+            })
+            .count();
+        out.push(MapSummary {
+            name,
+            unit,
+            median: quantile(&v, 0.5),
+            p5: quantile(&v, 0.05),
+            p95: quantile(&v, 0.95),
+            median_std_error: quantile(&se, 0.5),
+            flagged_fraction: flagged as f64 / n.max(1) as f64,
+            texels: n,
+        });
+    };
+    if req.height {
+        one(
+            "height".into(),
+            "fibre radii",
+            &|x| x.height,
+            h_max / 2.0,
+            0.0,
+        );
+    }
+    if req.fibre_azimuth {
+        let (sn, cs) = maps.values.iter().fold((0.0, 0.0), |(a, b), x| {
+            let t = (2.0 * x.psi).to_radians();
+            (a + t.sin(), b + t.cos())
+        });
+        let centre = 0.5 * f64::atan2(sn, cs).to_degrees();
+        one("fibre_azimuth".into(), "degrees", &|x| x.psi, 45.0, centre);
+    }
+    let rgb = ["r", "g", "b"];
+    for (on, base) in [(req.kd, "kd"), (req.ks, "ks")] {
+        if !on {
+            continue;
+        }
+        for c in 0..ch {
+            let name = match ch {
+                1 => base.to_string(),
+                _ => format!("{base}[{}]", rgb[c]),
+            };
+            match base {
+                "kd" => one(name, "albedo", &move |x: &TexelValues| x.kd[c], 0.5, 0.0),
+                _ => one(name, "albedo", &move |x: &TexelValues| x.ks[c], 0.5, 0.0),
+            }
+        }
+    }
+    out
+}
+
+/// The `[[Maps]]` section of a maps fit's report: the work of both stages and each map's
+/// summary.
+pub fn report_text(
+    stage: (usize, usize, u64, f64),
+    texel_stage: (usize, usize, f64),
+    summaries: &[MapSummary],
+) -> String {
+    let (rounds, sampled, iterations, g_seconds) = stage;
+    let (texels, sweeps, t_seconds) = texel_stage;
+    let mut t = String::from(
+        "[[Maps]] (per-texel recovery; the statistics above are the global stage's on its sampled texels)\n",
+    );
+    t += &format!(
+        "    global stage       = {rounds} rounds on {sampled} sampled texels, {iterations} LM iterations, {g_seconds:.3} s\n"
+    );
+    t +=
+        &format!("    texel stage        = {texels} texels, {sweeps} sweep(s), {t_seconds:.3} s\n");
+    t += &format!("    wall time, maps    = {:.3} s\n", g_seconds + t_seconds);
+    t += "    map                 median      5 %       95 %      median se   flagged (undetermined or ambiguous)\n";
+    for s in summaries {
+        t += &format!(
+            "    {:<18} {:>9.4} {:>9.4} {:>9.4} {:>11.4}   {:.1} % of {} texels  ({})\n",
+            s.name,
+            s.median,
+            s.p5,
+            s.p95,
+            s.median_std_error,
+            100.0 * s.flagged_fraction,
+            s.texels,
+            s.unit
+        );
+    }
+    t
+}

@@ -235,6 +235,7 @@ pub fn finish_maps(
         values: Vec::with_capacity(texels),
         std_errors: Vec::with_capacity(texels),
         residual: Vec::with_capacity(texels),
+        ambiguous: Vec::with_capacity(texels),
         channels,
     };
     let mut ambiguous = 0;
@@ -265,6 +266,7 @@ pub fn finish_maps(
                 }
             }
             ambiguous += usize::from(amb);
+            maps.ambiguous.push(amb);
             maps.std_errors.push(se);
         }
         maps.texels.append(&mut p.texels);
