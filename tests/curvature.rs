@@ -353,3 +353,91 @@ fn fibrefit_tangents_writes_csv_and_a_valid_glb() {
     assert!(!d.join("b.csv").exists());
     run("t.txt").code(2);
 }
+
+/// `fibrefit tangents` writes one row per vertex in the OBJ's own order, and the GLB's vertices
+/// likewise, even when the faces use the vertices in another order (issue 24 item 5): a torus
+/// whose `v` lines are shuffled, with faces referring to them by their shuffled numbers, one of
+/// them never used by a face and a first face that starts at the file's last vertex.
+#[test]
+fn tangents_rows_follow_the_files_vertex_order() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (nu, nv, rr, r) = (24, 12, 2.0, 0.7);
+    let n = nu * nv;
+    // file position of grid vertex g: a fixed shuffle (a stride coprime with n, reversed)
+    let pos = |g: usize| n - 1 - (g * 7) % n;
+    let mut lines = vec![String::new(); n];
+    let mut xyz = vec![[0.0; 3]; n];
+    for j in 0..nv {
+        for i in 0..nu {
+            let (u, v) = (
+                i as f64 / nu as f64 * std::f64::consts::TAU,
+                j as f64 / nv as f64 * std::f64::consts::TAU,
+            );
+            let p = [
+                (rr + r * v.cos()) * u.cos(),
+                (rr + r * v.cos()) * u.sin(),
+                r * v.sin(),
+            ];
+            let g = j * nu + i;
+            xyz[pos(g)] = p;
+            lines[pos(g)] = format!("v {} {} {}\n", p[0], p[1], p[2]);
+        }
+    }
+    let mut obj: String = lines.concat();
+    obj += "v 9 9 9\n"; // used by no face
+    let mut faces = Vec::new();
+    for j in 0..nv {
+        for i in 0..nu {
+            let id = |i: usize, j: usize| pos((j % nv) * nu + (i % nu)) + 1;
+            faces.push(format!(
+                "f {} {} {} {}\n",
+                id(i, j),
+                id(i + 1, j),
+                id(i + 1, j + 1),
+                id(i, j + 1)
+            ));
+        }
+    }
+    // the faces in reverse, so the first one the parser meets is not the file's first vertex's
+    faces.reverse();
+    obj += &faces.concat();
+    std::fs::write(d.join("shuffled.obj"), obj).unwrap();
+    Command::cargo_bin("fibrefit")
+        .unwrap()
+        .current_dir(d)
+        .args(["tangents", "shuffled.obj", "--out", "t.csv", "-q"])
+        .assert()
+        .success();
+    let mut rd = csv::Reader::from_path(d.join("t.csv")).unwrap();
+    let rows: Vec<Vec<f64>> = rd
+        .records()
+        .map(|r| r.unwrap().iter().map(|x| x.parse().unwrap()).collect())
+        .collect();
+    assert_eq!(rows.len(), n + 1, "one row per `v` line, the unused one included");
+    for (k, row) in rows.iter().take(n).enumerate() {
+        for c in 0..3 {
+            assert!((row[c] - xyz[k][c]).abs() < 1e-9, "row {k}: {row:?} vs {:?}", xyz[k]);
+        }
+        // and each row's curvature is that vertex's: k1 = 1/r round the tube
+        assert!((row[12] - 1.0 / r).abs() < 0.15 / r, "row {k}: {row:?}");
+    }
+    assert_eq!(&rows[n][..3], &[9.0, 9.0, 9.0]);
+    Command::cargo_bin("fibrefit")
+        .unwrap()
+        .current_dir(d)
+        .args(["tangents", "shuffled.obj", "--out", "t.glb", "-q"])
+        .assert()
+        .success();
+    let bytes = std::fs::read(d.join("t.glb")).unwrap();
+    let g = gltf::Gltf::from_slice(&bytes).unwrap();
+    let blob = g.blob.as_ref().unwrap();
+    let prim = g.meshes().next().unwrap().primitives().next().unwrap();
+    let positions: Vec<[f32; 3]> = prim.reader(|_| Some(blob)).read_positions().unwrap().collect();
+    assert!(positions.len() >= n);
+    for (k, p) in positions.iter().take(n).enumerate() {
+        for c in 0..3 {
+            assert!((p[c] as f64 - xyz[k][c]).abs() < 1e-5, "GLB vertex {k}: {p:?} vs {:?}", xyz[k]);
+        }
+    }
+}
