@@ -106,14 +106,9 @@ fn picture(
 ) -> Result<super::plots::Drawn> {
     use super::plots::{image_panels, percentiles, ColourMap, MapScale};
     let (name, from_zero, label) = kind;
-    let panels: Vec<(String, Vec<Option<f64>>)> = (0..channels)
+    let panels: Vec<(String, Vec<f32>)> = (0..channels)
         .map(|c| {
-            let v = data
-                .iter()
-                .skip(c)
-                .step_by(channels)
-                .map(|&x| x.is_finite().then_some(x as f64))
-                .collect();
+            let v = data.iter().skip(c).step_by(channels).copied().collect();
             let title = match channels {
                 1 => name.to_string(),
                 _ => format!("{name} {}", ["R", "G", "B"][c]),

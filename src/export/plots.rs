@@ -99,7 +99,7 @@ pub fn nice_ticks(lo: f64, hi: f64, log: bool) -> Vec<f64> {
     if !(lo.is_finite() && hi.is_finite()) || hi <= lo {
         return if lo.is_finite() { vec![lo] } else { vec![] };
     }
-    if log && lo > 0.0 {
+    if log && lo > 0.0 && hi / lo >= 3.0 {
         let (d0, d1) = (lo.log10().ceil() as i32, hi.log10().floor() as i32);
         let decades = d1 - d0 + 1;
         if decades >= 3 {
@@ -306,11 +306,13 @@ where
     let steps = 200;
     macro_rules! bar {
         ($y:expr, $at:expr) => {{
+            // the tick labels and the rotated label right of a narrow bar
+            let labels = (area.dim_in_pixel().0 as f64 * 0.62).min(80.0) as u32;
             let mut chart = ChartBuilder::on(area)
                 .margin_top(10)
                 .margin_bottom(10)
                 .margin_right(4)
-                .right_y_label_area_size(52)
+                .right_y_label_area_size(labels)
                 .build_cartesian_2d(0.0..1.0, $y)
                 .map_err(err)?;
             chart
@@ -358,7 +360,7 @@ where
     })
 }
 
-/// Image panels of one size (`width` x `height` values each, row-major from the top-left; `None`
+/// Image panels of one size (`width` x `height` values each, row-major from the top-left; NaN
 /// grey: no value) side by side, each titled, drawn at an integer magnification (one value per
 /// block of screen pixels, so the image's own resolution shows), with pixel axes and one
 /// colour bar of `scale` on the right.
@@ -367,7 +369,7 @@ pub fn image_panels(
     title: &str,
     width: usize,
     height: usize,
-    panels: &[(String, Vec<Option<f64>>)],
+    panels: &[(String, Vec<f32>)],
     scale: &MapScale,
 ) -> Result<Drawn> {
     font();
@@ -443,16 +445,18 @@ pub fn image_panels(
                     // the value under the screen pixel (blocks of about `mag` pixels)
                     let ix = (px as usize * width / sw as usize).min(width - 1);
                     let iy = (py as usize * height / sh as usize).min(height - 1);
-                    let c = match values[iy * width + ix] {
-                        Some(v) => scale.colour(v),
-                        None => RGBColor(160, 160, 160),
+                    let v = values[iy * width + ix];
+                    let c = if v.is_finite() {
+                        scale.colour(v as f64)
+                    } else {
+                        RGBColor(160, 160, 160)
                     };
                     canvas
                         .draw_pixel((xr.start + px, yr.start + py), &c)
                         .map_err(err)?;
                 }
             }
-            drawn.points += values.iter().flatten().count();
+            drawn.points += values.iter().filter(|v| v.is_finite()).count();
             drawn.panels.push(name.clone());
         }
         drawn.x_ticks = xt.into_inner();
@@ -685,14 +689,14 @@ pub fn histogram(
 }
 
 /// The relative residuals (fitted - measured) / measured of a capture's samples, image by
-/// image, at the image's full size (`size`, or the largest pixel seen): per channel, `None`
-/// where a pixel has no sample (masked, saturated or subsampled out).
+/// image, at the image's full size (`size`, or the largest pixel seen): per channel, NaN where
+/// a pixel has no sample (masked, saturated or subsampled out); f32, 4 bytes a value.
 pub struct ImageResiduals {
     pub width: usize,
     pub height: usize,
     pub channels: usize,
     /// Per channel, row-major values from the top-left.
-    pub values: Vec<Vec<Option<f64>>>,
+    pub values: Vec<Vec<f32>>,
 }
 
 /// [`ImageResiduals`] of every capture image with samples, by image index.
@@ -718,12 +722,12 @@ pub fn image_residuals(
                 p.iter().map(|q| q.0).max().unwrap_or(0) as usize + 1,
                 p.iter().map(|q| q.1).max().unwrap_or(0) as usize + 1,
             ));
-            let mut values = vec![vec![None; w * h]; ch];
+            let mut values = vec![vec![f32::NAN; w * h]; ch];
             for (x, y, r) in p {
                 let (x, y) = (x as usize, y as usize);
                 if x < w && y < h {
                     for c in 0..ch {
-                        values[c][y * w + x] = Some(r[c]);
+                        values[c][y * w + x] = r[c] as f32;
                     }
                 }
             }
@@ -748,13 +752,13 @@ pub const RESIDUAL_PERCENTILE: f64 = 99.0;
 /// one for grey), blue (fitted below measured) - white - red (above), grey where the pixel has no
 /// sample, on a symmetric colour bar in percent sized to the [`RESIDUAL_PERCENTILE`] of |r|.
 pub fn residual_map(path: Sink, title: &str, r: &ImageResiduals) -> Result<Drawn> {
-    let pct: Vec<Vec<Option<f64>>> = r
+    let pct: Vec<Vec<f32>> = r
         .values
         .iter()
-        .map(|v| v.iter().map(|x| x.map(|x| 100.0 * x)).collect())
+        .map(|v| v.iter().map(|x| 100.0 * x).collect())
         .collect();
     let scale = MapScale::symmetric(
-        pct.iter().flatten().flatten().copied(),
+        pct.iter().flatten().map(|&x| x as f64),
         RESIDUAL_PERCENTILE,
         1e-6,
         "(fitted - measured) / measured [%]",
@@ -764,6 +768,6 @@ pub fn residual_map(path: Sink, title: &str, r: &ImageResiduals) -> Result<Drawn
     } else {
         ["R", "G", "B"].map(|c| format!("channel {c}")).to_vec()
     };
-    let panels: Vec<(String, Vec<Option<f64>>)> = names.into_iter().zip(pct).collect();
+    let panels: Vec<(String, Vec<f32>)> = names.into_iter().zip(pct).collect();
     image_panels(path, title, r.width, r.height, &panels, &scale)
 }
