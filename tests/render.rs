@@ -81,6 +81,8 @@ fn a_lambert_sphere_is_kd_over_pi_times_the_cosine_at_its_normals() {
         .args([
             "--light", "30,60", "--camera", "20,200", "--size", "48", "40",
         ])
+        // the key light only: the pixels are checked against it
+        .args(["--fill", "0"])
         .args([
             "--supersample",
             "1",
@@ -145,6 +147,7 @@ fn a_fibre_torus_pixel_is_eval_at_its_own_light_view_tangent_and_height() {
     fibrefit()
         .current_dir(d)
         .args(["render", "--params", "p.toml", "--object", "torus"])
+        .args(["--fill", "0"])
         .args([
             "--light", "40,120", "--camera", "50,270", "--size", "40", "40",
         ])
@@ -231,8 +234,21 @@ fn seed_001_grid_and_bad_input() {
         .args(["render", "--seed001", "--out", "grid.png", "-q"])
         .assert()
         .success();
-    let grid = image::open(d.join("grid.png")).unwrap();
-    assert_eq!((grid.width(), grid.height()), (512, 1024));
+    let grid = image::open(d.join("grid.png")).unwrap().to_rgb8();
+    // 2 x 4 tiles of 256 px, a margin for the row labels (left) and the column labels (top)
+    assert_eq!((grid.width(), grid.height()), (512 + 200, 1024 + 44));
+    let dark = |x0: u32, x1: u32, y0: u32, y1: u32| {
+        (x0..x1)
+            .flat_map(|x| (y0..y1).map(move |y| (x, y)))
+            .filter(|&(x, y)| grid.get_pixel(x, y).0.iter().all(|&c| c < 100))
+            .count()
+    };
+    // text in the margins: each row's label, the columns' labels
+    for r in 0..4 {
+        let y = 44 + r * 256 + 128;
+        assert!(dark(0, 200, y - 12, y + 12) > 20, "row {r} has no label");
+    }
+    assert!(dark(200, 712, 0, 44) > 40, "no column labels");
     std::fs::write(d.join("p.toml"), "model = \"lambert\"\nkd = 0.5\n").unwrap();
     for (args, says) in [
         (vec!["--light", "abc"], "THETA,PHI"),

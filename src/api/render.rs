@@ -28,6 +28,8 @@ pub struct FlagScene {
     pub camera: Vec3,
     pub size: [usize; 2],
     pub supersample: usize,
+    /// Irradiance of a fill light from the camera's direction (0: none).
+    pub fill: f64,
 }
 
 /// Where the scene comes from.
@@ -221,7 +223,8 @@ pub fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Opti
 /// irradiance, an orthographic camera.
 fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
     let obj = object(&f.object, &f.tangents, params)?;
-    let lights = directional(&f.lights);
+    let mut lights = directional(&f.lights);
+    lights.extend(crate::render::fill_light(f.camera, f.fill, "--fill")?);
     let [w, h] = f.size;
     crate::render::check_budget(w, h, f.supersample, "--size/--supersample")?;
     let camera = Camera {
@@ -248,10 +251,17 @@ fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
 }
 
 /// Seed 001's figures 6 and 7: the torus in four rows (max-normal, poulin-fournier,
-/// varying-topology, varying-topology with a topology map of scale 0.25) under two lightings.
-/// Seed 001's figures 6 and 7 as one picture, seen from `camera` with `supersample`^2 rays per
-/// pixel; returns it with the exposure that puts the 99th percentile of every tile at 0.9.
-pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<(Picture, f32)> {
+/// varying-topology, varying-topology with a topology map of scale 0.25) under two lightings,
+/// as one picture of `tile` x `tile` renders seen from `camera` with `supersample`^2 rays per
+/// pixel, with the rows' and columns' labels.
+pub struct Seed001 {
+    pub grid: Picture,
+    pub tile: usize,
+    pub rows: Vec<String>,
+    pub columns: Vec<String>,
+}
+
+pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<Seed001> {
     let size = 256usize;
     let deg = |t: f64, p: f64| direction_from_angles(t.to_radians(), p.to_radians());
     let lightings = [
@@ -322,24 +332,6 @@ pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<(Picture
         }
     }
     bar.finish_and_clear();
-    // one exposure for the whole grid: the 99th percentile over every tile
-    let mut lum: Vec<f32> = tiles
-        .iter()
-        .flat_map(|p| {
-            p.radiance
-                .iter()
-                .zip(&p.alpha)
-                .filter(|(_, a)| **a > 0.0)
-                .map(|(c, a)| c[0].max(c[1]).max(c[2]) / a)
-        })
-        .collect();
-    lum.sort_by(f32::total_cmp);
-    let e = 0.9
-        / lum
-            .get(lum.len() * 99 / 100)
-            .copied()
-            .unwrap_or(1.0)
-            .max(1e-12);
     let cols = lightings.len();
     let (gw, gh) = (size * cols, size * rows.len());
     let mut grid = Picture {
@@ -362,5 +354,13 @@ pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<(Picture
             }
         }
     }
-    Ok((grid, e))
+    Ok(Seed001 {
+        grid,
+        tile: size,
+        rows: rows.iter().map(|r| r.0.to_string()).collect(),
+        columns: vec![
+            "one light at 35,120".into(),
+            "two lights at 70,20 and 30,250".into(),
+        ],
+    })
 }

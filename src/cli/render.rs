@@ -3,7 +3,7 @@
 
 use crate::api::render::{self as render_api, FlagScene, Render, RenderRequest, SceneSource};
 use crate::export::atomic::Outputs;
-use crate::export::picture::{reserve_aovs, write_aovs, write_picture};
+use crate::export::picture::{reserve_aovs, write_aovs, write_labelled_grid, write_picture};
 use crate::model::frame::{direction_from_angles, Vec3};
 use anyhow::{bail, Result};
 use clap::Args;
@@ -55,10 +55,14 @@ pub struct RenderArgs {
     /// Rays per pixel along each axis (anti-aliasing: N x N rays)
     #[arg(long, value_name = "N", default_value_t = 2)]
     pub supersample: usize,
-    /// PNG only: radiance factor before sRGB encoding, or `auto` (the 99th percentile of the
-    /// object's pixels to 0.9)
+    /// PNG only: radiance factor before sRGB encoding (clipped at 1), or `auto` (the 99.5th
+    /// percentile of the lit pixels to 0.8, brighter values compressed by a shoulder towards 1)
     #[arg(long, value_name = "E|auto", default_value = "auto")]
     pub exposure: String,
+    /// Irradiance of a fill light from the camera's direction (the key lights have 1), so no
+    /// visible side of the object is black; 0: none (scene files: their `fill`, default 0)
+    #[arg(long, value_name = "E", default_value_t = crate::render::DEFAULT_FILL, allow_hyphen_values = true)]
+    pub fill: f64,
     /// A scene file (objects moved and scaled, directional and point lights, orthographic or
     /// pinhole camera, size, supersampling, exposure; see README) in place of --object,
     /// --tangents, --light, --camera, --size and --supersample
@@ -125,8 +129,9 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.seed001 {
         let mut outs = Outputs::new(&[]);
         let picture_out = outs.file(&args.out, "--out")?;
-        let (grid, e) = render_api::seed001(camera, args.supersample, args.quiet)?;
-        write_picture(&mut outs, picture_out, &grid, &format!("{e}"))?;
+        let s = render_api::seed001(camera, args.supersample, args.quiet)?;
+        let (rows, cols) = (&s.rows, &s.columns);
+        write_labelled_grid(&mut outs, picture_out, &s.grid, s.tile, rows, cols)?;
         outs.commit()?;
         if !args.quiet {
             eprintln!(
@@ -161,6 +166,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
                 camera,
                 size: [args.size[0], args.size[1]],
                 supersample: args.supersample,
+                fill: args.fill,
             }),
         },
         maps: args.maps.clone(),

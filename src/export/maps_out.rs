@@ -4,8 +4,10 @@
 //!
 //! Files: `height.exr` (H, fibre radii), `fibre_azimuth.exr` (psi, degrees in [-90, 90)),
 //! `kd.exr`, `ks.exr` (albedos, one channel per colour channel), `<name>_std_error.exr`, and
-//! `residual.exr` (RMS relative residual per texel). All are reserved in the run's outputs before
-//! the work and put in place with its other outputs when every one is complete.
+//! `residual.exr` (RMS relative residual per texel), and a picture of each (`<name>.png`,
+//! `<name>_std_error.png`, `residual.png`: the map at the capture's resolution, one panel per
+//! channel, with a colour bar; grey where no texel is). All are reserved in the run's outputs
+//! before the work and put in place with its other outputs when every one is complete.
 
 use super::atomic::{OutputId, Outputs};
 use super::images::write_exr_into;
@@ -67,10 +69,78 @@ impl MapFiles {
 pub fn file_names(names: &[&str]) -> Vec<String> {
     let mut v: Vec<String> = names
         .iter()
-        .flat_map(|n| [format!("{n}.exr"), format!("{n}_std_error.exr")])
+        .flat_map(|n| {
+            [
+                format!("{n}.exr"),
+                format!("{n}_std_error.exr"),
+                format!("{n}.png"),
+                format!("{n}_std_error.png"),
+            ]
+        })
         .collect();
     v.push("residual.exr".into());
+    v.push("residual.png".into());
     v
+}
+
+/// The short name and unit of a map on its colour bar.
+fn bar_label(name: &str) -> (&'static str, &'static str) {
+    match name {
+        "height" => ("height H", "fibre radii"),
+        "fibre_azimuth" => ("fibre azimuth psi", "deg"),
+        "kd" => ("kd", "albedo"),
+        _ => ("ks", "weight"),
+    }
+}
+
+/// Draw a map (`channels` interleaved values per texel, NaN: none) as a picture with a colour
+/// bar: `azimuth` on a hue circle over [-90, 90] deg, others on a sequential scale over the 1st
+/// to 99th percentile (from 0 for errors and residuals).
+fn picture(
+    sink: super::atomic::Sink,
+    title: &str,
+    maps: &TexelMaps,
+    channels: usize,
+    data: &[f32],
+    kind: (&str, bool, String),
+) -> Result<super::plots::Drawn> {
+    use super::plots::{image_panels, percentiles, ColourMap, MapScale};
+    let (name, from_zero, label) = kind;
+    let panels: Vec<(String, Vec<f32>)> = (0..channels)
+        .map(|c| {
+            let v = data.iter().skip(c).step_by(channels).copied().collect();
+            let title = match channels {
+                1 => name.to_string(),
+                _ => format!("{name} {}", ["R", "G", "B"][c]),
+            };
+            (title, v)
+        })
+        .collect();
+    let finite = data.iter().filter(|x| x.is_finite()).map(|&x| x as f64);
+    let scale = if name == "fibre azimuth psi" {
+        MapScale {
+            lo: -90.0,
+            hi: 90.0,
+            log: false,
+            map: ColourMap::Cyclic,
+            label,
+        }
+    } else {
+        let (lo, hi) = percentiles(finite, 1.0, 99.0).unwrap_or((0.0, 1.0));
+        let lo = if from_zero { 0.0 } else { lo };
+        MapScale {
+            lo,
+            hi: if hi > lo {
+                hi
+            } else {
+                lo + 1e-9_f64.max(lo.abs() * 1e-6)
+            },
+            log: false,
+            map: ColourMap::Sequential,
+            label,
+        }
+    };
+    image_panels(sink, title, maps.width, maps.height, &panels, &scale)
 }
 
 /// The grid of one map: texel values at their pixels, NaN where no texel is.
@@ -98,6 +168,8 @@ pub fn describe(dir: &Path, names: &[&str], maps: &TexelMaps) -> serde_json::Val
                 "std_error_file": format!("{name}_std_error.exr"),
                 "unit": unit,
                 "channels": if channels == 1 { "Y" } else { "R, G, B" },
+                "picture": format!("{name}.png"),
+                "std_error_picture": format!("{name}_std_error.png"),
             }),
         );
     }
@@ -105,6 +177,7 @@ pub fn describe(dir: &Path, names: &[&str], maps: &TexelMaps) -> serde_json::Val
         "residual".into(),
         serde_json::json!({
             "file": "residual.exr",
+            "picture": "residual.png",
             "unit": "RMS relative residual (model - data) / data over the texel's pixels and channels",
             "channels": "Y",
         }),
@@ -133,5 +206,47 @@ pub fn write(outs: &mut Outputs, files: &MapFiles, names: &[&str], maps: &TexelM
         put(&format!("{name}.exr"), channels, &values)?;
         put(&format!("{name}_std_error.exr"), channels, &errors)?;
     }
-    put("residual.exr", 1, &grid(maps, 1, &|t, _| maps.residual[t]))
+    let residual = grid(maps, 1, &|t, _| maps.residual[t]);
+    put("residual.exr", 1, &residual)?;
+    drop(put);
+    // the pictures
+    for &name in names {
+        let (_, channels, get) = layout(name, maps.channels);
+        let (short, unit) = bar_label(name);
+        let values = grid(maps, channels, &|t, c| get(&maps.values[t], c));
+        let errors = grid(maps, channels, &|t, c| get(&maps.std_errors[t], c));
+        let sink = super::atomic::Sink::Staged(outs, files.id(&format!("{name}.png"))?);
+        let title = format!("Recovered {short} per texel ({unit})");
+        picture(
+            sink,
+            &title,
+            maps,
+            channels,
+            &values,
+            (short, false, format!("{short} [{unit}]")),
+        )?;
+        let sink = super::atomic::Sink::Staged(outs, files.id(&format!("{name}_std_error.png"))?);
+        let title = format!("Standard error of {short} per texel ({unit})");
+        let label = format!("std error of {short} [{unit}]");
+        picture(
+            sink,
+            &title,
+            maps,
+            channels,
+            &errors,
+            ("standard error", true, label),
+        )?;
+    }
+    let pct: Vec<f32> = residual.iter().map(|r| 100.0 * r).collect();
+    let sink = super::atomic::Sink::Staged(outs, files.id("residual.png")?);
+    let title = "RMS relative residual per texel";
+    picture(
+        sink,
+        title,
+        maps,
+        1,
+        &pct,
+        ("residual", true, "RMS residual [%]".into()),
+    )?;
+    Ok(())
 }

@@ -185,7 +185,6 @@ pub fn write_dir(
 ) -> anyhow::Result<()> {
     use super::brdf_plots::{self, Curve};
     use super::plots;
-    use crate::load::samples::Origin;
     let mut md = format!("# fibrefit fit report\n\n```text\n{report_text}```\n\n");
     let ch = samples.channels;
     let psi_deg = outcome
@@ -223,11 +222,12 @@ pub fn write_dir(
         &samples.samples,
         log_y,
     )?;
+    let (points, per) = (points.points, points.note);
     md += &format!(
-        "## Slices\n\nThe fitted BRDF (1/sr, channel mean{}) along the plane of the fibres (T-N, fibres at \
+        "## Slices\n\nThe fitted BRDF (1/sr, {per}{}) along the plane of the fibres (T-N, fibres at \
          {psi_deg:.1} deg) and across it (B-N) at incidence {} deg: the light on the negative side, the \
          view at a signed angle (+: the far side){}; dots: the {points} samples near a slice (theta_i \
-         within {:.0} deg, both directions within {:.0} deg of the plane).\n\n![slices](slices.png)\n\n",
+         within {:.0} deg, both directions within {:.0} deg of the plane), their mean +-1 sd per 2 deg bin of theta_o.\n\n![slices](slices.png)\n\n",
         if log_y { ", log axis" } else { "" },
         brdf_plots::SLICE_THETAS.map(|t| format!("{t:.0}")).join(", "),
         if measured.is_some() {
@@ -248,18 +248,11 @@ pub fn write_dir(
         &samples.samples,
     )?;
     md += &format!(
-        "## Hemisphere maps\n\nEvery view direction for a light across the fibres at incidence {} deg \
-         (orthographic, seen from above; right = the far side of the light). {}\n\n\
-         ![hemisphere maps](hemispheres.png)\n\n",
-        brdf_plots::MAP_THETAS.map(|t| format!("{t:.0}")).join(", "),
-        if measured.is_some() {
-            "Measured: the file evaluated densely.".to_string()
-        } else {
-            format!(
-                "Measured and residual: the {near} samples whose light lies within {:.0} deg of the map's.",
-                brdf_plots::NEAR_LIGHT_DEG
-            )
-        }
+        "## Hemisphere maps\n\nEvery view direction for a light (orthographic, seen from above). {} \
+         {} samples drawn; residual colour bar +/-{:.2} %.\n\n![hemisphere maps](hemispheres.png)\n\n",
+        near.note,
+        near.points,
+        near.colour_bars.last().map_or(0.0, |b| b.hi),
     );
     let rel: Vec<f64> = samples
         .samples
@@ -275,36 +268,24 @@ pub fn write_dir(
         60,
     )?;
     md += "## Residuals\n\n![residual histogram](residuals.png)\n\n";
-    // residual maps for captures
-    let mut images: std::collections::BTreeMap<u32, Vec<(u32, u32, f64)>> = Default::default();
-    for (s, m) in samples.samples.iter().zip(&outcome.fitted) {
-        if let Origin::Pixel { image, x, y } = s.origin {
-            let r = (0..ch)
-                .map(|c| (m[c] - s.value[c]) / s.value[c].abs().max(1e-12))
-                .sum::<f64>()
-                / ch as f64;
-            images.entry(image).or_default().push((x, y, r));
-        }
-    }
+    // residual maps for captures: the image's size, per channel, a colour bar in percent
+    let images = plots::image_residuals(samples, &outcome.fitted);
     // reserved maps of images without samples are not written
     for (k, id) in &files.maps {
         if !images.contains_key(k) {
             outs.discard(*id);
         }
     }
-    for (k, px) in images {
-        let w = px.iter().map(|p| p.0).max().unwrap_or(0) as usize + 1;
-        let h = px.iter().map(|p| p.1).max().unwrap_or(0) as usize + 1;
-        let mut values = vec![None; w * h];
-        for (x, y, r) in px {
-            values[y as usize * w + x as usize] = Some(r);
-        }
-        let file = format!("residual_map_{k:03}.png");
-        let Some(&id) = files.maps.get(&k) else {
+    for (k, r) in &images {
+        let Some(&id) = files.maps.get(k) else {
             anyhow::bail!("image {k}: no residual map was reserved for it");
         };
-        plots::residual_map(Sink::Staged(outs, id), w, h, &values)?;
-        md += &format!("### Image {k}: relative residual per pixel (red: fitted above measured, blue: below, grey: not used)\n\n![residual map {k}]({file})\n\n");
+        let d = plots::residual_map(
+            Sink::Staged(outs, id),
+            &format!("Image {k}: relative residual per pixel"),
+            r,
+        )?;
+        md += &format!("### Image {k}: relative residual per pixel ({} x {} px, {}; red: fitted above measured, blue: below, grey: no sample; colour bar +/-{:.2} %, the {:.0}th percentile of |residual|)\n\n![residual map {k}](residual_map_{k:03}.png)\n\n", r.width, r.height, d.panels.join(", "), d.colour_bars[0].hi, plots::RESIDUAL_PERCENTILE);
     }
     outs.put(files.md, md.as_bytes())
 }

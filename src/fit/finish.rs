@@ -149,7 +149,7 @@ pub fn finish(
             )
         })
         .collect();
-    let quality = quality::assess(&quality::Inputs {
+    let mut quality = quality::assess(&quality::Inputs {
         samples: &full.samples,
         scale: full.scale(),
         residuals: r.as_slice(),
@@ -159,6 +159,10 @@ pub fn finish(
         psi: set.shape_value(Shape::Azimuth).to_radians(),
         minima: &minima,
     });
+    // a PNG capture read with the wrong transfer curve (src/fit/encoding_check.rs)
+    quality
+        .warnings
+        .extend(super::encoding_check::check(samples, &fitted));
     warnings.extend(quality.warnings.iter().cloned());
     Ok(FitOutcome {
         quality,

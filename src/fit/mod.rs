@@ -11,6 +11,7 @@
 pub mod all_pixels;
 pub mod basins;
 pub mod config;
+pub mod encoding_check;
 pub mod finish;
 pub mod global;
 pub mod gltf_material;

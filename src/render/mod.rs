@@ -61,6 +61,23 @@ pub fn check_budget(
     Ok(())
 }
 
+/// Irradiance of `render`'s default fill light (the key lights have 1): a directional light from
+/// the camera's direction, so every surface the camera sees is lit by it (n.v > 0 there) and no
+/// side of an object is black; a quarter of a key light keeps the key's shading readable.
+pub const DEFAULT_FILL: f64 = 0.25;
+
+/// The fill light of irradiance `fill` from `camera` (the direction towards the camera), none
+/// for 0; `what` names the setting in the error for a negative or non-finite value.
+pub fn fill_light(camera: Vec3, fill: f64, what: &str) -> anyhow::Result<Option<Light>> {
+    if !(fill.is_finite() && fill >= 0.0) {
+        anyhow::bail!("{what} {fill}: expected a finite irradiance >= 0 (0: no fill light)");
+    }
+    Ok((fill > 0.0).then_some(Light::Directional {
+        direction: camera.normalize(),
+        irradiance: fill,
+    }))
+}
+
 #[derive(Clone, Copy, Debug)]
 pub enum Light {
     /// A distant light: unit direction towards it and irradiance E perpendicular to it.

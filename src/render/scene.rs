@@ -6,6 +6,7 @@
 //! size = [640, 480]
 //! supersample = 2
 //! exposure = 1.5                   # PNG only; "auto" by default
+//! fill = 0.25                      # a fill light from the camera's direction; default 0 (none)
 //! [camera]                         # orthographic from (theta, phi), or:
 //! type = "orthographic"
 //! theta_deg = 50
@@ -42,6 +43,10 @@ pub struct SceneFile {
     pub supersample: usize,
     #[serde(default)]
     pub exposure: Option<toml::Value>,
+    /// Irradiance of a fill light from the camera's direction (0: none; the lights are as
+    /// written).
+    #[serde(default)]
+    pub fill: f64,
     pub camera: CameraSpec,
     pub lights: Vec<LightSpec>,
     pub objects: Vec<ObjectSpec>,
@@ -273,6 +278,11 @@ impl SceneFile {
                 }
             }
         };
+        lights.extend(super::fill_light(
+            camera.direction,
+            self.fill,
+            &format!("{at}: fill ="),
+        )?);
         let exposure = match &self.exposure {
             None => None,
             Some(toml::Value::String(s)) => Some(s.clone()),

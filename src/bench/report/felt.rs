@@ -56,8 +56,8 @@ pub fn write(
     plots::xy(
         crate::export::atomic::Sink::File(&dir.join("felt.png")),
         "Real felt: held-out log error vs cost per rung",
-        "ns per evaluation (single thread)",
-        "held-out log error",
+        "cost per evaluation [ns] (single thread)",
+        "held-out log error (RMS of ln(model) - ln(data))",
         &series,
         true,
         false,
@@ -153,12 +153,14 @@ pub fn write(
             &curves,
             &run.test.samples,
             true,
-        )?;
+        )?
+        .points;
         md += &format!(
             "## Slices\n\nThe fitted BRDF (channel mean, 1/sr, log axis) along the plane of the fibres \
              (T-N) and across it (B-N) at four incidence angles, with the measured file evaluated on \
              the same directions (dashed) and the {points} held-out samples that lie near a slice \
-             (theta_i within {:.0} deg, both directions within {:.0} deg of the plane). The felt is \
+             (theta_i within {:.0} deg, both directions within {:.0} deg of the plane), as the mean \
+             +-1 sd per 2 deg bin of theta_o. The felt is \
              isotropic, so the fibre azimuth is taken as 0.\n\n![slices](felt_slices.png)\n\n",
             brdf_plots::NEAR_THETA_DEG,
             brdf_plots::NEAR_PLANE_COSINE.asin().to_degrees()

@@ -4,7 +4,7 @@
 use crate::bench::maps::{MapRow, Pictures, SIZE};
 use crate::export::atomic::AtomicFile;
 use crate::export::brdf_plots::{diverging, sequential};
-use crate::export::plots::font;
+use crate::export::plots::{colour_bar, font, ColourMap, MapScale};
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use std::io::Write;
@@ -22,7 +22,8 @@ fn figure(path: &Path, p: &Pictures) -> Result<()> {
     font();
     const CELL: i32 = 7;
     let side = SIZE as i32 * CELL;
-    let (w, h) = ((side + 24) as u32 * 5 + 10, side as u32 + 90);
+    let bars_w = 3 * 95u32;
+    let (w, h) = ((side + 24) as u32 * 5 + 10 + bars_w, side as u32 + 90);
     let mut buf = vec![0u8; (w * h * 3) as usize];
     {
         let root = BitMapBackend::with_buffer(&mut buf, (w, h)).into_drawing_area();
@@ -84,6 +85,25 @@ fn figure(path: &Path, p: &Pictures) -> Result<()> {
                 ))
                 .map_err(err)?;
             }
+        }
+        // colour bars: H, psi, error / se
+        let bars = root
+            .clone()
+            .shrink(((w - bars_w) as i32, 0), (bars_w, 30 + side as u32 + 10));
+        let scales = [
+            (h0, h1, ColourMap::Sequential, "H [fibre radii]"),
+            (p0, p1, ColourMap::Sequential, "psi [deg]"),
+            (-3.0, 3.0, ColourMap::Diverging, "(H - true) / se"),
+        ];
+        for (area, (lo, hi, map, label)) in bars.split_evenly((1, 3)).iter().zip(scales) {
+            let scale = MapScale {
+                lo,
+                hi: if hi > lo { hi } else { lo + 1e-9 },
+                log: false,
+                map,
+                label: label.into(),
+            };
+            colour_bar(area, &scale)?;
         }
         root.draw(&Text::new(
             format!(
