@@ -35,7 +35,7 @@ pub struct FlagScene {
 /// Where the scene comes from.
 #[derive(Clone, Debug)]
 pub enum SceneSource {
-    /// A scene file (README: scenes).
+    /// A scene file (docs/guide/render.md; format in src/render/scene.rs).
     File(PathBuf),
     Flags(FlagScene),
 }

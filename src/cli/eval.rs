@@ -25,7 +25,7 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
   fuzz, fuzz_depth, fuzz_asymmetry
                      fuzz layer over any rung: weight in [0, 50] (grey or RGB), optical
                      depth in [0.001, 10] (default 0: no layer), Henyey-Greenstein g in
-                     [-0.9, 0.95] (> 0: forward scattering); README, Optional components
+                     [-0.9, 0.95] (> 0: forward scattering); docs/model.md, Optional components
   quadrature_order   specular Gauss-Legendre order N                 (default 16)
   histogram_bins     height histogram bins K                         (default 16)
   two_sided, ambient lambert preview shading of seed 003 (intensity column only)

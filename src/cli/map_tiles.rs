@@ -12,7 +12,7 @@ Reads every TILES/tile_I_of_N.json that `fibrefit fit CAPTURE --config C --globa
 --tile I/N --maps TILES` wrote, checks that they are all N tiles of one capture fitted with the
 same globals, and writes the maps into DIR and the result JSON (G.json with the maps block)
 to --out, exactly as a single `fit --maps DIR` run would. Nothing is written if a tile is
-missing, duplicated or from other globals. A Slurm job array runs the tiles: README, \"Per-texel
+missing, duplicated or from other globals. A Slurm job array runs the tiles: docs/guide/fit.md, \"Per-texel
 maps past one machine\".")]
 pub struct MergeMapsArgs {
     /// Directory holding the tile files

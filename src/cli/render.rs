@@ -64,7 +64,7 @@ pub struct RenderArgs {
     #[arg(long, value_name = "E", default_value_t = crate::render::DEFAULT_FILL, allow_hyphen_values = true)]
     pub fill: f64,
     /// A scene file (objects moved and scaled, directional and point lights, orthographic or
-    /// pinhole camera, size, supersampling, exposure; see README) in place of --object,
+    /// pinhole camera, size, supersampling, exposure; see docs/guide/render.md) in place of --object,
     /// --tangents, --light, --camera, --size and --supersample
     #[arg(long, value_name = "FILE")]
     pub scene: Option<PathBuf>,

@@ -9,7 +9,7 @@ use std::path::PathBuf;
 Writes into OUT (a new or empty folder, or one synth wrote before; its own files are kept): gonio.csv (if [gonio]), capture.toml + img_NNN.exr|png (if [capture]),
 topology.png / tangent.png when used, truth.json (the true parameters; usable as
 `fibrefit eval --params OUT/truth.json`) and synth_info.json (noise, seeds, files).
-The config format is documented in src/synth/mod.rs and the README; examples: configs/synth_*.toml.")]
+The config format is documented in docs/formats.md (\"Synth config\"); examples: configs/synth_*.toml.")]
 pub struct SynthArgs {
     /// Synthesis config (TOML)
     #[arg(long, value_name = "FILE")]

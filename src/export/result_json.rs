@@ -1,4 +1,4 @@
-//! The renderer JSON (schema `fibrefit-result/1`, documented in the README), written and read in
+//! The renderer JSON (schema `fibrefit-result/1`, documented in docs/formats.md), written and read in
 //! this one place: the fitted model with its conventions, parameters and uncertainties,
 //! statistics, knobs, provenance, check values for renderer ports, and a Ward fallback
 //! ([`ResultFile`]); read back as parameters ([`read_params`]: `eval`, `render`, `export`,

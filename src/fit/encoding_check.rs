@@ -36,11 +36,12 @@ pub fn slope(samples: &Samples, fitted: &[[f64; 3]]) -> Option<(f64, usize, Vec<
         .images
         .iter()
         .map(|im| {
-            let is_png = im
-                .file
-                .extension()
-                .and_then(|e| e.to_str())
-                .is_some_and(|e| e.eq_ignore_ascii_case("png"));
+            // integer-coded images (PNG, 8/16-bit TIFF; a float TIFF has no encoding)
+            let is_png = im.frames().iter().all(|(f, _)| {
+                f.extension().and_then(|e| e.to_str()).is_some_and(|e| {
+                    ["png", "tif", "tiff"].contains(&e.to_ascii_lowercase().as_str())
+                })
+            });
             if is_png {
                 im.encoding
             } else {

@@ -1,4 +1,4 @@
-//! Goniometric samples: CSV with a header (README, "Goniometric CSV").
+//! Goniometric samples: CSV with a header (docs/formats.md, "Goniometric CSV").
 //!
 //! Angles `theta_i,phi_i,theta_o,phi_o` in degrees (MODEL.md §1). Values as `brdf` (or
 //! `brdf_r,brdf_g,brdf_b`), in 1/sr, or as `radiance` (or `radiance_r,radiance_g,radiance_b`)

@@ -875,7 +875,7 @@ fn render_capture(
         images: specs,
     };
     let text = format!(
-        "# Image capture rendered by fibrefit synth ({}). Format: README, \"Image captures\".\n{}",
+        "# Image capture rendered by fibrefit synth ({}). Format: fibrefit docs/formats.md, \"Image captures\".\n{}",
         shading.id(),
         toml::to_string(&capture_file)?
     );

@@ -87,7 +87,7 @@ pub fn write(
          20 % held out. Every rung with every shape parameter free (as `--model auto` fits it), alone \
          and with the optional components: the fibre-direction spread (`azimuth_spread_deg`), the \
          Fresnel factor on the lobe (`fresnel_ior`) and the fuzz layer (`fuzz`, `fuzz_depth`, \
-         `fuzz_asymmetry`; README, \"Optional components\"), under the linear and the log metric. \
+         `fuzz_asymmetry`; docs/model.md, \"Optional components\"), under the linear and the log metric. \
          Log error: RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median. Chosen: the \
          rung `--model auto` picks under the log metric without opt-in components (cheapest within \
          5 % of the best held-out log error among the plain and spread rows). The ratio column is the \
