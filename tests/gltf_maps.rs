@@ -5,7 +5,7 @@
 mod common;
 
 use assert_cmd::Command;
-use common::SYNTH;
+use common::{maps_fit, SYNTH};
 use fibrefit::fit::gltf_material::{self, TexelMaterials};
 use fibrefit::load::image_io;
 use std::path::Path;
@@ -13,25 +13,6 @@ use std::path::Path;
 fn fibrefit() -> Command {
     Command::cargo_bin("fibrefit").expect("binary built")
 }
-
-const FIT: &str = r#"
-model = "varying-topology"
-metric = "linear"
-seed = 1
-[parameters]
-kd = { value = 0.5 }
-ks = { value = 0.2 }
-exponent = { value = 20, min = 1, max = 1000 }
-spacing = { value = 2.0, vary = false }
-height = { value = 0.8 }
-fibre_azimuth_deg = { value = 0 }
-[maps]
-height = true
-fibre_azimuth = true
-kd = true
-# fewer rounds than tests/maps.rs: the textures are checked against the maps as fitted
-rounds = 8
-"#;
 
 fn glb_json(bytes: &[u8]) -> serde_json::Value {
     let glb = gltf::binary::Glb::from_slice(bytes).unwrap();
@@ -73,7 +54,8 @@ fn a_maps_fit_exported_as_gltf_carries_its_maps_as_textures() {
     std::fs::write(d.join("synth.toml"), SYNTH).unwrap();
     fibrefit::synth::run(&d.join("synth.toml"), &d.join("cap"), true).unwrap();
     let blind = fibrefit::bench::maps::write_blind(&d.join("cap")).unwrap();
-    std::fs::write(d.join("fit.toml"), FIT).unwrap();
+    // fewer rounds than tests/maps.rs: the textures are checked against the maps as fitted
+    std::fs::write(d.join("fit.toml"), maps_fit(8)).unwrap();
     let maps = d.join("maps");
     let result = d.join("r.json");
     fibrefit()

@@ -4,7 +4,7 @@
 mod common;
 
 use assert_cmd::Command;
-use common::SYNTH;
+use common::{maps_fit, SYNTH};
 use fibrefit::load::image_io;
 use fibrefit::model::topology::TopologyMap;
 use std::path::Path;
@@ -12,24 +12,6 @@ use std::path::Path;
 fn fibrefit() -> Command {
     Command::cargo_bin("fibrefit").expect("binary built")
 }
-
-const FIT: &str = r#"
-model = "varying-topology"
-metric = "linear"
-seed = 1
-[parameters]
-kd = { value = 0.5 }
-ks = { value = 0.2 }
-exponent = { value = 20, min = 1, max = 1000 }
-spacing = { value = 2.0, vary = false }
-height = { value = 0.8 }
-fibre_azimuth_deg = { value = 0 }
-[maps]
-height = true
-fibre_azimuth = true
-kd = true
-rounds = 25
-"#;
 
 /// A synthetic capture in `dir`, and a copy of its capture TOML without the maps (the unknowns).
 fn capture(dir: &Path) -> std::path::PathBuf {
@@ -52,7 +34,7 @@ fn sorted(mut v: Vec<f64>) -> Vec<f64> {
 fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
     let dir = tempfile::tempdir().unwrap();
     let blind = capture(dir.path());
-    std::fs::write(dir.path().join("fit.toml"), FIT).unwrap();
+    std::fs::write(dir.path().join("fit.toml"), maps_fit(25)).unwrap();
     let out = dir.path().join("maps");
     let run = fibrefit()
         .arg("fit")
@@ -385,7 +367,7 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
     fibrefit::synth::run(&d.join("synth.toml"), &d.join("d"), true).unwrap();
     let capture = d.join("d/capture.toml");
     let cfg = d.join("fit.toml");
-    std::fs::write(&cfg, FIT.replace("kd = true\n", "")).unwrap();
+    std::fs::write(&cfg, maps_fit(25).replace("kd = true\n", "")).unwrap();
     let fit = |extra: &[&str]| {
         let mut c = std::process::Command::new(env!("CARGO_BIN_EXE_fibrefit"));
         c.arg("fit")
@@ -531,7 +513,7 @@ fn globals_that_trade_off_with_the_maps_are_said_to() {
             })
             .collect::<String>()
         + "[noise]\nrelative = 0.01\nseed = 5\n";
-    let fit_toml = FIT.replace("kd = true\n", "");
+    let fit_toml = maps_fit(25).replace("kd = true\n", "");
     let mut widened = Vec::new();
     for (name, synth) in [("near", near_normal.as_str()), ("eight", SYNTH)] {
         let dir = tempfile::tempdir().unwrap();

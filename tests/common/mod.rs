@@ -3,6 +3,30 @@
 
 pub mod mutate;
 
+/// The fit config that recovers [`SYNTH`]'s maps (height, fibre azimuth and kd per texel) in at
+/// most `rounds` alternations of the global stage (tests/maps.rs, tests/gltf_maps.rs).
+pub fn maps_fit(rounds: u32) -> String {
+    format!(
+        r#"
+model = "varying-topology"
+metric = "linear"
+seed = 1
+[parameters]
+kd = {{ value = 0.5 }}
+ks = {{ value = 0.2 }}
+exponent = {{ value = 20, min = 1, max = 1000 }}
+spacing = {{ value = 2.0, vary = false }}
+height = {{ value = 0.8 }}
+fibre_azimuth_deg = {{ value = 0 }}
+[maps]
+height = true
+fibre_azimuth = true
+kd = true
+rounds = {rounds}
+"#
+    )
+}
+
 /// The synth config of a small capture whose maps are known (tests/maps.rs, tests/gltf_maps.rs):
 /// 16 x 16 texels, 8 images; fibres from -30 to 40 deg across x, heights from a topology map.
 pub const SYNTH: &str = r#"
