@@ -77,8 +77,14 @@ pub struct CameraRow {
     pub cpu_seconds: f64,
     pub peak_mb: f64,
     pub bytes_per_pixel_value: f64,
+    /// Peak resident memory over the pixel values (the process's fixed overhead included).
+    pub peak_bytes_per_pixel_value: f64,
+    /// Infinite: no time goal (the memory rows).
     pub goal_seconds: f64,
     pub goal_mb: f64,
+    /// The goal in peak bytes per pixel value (issue 24: 150 at 8 x 512 x 512), where there is
+    /// one.
+    pub goal_bytes_per_pixel_value: Option<f64>,
     pub met: bool,
     /// What came out, against the truth.
     pub accuracy: String,
@@ -272,6 +278,11 @@ pub fn run(
         map_accuracy(&d, &scratch.join("maps"))?,
     ));
     bar.inc(1);
+    let fit_peak = rows
+        .iter()
+        .find(|r| r.job == "global fit given the maps")
+        .map_or(f64::INFINITY, |r| r.peak_mb);
+    rows.extend(memory_rows(exe, scratch, size, fit_peak, bar)?);
     Ok(CameraRun {
         size,
         rows,
@@ -297,11 +308,158 @@ fn row(
         cpu_seconds: cost.cpu_seconds,
         peak_mb: cost.peak_mb,
         bytes_per_pixel_value: bytes,
+        peak_bytes_per_pixel_value: peak_bytes_per_value(cost, values),
         goal_seconds,
         goal_mb,
+        goal_bytes_per_pixel_value: None,
         met: cost.wall_seconds <= goal_seconds && cost.peak_mb <= goal_mb,
         accuracy,
     }
+}
+
+fn peak_bytes_per_value(cost: &Cost, values: usize) -> f64 {
+    cost.peak_mb * 1024.0 * 1024.0 / values.max(1) as f64
+}
+
+/// The capture side of issue 24's memory goal: `fit`, `score` and `inspect` of an RGB capture
+/// of 8 x 512 x 512 pixels each peak at <= [`MEMORY_GOAL_BYTES`] per pixel value, the process's
+/// fixed overhead included.
+pub const MEMORY_SIZE: usize = 512;
+pub const MEMORY_GOAL_BYTES: f64 = 150.0;
+
+/// A row of a job judged by its peak memory alone: at most `goal_mb`, and at most
+/// `goal_bytes` per pixel value where given.
+fn memory_row(
+    job: &str,
+    (texels, values): (usize, usize),
+    cost: &Cost,
+    store_bytes: f64,
+    goal_mb: f64,
+    goal_bytes: Option<f64>,
+    accuracy: String,
+) -> CameraRow {
+    let mut r = row(
+        job,
+        texels,
+        values,
+        cost,
+        store_bytes,
+        (f64::INFINITY, goal_mb),
+        accuracy,
+    );
+    r.goal_bytes_per_pixel_value = goal_bytes;
+    r.met = cost.peak_mb <= goal_mb && goal_bytes.is_none_or(|b| r.peak_bytes_per_pixel_value <= b);
+    r
+}
+
+/// `fibrefit score RESULT CAPTURE` and `fibrefit inspect CAPTURE` as child processes, each
+/// judged against `goal_mb` (and `goal_bytes` per pixel value); `label` names the capture.
+fn score_and_inspect(
+    exe: &Path,
+    scratch: &Path,
+    (capture, result): (&Path, &Path),
+    label: &str,
+    size: (usize, usize, f64),
+    (goal_mb, goal_bytes): (f64, Option<f64>),
+) -> Result<Vec<CameraRow>> {
+    let (texels, values, store_bytes) = size;
+    let mut rows = Vec::new();
+    let mut cmd = Command::new(exe);
+    cmd.arg("score").arg(result).arg(capture).arg("--json");
+    let cost = measure(cmd, &scratch.join("score.log"))?;
+    rows.push(memory_row(
+        &format!("score of the global fit{label}"),
+        (texels, values),
+        &cost,
+        store_bytes,
+        goal_mb,
+        goal_bytes,
+        "every pixel, a piece of whole image rows at a time".into(),
+    ));
+    let mut cmd = Command::new(exe);
+    cmd.arg("inspect").arg(capture).arg("--json");
+    let cost = measure(cmd, &scratch.join("inspect.log"))?;
+    rows.push(memory_row(
+        &format!("inspect{label}"),
+        (texels, values),
+        &cost,
+        store_bytes,
+        goal_mb,
+        goal_bytes,
+        "every pixel counted from the store".into(),
+    ));
+    Ok(rows)
+}
+
+/// The memory rows of issue 24 item 4: `score` and `inspect` of this capture (`data/capture.toml`
+/// and its global fit `result`) within the global fit's peak `fit_peak_mb`; and `fit`, `score`
+/// and `inspect` of an 8 x [`MEMORY_SIZE`]^2 capture at <= [`MEMORY_GOAL_BYTES`] per pixel value
+/// (rendered here unless this capture is that size).
+pub fn memory_rows(
+    exe: &Path,
+    scratch: &Path,
+    size: usize,
+    fit_peak_mb: f64,
+    bar: &indicatif::ProgressBar,
+) -> Result<Vec<CameraRow>> {
+    let d = scratch.join("d");
+    let capture = d.join("capture.toml");
+    let counted = |capture: &Path| -> Result<(usize, usize, f64)> {
+        let store = CaptureStore::load(capture, Default::default())?;
+        let values = store.sample_count();
+        Ok((store.texels().len(), values, store.bytes() as f64 / values as f64))
+    };
+    let here = counted(&capture)?;
+    let goal_bytes = (size == MEMORY_SIZE).then_some(MEMORY_GOAL_BYTES);
+    bar.set_message("camera: score and inspect");
+    let mut rows = score_and_inspect(
+        exe,
+        scratch,
+        (&capture, &scratch.join("global.json")),
+        "",
+        here,
+        (fit_peak_mb, goal_bytes),
+    )?;
+    if size == MEMORY_SIZE {
+        return Ok(rows);
+    }
+    // the goal's own capture: 8 x 512 x 512
+    bar.set_message("camera: fit, score and inspect at 512 x 512");
+    let m = scratch.join("m");
+    std::fs::create_dir_all(&m)?;
+    std::fs::write(m.join("synth.toml"), synth_config(MEMORY_SIZE))?;
+    crate::synth::run(&m.join("synth.toml"), &m.join("d"), true)?;
+    let capture = m.join("d/capture.toml");
+    let there = counted(&capture)?;
+    let goal_mb = MEMORY_GOAL_BYTES * there.1 as f64 / (1024.0 * 1024.0);
+    let label = format!(", 8 x {MEMORY_SIZE} x {MEMORY_SIZE}");
+    let mut cmd = Command::new(exe);
+    cmd.arg("fit")
+        .arg(&capture)
+        .arg("--config")
+        .arg(scratch.join("global.toml"))
+        .arg("--out")
+        .arg(m.join("global.json"))
+        .arg("-q");
+    let cost = measure(cmd, &m.join("global.log"))?;
+    rows.push(memory_row(
+        &format!("global fit given the maps{label}"),
+        (there.0, there.1),
+        &cost,
+        there.2,
+        goal_mb,
+        Some(MEMORY_GOAL_BYTES),
+        format!("sample of {} texels", crate::fit::config::Knobs::default().fit_texels),
+    ));
+    rows.extend(score_and_inspect(
+        exe,
+        &m,
+        (&capture, &m.join("global.json")),
+        &label,
+        there,
+        (goal_mb, Some(MEMORY_GOAL_BYTES)),
+    )?);
+    Ok(rows)
 }
 
 /// RMS error of the recovered H and psi against the truth, and how the errors compare with

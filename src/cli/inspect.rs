@@ -1,7 +1,7 @@
 //! `fibrefit inspect`: load measurements exactly as `fit` does and summarise them.
 
 use super::data::LoadArgs;
-use crate::load::{load_data_with_format, summary::Summary};
+use crate::load::summary;
 use anyhow::Result;
 use clap::Args;
 use std::path::PathBuf;
@@ -23,12 +23,7 @@ pub struct InspectArgs {
 }
 
 pub fn run(args: &InspectArgs) -> Result<()> {
-    let (samples, format) = load_data_with_format(&args.data, &args.load.options()?)?;
-    let mut summary = Summary::of(&samples);
-    if let Some(f) = format {
-        summary.delimiter = Some(f.delimiter.name());
-        summary.format = Some(f.describe());
-    }
+    let summary = summary::summarise(&args.data, &args.load.options()?)?;
     if args.json {
         super::print_out(&(serde_json::to_string_pretty(&summary)? + "\n"))?;
     } else {

@@ -63,7 +63,7 @@ pub fn finish(
             .push(near(a.value[c], a.min, a.min, a.max) || near(a.value[c], a.max, a.min, a.max));
     }
     let jac = full.full_jacobian(&set, &cols)?;
-    let cov = uncertainty::covariance(&jac, &names, &at_bound, chi2, n);
+    let cov = uncertainty::covariance(jac, &names, &at_bound, chi2, n);
     let mut warnings = notes;
     warnings.extend(cov.warnings.iter().cloned());
 

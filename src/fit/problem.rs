@@ -149,6 +149,13 @@ impl<'a> FitProblem<'a> {
         self
     }
 
+    /// This problem with the `log` metric's floors `floor` per channel ([`log_floor`] of the
+    /// full data, when this problem holds a piece of them).
+    pub fn with_log_floor(mut self, floor: [f64; 3]) -> Self {
+        self.log_floor = floor;
+        self
+    }
+
     /// Residual scale per sample and channel (1/sigma or sqrt(weight), times cos(theta_i) for
     /// the cosine metric).
     pub fn scale(&self) -> &[[f64; 3]] {
@@ -713,7 +720,11 @@ impl Coordinate {
 /// ln(f + eps) weighs relative errors alike over the data's range while values near zero (noise)
 /// do not dominate.
 pub fn log_floor(values: &[[f64; 3]], c: usize) -> f64 {
-    let mut v: Vec<f64> = values.iter().map(|x| x[c].abs()).collect();
+    log_floor_of_magnitudes(values.iter().map(|x| x[c].abs()).collect())
+}
+
+/// [`log_floor`] of one channel's |values| (any order).
+pub fn log_floor_of_magnitudes(mut v: Vec<f64>) -> f64 {
     if v.is_empty() {
         return 1e-12;
     }

@@ -100,26 +100,69 @@ pub fn half_vector_angles(s: &Sample, psi: f64) -> Option<(f64, f64)> {
     Some((theta, a))
 }
 
-fn bins(axis: &str, edges: &[f64], values: &[(f64, f64)], s_all: f64) -> Vec<ResidualBin> {
+/// Edges of the residual-structure bins: half-vector angle 0-90 deg in 10, azimuth from the
+/// fibres 0-90 deg in 15.
+const THETA_EDGES: [f64; 10] = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0, 70.0, 80.0, 90.0];
+const AZIMUTH_EDGES: [f64; 7] = [0.0, 15.0, 30.0, 45.0, 60.0, 75.0, 90.0];
+
+/// The bin of `x` among `edges` (lo <= x < hi; the last bin holds its upper edge too).
+fn bin_of(edges: &[f64], x: f64) -> Option<usize> {
+    let last = *edges.last().expect("edges");
+    edges
+        .windows(2)
+        .position(|w| x >= w[0] && (x < w[1] || (w[1] == last && x <= w[1])))
+}
+
+/// Sums of the mean residual over channels per residual-structure bin (sum, count), added
+/// sample by sample in the samples' order: data read a piece at a time give the very sums of
+/// all of them at once.
+#[derive(Clone, Debug, Default)]
+pub struct BinSums {
+    theta: [(f64, usize); 9],
+    azimuth: [(f64, usize); 6],
+}
+
+impl BinSums {
+    /// Add sample `s` with its weighted residuals (one per channel).
+    pub fn add(&mut self, s: &Sample, psi: f64, residuals: &[f64]) {
+        if let Some((t, a)) = half_vector_angles(s, psi) {
+            let r = residuals.iter().sum::<f64>() / residuals.len() as f64;
+            if let Some(k) = bin_of(&THETA_EDGES, t) {
+                self.theta[k].0 += r;
+                self.theta[k].1 += 1;
+            }
+            if let Some(k) = bin_of(&AZIMUTH_EDGES, a) {
+                self.azimuth[k].0 += r;
+                self.azimuth[k].1 += 1;
+            }
+        }
+    }
+
+    /// The bins with samples, in residual standard deviations `s_all`.
+    fn bins(&self, s_all: f64) -> Vec<ResidualBin> {
+        let mut out = bins("half-vector angle", &THETA_EDGES, &self.theta, s_all);
+        out.extend(bins(
+            "half-vector azimuth from the fibres",
+            &AZIMUTH_EDGES,
+            &self.azimuth,
+            s_all,
+        ));
+        out
+    }
+}
+
+fn bins(axis: &str, edges: &[f64], sums: &[(f64, usize)], s_all: f64) -> Vec<ResidualBin> {
     let mut out = Vec::new();
-    for w in edges.windows(2) {
-        let (lo, hi) = (w[0], w[1]);
-        let last = hi == *edges.last().expect("edges");
-        let rs: Vec<f64> = values
-            .iter()
-            .filter(|(x, _)| *x >= lo && (*x < hi || (last && *x <= hi)))
-            .map(|v| v.1)
-            .collect();
-        let n = rs.len();
+    for (w, &(sum, n)) in edges.windows(2).zip(sums) {
         if n == 0 {
             continue;
         }
-        let mean = rs.iter().sum::<f64>() / n as f64 / s_all;
+        let mean = sum / n as f64 / s_all;
         let z = mean * (n as f64).sqrt();
         out.push(ResidualBin {
             axis: axis.into(),
-            lo_deg: lo,
-            hi_deg: hi,
+            lo_deg: w[0],
+            hi_deg: w[1],
             n,
             mean,
             z,
@@ -132,6 +175,18 @@ fn bins(axis: &str, edges: &[f64], values: &[(f64, f64)], s_all: f64) -> Vec<Res
 /// Pooled noise variance of repeated direction pairs (same l and v to 1e-9), weighted like the
 /// residuals, and its degrees of freedom.
 fn repeats_variance(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> Option<(f64, usize)> {
+    repeats_estimate(repeats_sums(samples, scale, ch))
+}
+
+/// [`repeats_variance`] of pooled sums (sum of squares, degrees of freedom).
+pub fn repeats_estimate((ss, dof): (f64, usize)) -> Option<(f64, usize)> {
+    (dof >= 5).then(|| (ss / dof as f64, dof))
+}
+
+/// The pooled sums behind [`repeats_variance`]: sum of squared deviations from each repeated
+/// pair's mean and degrees of freedom. Samples that can repeat each other (for a capture: one
+/// texel's pixels in every image) must come in one call.
+pub fn repeats_sums(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> (f64, usize) {
     // pixels of a capture repeat a direction pair only at the same place on the swatch: two
     // texels seen from the same directions differ by their topology and fibre direction
     let key = |s: &Sample| {
@@ -167,14 +222,27 @@ fn repeats_variance(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> Optio
             dof += vals.len() - 1;
         }
     }
-    (dof >= 5).then(|| (ss / dof as f64, dof))
+    (ss, dof)
 }
 
 /// Noise variance from second differences of the residuals along image rows (pixels of one
 /// image share light and view, so their model values change smoothly):
 /// mean((r[x0] - 2 r[x1] + r[x2])^2) / 6 over consecutive kept pixels of a row with equal gaps
 /// x1 - x0 = x2 - x1 (neighbours, or every stride-th pixel of a subsampled capture).
+#[cfg(test)]
 fn pixel_variance(samples: &[&Sample], residuals: &[f64], ch: usize) -> Option<(f64, usize)> {
+    pixel_estimate(pixel_sums(samples, residuals, ch))
+}
+
+/// The noise variance of summed second differences (sum of squares, count), as
+/// [`pixel_sums`] describes, when there are at least 10.
+pub fn pixel_estimate((ss, count): (f64, usize)) -> Option<(f64, usize)> {
+    (count >= 10).then(|| (ss / count as f64 / 6.0, count))
+}
+
+/// The sums behind the noise from neighbouring pixels (above): squared second differences
+/// and their count. An image row's samples must come in one call.
+pub fn pixel_sums(samples: &[&Sample], residuals: &[f64], ch: usize) -> (f64, usize) {
     let mut rows: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::new();
     for (i, s) in samples.iter().enumerate() {
         if let Origin::Pixel { image, x, y } = s.origin {
@@ -196,7 +264,7 @@ fn pixel_variance(samples: &[&Sample], residuals: &[f64], ch: usize) -> Option<(
             }
         }
     }
-    (count >= 10).then(|| (ss / count as f64 / 6.0, count))
+    (ss, count)
 }
 
 /// Everything the quality block needs from the fit.
@@ -216,16 +284,85 @@ pub struct Inputs<'a> {
 }
 
 pub fn assess(inp: &Inputs) -> Quality {
-    let n = inp.residuals.len();
-    let p = inp.free_parameters;
+    let mut sums = Sums::new(!inp.sigmas_given);
+    sums.add(inp.samples, inp.residuals, inp.channels, inp.psi);
+    assess_sums(
+        &sums,
+        inp.free_parameters,
+        inp.sigmas_given,
+        || repeats_variance(inp.samples, inp.scale, inp.channels),
+        inp.minima,
+    )
+}
+
+/// What [`assess`] sums over the residuals, for data read a piece at a time (a capture scored
+/// chunk by chunk): the residual count and sum of squares, the second differences along image
+/// rows (when the noise is to be estimated from them) and the residual-structure bins. Pieces
+/// added in the samples' order give the sums of all samples at once.
+#[derive(Clone, Debug)]
+pub struct Sums {
+    pub n: usize,
+    pub cost: f64,
+    /// (sum of squares, count) of second differences; `None` when sigmas are given.
+    pixels: Option<(f64, usize)>,
+    bins: BinSums,
+}
+
+impl Sums {
+    /// Empty sums; `estimate_noise`: the data carry no sigmas, so the noise is estimated from
+    /// neighbouring pixels.
+    pub fn new(estimate_noise: bool) -> Self {
+        Self {
+            n: 0,
+            cost: 0.0,
+            pixels: estimate_noise.then_some((0.0, 0)),
+            bins: BinSums::default(),
+        }
+    }
+
+    /// Add `samples` with their weighted residuals (sample-major); an image row's samples come
+    /// in one piece.
+    pub fn add(&mut self, samples: &[&Sample], residuals: &[f64], channels: usize, psi: f64) {
+        self.n += residuals.len();
+        for r in residuals {
+            self.cost += r * r;
+        }
+        if let Some((ss, count)) = &mut self.pixels {
+            let (s, c) = pixel_sums(samples, residuals, channels);
+            *ss += s;
+            *count += c;
+        }
+        for (s, r) in samples.iter().zip(residuals.chunks(channels)) {
+            self.bins.add(s, psi, r);
+        }
+    }
+
+    /// The noise variance the second differences give ([`pixel_estimate`]).
+    pub fn pixel_estimate(&self) -> Option<(f64, usize)> {
+        self.pixels.and_then(pixel_estimate)
+    }
+}
+
+/// [`assess`] from its sums; `repeats` gives the noise estimate from repeated direction pairs
+/// ([`repeats_variance`]), asked for only when no sigmas are given and the neighbouring pixels
+/// give none.
+pub fn assess_sums(
+    sums: &Sums,
+    free_parameters: usize,
+    sigmas_given: bool,
+    repeats: impl FnOnce() -> Option<(f64, usize)>,
+    minima: &[(Vec<(String, f64)>, f64)],
+) -> Quality {
+    let n = sums.n;
+    let p = free_parameters;
     let dof = n.saturating_sub(p).max(1);
-    let cost: f64 = inp.residuals.iter().map(|r| r * r).sum();
+    let cost = sums.cost;
     let s2 = cost / dof as f64;
     let mut warnings = Vec::new();
 
     // noise
     let spread = |k: usize| (2.0 / k as f64).sqrt();
-    let noise = if inp.sigmas_given {
+    let noise = if sigmas_given {
         NoiseCheck {
             source: "sigmas".into(),
             ratio: Some(s2),
@@ -238,11 +375,11 @@ pub fn assess(inp: &Inputs) -> Quality {
             ),
         }
     } else {
-        let pixels = pixel_variance(inp.samples, inp.residuals, inp.channels);
-        let repeats = repeats_variance(inp.samples, inp.scale, inp.channels);
-        match pixels
+        // repeated directions only when the pixels give no estimate (their grouping is costly)
+        match sums
+            .pixel_estimate()
             .map(|e| ("neighbouring pixels", e))
-            .or(repeats.map(|e| ("repeated directions", e)))
+            .or_else(|| repeats().map(|e| ("repeated directions", e)))
         {
             Some((source, (var, k))) if var > 0.0 => {
                 // the ratio of two variance estimates: spread from both
@@ -295,9 +432,8 @@ pub fn assess(inp: &Inputs) -> Quality {
     };
 
     // distinct minima
-    let best = inp.minima.first().map_or(cost, |m| m.1);
-    let all: Vec<MinimumOut> = inp
-        .minima
+    let best = minima.first().map_or(cost, |m| m.1);
+    let all: Vec<MinimumOut> = minima
         .iter()
         .map(|(ps, c)| MinimumOut {
             parameters: ps.iter().cloned().collect(),
@@ -342,27 +478,7 @@ pub fn assess(inp: &Inputs) -> Quality {
 
     // residual structure
     let s_all = s2.sqrt().max(f64::MIN_POSITIVE);
-    let mut theta_h = Vec::new();
-    let mut azim = Vec::new();
-    for (i, s) in inp.samples.iter().enumerate() {
-        if let Some((t, a)) = half_vector_angles(s, inp.psi) {
-            let r = (0..inp.channels)
-                .map(|c| inp.residuals[i * inp.channels + c])
-                .sum::<f64>()
-                / inp.channels as f64;
-            theta_h.push((t, r));
-            azim.push((a, r));
-        }
-    }
-    let edges_t: Vec<f64> = (0..=9).map(|k| 10.0 * k as f64).collect();
-    let edges_a: Vec<f64> = (0..=6).map(|k| 15.0 * k as f64).collect();
-    let mut residual_bins = bins("half-vector angle", &edges_t, &theta_h, s_all);
-    residual_bins.extend(bins(
-        "half-vector azimuth from the fibres",
-        &edges_a,
-        &azim,
-        s_all,
-    ));
+    let residual_bins = sums.bins.bins(s_all);
     let flagged: Vec<String> = residual_bins
         .iter()
         .filter(|b| b.flagged)

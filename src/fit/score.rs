@@ -15,8 +15,9 @@ use super::config::{Knobs, Metric};
 use super::parameters::{ParamSet, Shape};
 use super::problem::FitProblem;
 use super::quality;
-use super::uncertainty::{statistics, Statistics};
-use crate::load::samples::Samples;
+use super::uncertainty::{statistics_of_sums, Statistics};
+use crate::load::capture_store::CaptureStore;
+use crate::load::samples::{Sample, Samples};
 use crate::model::topology::TopologyMap;
 use anyhow::{Context, Result};
 use serde::Serialize;
@@ -53,95 +54,226 @@ pub struct Score {
     pub noise: quality::NoiseCheck,
 }
 
+/// Texels per piece of a capture scored a piece at a time (whole image rows).
+const CHUNK_TEXELS: usize = 16_384;
+
 /// Score `result` against `samples`.
 pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
-    let map = match &result.knobs.topology_map {
+    let map = topology_map(result)?;
+    let ch = samples.channels;
+    let values: Vec<[f64; 3]> = samples.samples.iter().map(|s| s.value).collect();
+    let eps = [0, 1, 2].map(|c| super::problem::log_floor(&values, c));
+    drop(values);
+    let problem = problem_for(result, &map, samples.samples.iter().collect(), eps);
+    let mut run = Running::new(ch, eps);
+    run.add(result, &problem)?;
+    let repeats = || {
+        quality::repeats_estimate(quality::repeats_sums(
+            &problem.samples,
+            problem.scale(),
+            ch,
+        ))
+    };
+    Ok(run.finish(result, repeats))
+}
+
+/// Score `result` against the capture held by `store`, a piece at a time (whole rows of one
+/// image, in the order of [`CaptureStore::to_samples`]): no more than one piece's samples exist
+/// at once, and the numbers are those of [`score`] on every sample (sums in the same order; the
+/// noise from neighbouring pixels summed row by row).
+pub fn score_capture(result: &FittedResult, store: &CaptureStore) -> Result<Score> {
+    score_capture_in_pieces(result, store, CHUNK_TEXELS)
+}
+
+/// [`score_capture`] in pieces of whole image rows of at least `piece_texels` texels.
+pub fn score_capture_in_pieces(
+    result: &FittedResult,
+    store: &CaptureStore,
+    piece_texels: usize,
+) -> Result<Score> {
+    let map = topology_map(result)?;
+    let ch = store.channels;
+    // the log floors: 1 % of each channel's median over every sample
+    let mut eps = [0.0; 3];
+    for (c, e) in eps.iter_mut().enumerate() {
+        *e = super::problem::log_floor_of_magnitudes(store.channel_magnitudes(c.min(ch - 1)));
+    }
+    let mut run = Running::new(ch, eps);
+    let pieces = store.row_chunks(piece_texels);
+    for k in 0..store.images() {
+        for texels in &pieces {
+            let samples = store.image_samples(k, texels.clone());
+            if samples.samples.is_empty() {
+                continue;
+            }
+            let problem = problem_for(result, &map, samples.samples.iter().collect(), eps);
+            run.add(result, &problem)?;
+        }
+    }
+    // repeated directions (asked only without sigmas and neighbours): a texel's pixels in
+    // every image, texels a chunk at a time
+    let repeats = || {
+        let mut sums = (0.0, 0);
+        let all: Vec<usize> = (0..store.texels().len()).collect();
+        for ids in all.chunks(piece_texels) {
+            let samples = store.samples_of(ids);
+            let problem = problem_for(result, &map, samples.samples.iter().collect(), eps);
+            let (ss, dof) = quality::repeats_sums(&problem.samples, problem.scale(), ch);
+            sums.0 += ss;
+            sums.1 += dof;
+        }
+        quality::repeats_estimate(sums)
+    };
+    Ok(run.finish(result, repeats))
+}
+
+fn topology_map(result: &FittedResult) -> Result<Option<Arc<TopologyMap>>> {
+    Ok(match &result.knobs.topology_map {
         Some(p) => Some(Arc::new(
             TopologyMap::load(p).context("the result's knobs.topology_map")?,
         )),
         None => None,
-    };
-    let ch = samples.channels;
+    })
+}
+
+/// The fit's problem on `samples` (the `log` metric's floors `eps` of all the data).
+fn problem_for<'a>(
+    result: &FittedResult,
+    map: &Option<Arc<TopologyMap>>,
+    samples: Vec<&'a Sample>,
+    eps: [f64; 3],
+) -> FitProblem<'a> {
     let problem = FitProblem::new(
-        samples.samples.iter().collect(),
+        samples,
         result.set.clone(),
         result.metric,
         result.knobs.quadrature_order,
         result.knobs.histogram_bins,
-        map,
+        map.clone(),
         false,
     )
     .with_azimuth_nodes(result.knobs.azimuth_nodes);
-    let cols = problem.columns(&result.set)?;
-    let r = problem.residuals(&cols, &result.set);
-    let values = problem.model_values(&cols, &result.set);
-    let mut model_flat = Vec::with_capacity(values.len() * ch);
-    let mut data_flat = Vec::with_capacity(values.len() * ch);
-    for (m, s) in values.iter().zip(&samples.samples) {
-        model_flat.extend_from_slice(&m[..ch]);
-        data_flat.extend_from_slice(&s.value[..ch]);
+    match result.metric {
+        Metric::Log => problem.with_log_floor(eps),
+        _ => problem,
     }
-    let sigmas = samples.samples.iter().all(|s| s.sigma.is_some());
-    let stats = statistics(
-        r.norm_squared(),
-        r.len(),
-        result.free_parameters,
-        sigmas,
-        &model_flat,
-        &data_flat,
-    );
-    let names = if ch == 1 {
-        vec!["grey"]
-    } else {
-        vec!["r", "g", "b"]
-    };
-    let channels = (0..ch)
-        .map(|c| {
-            let pairs: Vec<(f64, f64)> = values
-                .iter()
-                .zip(&samples.samples)
-                .map(|(m, s)| (m[c], s.value[c]))
-                .collect();
-            let n = pairs.len().max(1) as f64;
-            let rms_y = (pairs.iter().map(|p| p.1 * p.1).sum::<f64>() / n).sqrt();
-            let rmse = (pairs.iter().map(|p| (p.0 - p.1).powi(2)).sum::<f64>() / n).sqrt();
-            let eps = super::problem::log_floor(
-                &samples.samples.iter().map(|s| s.value).collect::<Vec<_>>(),
-                c,
-            );
-            let log_error = (pairs
-                .iter()
-                .map(|p| ((p.0.max(0.0) + eps).ln() - (p.1.max(0.0) + eps).ln()).powi(2))
-                .sum::<f64>()
-                / n)
-                .sqrt();
-            ChannelScore {
-                channel: names[c].into(),
-                rmse,
-                relative_rmse: rmse / rms_y.max(f64::MIN_POSITIVE),
-                log_error,
+}
+
+/// A score's sums over the samples, added a piece at a time in the samples' order.
+struct Running {
+    channels: usize,
+    /// Per channel: the floor of the log error (the `log` metric's, of all the data).
+    eps: [f64; 3],
+    samples: usize,
+    chi_square: f64,
+    /// Sum of (model - data)^2 and of data^2 over every value, and the number of values.
+    values: (f64, f64, usize),
+    /// Per channel: sum of (model - data)^2, of data^2, of the squared log error.
+    per_channel: [(f64, f64, f64); 3],
+    sigmas: bool,
+    quality: quality::Sums,
+}
+
+impl Running {
+    fn new(channels: usize, eps: [f64; 3]) -> Self {
+        Self {
+            channels,
+            eps,
+            samples: 0,
+            chi_square: 0.0,
+            values: (0.0, 0.0, 0),
+            per_channel: [(0.0, 0.0, 0.0); 3],
+            sigmas: true,
+            // the second differences are kept in case the data carry no sigmas
+            quality: quality::Sums::new(true),
+        }
+    }
+
+    /// Add the samples of `problem` (its log floors those of all the data).
+    fn add(&mut self, result: &FittedResult, problem: &FitProblem) -> Result<()> {
+        let ch = self.channels;
+        let cols = problem.columns(&result.set)?;
+        let r = problem.residuals(&cols, &result.set);
+        let model = problem.model_values(&cols, &result.set);
+        drop(cols);
+        self.chi_square += r.norm_squared();
+        for (m, s) in model.iter().zip(&problem.samples) {
+            for c in 0..ch {
+                let (m, y) = (m[c], s.value[c]);
+                self.values.0 += (m - y) * (m - y);
+                self.values.1 += y * y;
             }
-        })
-        .collect();
-    let q = quality::assess(&quality::Inputs {
-        samples: &problem.samples,
-        scale: problem.scale(),
-        residuals: r.as_slice(),
-        channels: ch,
-        free_parameters: result.free_parameters,
-        sigmas_given: sigmas,
-        psi: result.set.shape_value(Shape::Azimuth).to_radians(),
-        minima: &[],
-    });
-    Ok(Score {
-        model: result.set.rung.to_string(),
-        samples: samples.samples.len(),
-        statistics: stats,
-        channels,
-        residual_bins: q.residual_bins,
-        verdict: q.verdict,
-        noise: q.noise,
-    })
+            self.values.2 += ch;
+        }
+        for (c, (sq, yy, log)) in self.per_channel.iter_mut().enumerate().take(ch) {
+            let eps = self.eps[c];
+            for (m, s) in model.iter().zip(&problem.samples) {
+                let (m, y) = (m[c], s.value[c]);
+                *sq += (m - y).powi(2);
+                *yy += y * y;
+                *log += ((m.max(0.0) + eps).ln() - (y.max(0.0) + eps).ln()).powi(2);
+            }
+        }
+        self.sigmas &= problem.samples.iter().all(|s| s.sigma.is_some());
+        self.samples += problem.samples.len();
+        self.quality.add(
+            &problem.samples,
+            r.as_slice(),
+            ch,
+            result.set.shape_value(Shape::Azimuth).to_radians(),
+        );
+        Ok(())
+    }
+
+    fn finish(
+        self,
+        result: &FittedResult,
+        repeats: impl FnOnce() -> Option<(f64, usize)>,
+    ) -> Score {
+        let ch = self.channels;
+        let stats = statistics_of_sums(
+            self.chi_square,
+            self.quality.n,
+            result.free_parameters,
+            self.sigmas,
+            self.values,
+        );
+        let names = if ch == 1 {
+            vec!["grey"]
+        } else {
+            vec!["r", "g", "b"]
+        };
+        let n = self.samples.max(1) as f64;
+        let channels = (0..ch)
+            .map(|c| {
+                let (sq, yy, log) = self.per_channel[c];
+                let rms_y = (yy / n).sqrt();
+                let rmse = (sq / n).sqrt();
+                ChannelScore {
+                    channel: names[c].into(),
+                    rmse,
+                    relative_rmse: rmse / rms_y.max(f64::MIN_POSITIVE),
+                    log_error: (log / n).sqrt(),
+                }
+            })
+            .collect();
+        let q = quality::assess_sums(
+            &self.quality,
+            result.free_parameters,
+            self.sigmas,
+            repeats,
+            &[],
+        );
+        Score {
+            model: result.set.rung.to_string(),
+            samples: self.samples,
+            statistics: stats,
+            channels,
+            residual_bins: q.residual_bins,
+            verdict: q.verdict,
+            noise: q.noise,
+        }
+    }
 }
 
 /// The score as text.

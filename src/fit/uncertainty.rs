@@ -16,10 +16,11 @@ pub struct Covariance {
     pub warnings: Vec<String>,
 }
 
-/// `j`: n x p Jacobian; `names`: its column labels; `at_bound[k]`: column k sits on a bound;
-/// `chi2`: sum of squared residuals; `n`: residual count.
+/// `j`: n x p Jacobian (taken, and scaled in place: at camera resolution it is the fit's largest
+/// array); `names`: its column labels; `at_bound[k]`: column k sits on a bound; `chi2`: sum of
+/// squared residuals; `n`: residual count.
 pub fn covariance(
-    j: &DMatrix<f64>,
+    j: DMatrix<f64>,
     names: &[String],
     at_bound: &[bool],
     chi2: f64,
@@ -43,12 +44,14 @@ pub fn covariance(
             warnings,
         };
     }
-    let jk = j.select_columns(&keep);
+    let mut scaled = match keep.len() == p_all {
+        true => j,
+        false => j.select_columns(&keep),
+    };
     // column scaling keeps the SVD threshold meaningful across units
-    let norms: Vec<f64> = (0..jk.ncols())
-        .map(|k| jk.column(k).norm().max(1e-300))
+    let norms: Vec<f64> = (0..scaled.ncols())
+        .map(|k| scaled.column(k).norm().max(1e-300))
         .collect();
-    let mut scaled = jk.clone();
     for (k, nk) in norms.iter().enumerate() {
         scaled.column_mut(k).scale_mut(1.0 / nk);
     }
@@ -161,9 +164,22 @@ pub fn statistics(
     model: &[f64],
     data: &[f64],
 ) -> Statistics {
-    let nn = model.len().max(1) as f64;
     let sq: f64 = model.iter().zip(data).map(|(m, y)| (m - y) * (m - y)).sum();
-    let rms_data = (data.iter().map(|y| y * y).sum::<f64>() / nn).sqrt();
+    let yy: f64 = data.iter().map(|y| y * y).sum();
+    statistics_of_sums(chi2, n, p, sigmas_given, (sq, yy, model.len()))
+}
+
+/// [`statistics`] from sums over the values (data read a piece at a time): `(sq, yy, count)`
+/// = the sum of (model - data)^2, the sum of data^2 and the number of values.
+pub fn statistics_of_sums(
+    chi2: f64,
+    n: usize,
+    p: usize,
+    sigmas_given: bool,
+    (sq, yy, count): (f64, f64, usize),
+) -> Statistics {
+    let nn = count.max(1) as f64;
+    let rms_data = (yy / nn).sqrt();
     let rmse = (sq / nn).sqrt();
     let nf = n as f64;
     let chi_n = (chi2 / nf).max(f64::MIN_POSITIVE);
@@ -194,7 +210,7 @@ mod tests {
         let x = [0.0, 1.0, 2.0, 3.0, 4.0];
         let j = DMatrix::from_fn(5, 2, |i, k| if k == 0 { 1.0 } else { x[i] });
         let chi2 = 3.0; // n - p = 3 -> s^2 = 1
-        let c = covariance(&j, &["a".into(), "b".into()], &[false, false], chi2, 5);
+        let c = covariance(j, &["a".into(), "b".into()], &[false, false], chi2, 5);
         // (X^T X)^-1 = [[0.6, -0.2], [-0.2, 0.1]]
         assert!((c.std_error[0].unwrap() - 0.6f64.sqrt()).abs() < 1e-12);
         assert!((c.std_error[1].unwrap() - 0.1f64.sqrt()).abs() < 1e-12);
@@ -206,7 +222,7 @@ mod tests {
     fn duplicated_column_is_named_as_non_identifiable() {
         let j = DMatrix::from_fn(6, 2, |i, _| i as f64 + 1.0);
         let c = covariance(
-            &j,
+            j,
             &["spacing".into(), "height".into()],
             &[false, false],
             1.0,

@@ -27,6 +27,7 @@ use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::Vec3;
 use crate::model::topology::TopologyMap;
 use anyhow::{bail, Result};
+use std::ops::Range;
 use std::path::{Path, PathBuf};
 
 /// Texels drawn together by [`CaptureStore::sample_texels`].
@@ -392,6 +393,49 @@ impl CaptureStore {
             skipped_examples: vec![],
             image_size: Some((self.width, self.height)),
         }
+    }
+
+    /// The samples of image `k` at the texels `texels` (ascending), in the order of
+    /// [`Self::to_samples`]: a piece of it.
+    pub fn image_samples(&self, k: usize, texels: Range<usize>) -> Samples {
+        Samples {
+            samples: texels.filter_map(|t| self.sample(t, k)).collect(),
+            channels: self.channels,
+            kind: DataKind::Capture,
+            source: self.source.clone(),
+            dropped: self.dropped.clone(),
+            skipped_examples: vec![],
+            image_size: Some((self.width, self.height)),
+        }
+    }
+
+    /// The texels in consecutive ranges of whole image rows, each of at least `min_texels`
+    /// texels but the last: pieces of an image for passes that need a row's pixels together
+    /// (the noise from neighbouring pixels).
+    pub fn row_chunks(&self, min_texels: usize) -> Vec<Range<usize>> {
+        let mut out = Vec::new();
+        let mut start = 0;
+        for t in 1..self.texels.len() {
+            if t - start >= min_texels && self.texels[t].1 != self.texels[t - 1].1 {
+                out.push(start..t);
+                start = t;
+            }
+        }
+        if start < self.texels.len() {
+            out.push(start..self.texels.len());
+        }
+        out
+    }
+
+    /// |BRDF value| of channel `c` of every sample, in no particular order (for a median).
+    pub fn channel_magnitudes(&self, c: usize) -> Vec<f64> {
+        use rayon::prelude::*;
+        (0..self.images())
+            .into_par_iter()
+            .flat_map_iter(|k| {
+                (0..self.texels.len()).filter_map(move |t| self.sample(t, k).map(|s| s.value[c].abs()))
+            })
+            .collect()
     }
 
     /// Every sample, image by image, rows from the top.

@@ -1,7 +1,14 @@
 //! What a data set holds, for `fibrefit inspect`: counts, value ranges, angle coverage, drops.
+//! Counted sample by sample, so a capture is summarised from its compact store without making
+//! every sample at once.
 
-use super::samples::{DataKind, Dropped, Samples};
+use super::capture_store::CaptureStore;
+use super::samples::{DataKind, Dropped, Sample, Samples};
+use super::{is_capture, load_data_with_format, LoadOptions};
+use anyhow::Result;
+use rayon::prelude::*;
 use serde::Serialize;
+use std::path::Path;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Summary {
@@ -30,49 +37,147 @@ pub struct Summary {
     pub delimiter: Option<&'static str>,
 }
 
-impl Summary {
-    pub fn of(s: &Samples) -> Self {
-        let mut brdf_range = vec![(f64::INFINITY, f64::NEG_INFINITY); s.channels];
-        let mut th = ([0u64; 9], [0u64; 9]);
-        let mut ph = ([0u64; 12], [0u64; 12]);
+/// The counts and ranges of [`Summary`], samples added one at a time.
+#[derive(Clone, Debug)]
+struct Tally {
+    samples: usize,
+    brdf_range: Vec<(f64, f64)>,
+    has_sigma: bool,
+    has_topology_map: bool,
+    has_tangent: bool,
+    theta: ([u64; 9], [u64; 9]),
+    phi: ([u64; 12], [u64; 12]),
+}
+
+impl Tally {
+    fn new(channels: usize) -> Self {
+        Self {
+            samples: 0,
+            brdf_range: vec![(f64::INFINITY, f64::NEG_INFINITY); channels],
+            has_sigma: false,
+            has_topology_map: false,
+            has_tangent: false,
+            theta: ([0; 9], [0; 9]),
+            phi: ([0; 12], [0; 12]),
+        }
+    }
+
+    fn add(&mut self, smp: &Sample) {
         let theta_bin = |z: f64| ((z.clamp(-1.0, 1.0).acos().to_degrees() / 10.0) as usize).min(8);
         let phi_bin =
             |x: f64, y: f64| ((y.atan2(x).to_degrees().rem_euclid(360.0) / 30.0) as usize).min(11);
-        for smp in &s.samples {
-            for (c, r) in brdf_range.iter_mut().enumerate() {
-                r.0 = r.0.min(smp.value[c]);
-                r.1 = r.1.max(smp.value[c]);
-            }
-            th.0[theta_bin(smp.l.z)] += 1;
-            th.1[theta_bin(smp.v.z)] += 1;
-            ph.0[phi_bin(smp.l.x, smp.l.y)] += 1;
-            ph.1[phi_bin(smp.v.x, smp.v.y)] += 1;
+        self.samples += 1;
+        for (c, r) in self.brdf_range.iter_mut().enumerate() {
+            r.0 = r.0.min(smp.value[c]);
+            r.1 = r.1.max(smp.value[c]);
         }
+        self.theta.0[theta_bin(smp.l.z)] += 1;
+        self.theta.1[theta_bin(smp.v.z)] += 1;
+        self.phi.0[phi_bin(smp.l.x, smp.l.y)] += 1;
+        self.phi.1[phi_bin(smp.v.x, smp.v.y)] += 1;
+        self.has_sigma |= smp.sigma.is_some();
+        self.has_topology_map |= smp.map_value.is_some() || smp.texel_height.is_some();
+        self.has_tangent |= smp.fibre_azimuth.is_some();
+    }
+
+    /// Both tallies in one (counts add, ranges widen: the order does not matter).
+    fn merge(mut self, other: Tally) -> Tally {
+        self.samples += other.samples;
+        for (a, b) in self.brdf_range.iter_mut().zip(&other.brdf_range) {
+            a.0 = a.0.min(b.0);
+            a.1 = a.1.max(b.1);
+        }
+        self.has_sigma |= other.has_sigma;
+        self.has_topology_map |= other.has_topology_map;
+        self.has_tangent |= other.has_tangent;
+        let add = |a: &mut [u64], b: &[u64]| a.iter_mut().zip(b).for_each(|(x, y)| *x += y);
+        add(&mut self.theta.0, &other.theta.0);
+        add(&mut self.theta.1, &other.theta.1);
+        add(&mut self.phi.0, &other.phi.0);
+        add(&mut self.phi.1, &other.phi.1);
+        self
+    }
+
+    fn summary(
+        self,
+        source: &Path,
+        kind: DataKind,
+        channels: usize,
+        dropped: &Dropped,
+        skipped_examples: &[String],
+    ) -> Summary {
         Summary {
-            source: s.source.display().to_string(),
-            kind: match s.kind {
+            source: source.display().to_string(),
+            kind: match kind {
                 DataKind::Gonio => "goniometric",
                 DataKind::Capture => "image capture",
                 DataKind::Measured => "measured BRDF file",
             },
-            samples: s.samples.len(),
-            channels: s.channels,
-            brdf_range,
-            has_sigma: s.samples.iter().any(|x| x.sigma.is_some()),
-            has_topology_map: s
-                .samples
-                .iter()
-                .any(|x| x.map_value.is_some() || x.texel_height.is_some()),
-            has_tangent: s.samples.iter().any(|x| x.fibre_azimuth.is_some()),
-            theta_light_hist: th.0,
-            theta_view_hist: th.1,
-            phi_light_hist: ph.0,
-            phi_view_hist: ph.1,
-            dropped: s.dropped.clone(),
-            skipped_examples: s.skipped_examples.clone(),
+            samples: self.samples,
+            channels,
+            brdf_range: self.brdf_range,
+            has_sigma: self.has_sigma,
+            has_topology_map: self.has_topology_map,
+            has_tangent: self.has_tangent,
+            theta_light_hist: self.theta.0,
+            theta_view_hist: self.theta.1,
+            phi_light_hist: self.phi.0,
+            phi_view_hist: self.phi.1,
+            dropped: dropped.clone(),
+            skipped_examples: skipped_examples.to_vec(),
             format: None,
             delimiter: None,
         }
+    }
+}
+
+/// The summary `inspect` prints of the data at `path`, loaded exactly as `fit` loads them: a
+/// capture is read into the compact store and summarised pixel by pixel without making every
+/// sample at once; other data are loaded whole (a goniometric CSV with what its header said).
+pub fn summarise(path: &Path, opts: &LoadOptions) -> Result<Summary> {
+    if is_capture(path) {
+        return Ok(Summary::of_capture(&CaptureStore::load(path, opts.subsample)?));
+    }
+    let (samples, format) = load_data_with_format(path, opts)?;
+    let mut summary = Summary::of(&samples);
+    if let Some(f) = format {
+        summary.delimiter = Some(f.delimiter.name());
+        summary.format = Some(f.describe());
+    }
+    Ok(summary)
+}
+
+impl Summary {
+    pub fn of(s: &Samples) -> Self {
+        let mut tally = Tally::new(s.channels);
+        for smp in &s.samples {
+            tally.add(smp);
+        }
+        tally.summary(&s.source, s.kind, s.channels, &s.dropped, &s.skipped_examples)
+    }
+
+    /// The summary of a capture's every sample (those of [`CaptureStore::to_samples`]), made
+    /// one at a time from the store, the images in parallel.
+    pub fn of_capture(store: &CaptureStore) -> Self {
+        let tally = (0..store.images())
+            .into_par_iter()
+            .map(|k| {
+                let mut t = Tally::new(store.channels);
+                for texel in 0..store.texels().len() {
+                    if let Some(s) = store.sample(texel, k) {
+                        t.add(&s);
+                    }
+                }
+                t
+            })
+            .reduce(|| Tally::new(store.channels), Tally::merge);
+        tally.summary(
+            &store.source,
+            DataKind::Capture,
+            store.channels,
+            &store.dropped,
+            &[],
+        )
     }
 
     /// A human-readable report.
