@@ -134,6 +134,8 @@ fn a_ward_fallback_of_a_ward_truth_has_no_warning() {
         fixed,
         at_bound: vec![at],
         fixed_reason: None,
+        grey: false,
+        held: None,
     };
     let bound = fibrefit::fit::ward_fallback::warnings(
         0.1,

@@ -50,6 +50,12 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
             } else {
                 format!("{}[{}]", r.name, ["r", "g", "b"][c])
             };
+            // the full-Jacobian column's name (a grey albedo has one for all channels)
+            let label = if r.grey {
+                r.name.as_str()
+            } else {
+                name.as_str()
+            };
             let line = if r.fixed && r.fixed_reason.as_deref() == Some(PER_TEXEL) {
                 format!("per texel (recovered as a map; {v:.6} is its global start: see [[Maps]])")
             } else if r.fixed {
@@ -59,9 +65,21 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
                 }
             } else if r.at_bound[c] {
                 format!(
-                    "{v:.6} (init = {:.6}) at a bound of [{}, {}]: no standard error",
-                    r.init[c], r.min, r.max
+                    "{v:.6} (init = {:.6}) at a bound of [{}, {}]: no standard error{}",
+                    r.init[c],
+                    r.min,
+                    r.max,
+                    match &r.held {
+                        Some(h) if h.contains(&format!("`{label}` is held")) => format!(" ({h})"),
+                        _ => String::new(),
+                    }
                 )
+            } else if let Some(h) = r
+                .held
+                .as_ref()
+                .filter(|h| r.std_error[c].is_none() && h.contains(&format!("`{label}` is held")))
+            {
+                format!("{v:.6} (init = {:.6}) held: {h}", r.init[c])
             } else {
                 match r.std_error[c] {
                     Some(e) => format!(
@@ -72,7 +90,12 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
                     None => format!("{v:.6} +/- not determined (init = {:.6})", r.init[c]),
                 }
             };
-            let _ = writeln!(t, "    {name:<20} {line}");
+            let grey = if r.grey {
+                " [grey: one value fitted for r, g and b]"
+            } else {
+                ""
+            };
+            let _ = writeln!(t, "    {name:<20} {line}{grey}");
         }
     }
     if !outcome.correlations.is_empty() {

@@ -101,7 +101,9 @@ pub fn result_from_value(
         rgb |= value.is_rgb();
         let fixed = e.get("fixed").and_then(|f| f.as_bool()).unwrap_or(true);
         if !fixed {
-            free += if value.is_rgb() { 3 } else { 1 };
+            // a grey fit of RGB data (ks) is one free parameter, its value repeated per channel
+            let grey = e.get("grey").and_then(|g| g.as_bool()).unwrap_or(false);
+            free += if value.is_rgb() && !grey { 3 } else { 1 };
         }
         // the fitted value only: the fit's bounds are checked against the fitted spacing
         entries.insert(
@@ -276,6 +278,14 @@ pub struct ParamOut {
     /// recovered per texel (a map).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub fixed_reason: Option<String>,
+    /// True when one value was fitted for all channels of RGB data (`value` repeats it per
+    /// channel): `ks` unless the config asked for `colour = true`.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub grey: bool,
+    /// Why a free parameter is held at its value (no standard error): the data do not separate
+    /// it from another one (the `quality.degeneracies` pair).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub held: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -398,6 +408,8 @@ pub fn params_out(outcome: &FitOutcome) -> BTreeMap<String, ParamOut> {
                 fixed: r.fixed,
                 at_bound: r.at_bound.iter().any(|&b| b),
                 fixed_reason: r.fixed_reason.clone().filter(|_| r.fixed),
+                grey: r.grey,
+                held: r.held.clone(),
             },
         );
     }

@@ -22,7 +22,7 @@ pub enum Metric {
     Cosine,
 }
 
-/// One parameter's entry: `value` (start), `min`, `max`, `vary`.
+/// One parameter's entry: `value` (start), `min`, `max`, `vary`, and for `ks` only `colour`.
 #[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ParamEntry {
@@ -30,6 +30,11 @@ pub struct ParamEntry {
     pub min: Option<f64>,
     pub max: Option<f64>,
     pub vary: Option<bool>,
+    /// `ks` only: `true` fits the specular weight per channel of RGB data. By default (`false`)
+    /// it is one grey value shared by the channels: a dielectric fibre's surface reflection is
+    /// colourless, and the dye's colour lives in the albedos (kd, the substrate, the fuzz layer).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub colour: Option<bool>,
 }
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -216,6 +221,10 @@ const NOT_SHAPES: [&str; 9] = [
     "fuzz_depth",
     "fuzz_asymmetry",
 ];
+
+/// The one parameter with a colour choice (`[parameters] ks = { colour = true }`): the specular
+/// weight of the fibre rungs, grey unless asked.
+pub const COLOUR_CHOICE: &str = "ks";
 
 /// `[maps]`: which per-texel maps `fit --maps` recovers beside the global parameters, and how.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -573,6 +582,24 @@ impl FitConfig {
                     "parameters.{name}: not a parameter of `{id}`; its parameters are {}",
                     allowed.join(", ")
                 );
+            }
+            if e.colour.is_some() && name != COLOUR_CHOICE {
+                bail!(
+                    "parameters.{name}.colour: only `{COLOUR_CHOICE}` has a colour choice (the \
+                     albedos kd, substrate_albedo and fuzz are always fitted per channel: the dye's \
+                     colour lives there; shape parameters have no colour)"
+                );
+            }
+            // a fixed `ks` may be RGB (it is not fitted): a result's values read back, say
+            if name == COLOUR_CHOICE && e.colour != Some(true) && e.vary != Some(false) {
+                if let Some(v) = e.value.filter(|v| v.is_rgb()) {
+                    bail!(
+                        "parameters.{name}.value = {:?}: an RGB start for a grey `{name}` (fitted as \
+                         one value shared by the channels unless `colour = true`); give one number, \
+                         or add `colour = true` to fit `{name}` per channel",
+                        v.channels()
+                    );
+                }
             }
             if let (Some(lo), Some(hi)) = (e.min, e.max) {
                 if !(lo <= hi) {

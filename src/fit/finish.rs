@@ -63,21 +63,65 @@ pub fn finish(
             .push(near(a.value[c], a.min, a.min, a.max) || near(a.value[c], a.max, a.min, a.max));
     }
     let jac = full.full_jacobian(&set, &cols)?;
-    let cov = uncertainty::covariance(jac, &names, &at_bound, chi2, n);
+    // pairs the data do not separate, from the covariance with every column free (one at a
+    // bound too: its partner took its role); one of each is held, the others' errors conditional
+    // the Jacobian reduced to its p x p triangle once (QR, in place): both covariances from it
+    let jac = uncertainty::reduce(jac);
+    let cov_free = uncertainty::covariance_of_r(&jac, &names, &vec![false; names.len()], chi2, n);
+    let ranges: Vec<f64> = full
+        .free_shapes()
+        .iter()
+        .map(|&i| {
+            let s = &set.shapes[i];
+            let (lo, hi) = (s.kind.to_internal(s.min), s.kind.to_internal(s.max));
+            if (hi - lo).is_finite() {
+                hi - lo
+            } else {
+                180.0
+            }
+        })
+        .chain(
+            full.free_albedos()
+                .iter()
+                .map(|&(i, _)| set.albedos[i].max - set.albedos[i].min),
+        )
+        .collect();
+    let relative_se: Vec<Option<f64>> = cov_free
+        .std_error
+        .iter()
+        .zip(&ranges)
+        .map(|(e, r)| e.map(|e| e / r.max(f64::MIN_POSITIVE)))
+        .collect();
+    let (degeneracies, held_cols) =
+        quality::degeneracies(&names, &cov_free.correlations, &at_bound, &relative_se);
+    let mut excluded = at_bound.clone();
+    for &k in &held_cols {
+        excluded[k] = true;
+    }
+    let cov = uncertainty::covariance_of_r(&jac, &names, &excluded, chi2, n);
     let mut warnings = notes;
     warnings.extend(cov.warnings.iter().cloned());
+    warnings.extend(degeneracies.iter().map(|d| d.note.clone()));
+    // the held parameters' notes, per full-Jacobian column
+    let held_note = |k: usize| -> Option<String> {
+        degeneracies
+            .iter()
+            .find(|d| d.held == names[k])
+            .map(|d| d.note.clone())
+    };
 
     // per-parameter records in external units
     let mut records = Vec::new();
     let mut col = 0;
     for s in set.shapes.iter() {
-        let (se, ab) = if s.vary {
+        let (se, ab, held) = if s.vary {
             let se = cov.std_error[col].map(|e| if s.kind.log_space() { e * s.value } else { e });
             let ab = at_bound[col];
+            let held = held_note(col);
             col += 1;
-            (se, ab)
+            (se, ab, held)
         } else {
-            (None, false)
+            (None, false, None)
         };
         let value = if s.kind == Shape::Azimuth {
             wrap_azimuth(s.value)
@@ -94,21 +138,29 @@ pub fn finish(
             fixed: !s.vary,
             at_bound: vec![ab],
             fixed_reason: None,
+            grey: false,
+            held,
         });
     }
     for (i, a) in set.albedos.iter().enumerate() {
         let mut se = vec![None; ch];
         let mut ab = vec![false; ch];
+        let mut held: Vec<String> = Vec::new();
         if a.vary {
             for c in 0..ch {
+                // a grey albedo is one column (channel 0) for every channel
+                let cc = if a.grey { 0 } else { c };
                 let k = full
                     .free_albedos()
                     .iter()
-                    .position(|&(ii, cc)| ii == i && cc == c)
+                    .position(|&(ii, x)| ii == i && x == cc)
                     .expect("free albedo");
                 let colk = full.free_shapes().len() + k;
                 se[c] = cov.std_error[colk];
                 ab[c] = at_bound[colk];
+                if let Some(h) = held_note(colk).filter(|h| !held.contains(h)) {
+                    held.push(h);
+                }
             }
         }
         records.push(ParamRecord {
@@ -121,6 +173,8 @@ pub fn finish(
             fixed: !a.vary,
             at_bound: ab,
             fixed_reason: None,
+            grey: a.grey && a.vary,
+            held: (!held.is_empty()).then(|| held.join("; ")),
         });
     }
     for r in &records {
@@ -159,6 +213,7 @@ pub fn finish(
         psi: set.shape_value(Shape::Azimuth).to_radians(),
         minima: &minima,
     });
+    quality.degeneracies = degeneracies;
     // a PNG capture read with the wrong transfer curve (src/fit/encoding_check.rs)
     quality
         .warnings

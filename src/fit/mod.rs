@@ -55,6 +55,15 @@ pub struct ParamRecord {
     /// report and the result ([`parameters::explain_fixed`]).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fixed_reason: Option<String>,
+    /// One value fitted for all channels of RGB data (`value` repeats it per channel): `ks`
+    /// unless the config asks for `colour = true`.
+    #[serde(skip_serializing_if = "std::ops::Not::not")]
+    pub grey: bool,
+    /// Why a free parameter is held at its value for the standard errors: the data do not
+    /// separate it from another one (correlation near +-1, or at a bound where a free one
+    /// would take its role); see [`quality::Degeneracy`].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub held: Option<String>,
 }
 
 /// Everything a fit produced.

@@ -97,6 +97,10 @@ pub struct AlbedoParam {
     pub min: f64,
     pub max: f64,
     pub vary: bool,
+    /// One value shared by the channels of RGB data, fitted as one free parameter (`ks` unless
+    /// the config asks for `colour = true`); `value` holds it in every channel. Always false for
+    /// grey data and for a fixed parameter.
+    pub grey: bool,
 }
 
 /// All parameters of one fit.
@@ -280,6 +284,16 @@ impl ParamSet {
                             bail!("parameters.{name}.value = {x} is outside its bounds [{min}, {max}]");
                         }
                     }
+                    // the specular weight of dielectric fibres is colourless: one value for all
+                    // channels unless the config asks for colour (FitConfig::validate refuses an
+                    // RGB start for it)
+                    let grey = channels > 1
+                        && vary
+                        && name == super::config::COLOUR_CHOICE
+                        && e.colour != Some(true);
+                    if grey && value.is_rgb() {
+                        bail!("parameters.{name}: an RGB start for a grey `{name}`; give one number or `colour = true`");
+                    }
                     albedos.push(AlbedoParam {
                         component,
                         name,
@@ -288,6 +302,7 @@ impl ParamSet {
                         min,
                         max,
                         vary,
+                        grey,
                     });
                 }
                 None => {
@@ -357,17 +372,28 @@ impl ParamSet {
             .collect()
     }
 
-    /// (albedo index, channel) of every varying albedo channel.
+    /// (albedo index, channel) of every varying albedo channel; a grey albedo of RGB data is
+    /// one free parameter, listed as channel 0 (its value is every channel's).
     pub fn free_albedos(&self) -> Vec<(usize, usize)> {
         let mut out = Vec::new();
         for (i, a) in self.albedos.iter().enumerate() {
             if a.vary {
-                for c in 0..self.channels {
+                let channels = if a.grey { 1 } else { self.channels };
+                for c in 0..channels {
                     out.push((i, c));
                 }
             }
         }
         out
+    }
+
+    /// Names of the albedos fitted as one grey value for RGB data.
+    pub fn grey_albedos(&self) -> Vec<&'static str> {
+        self.albedos
+            .iter()
+            .filter(|a| a.vary && a.grey)
+            .map(|a| a.name)
+            .collect()
     }
 }
 

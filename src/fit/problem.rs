@@ -291,7 +291,11 @@ impl<'a> FitProblem<'a> {
         if !self.separable {
             let off = self.free_shapes.len();
             for (k, &(i, c)) in self.free_albedos.iter().enumerate() {
-                set.albedos[i].value[c] = theta[off + k];
+                if set.albedos[i].grey {
+                    set.albedos[i].value = [theta[off + k]; 3];
+                } else {
+                    set.albedos[i].value[c] = theta[off + k];
+                }
             }
         }
         set
@@ -426,7 +430,9 @@ impl<'a> FitProblem<'a> {
         Ok(cols)
     }
 
-    /// Solve the albedos exactly for fixed columns (bounded linear least squares per channel).
+    /// Solve the albedos exactly for fixed columns: bounded linear least squares per channel,
+    /// or, with a grey albedo (one value shared by the channels, `AlbedoParam::grey`), the
+    /// joint problem of all channels (`solve_with_shared`).
     pub fn solve_albedos(&self, cols: &[Columns], set: &mut ParamSet) {
         let m = set.albedos.len();
         let comp: Vec<usize> = set
@@ -439,10 +445,10 @@ impl<'a> FitProblem<'a> {
             .iter()
             .map(|&a| (set.albedos[a].min, set.albedos[a].max))
             .collect();
-        for c in 0..self.channels() {
-            // Gram matrix and right-hand side with fixed albedos moved to the data side
-            let mut g = [[0.0f64; 4]; 4];
-            let mut h = [0.0f64; 4];
+        let ch = self.channels();
+        // Gram matrix and right-hand side per channel, with fixed albedos moved to the data side
+        let mut grams = [([[0.0f64; 4]; 4], [0.0f64; 4]); 3];
+        for (c, (g, h)) in grams.iter_mut().enumerate().take(ch) {
             for (i, (s, (col, sc))) in self
                 .samples
                 .iter()
@@ -463,10 +469,42 @@ impl<'a> FitProblem<'a> {
                     }
                 }
             }
-            let sol = bounded_small_lsq(&g, &h, &free, &bounds);
+        }
+        let grey: Vec<usize> = (0..free.len())
+            .filter(|&k| ch > 1 && set.albedos[free[k]].grey)
+            .collect();
+        let per_channel: Vec<Vec<f64>> = if grey.is_empty() {
+            (0..ch)
+                .map(|c| bounded_small_lsq(&grams[c].0, &grams[c].1, &free, &bounds))
+                .collect()
+        } else if grey.len() == free.len() {
+            // every free albedo grey: one system, the channels' normal equations summed
+            let (mut g, mut h) = ([[0.0f64; 4]; 4], [0.0f64; 4]);
+            for (gc, hc) in &grams[..ch] {
+                for a in 0..4 {
+                    h[a] += hc[a];
+                    for b in 0..4 {
+                        g[a][b] += gc[a][b];
+                    }
+                }
+            }
+            vec![bounded_small_lsq(&g, &h, &free, &bounds); ch]
+        } else {
+            assert_eq!(
+                grey.len(),
+                1,
+                "at most one grey albedo beside coloured ones (only ks has the choice)"
+            );
+            solve_with_shared(&grams[..ch], &free, &bounds, grey[0])
+        };
+        for (c, sol) in per_channel.iter().enumerate() {
             for (k, &a) in free.iter().enumerate() {
                 set.albedos[a].value[c] = sol[k];
             }
+        }
+        // a grey albedo holds its one value in every channel, also for grey data's unused ones
+        for a in set.albedos.iter_mut().filter(|a| a.grey && a.vary) {
+            a.value = [a.value[0]; 3];
         }
     }
 
@@ -594,21 +632,29 @@ impl<'a> FitProblem<'a> {
         }
         let off = self.free_shapes.len();
         let values = self.model_values(cols, set);
-        for (k, &(ai, c)) in self.free_albedos.iter().enumerate() {
+        for (k, &(ai, c0)) in self.free_albedos.iter().enumerate() {
             let comp = component_index(set.albedos[ai].component);
+            // a grey albedo is one column over every channel's rows
+            let channels = if set.albedos[ai].grey {
+                0..ch
+            } else {
+                c0..c0 + 1
+            };
             for (i, (s, col)) in self.samples.iter().zip(cols).enumerate() {
-                let sc = self.scale[i][c];
-                j[(i * ch + c, off + k)] = match self.metric {
-                    Metric::Linear | Metric::Cosine => sc * col[comp],
-                    Metric::Log => {
-                        let eps = self.log_floor[c];
-                        let kk = match s.sigma {
-                            Some(sig) => (s.value[c].max(0.0) + eps) / sig[c],
-                            None => s.weight.sqrt(),
-                        };
-                        kk * col[comp] / (values[i][c].max(0.0) + eps)
-                    }
-                };
+                for c in channels.clone() {
+                    let sc = self.scale[i][c];
+                    j[(i * ch + c, off + k)] = match self.metric {
+                        Metric::Linear | Metric::Cosine => sc * col[comp],
+                        Metric::Log => {
+                            let eps = self.log_floor[c];
+                            let kk = match s.sigma {
+                                Some(sig) => (s.value[c].max(0.0) + eps) / sig[c],
+                                None => s.weight.sqrt(),
+                            };
+                            kk * col[comp] / (values[i][c].max(0.0) + eps)
+                        }
+                    };
+                }
             }
         }
         Ok(j)
@@ -813,7 +859,7 @@ pub fn albedos_of(set: &ParamSet) -> model::Albedos {
 }
 
 pub fn albedo_label(set: &ParamSet, i: usize, c: usize) -> String {
-    if set.channels == 1 {
+    if set.channels == 1 || set.albedos[i].grey {
         set.albedos[i].name.to_string()
     } else {
         format!("{}[{}]", set.albedos[i].name, ["r", "g", "b"][c])
@@ -831,6 +877,118 @@ pub fn describe(set: &ParamSet) -> String {
         parts.push(format!("{} = {:?}", a.name, &a.value[..set.channels]));
     }
     parts.join(", ")
+}
+
+/// The albedos of every channel when one of them, `free[shared]`, is a single value for all
+/// channels (a grey `ks` beside per-channel `kd`): min over s and a_c of
+/// sum_c [a_c s]^T G_c [a_c s] - 2 [a_c s]^T h_c, all within bounds. For a fixed s each channel's
+/// a_c is a small bounded problem ([`bounded_small_lsq`] with s moved to the data side); the cost
+/// F(s) minimised over them is convex, with derivative (envelope theorem)
+/// F'(s) = 2 sum_c (G_c[s,s] s - h_c[s] + G_c[s,.] a_c(s)), nondecreasing, so s is the root of F'
+/// in its bounds (or the bound where F' does not change sign), found by bisection and made exact
+/// by one secant step on the linear piece where both ends share the channels' active sets.
+/// Returns per channel the values of `free`, in its order (the shared one equal in all).
+pub(crate) fn solve_with_shared(
+    grams: &[([[f64; 4]; 4], [f64; 4])],
+    free: &[usize],
+    bounds: &[(f64, f64)],
+    shared: usize,
+) -> Vec<Vec<f64>> {
+    let sk = free[shared];
+    let others: Vec<usize> = (0..free.len()).filter(|&k| k != shared).collect();
+    let other_free: Vec<usize> = others.iter().map(|&k| free[k]).collect();
+    let other_bounds: Vec<(f64, f64)> = others.iter().map(|&k| bounds[k]).collect();
+    // the other albedos of every channel at s, and F'(s) / 2
+    let inner = |s: f64| -> (Vec<Vec<f64>>, f64) {
+        let mut d = 0.0;
+        let sols = grams
+            .iter()
+            .map(|(g, h)| {
+                let mut h2 = *h;
+                for &a in &other_free {
+                    h2[a] -= g[a][sk] * s;
+                }
+                let sol = bounded_small_lsq(g, &h2, &other_free, &other_bounds);
+                d += g[sk][sk] * s - h[sk];
+                for (k, &a) in other_free.iter().enumerate() {
+                    d += g[sk][a] * sol[k];
+                }
+                sol
+            })
+            .collect();
+        (sols, d)
+    };
+    let active = |sols: &[Vec<f64>]| -> Vec<Vec<i8>> {
+        sols.iter()
+            .map(|sol| {
+                sol.iter()
+                    .zip(&other_bounds)
+                    .map(|(&v, &(lo, hi))| {
+                        if v <= lo {
+                            -1
+                        } else if v >= hi {
+                            1
+                        } else {
+                            0
+                        }
+                    })
+                    .collect()
+            })
+            .collect()
+    };
+    let (lo, hi) = bounds[shared];
+    let (sol_lo, d_lo) = inner(lo);
+    let s = if d_lo >= 0.0 {
+        lo
+    } else {
+        let (sol_hi, d_hi) = inner(hi);
+        if d_hi <= 0.0 {
+            hi
+        } else {
+            let (mut a, mut b) = (lo, hi);
+            let (mut da, mut db) = (d_lo, d_hi);
+            let (mut act_a, mut act_b) = (active(&sol_lo), active(&sol_hi));
+            let mut root = None;
+            for _ in 0..200 {
+                // F' is linear between a and b when both share the active sets (and the point
+                // the secant gives does too): its root, exactly; else bisect
+                let m = if act_a == act_b {
+                    (a - da * (b - a) / (db - da)).clamp(a, b)
+                } else {
+                    0.5 * (a + b)
+                };
+                if !(m > a && m < b) {
+                    break; // the bracket is as narrow as f64 allows
+                }
+                let (sol_m, dm) = inner(m);
+                if act_a == act_b && active(&sol_m) == act_a {
+                    root = Some(m);
+                    break;
+                }
+                if dm == 0.0 {
+                    root = Some(m);
+                    break;
+                }
+                if dm < 0.0 {
+                    (a, da, act_a) = (m, dm, active(&sol_m));
+                } else {
+                    (b, db, act_b) = (m, dm, active(&sol_m));
+                }
+            }
+            root.unwrap_or(0.5 * (a + b))
+        }
+    };
+    let (sols, _) = inner(s);
+    sols.into_iter()
+        .map(|sol| {
+            let mut out = vec![0.0; free.len()];
+            out[shared] = s;
+            for (k, &o) in others.iter().enumerate() {
+                out[o] = sol[k];
+            }
+            out
+        })
+        .collect()
 }
 
 /// min over a of a^T G a - 2 a^T h with a_k in bounds, for the `free` indices (at most 3):
@@ -1025,6 +1183,143 @@ mod tests {
         );
         // with a1 = 0: 2 a0 = 2 -> a0 = 1
         assert!((a[0] - 1.0).abs() < 1e-12 && a[1].abs() < 1e-12, "{a:?}");
+    }
+}
+
+#[cfg(test)]
+mod shared_albedo_tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// sum_c of the joint objective and its gradient for per-channel values `x[c]` (in `free`'s
+    /// order).
+    fn objective(
+        grams: &[([[f64; 4]; 4], [f64; 4])],
+        free: &[usize],
+        x: &[Vec<f64>],
+    ) -> (f64, Vec<Vec<f64>>) {
+        let mut f = 0.0;
+        let mut grad = Vec::new();
+        for ((g, h), xc) in grams.iter().zip(x) {
+            let mut gc = vec![0.0; free.len()];
+            for (i, &a) in free.iter().enumerate() {
+                f -= 2.0 * xc[i] * h[a];
+                gc[i] -= 2.0 * h[a];
+                for (j, &b) in free.iter().enumerate() {
+                    f += xc[i] * xc[j] * g[a][b];
+                    gc[i] += 2.0 * g[a][b] * xc[j];
+                }
+            }
+            grad.push(gc);
+        }
+        (f, grad)
+    }
+
+    /// Gram matrices of random columns (kd, ks, fuzz) and data of three channels.
+    fn grams(seed: u64, truth: &[[f64; 3]; 3], correlated: f64) -> Vec<([[f64; 4]; 4], [f64; 4])> {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+        let cols: Vec<[f64; 4]> = (0..200)
+            .map(|_| {
+                let d: f64 = rng.random_range(0.1..1.0);
+                let s: f64 = correlated * d + (1.0 - correlated) * rng.random_range(0.0..2.0);
+                [d, s, 0.0, rng.random_range(0.0..0.5)]
+            })
+            .collect();
+        (0..3)
+            .map(|c| {
+                let mut g = [[0.0; 4]; 4];
+                let mut h = [0.0; 4];
+                for col in &cols {
+                    let noise: f64 = rng.random_range(-0.01..0.01);
+                    let y =
+                        truth[0][c] * col[0] + truth[1][c] * col[1] + truth[2][c] * col[3] + noise;
+                    for a in [0, 1, 3] {
+                        h[a] += col[a] * y;
+                        for b in [0, 1, 3] {
+                            g[a][b] += col[a] * col[b];
+                        }
+                    }
+                }
+                (g, h)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn a_shared_albedo_meets_the_joint_optimality_conditions() {
+        let free = [0usize, 1, 3];
+        let bounds = [(0.0, 1.0), (0.0, 1.0), (0.0, 1.0)];
+        // kd per channel, ks (grey truth or not), fuzz per channel; the last case pushes kd[b]
+        // and the fuzz to their bounds and has a ks whose best grey value is inside
+        let cases: [([[f64; 3]; 3], f64); 4] = [
+            ([[0.5, 0.1, 0.05], [0.3, 0.3, 0.3], [0.2, 0.1, 0.3]], 0.0),
+            ([[0.5, 0.1, 0.05], [0.6, 0.2, 0.1], [0.2, 0.1, 0.3]], 0.0),
+            ([[0.5, 0.1, 0.02], [0.3, 0.3, 0.3], [0.0, 0.1, 0.0]], 0.9),
+            ([[0.6, 0.2, -0.3], [0.5, 0.4, 0.6], [-0.2, 0.4, 1.4]], 0.5),
+        ];
+        for (k, (truth, corr)) in cases.iter().enumerate() {
+            let g = grams(k as u64, truth, *corr);
+            let x = solve_with_shared(&g, &free, &bounds, 1);
+            assert!(
+                x.iter().all(|xc| xc[1] == x[0][1]),
+                "case {k}: shared value differs"
+            );
+            let (f, grad) = objective(&g, &free, &x);
+            let scale: f64 = g.iter().map(|(gc, _)| gc[0][0]).sum::<f64>();
+            let tol = 1e-9 * scale;
+            // KKT: per-channel variables and the shared one (its gradient summed over channels)
+            let check = |v: f64, d: f64, (lo, hi): (f64, f64), what: &str| {
+                if v <= lo {
+                    assert!(
+                        d >= -tol,
+                        "case {k}: {what} at its lower bound with gradient {d}"
+                    );
+                } else if v >= hi {
+                    assert!(
+                        d <= tol,
+                        "case {k}: {what} at its upper bound with gradient {d}"
+                    );
+                } else {
+                    assert!(
+                        d.abs() <= tol,
+                        "case {k}: {what} = {v} inside with gradient {d}"
+                    );
+                }
+            };
+            for c in 0..3 {
+                for i in [0usize, 2] {
+                    check(
+                        x[c][i],
+                        grad[c][i],
+                        bounds[i],
+                        &format!("channel {c} albedo {i}"),
+                    );
+                }
+            }
+            let d_shared: f64 = grad.iter().map(|gc| gc[1]).sum();
+            check(x[0][1], d_shared, bounds[1], "the shared albedo");
+            // and no nearby feasible point is better (a coarse scan of the shared value)
+            for t in 0..=40 {
+                let s = t as f64 / 40.0;
+                let mut y = x.clone();
+                for (c, (gc, hc)) in g.iter().enumerate() {
+                    let mut h2 = *hc;
+                    for a in [0usize, 3] {
+                        h2[a] -= gc[a][1] * s;
+                    }
+                    let sol = bounded_small_lsq(gc, &h2, &[0, 3], &[bounds[0], bounds[2]]);
+                    y[c] = vec![sol[0], s, sol[1]];
+                }
+                assert!(
+                    objective(&g, &free, &y).0 >= f - tol,
+                    "case {k}: s = {s} beats the solution"
+                );
+            }
+        }
+        // the grey truth is recovered where the data allow
+        let g = grams(0, &cases[0].0, 0.0);
+        let x = solve_with_shared(&g, &free, &bounds, 1);
+        assert!((x[0][1] - 0.3).abs() < 0.01, "{}", x[0][1]);
     }
 }
 

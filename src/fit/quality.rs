@@ -25,6 +25,9 @@ pub const BIN_Z_LIMIT: f64 = 4.0;
 pub const CHI2_Z_LIMIT: f64 = 5.0;
 /// Minima within this many residual variances of the best are not decided by the data.
 pub const AMBIGUOUS_DELTA: f64 = 4.0;
+/// Two free parameters whose correlation is this close to +-1 (computed with every free
+/// parameter free, those at a bound too) are not separated by the data: one of them is held.
+pub const DEGENERATE_CORRELATION: f64 = 0.995;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Quality {
@@ -41,7 +44,104 @@ pub struct Quality {
     /// True when another minimum's cost is within 4 residual variances of the best.
     pub ambiguous: bool,
     pub residual_bins: Vec<ResidualBin>,
+    /// Pairs of parameters the data do not separate, most correlated first, and which of each
+    /// pair is held ([`degeneracies`]).
+    pub degeneracies: Vec<Degeneracy>,
     pub warnings: Vec<String>,
+}
+
+/// Two parameters the data do not separate: their correlation is within
+/// 1 - [`DEGENERATE_CORRELATION`] of +-1 (with every free parameter free, also one at a bound,
+/// whose role the other then takes: kd at 0 beside a broad specular lobe, say).
+#[derive(Clone, Debug, Serialize)]
+pub struct Degeneracy {
+    pub a: String,
+    pub b: String,
+    /// Their correlation, every free parameter free.
+    pub correlation: f64,
+    /// The one held: at its bound (where it ended), or at its fitted value for the standard
+    /// errors (the less determined of the two, relative to its range); the other's standard
+    /// error is conditional on it.
+    pub held: String,
+    /// "at its bound" or "at its fitted value".
+    pub held_at: String,
+    pub note: String,
+}
+
+/// The pairs of free parameters (full-Jacobian columns named `names`) the data do not separate,
+/// from `correlations` of the covariance with every column free: |r| >= [`DEGENERATE_CORRELATION`],
+/// most correlated first. Of each pair one is held: one at a bound (`at_bound`) if either is,
+/// else the one with the larger standard error relative to its range (`relative_se`, None: not
+/// determined at all); a pair one of whose parameters is already held adds none. Returns the
+/// pairs and the columns newly held at their fitted values (not at a bound).
+pub fn degeneracies(
+    names: &[String],
+    correlations: &[(usize, usize, f64)],
+    at_bound: &[bool],
+    relative_se: &[Option<f64>],
+) -> (Vec<Degeneracy>, Vec<usize>) {
+    let mut pairs: Vec<&(usize, usize, f64)> = correlations
+        .iter()
+        .filter(|x| x.2.abs() >= DEGENERATE_CORRELATION)
+        .collect();
+    pairs.sort_by(|x, y| y.2.abs().total_cmp(&x.2.abs()));
+    let mut held_cols: Vec<usize> = Vec::new();
+    let mut out = Vec::new();
+    for &&(a, b, r) in &pairs {
+        let is_held = |k: usize| at_bound[k] || held_cols.contains(&k);
+        let (held, at_bound_held) = if is_held(a) || is_held(b) {
+            // already held (at a bound, or for a more correlated pair): the pair needs no other
+            let k = if is_held(b) && !is_held(a) {
+                b
+            } else if is_held(a) && !is_held(b) {
+                a
+            } else if at_bound[b] {
+                b
+            } else {
+                a
+            };
+            (k, at_bound[k])
+        } else {
+            let rel = |k: usize| relative_se[k].unwrap_or(f64::INFINITY);
+            let k = if rel(b) > rel(a) { b } else { a };
+            held_cols.push(k);
+            (k, false)
+        };
+        let other = if held == a { b } else { a };
+        let held_at = if at_bound_held {
+            "at its bound"
+        } else {
+            "at its fitted value"
+        };
+        let note = format!(
+            "the data do not separate `{}` and `{}` (correlation {r:+.4}{}): `{}` is held {held_at}{}",
+            names[a],
+            names[b],
+            if at_bound[a] || at_bound[b] {
+                ", with the one at its bound free"
+            } else {
+                ""
+            },
+            names[held],
+            if at_bound_held {
+                format!(", where `{}` takes its role", names[other])
+            } else {
+                format!(
+                    " (no standard error; `{}`'s is conditional on it): give data that tell them apart, or fix one in the config",
+                    names[other]
+                )
+            }
+        );
+        out.push(Degeneracy {
+            a: names[a].clone(),
+            b: names[b].clone(),
+            correlation: r,
+            held: names[held].clone(),
+            held_at: held_at.into(),
+            note,
+        });
+    }
+    (out, held_cols)
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -503,6 +603,7 @@ pub fn assess_sums(
         minima_beyond,
         ambiguous,
         residual_bins,
+        degeneracies: Vec::new(),
         warnings,
     }
 }
@@ -546,6 +647,45 @@ mod tests {
             weight: 1.0,
             origin,
         }
+    }
+
+    #[test]
+    fn pairs_the_data_do_not_separate_are_named_and_one_of_each_held() {
+        let names: Vec<String> = ["exponent", "spacing", "azimuth_spread_deg", "kd[r]", "ks"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect();
+        // spacing ~ spread (spread less determined), kd[r] at its bound ~ ks, exponent ~ spacing
+        // below the threshold, and spread ~ exponent after spread is held (no second hold)
+        let correlations = [(1, 2, 0.998), (3, 4, -0.996), (0, 1, 0.99), (0, 2, 0.9955)];
+        let at_bound = [false, false, false, true, false];
+        let rel = [Some(0.01), Some(0.02), Some(0.3), None, Some(0.05)];
+        let (d, held) = degeneracies(&names, &correlations, &at_bound, &rel);
+        assert_eq!(held, vec![2], "{d:?}");
+        assert_eq!(d.len(), 3, "{d:?}");
+        assert_eq!(
+            (d[0].a.as_str(), d[0].b.as_str(), d[0].held.as_str()),
+            ("spacing", "azimuth_spread_deg", "azimuth_spread_deg")
+        );
+        assert_eq!(d[0].held_at, "at its fitted value");
+        assert!(
+            d[0].note.contains("+0.9980") && d[0].note.contains("conditional"),
+            "{}",
+            d[0].note
+        );
+        assert_eq!(
+            (d[1].held.as_str(), d[1].held_at.as_str()),
+            ("kd[r]", "at its bound")
+        );
+        assert!(
+            d[1].note.contains("-0.9960") && d[1].note.contains("`ks` takes its role"),
+            "{}",
+            d[1].note
+        );
+        assert_eq!(d[2].held, "azimuth_spread_deg");
+        // nothing near +-1: nothing held
+        let (d, held) = degeneracies(&names, &[(0, 1, 0.9)], &at_bound, &rel);
+        assert!(d.is_empty() && held.is_empty());
     }
 
     #[test]

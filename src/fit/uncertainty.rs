@@ -16,7 +16,7 @@ pub struct Covariance {
     pub warnings: Vec<String>,
 }
 
-/// `j`: n x p Jacobian (taken, and scaled in place: at camera resolution it is the fit's largest
+/// `j`: n x p Jacobian (taken, and reduced in place: at camera resolution it is the fit's largest
 /// array); `names`: its column labels; `at_bound[k]`: column k sits on a bound; `chi2`: sum of
 /// squared residuals; `n`: residual count.
 pub fn covariance(
@@ -26,6 +26,29 @@ pub fn covariance(
     chi2: f64,
     n: usize,
 ) -> Covariance {
+    covariance_of_r(&reduce(j), names, at_bound, chi2, n)
+}
+
+/// The n x p Jacobian `j` reduced to the triangle R of its QR factorisation (min(n, p) x p,
+/// factored in place): R^T R = J^T J, its columns have J's norms and any selection of its columns
+/// has the singular values and right singular vectors of the same selection of J's, so every
+/// covariance of J can be had from R — several (different columns held) without copying J.
+pub fn reduce(j: DMatrix<f64>) -> DMatrix<f64> {
+    match j.nrows() > j.ncols() {
+        true => j.qr().r(),
+        false => j,
+    }
+}
+
+/// [`covariance`] from `r`: the Jacobian or its [`reduce`]d triangle.
+pub fn covariance_of_r(
+    r: &DMatrix<f64>,
+    names: &[String],
+    at_bound: &[bool],
+    chi2: f64,
+    n: usize,
+) -> Covariance {
+    let j = r;
     let p_all = j.ncols();
     let keep: Vec<usize> = (0..p_all).filter(|&k| !at_bound[k]).collect();
     let mut std_error = vec![None; p_all];
@@ -44,10 +67,7 @@ pub fn covariance(
             warnings,
         };
     }
-    let mut scaled = match keep.len() == p_all {
-        true => j,
-        false => j.select_columns(&keep),
-    };
+    let mut scaled = j.select_columns(&keep);
     // column scaling keeps the SVD threshold meaningful across units
     let norms: Vec<f64> = (0..scaled.ncols())
         .map(|k| scaled.column(k).norm().max(1e-300))

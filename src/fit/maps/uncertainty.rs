@@ -173,9 +173,13 @@ pub(super) fn inflate_records(
     }
     for (i, a) in set.albedos.iter().enumerate() {
         if a.vary {
-            for c in 0..outcome.records[n_shapes + i].std_error.len() {
+            // a grey albedo (ks) is one column of the full parameter vector for every channel
+            let channels = outcome.records[n_shapes + i].std_error.len();
+            for c in 0..channels {
                 widen(&mut outcome.records[n_shapes + i], c, inflation[col]);
-                col += 1;
+                if !a.grey || c + 1 == channels {
+                    col += 1;
+                }
             }
         }
     }
