@@ -3,9 +3,14 @@
 //! tangent maps, fitted by the `fibrefit` binary as a user runs it, each run a child process
 //! whose wall time, CPU time and peak resident memory are read from `/proc`:
 //! 1. the global fit given the maps (the capture TOML names them);
-//! 2. map recovery, maps + globals (`fit --maps`, the maps left out of the TOML).
+//! 2. map recovery, maps + globals (`fit --maps`, the maps left out of the TOML);
+//! 3. map recovery of the same swatch seen from the same directions as a capture rig takes it
+//!    ([`Rig::Near`]): pinhole cameras and point lights [`RIG_DISTANCE_MM`] from the swatch,
+//!    image 0's light a flash beside its lens, so every texel sees its own directions
+//!    ([`pinhole_rows`], with how far the direction lattice's blend is from the model).
 //!
-//! Goals (issue 13, 2 cores): (1) <= 30 s and <= 1 GB; (2) <= 3 minutes and <= 1.5 GB.
+//! Goals (issues 13 and 24, 2 cores): (1) <= 30 s and <= 1 GB; (2) and (3) <= 3 minutes and
+//! <= 1.5 GB, (3) as accurate as (2).
 
 use crate::load::capture_store::CaptureStore;
 use crate::model::topology::TopologyMap;
@@ -14,8 +19,43 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// (light theta, phi; camera theta, phi) in degrees, as `bench --maps`' 8-image case.
+/// (light theta, phi; camera theta, phi) in degrees, as `bench --maps`' 8-image case, but for
+/// image 0's light: the flash beside its camera's lens ([`flash_direction`]).
 const IMAGES: [[f64; 4]; 8] = super::maps::EIGHT_IMAGES;
+
+/// Distance (mm) of the near rig's pinhole cameras and point lights from the swatch centre
+/// (the swatch is 20 mm across: the directions turn by up to ~4 degrees over it).
+pub const RIG_DISTANCE_MM: f64 = 300.0;
+/// How far (mm) image 0's flash sits beside its camera's lens (the camera looks straight down).
+pub const FLASH_OFFSET_MM: f64 = 40.0;
+
+/// Where the lights and cameras are.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Rig {
+    /// Directional lights and orthographic cameras: every texel sees the same directions.
+    Distant,
+    /// Point lights and pinhole cameras [`RIG_DISTANCE_MM`] from the swatch centre in the
+    /// same directions (from the centre), image 0's light the flash.
+    Near,
+}
+
+/// Position (mm, swatch frame) at `RIG_DISTANCE_MM` in direction (theta, phi) degrees.
+fn rig_position(theta_deg: f64, phi_deg: f64) -> [f64; 3] {
+    let d =
+        crate::model::frame::direction_from_angles(theta_deg.to_radians(), phi_deg.to_radians())
+            * RIG_DISTANCE_MM;
+    [d.x, d.y, d.z]
+}
+
+/// The flash of image 0: [`FLASH_OFFSET_MM`] along x beside a camera straight above the swatch
+/// centre, as its position (mm) and its direction (theta, phi, degrees) from the centre.
+pub fn flash_direction() -> ([f64; 3], [f64; 2]) {
+    let p = [FLASH_OFFSET_MM, 0.0, RIG_DISTANCE_MM];
+    (
+        p,
+        [FLASH_OFFSET_MM.atan2(RIG_DISTANCE_MM).to_degrees(), 0.0],
+    )
+}
 
 /// The truth the capture is rendered from (RGB albedos).
 const TRUTH: &str = r#"model = "varying-topology"
@@ -96,6 +136,15 @@ pub struct CameraRun {
     /// Bytes the compact store holds per pixel value.
     pub store_bytes_per_value: f64,
     pub synth_seconds: f64,
+    /// The near rig's capture ([`pinhole_rows`]): its rendering time and how far the direction
+    /// lattice's blend lies from the model.
+    pub pinhole: Option<PinholeRun>,
+}
+
+/// What [`pinhole_rows`] measured besides its row.
+pub struct PinholeRun {
+    pub synth_seconds: f64,
+    pub blend: crate::fit::maps::BlendError,
 }
 
 /// Run `cmd` to its end, reading its peak resident memory (VmHWM) and CPU time (utime + stime
@@ -154,14 +203,60 @@ pub fn measure(mut cmd: Command, log: &Path) -> Result<Cost> {
     })
 }
 
-fn synth_config(size: usize) -> String {
+/// The synth config of the benchmark's capture, `size` x `size` pixels of a 20 mm swatch, seen
+/// by `rig`.
+pub fn synth_config(size: usize, rig: Rig) -> String {
+    synth_config_of(size, 20.0, rig)
+}
+
+/// [`synth_config`] of a swatch `size_mm` across (a smaller one at the same distance sees
+/// directions that turn less across it).
+pub fn synth_config_of(size: usize, size_mm: f64, rig: Rig) -> String {
     let mut s = format!(
-        "{TRUTH}[topology_map]\nwidth = {size}\nheight = {size}\nseed = 3\n[capture]\nwidth = {size}\nheight = {size}\nsize_mm = [20.0, 20.0]\nformat = \"exr\"\ntangent = {{ from_deg = -30, to_deg = 40 }}\n"
+        "{TRUTH}[topology_map]\nwidth = {size}\nheight = {size}\nseed = 3\n[capture]\nwidth = {size}\nheight = {size}\nsize_mm = [{size_mm:?}, {size_mm:?}]\nformat = \"exr\"\ntangent = {{ from_deg = -30, to_deg = 40 }}\n"
     );
-    for [lt, lp, vt, vp] in IMAGES {
-        s += &format!(
-            "[[capture.images]]\nlight = {{ type = \"directional\", theta_deg = {lt}, phi_deg = {lp}, irradiance = 1.0 }}\ncamera = {{ type = \"orthographic\", theta_deg = {vt}, phi_deg = {vp} }}\n"
-        );
+    let (flash_at, [flash_theta, flash_phi]) = flash_direction();
+    let point = |p: [f64; 3]| {
+        // irradiance 1 at the swatch centre, as the directional lights'
+        let r_m = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt() / 1000.0;
+        format!(
+            "{{ type = \"point\", position_mm = [{:.6}, {:.6}, {:.6}], intensity = {:.9} }}",
+            p[0],
+            p[1],
+            p[2],
+            r_m * r_m
+        )
+    };
+    for (k, [lt, lp, vt, vp]) in IMAGES.into_iter().enumerate() {
+        let flash = k == 0;
+        let (light, camera) = match rig {
+            Rig::Distant => {
+                let (lt, lp) = if flash {
+                    (flash_theta, flash_phi)
+                } else {
+                    (lt, lp)
+                };
+                (
+                    format!("{{ type = \"directional\", theta_deg = {lt}, phi_deg = {lp}, irradiance = 1.0 }}"),
+                    format!("{{ type = \"orthographic\", theta_deg = {vt}, phi_deg = {vp} }}"),
+                )
+            }
+            Rig::Near => {
+                let c = rig_position(vt, vp);
+                (
+                    point(if flash {
+                        flash_at
+                    } else {
+                        rig_position(lt, lp)
+                    }),
+                    format!(
+                        "{{ type = \"pinhole\", position_mm = [{:.6}, {:.6}, {:.6}] }}",
+                        c[0], c[1], c[2]
+                    ),
+                )
+            }
+        };
+        s += &format!("[[capture.images]]\nlight = {light}\ncamera = {camera}\n");
     }
     s + "[noise]\nrelative = 0.01\nseed = 5\n"
 }
@@ -174,7 +269,7 @@ pub fn run(
     bar: &indicatif::ProgressBar,
 ) -> Result<CameraRun> {
     let d = scratch.join("d");
-    std::fs::write(scratch.join("synth.toml"), synth_config(size))?;
+    std::fs::write(scratch.join("synth.toml"), synth_config(size, Rig::Distant))?;
     bar.set_message("camera: rendering the capture");
     let t = Instant::now();
     crate::synth::run(&scratch.join("synth.toml"), &d, true)?;
@@ -269,7 +364,7 @@ pub fn run(
         .arg("-q");
     let cost = measure(cmd, &scratch.join("maps.log"))?;
     rows.push(row(
-        "maps (H, psi) + globals",
+        "maps (H, psi) + globals: directional lights, orthographic cameras",
         texels,
         values,
         &cost,
@@ -283,12 +378,79 @@ pub fn run(
         .find(|r| r.job == "global fit given the maps")
         .map_or(f64::INFINITY, |r| r.peak_mb);
     rows.extend(memory_rows(exe, scratch, size, fit_peak, bar)?);
+    // the orthographic capture's files are not needed any more (8 x 1 Mpx: 100 MB of EXRs)
+    std::fs::remove_dir_all(&d)?;
+    let (pinhole_row, pinhole) = pinhole_rows(exe, scratch, size, bar)?;
+    rows.push(pinhole_row);
     Ok(CameraRun {
         size,
         rows,
         store_bytes_per_value,
         synth_seconds,
+        pinhole: Some(pinhole),
     })
+}
+
+/// Map recovery of the near rig's capture ([`Rig::Near`]: point lights and pinhole cameras,
+/// image 0's light a flash beside its lens) in `scratch/near`, as the orthographic row's, and
+/// the direction lattice's blend against the model at 256 of its texels.
+pub fn pinhole_rows(
+    exe: &Path,
+    scratch: &Path,
+    size: usize,
+    bar: &indicatif::ProgressBar,
+) -> Result<(CameraRow, PinholeRun)> {
+    let dir = scratch.join("near");
+    std::fs::create_dir_all(&dir)?;
+    let d = dir.join("d");
+    std::fs::write(dir.join("synth.toml"), synth_config(size, Rig::Near))?;
+    bar.set_message("camera: rendering the pinhole capture");
+    let t = Instant::now();
+    crate::synth::run(&dir.join("synth.toml"), &d, true)?;
+    let synth_seconds = t.elapsed().as_secs_f64();
+    let blind = super::maps::write_blind(&d)?;
+    std::fs::write(dir.join("maps.toml"), FIT_MAPS)?;
+    let store = CaptureStore::load(&blind, Default::default())?;
+    let (texels, values) = (store.texels().len(), store.sample_count());
+    let bytes = store.bytes() as f64 / values as f64;
+    // the blend at the truth's exponent (a sharper lobe than the fit's start)
+    let cfg: crate::fit::config::FitConfig =
+        toml::from_str(&FIT_MAPS.replace("exponent = { value = 20,", "exponent = { value = 40,"))?;
+    let blend = crate::fit::maps::blend_error(&store, &cfg, 256, 8, 11)?;
+    drop(store);
+    bar.set_message("camera: pinhole maps + globals");
+    let mut cmd = Command::new(exe);
+    cmd.arg("fit")
+        .arg(&blind)
+        .arg("--config")
+        .arg(dir.join("maps.toml"))
+        .arg("--out")
+        .arg(dir.join("maps.json"))
+        .arg("--maps")
+        .arg(dir.join("maps"))
+        .arg("-q");
+    let cost = measure(cmd, &dir.join("maps.log"))?;
+    let (flash, _) = flash_direction();
+    let row = row(
+        &format!(
+            "maps (H, psi) + globals: point lights, pinhole cameras {RIG_DISTANCE_MM:.0} mm away (image 0 lit by a flash {:.0} mm beside its lens)",
+            flash[0]
+        ),
+        texels,
+        values,
+        &cost,
+        bytes,
+        (180.0, 1536.0),
+        map_accuracy(&d, &dir.join("maps"))?,
+    );
+    bar.inc(1);
+    Ok((
+        row,
+        PinholeRun {
+            synth_seconds,
+            blend,
+        },
+    ))
 }
 
 fn row(

@@ -150,7 +150,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
             bail!("--camera {size}: the capture needs at least 8 x 8 pixels");
         }
         let t = Instant::now();
-        let bar = crate::progress::bar(2, "camera", args.quiet);
+        let bar = crate::progress::bar(3, "camera", args.quiet);
         let scratch = tempfile::tempdir()?;
         let exe = std::env::current_exe()?;
         let run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;

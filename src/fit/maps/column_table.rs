@@ -2,9 +2,11 @@
 //! texel that sees the same directions, and the cache of such tables.
 
 use super::*;
+use crate::model::frame::Vec3;
 
 /// Column tables kept at most, and direction sets tracked before giving up (texels whose
-/// directions all differ, a pinhole camera's or a point light's, evaluate the model exactly).
+/// directions all differ, a pinhole camera's or a point light's, read a [`DirectionLattice`]
+/// instead, or evaluate the model directly where there is none).
 pub(super) const TABLE_ENTRIES: usize = 16;
 pub(super) const TRACKED_KEYS: usize = 4096;
 /// Table nodes per grid step: 4 in H (H_max / 64), 16 in psi (0.9375 degrees).
@@ -64,18 +66,29 @@ impl ColumnTable {
     }
 
     pub(super) fn build(texel: &Texel, g: &Globals, start: &TexelValues) -> Self {
-        let (nh, np) = Self::dims(texel.free);
-        let mut cols = Vec::with_capacity(nh * np * texel.obs.len());
+        let dirs: Vec<(Vec3, Vec3)> = texel.obs.iter().map(|s| (s.l, s.v)).collect();
+        Self::build_for(&dirs, texel.free, g, start)
+    }
+
+    /// The table of observations with light and view directions `dirs` (swatch frame).
+    pub(super) fn build_for(
+        dirs: &[(Vec3, Vec3)],
+        free: Free,
+        g: &Globals,
+        start: &TexelValues,
+    ) -> Self {
+        let (nh, np) = Self::dims(free);
+        let mut cols = Vec::with_capacity(nh * np * dirs.len());
         for j in 0..nh {
             for k in 0..np {
                 let (h, psi) = Self::node(nh, np, g, start, j, k);
-                cols.extend(texel.columns(g, h, psi));
+                cols.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi));
             }
         }
         Self {
             nh,
             np,
-            nobs: texel.obs.len(),
+            nobs: dirs.len(),
             cols,
         }
     }
@@ -85,8 +98,8 @@ impl ColumnTable {
         &self.cols[i..i + self.nobs]
     }
 
-    /// Bilinear interpolation at (H, psi).
-    pub(super) fn interpolate(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+    /// The four nodes around (H, psi) with their weights: (j0, j1, t in H; k0, k1, u in psi).
+    fn around(&self, g: &Globals, h: f64, psi: f64) -> (usize, usize, f64, usize, usize, f64) {
         let (j0, t) = if self.nh > 1 {
             let f = (h.clamp(0.0, g.h_max) / g.h_max.max(1e-300)) * (self.nh - 1) as f64;
             let j0 = (f.floor() as usize).min(self.nh - 2);
@@ -101,8 +114,12 @@ impl ColumnTable {
         } else {
             (0, 0.0)
         };
-        let j1 = (j0 + 1).min(self.nh - 1);
-        let k1 = (k0 + 1) % self.np;
+        (j0, (j0 + 1).min(self.nh - 1), t, k0, (k0 + 1) % self.np, u)
+    }
+
+    /// Bilinear interpolation at (H, psi).
+    pub(super) fn interpolate(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+        let (j0, j1, t, k0, k1, u) = self.around(g, h, psi);
         let (a, b, c, d) = (
             self.at(j0, k0),
             self.at(j0, k1),
@@ -117,6 +134,68 @@ impl ColumnTable {
                 })
             })
             .collect()
+    }
+
+    /// Add `weight` times the interpolation at (H, psi) of the observations `rows` to `out`
+    /// (one entry per row): the lattice's blend ([`DirectionLattice`]).
+    pub(super) fn accumulate(
+        &self,
+        g: &Globals,
+        h: f64,
+        psi: f64,
+        rows: &[usize],
+        weight: f64,
+        out: &mut [[f64; 4]],
+    ) {
+        let (j0, j1, t, k0, k1, u) = self.around(g, h, psi);
+        let (a, b, c, d) = (
+            self.at(j0, k0),
+            self.at(j0, k1),
+            self.at(j1, k0),
+            self.at(j1, k1),
+        );
+        let w = [
+            weight * (1.0 - t) * (1.0 - u),
+            weight * (1.0 - t) * u,
+            weight * t * (1.0 - u),
+            weight * t * u,
+        ];
+        for (o, &r) in out.iter_mut().zip(rows) {
+            for m in 0..4 {
+                o[m] += w[0] * a[r][m] + w[1] * b[r][m] + w[2] * c[r][m] + w[3] * d[r][m];
+            }
+        }
+    }
+}
+
+/// The shared table or the lattice's blend: where a texel's grid and coarse searches read
+/// their model columns.
+pub(super) enum Tabled {
+    /// One table for every texel that sees the same directions: exact at its nodes.
+    Shared(Arc<ColumnTable>),
+    /// The lattice's blend for a texel with directions of its own: approximate at the nodes
+    /// too, so grid costs that matter are evaluated again with the model.
+    Blend(Blend),
+}
+
+impl Tabled {
+    pub(super) fn at(&self, j: usize, k: usize) -> std::borrow::Cow<'_, [[f64; 4]]> {
+        match self {
+            Tabled::Shared(t) => std::borrow::Cow::Borrowed(t.at(j, k)),
+            Tabled::Blend(b) => std::borrow::Cow::Owned(b.at(j, k)),
+        }
+    }
+
+    pub(super) fn interpolate(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+        match self {
+            Tabled::Shared(t) => t.interpolate(g, h, psi),
+            Tabled::Blend(b) => b.interpolate(g, h, psi),
+        }
+    }
+
+    /// Whether the table's node columns are the model's own (the shared table's are).
+    pub(super) fn exact_at_nodes(&self) -> bool {
+        matches!(self, Tabled::Shared(_))
     }
 }
 

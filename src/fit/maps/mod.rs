@@ -46,6 +46,7 @@ use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
 mod column_table;
+mod direction_lattice;
 mod global_stage;
 mod outputs;
 mod texel;
@@ -53,6 +54,10 @@ mod texel_stage;
 mod uncertainty;
 
 use column_table::*;
+use direction_lattice::*;
+pub use direction_lattice::{
+    blend_error, lattice_nodes, BlendError, LATTICE_MIN_CELL, LATTICE_STEP_DEG,
+};
 pub use global_stage::*;
 pub use outputs::*;
 use texel::*;

@@ -3,6 +3,7 @@
 //! linearly), with its standard errors and other minima.
 
 use super::*;
+use crate::model::frame::Vec3;
 
 /// Everything a per-texel fit needs from the globals.
 pub(super) struct Globals<'m> {
@@ -15,6 +16,9 @@ pub(super) struct Globals<'m> {
     pub(super) albedo: [[f64; 3]; 4],
     /// Model columns over (H, psi) by the texels' directions ([`ColumnTable`]).
     pub(super) tables: TableCache,
+    /// Column tables over the image for texels with directions of their own (pinhole
+    /// cameras, point lights): [`Globals::with_lattice`].
+    pub(super) lattice: Option<DirectionLattice>,
 }
 
 /// The rung at the globals `set` with the knobs of `cfg` (no map: texels carry their height).
@@ -38,8 +42,49 @@ impl<'m> Globals<'m> {
             channels,
             albedo: globals_albedo(set),
             tables: TableCache::default(),
+            lattice: None,
         }
     }
+
+    /// With the [`DirectionLattice`] of `store` where its texels' directions vary across the
+    /// image (pinhole cameras, point lights) and both H and psi are mapped: their grids and
+    /// coarse searches then read blended node tables instead of evaluating the model.
+    pub(super) fn with_lattice(mut self, store: &CaptureStore, free: Free) -> Self {
+        self.lattice = DirectionLattice::of_store(store, free);
+        self
+    }
+}
+
+/// Columns [diffuse, specular, substrate, fuzz] (diffuse + substrate in the first where tied)
+/// of observations with light and view directions `dirs` at (H, psi), one model batch.
+pub(super) fn model_columns<'a>(
+    g: &Globals,
+    dirs: impl Iterator<Item = (&'a Vec3, &'a Vec3)>,
+    h: f64,
+    psi: f64,
+) -> Vec<[f64; 4]> {
+    let frame = FibreFrame::from_azimuth(psi.to_radians());
+    let pairs: Vec<DirectionPair> = dirs
+        .map(|(l, v)| DirectionPair::new(&frame, l, v))
+        .collect();
+    // one texel is one pattern seen in every image: one batch
+    let mut bases = vec![Basis::default(); pairs.len()];
+    if !(g.has_topology
+        && g.model
+            .basis_many_at_height(&pairs, h.clamp(0.0, g.h_max), &mut bases))
+    {
+        g.model.basis_many(&pairs, &mut bases);
+    }
+    bases
+        .iter()
+        .map(|b| {
+            if g.tied {
+                [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
+            } else {
+                [b.diffuse, b.specular, b.substrate, b.fuzz]
+            }
+        })
+        .collect()
 }
 
 /// One texel's problem.
@@ -82,30 +127,7 @@ impl Texel {
 
     /// Columns of every observation at (H, psi).
     pub(super) fn columns(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
-        let frame = FibreFrame::from_azimuth(psi.to_radians());
-        let pairs: Vec<DirectionPair> = self
-            .obs
-            .iter()
-            .map(|s| DirectionPair::new(&frame, &s.l, &s.v))
-            .collect();
-        // one texel is one pattern seen in every image: one batch
-        let mut bases = vec![Basis::default(); pairs.len()];
-        if !(g.has_topology
-            && g.model
-                .basis_many_at_height(&pairs, h.clamp(0.0, g.h_max), &mut bases))
-        {
-            g.model.basis_many(&pairs, &mut bases);
-        }
-        bases
-            .iter()
-            .map(|b| {
-                if g.tied {
-                    [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
-                } else {
-                    [b.diffuse, b.specular, b.substrate, b.fuzz]
-                }
-            })
-            .collect()
+        model_columns(g, self.obs.iter().map(|s| (&s.l, &s.v)), h, psi)
     }
 
     /// Albedos of the texel (mapped ones solved linearly, bounded to [0, 1]) and the weighted
@@ -190,7 +212,7 @@ impl Texel {
         g: &Globals,
         base: &TexelValues,
         u: &[f64],
-        table: &ColumnTable,
+        table: &Tabled,
     ) -> (f64, TexelValues) {
         let mut v = self.at_nonlinear(g, base, u);
         let cols = table.interpolate(g, v.height, v.psi);
@@ -265,16 +287,22 @@ impl Texel {
             v.psi = psi;
             v
         };
-        let table = g
-            .tables
-            .get(self.grid_key(start), || ColumnTable::build(self, g, start));
+        // a texel with directions of its own reads the lattice where there is one; else the
+        // table shared by the texels with its directions (none for a direction set met once)
+        let table = match g.lattice.as_ref().and_then(|l| l.blend(self, g)) {
+            Some(b) => Some(Tabled::Blend(b)),
+            None => g
+                .tables
+                .get(self.grid_key(start), || ColumnTable::build(self, g, start))
+                .map(Tabled::Shared),
+        };
         let grid: Vec<(f64, TexelValues)> = (0..nh * np)
             .map(|k| {
                 let mut v = point(k);
                 let r = match &table {
                     Some(t) => {
                         let (j, l) = node_of(k);
-                        self.solve(g, t.at(j, l), &mut v)
+                        self.solve(g, &t.at(j, l), &mut v)
                     }
                     None => {
                         let cols = self.columns(g, v.height, v.psi);
@@ -318,7 +346,7 @@ impl Texel {
         let mut minima: Vec<(TexelValues, f64)> = Vec::new();
         for (v, c) in candidates {
             // on the table where there is one, then the model's own cost there
-            let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table.as_deref());
+            let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table.as_ref());
             let (v, c) = match table {
                 Some(_) => {
                     let (c, v) = self.cost_at(g, start, &self.nonlinear(&v));
@@ -346,6 +374,7 @@ impl Texel {
         // the grid's profiles (best over the other value at each grid height, and at each grid
         // azimuth) count as other candidates too: a flat profile is an undetermined value even
         // where it has no separate minimum
+        let profiles = minima.len();
         for i in 0..nh {
             if let Some(k) =
                 (0..np).min_by(|a, b| grid[i * np + a].0.total_cmp(&grid[i * np + b].0))
@@ -362,6 +391,21 @@ impl Texel {
                 minima.push((v, c));
             }
         }
+        // a blended table is the model only to within its blend: the profile's costs that could
+        // make the texel ambiguous (within what the texel stage keeps of other minima, in this
+        // texel's own residual variance) are the model's own
+        if table.as_ref().is_some_and(|t| !t.exact_at_nodes()) {
+            let residuals = self.obs.len() * g.channels;
+            let dof = residuals.saturating_sub(per_texel_unknowns(self.free, g.channels));
+            let margin = MINIMA_MARGIN * AMBIGUITY_DELTA * best_cost / dof.max(1) as f64;
+            for m in minima[profiles..]
+                .iter_mut()
+                .filter(|m| m.1 - best_cost <= margin)
+            {
+                let (c, v) = self.cost_at(g, start, &self.nonlinear(&m.0));
+                *m = (v, c);
+            }
+        }
         (best, best_cost, minima)
     }
 
@@ -375,7 +419,7 @@ impl Texel {
         v: TexelValues,
         c: f64,
         (from, to): (f64, f64),
-        table: Option<&ColumnTable>,
+        table: Option<&Tabled>,
     ) -> (TexelValues, f64) {
         let (mut best, mut best_cost) = (v, c);
         let mut best_u = self.nonlinear(&best);

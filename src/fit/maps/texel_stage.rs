@@ -49,7 +49,7 @@ pub fn texel_stage(
     let free = free_of(req);
     let set = fix_mapped(set, req);
     let model = rung_of(&set, cfg);
-    let g = Globals::of(&set, model.as_ref(), store.channels);
+    let g = Globals::of(&set, model.as_ref(), store.channels).with_lattice(store, free);
     let sweeps = if req.smoothness > 0.0 {
         1 + PRIOR_SWEEPS
     } else {
