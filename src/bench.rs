@@ -15,6 +15,7 @@ pub mod maps;
 pub mod report;
 pub mod robustness;
 pub mod sampling;
+pub mod selection;
 pub mod shader;
 
 use crate::fit::config::FitConfig;

@@ -1,13 +1,27 @@
-//! `--model auto` picks the cheapest rung the data need (1 % noise each): `lambert` for
-//! Lambertian data, `poulin-fournier` for flat fibres with gaps, `varying-topology` for climbing
-//! fibres with a topology map.
+//! `--model auto` (issue 23): candidates compared by their cross-validated error, the simplest
+//! within one standard error of the best chosen. It picks the cheapest rung the data need
+//! (`lambert` for Lambertian data, `poulin-fournier` for flat fibres with gaps,
+//! `varying-topology` for climbing fibres with a topology map), a fibre rung with the fuzz layer
+//! when the truth has one, the same choice on every fold when the truth is clear; and data
+//! without sigmas spanning decades are fitted and judged in the log metric, which the report
+//! and the result say.
 
-use fibrefit::fit::config::FitConfig;
-use fibrefit::fit::selection::{select, table};
+use assert_cmd::Command;
+use fibrefit::fit::config::{FitConfig, Metric};
+use fibrefit::fit::selection::{rule_choice, select, table, SelectionOutcome};
+use fibrefit::load::samples::Samples;
 use fibrefit::load::{load_data, LoadOptions};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
-fn synth(dir: &Path, model: &str, params: &str) -> std::path::PathBuf {
+fn synth_text(dir: &Path, name: &str, text: &str) -> PathBuf {
+    let p = dir.join(format!("{name}.toml"));
+    std::fs::write(&p, text).unwrap();
+    let out = dir.join(name);
+    fibrefit::synth::run(&p, &out, true).unwrap();
+    out
+}
+
+fn synth(dir: &Path, model: &str, params: &str) -> PathBuf {
     let text = format!(
         r#"
 model = "{model}"
@@ -24,11 +38,7 @@ relative = 0.01
 seed = 3
 "#
     );
-    let p = dir.join(format!("{model}.toml"));
-    std::fs::write(&p, text).unwrap();
-    let out = dir.join(model);
-    fibrefit::synth::run(&p, &out, true).unwrap();
-    out
+    synth_text(dir, model, &text)
 }
 
 fn auto_config(map: &Path) -> FitConfig {
@@ -68,7 +78,6 @@ fn chosen(dir: &Path, model: &str, params: &str) -> String {
 #[test]
 fn auto_picks_the_cheapest_sufficient_rung() {
     let dir = tempfile::tempdir().unwrap();
-    assert_eq!(chosen(dir.path(), "lambert", "kd = 0.6"), "lambert");
     assert_eq!(
         chosen(
             dir.path(),
@@ -85,4 +94,196 @@ fn auto_picks_the_cheapest_sufficient_rung() {
         ),
         "varying-topology"
     );
+}
+
+/// Grey samples of a synthetic truth without their sigmas (as a measurement that gives none).
+fn without_sigmas(d: &Path) -> Samples {
+    let mut data = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
+    for s in &mut data.samples {
+        s.sigma = None;
+    }
+    data
+}
+
+/// Every fold's own errors lead the rule to the pooled choice.
+fn same_choice_on_every_fold(s: &SelectionOutcome) {
+    let pooled = rule_choice(&s.candidates, None, None).unwrap();
+    assert!(s.candidates[pooled].chosen);
+    assert_eq!(s.folds, 5, "{}", s.validation);
+    for j in 0..s.folds {
+        let k = rule_choice(&s.candidates, Some(j), None).unwrap();
+        assert_eq!(
+            s.candidates[k].name, s.candidates[pooled].name,
+            "fold {j} alone chooses otherwise:\n{}",
+            table(s)
+        );
+    }
+}
+
+fn small_auto(rungs: &str) -> FitConfig {
+    let cfg: FitConfig = toml::from_str(&format!(
+        "model = \"auto\"\nstarts = 2\nseed = 2\n[optimizer]\nglobal_candidates = 24\n\
+         global_subsample = 300\n[selection]\nrungs = [{rungs}]\n"
+    ))
+    .unwrap();
+    cfg.validate().unwrap();
+    cfg
+}
+
+#[test]
+fn cross_validation_picks_lambert_for_a_small_noisy_lambertian_set() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = synth_text(
+        dir.path(),
+        "lambert",
+        "model = \"lambert\"\n[params]\nkd = 0.6\n[gonio]\n\
+         random = { count = 200, seed = 4, max_theta_deg = 80 }\n\
+         [noise]\nrelative = 0.05\nseed = 6\n",
+    );
+    let data = without_sigmas(&d);
+    let s = select(&data, &small_auto("\"lambert\", \"hast-diffuse\", \"ward\", \"max-normal\"")).unwrap();
+    eprintln!("{}", table(&s));
+    assert_eq!(s.chosen, "lambert");
+    assert_eq!(s.validation, "5-fold cross-validation");
+    // every sample held out once, each candidate with and without the fuzz layer
+    assert_eq!(s.heldout_samples, 200);
+    assert_eq!(s.candidates.len(), 8);
+    assert!(s.candidates.iter().any(|c| c.name == "ward + fuzz"));
+    for c in s.candidates.iter().filter(|c| c.error.is_none()) {
+        assert_eq!(c.fold_errors.len(), 5, "{}", c.name);
+        assert!(c.cv_standard_error > 0.0 && c.cv_standard_error < c.cv_error, "{}", c.name);
+    }
+    same_choice_on_every_fold(&s);
+}
+
+#[test]
+fn a_fibre_truth_with_a_fuzz_layer_picks_a_fibre_rung_with_fuzz() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = synth_text(
+        dir.path(),
+        "fuzzy",
+        "model = \"poulin-fournier\"\n[params]\nkd = 0.3\nks = 0.3\nexponent = 20\nspacing = 2.4\n\
+         fibre_azimuth_deg = 10\nfuzz = 3.0\nfuzz_depth = 0.2\nfuzz_asymmetry = 0.6\n\
+         [gonio]\nrandom = { count = 600, seed = 3, max_theta_deg = 80 }\n\
+         [noise]\nrelative = 0.01\nseed = 5\n",
+    );
+    let data = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
+    let s = select(
+        &data,
+        &small_auto("\"lambert\", \"ward\", \"max-normal\", \"poulin-fournier\""),
+    )
+    .unwrap();
+    eprintln!("{}", table(&s));
+    assert!(s.chosen_fuzz, "{}", table(&s));
+    assert!(
+        ["max-normal", "poulin-fournier"].contains(&s.chosen_rung.as_str()),
+        "{}",
+        table(&s)
+    );
+    // the layer pays: the rung without it is worse beyond the noise
+    let plain = s
+        .candidates
+        .iter()
+        .find(|c| c.name == s.chosen_rung)
+        .unwrap();
+    let fuzz = s.candidates.iter().find(|c| c.chosen).unwrap();
+    assert!(
+        plain.cv_error > fuzz.cv_error + 3.0 * fuzz.cv_standard_error,
+        "{}",
+        table(&s)
+    );
+    same_choice_on_every_fold(&s);
+}
+
+#[test]
+fn the_no_fuzz_setting_and_the_fuzz_flag_set_the_candidates() {
+    let mut cfg = small_auto("\"lambert\", \"ward\"");
+    let names = |c: &FitConfig| -> Vec<String> {
+        fibrefit::fit::selection::candidates_of(c)
+            .unwrap()
+            .into_iter()
+            .map(|c| c.0)
+            .collect()
+    };
+    assert_eq!(names(&cfg), ["lambert", "lambert + fuzz", "ward", "ward + fuzz"]);
+    cfg.selection.fuzz = false;
+    assert_eq!(names(&cfg), ["lambert", "ward"]);
+    // --fuzz (a fuzz parameter listed): every rung with the layer
+    let mut with = small_auto("\"lambert\", \"ward\"");
+    with.parameters.insert("fuzz_depth".into(), Default::default());
+    assert_eq!(names(&with), ["lambert + fuzz", "ward + fuzz"]);
+}
+
+fn fibrefit() -> Command {
+    Command::cargo_bin("fibrefit").unwrap()
+}
+
+/// `gonio.csv` of `d` without its sigma columns, written to `out`.
+fn strip_sigmas(d: &Path, out: &Path) {
+    let text = std::fs::read_to_string(d.join("gonio.csv")).unwrap();
+    let lines: Vec<String> = text
+        .lines()
+        .map(|l| l.split(',').take(7).collect::<Vec<_>>().join(","))
+        .collect();
+    std::fs::write(out, lines.join("\n") + "\n").unwrap();
+}
+
+#[test]
+fn data_spanning_decades_without_sigmas_are_fitted_in_the_log_metric_and_the_report_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    // a sharp lobe over a dark base: values span far more than a decade
+    let d = synth_text(
+        dir.path(),
+        "hdr",
+        "model = \"max-normal\"\n[params]\nkd = 0.02\nks = 0.6\nexponent = 200\n\
+         [gonio]\nrandom = { count = 300, seed = 7, max_theta_deg = 75 }\n\
+         [noise]\nrelative = 0.01\nseed = 8\n",
+    );
+    let csv = dir.path().join("hdr.csv");
+    strip_sigmas(&d, &csv);
+    let data = load_data(&csv, &LoadOptions::default()).unwrap();
+    assert_eq!(fibrefit::fit::config::metric_for_data(&data).0, Metric::Log);
+    let out = dir.path().join("r.json");
+    let o = fibrefit()
+        .arg("fit")
+        .arg(&csv)
+        .args(["--model", "lambert", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let report = String::from_utf8_lossy(&o.stdout);
+    assert!(report.contains("metric: log, chosen from the data"), "{report}");
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(r["knobs"]["metric"], "log");
+    assert!(
+        r["knobs"]["metric_reason"]
+            .as_str()
+            .unwrap()
+            .contains("no sigmas"),
+        "{r}"
+    );
+    // --metric overrides
+    let o = fibrefit()
+        .arg("fit")
+        .arg(&csv)
+        .args(["--model", "lambert", "--metric", "linear", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success());
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert_eq!(r["knobs"]["metric"], "linear");
+    // with sigmas the same values stay linear (chi-square against their noise)
+    let with = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
+    assert_eq!(fibrefit::fit::config::metric_for_data(&with).0, Metric::Linear);
+    // and a Lambertian set without sigmas (a factor of a few) stays linear
+    let l = synth_text(
+        dir.path(),
+        "flat",
+        "model = \"lambert\"\n[params]\nkd = 0.6\n[gonio]\n\
+         random = { count = 100, seed = 4, max_theta_deg = 60 }\n\
+         [noise]\nrelative = 0.02\nseed = 6\n",
+    );
+    assert_eq!(fibrefit::fit::config::metric_for_data(&without_sigmas(&l)).0, Metric::Linear);
 }

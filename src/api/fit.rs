@@ -21,7 +21,9 @@ use std::path::{Path, PathBuf};
 
 /// The configuration of a fit: a config file, or the defaults of a rung (`model`), with
 /// `model`, `metric` and `fuzz` overriding it; validated. Without a config a measured-BRDF file
-/// (.bsdf, .binary) is fitted with the log metric, and a named rung frees every shape parameter
+/// (.bsdf, .binary) is fitted with the log metric; other data without a named metric (no
+/// `--metric`, no `metric` in the config) take the metric they ask for when loaded
+/// ([`crate::fit::config::metric_for_data`]). A named rung frees every shape parameter
 /// as `auto` does ([`FitConfig::free_unlisted_shapes`]: starts and bounds there). `--model`
 /// over a config written for another rung ignores the parameters that rung lacks, with a note
 /// ([`FitConfig::retarget`]).
@@ -41,6 +43,10 @@ pub fn configure(
             });
             if measured {
                 c.metric = Metric::Log;
+                c.metric_reason =
+                    Some("log: a measured-BRDF file (values spanning decades, no sigmas)".into());
+            } else {
+                c.metric_follows_data = true;
             }
             c
         }
@@ -56,6 +62,11 @@ pub fn configure(
     if let Some(m) = metric {
         cfg.metric = serde_json::from_value(serde_json::Value::String(m.to_string()))
             .map_err(|_| anyhow!("--metric {m}: expected linear, log or cosine"))?;
+        cfg.metric_follows_data = false;
+        cfg.metric_reason = Some(format!("{m}: --metric {m}"));
+    } else if config.is_some() && !cfg.metric_follows_data {
+        let m = crate::fit::selection::metric_name(cfg.metric);
+        cfg.metric_reason = Some(format!("{m}: the config's `metric`"));
     }
     if fuzz {
         cfg.parameters.entry("fuzz_depth".into()).or_default();
@@ -146,9 +157,9 @@ fn fit_texel_sample(store: &CaptureStore, cfg: &FitConfig) -> Vec<usize> {
 /// partial ([`AutoProgress::partial_json`], [`write_partial`]).
 #[derive(Clone, Debug, Default)]
 pub struct AutoProgress {
-    /// The rungs to try, in order.
+    /// The candidates to try, in order (rungs, each without and with the fuzz layer).
     pub rungs: Vec<String>,
-    /// Every rung finished (fitted or failed), as the model-selection table lists them.
+    /// Every candidate finished (fitted or failed), as the model-selection table lists them.
     pub candidates: Vec<crate::fit::selection::Candidate>,
     /// The training fit's parameters of every rung fitted, as a result states them.
     pub fits: Vec<(String, serde_json::Value)>,
@@ -193,13 +204,13 @@ impl AutoProgress {
                      signal, fitted on the training split; no rung was refitted on all samples, so \
                      this is no result to render, export or score: run the fit again to finish",
             "data": { "file": self.data_file, "samples": self.samples },
-            "rungs_done": self.candidates.iter().map(|c| c.rung.clone()).collect::<Vec<_>>(),
+            "rungs_done": self.candidates.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
             "rungs_not_done": self.rungs.iter().skip(self.candidates.len()).cloned().collect::<Vec<_>>(),
             "chosen": self.chosen,
             "train_samples": self.train_samples,
             "heldout_samples": self.heldout_samples,
             "model_selection": self.candidates,
-            "training_fits": self.fits.iter().map(|(r, p)| serde_json::json!({ "rung": r, "parameters": p })).collect::<Vec<_>>(),
+            "training_fits": self.fits.iter().map(|(r, p)| serde_json::json!({ "candidate": r, "parameters": p })).collect::<Vec<_>>(),
         })
     }
 
@@ -210,20 +221,22 @@ impl AutoProgress {
             self.data_file,
             self.stage()
         );
-        t += "| rung | free parameters | held-out RMSE [1/sr] | held-out relative RMSE | held-out log error | fit time [s] |\n|---|---|---|---|---|---|\n";
+        t += "| candidate | free parameters | held-out error | standard error | held-out RMSE [1/sr] | held-out relative RMSE | held-out log error | fit time [s] |\n|---|---|---|---|---|---|---|---|\n";
         for c in &self.candidates {
             match &c.error {
                 Some(e) => {
                     t += &format!(
-                        "| {} | - | failed: {e} | | | {:.2} |\n",
-                        c.rung, c.fit_seconds
+                        "| {} | - | failed: {e} | | | | | {:.2} |\n",
+                        c.name, c.fit_seconds
                     )
                 }
                 None => {
                     t += &format!(
-                        "| {} | {} | {:.4e} | {:.2} % | {:.4} | {:.2} |\n",
-                        c.rung,
+                        "| {} | {} | {:.4} | {:.4} | {:.4e} | {:.2} % | {:.4} | {:.2} |\n",
+                        c.name,
                         c.free_parameters,
+                        c.cv_error,
+                        c.cv_standard_error,
                         c.heldout_rmse,
                         100.0 * c.heldout_relative_rmse,
                         c.heldout_log_error,
@@ -300,6 +313,13 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
     };
     cfg.check_work(samples.samples.len())
         .map_err(|e| anyhow!("{}: {e}", req.data.display()))?;
+    // the metric follows the data when nothing named it (goniometric and measured data; a
+    // capture's pixels and per-texel maps keep the linear metric)
+    if cfg.metric_follows_data && req.maps == Maps::None && samples.kind != DataKind::Capture {
+        let (m, why) = crate::fit::config::metric_for_data(&samples);
+        cfg.metric = m;
+        cfg.metric_reason = Some(why);
+    }
     let with_sink = |f: &mut dyn FnMut(&mut AutoProgress)| {
         if let Some(s) = sink {
             f(&mut s.lock().unwrap_or_else(|p| p.into_inner()));
@@ -307,7 +327,9 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
     };
     let selection = if cfg.model == "auto" {
         with_sink(&mut |p| {
-            p.rungs = cfg.selection.rungs.clone();
+            p.rungs = fit::selection::candidates_of(&cfg)
+                .map(|l| l.into_iter().map(|c| c.0).collect())
+                .unwrap_or_default();
             p.data_file = req
                 .data
                 .file_name()
@@ -322,7 +344,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                 p.heldout_samples = d.heldout_samples;
                 if let (Some(o), Some(c)) = (d.outcome, d.candidates.last()) {
                     p.fits.push((
-                        c.rung.clone(),
+                        c.name.clone(),
                         serde_json::to_value(rj::params_out(o)).unwrap_or_default(),
                     ));
                 }
@@ -337,7 +359,12 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                 samples.samples.len()
             ),
         );
-        cfg = cfg.for_rung(s.chosen.parse().map_err(|e: String| anyhow!(e))?);
+        let reason = cfg.metric_reason.clone();
+        cfg = match &s.chosen_config {
+            Some(c) => c.clone(),
+            None => cfg.for_rung(s.chosen_rung.parse().map_err(|e: String| anyhow!(e))?),
+        };
+        cfg.metric_reason = reason;
         if req.progress {
             eprintln!("{}", fit::selection::table(&s));
         }
@@ -524,11 +551,31 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                     .collect()
             })
             .unwrap_or_default(),
+        selection: selection.as_ref().map(|s| {
+            serde_json::json!({
+                "validation": s.validation,
+                "folds": s.folds,
+                "rule": s.rule,
+                "metric": s.metric,
+                "chosen": s.chosen,
+                "chosen_rung": s.chosen_rung,
+                "fuzz": s.chosen_fuzz,
+                "train_samples": s.train_samples,
+                "heldout_samples": s.heldout_samples,
+            })
+        }),
         quality: Some(serde_json::to_value(&outcome.quality)?),
         maps: None,
         warnings: warnings.clone(),
     };
     let mut report_text = report::text(&outcome, id.as_str(), &req.data.display().to_string());
+    if let Some(why) = &cfg.metric_reason {
+        report_text = report_text.replacen(
+            "[[Fit Statistics]]",
+            &format!("    metric: {why}\n[[Fit Statistics]]"),
+            1,
+        );
+    }
     report_text += &result
         .ward_fallback
         .as_ref()

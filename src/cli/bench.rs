@@ -59,6 +59,21 @@ pub struct BenchArgs {
     /// writes OUT/sampling.md and .csv
     #[arg(long)]
     pub sampling: bool,
+    /// Instead: `--model auto` on sparse subsets of this measured felt (--sizes) and on
+    /// synthetic fabrics with known truth (--synth-sizes): every candidate's cross-validated
+    /// error, the choice, the run's wall time: writes OUT/selection.md and .csv
+    #[arg(long, value_name = "FILE")]
+    pub selection: Option<PathBuf>,
+    /// Felt direction pairs of the selection study (comma-separated)
+    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000])]
+    pub sizes: Vec<usize>,
+    /// Samples of the selection study's synthetic fabrics (comma-separated; none: skip them)
+    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000])]
+    pub synth_sizes: Vec<usize>,
+    /// The selection study also measures every candidate at the config's knobs (the slow
+    /// path), side by side with the default coarse ranking
+    #[arg(long)]
+    pub slow: bool,
     /// Only these cases of the robustness study (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
@@ -225,6 +240,44 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         )?;
         if !args.quiet {
             eprintln!("wrote {}", args.out.join("maps_accuracy.md").display());
+        }
+        return Ok(());
+    }
+    if let Some(file) = &args.selection {
+        let t = Instant::now();
+        let synth: Vec<usize> = args.synth_sizes.iter().copied().filter(|&n| n > 0).collect();
+        let rows =
+            crate::bench::selection::run(Some(file), &args.sizes, &synth, args.slow, args.quiet)?;
+        let list = |v: &[usize]| {
+            v.iter()
+                .map(|n| n.to_string())
+                .collect::<Vec<_>>()
+                .join(",")
+        };
+        let command = format!(
+            "fibrefit bench --selection {} --sizes {} --synth-sizes {}{}",
+            file.display(),
+            list(&args.sizes),
+            match synth.is_empty() {
+                true => "0".to_string(),
+                false => list(&synth),
+            },
+            if args.slow { " --slow" } else { "" }
+        );
+        crate::bench::report::selection::write(
+            &args.out,
+            &rows,
+            &command,
+            t.elapsed().as_secs_f64(),
+        )?;
+        if !args.quiet {
+            for r in &rows {
+                eprintln!(
+                    "{} {} ({}): chose {} in {:.1} s",
+                    r.data, r.samples, r.path, r.chosen, r.seconds
+                );
+            }
+            eprintln!("wrote {}", args.out.join("selection.md").display());
         }
         return Ok(());
     }

@@ -154,6 +154,8 @@ pub fn result_from_value(
         maps: Default::default(),
         columns: Default::default(),
         notes: Vec::new(),
+        metric_follows_data: false,
+        metric_reason: None,
     };
     cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
     let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
@@ -232,6 +234,10 @@ pub struct ResultFile {
     pub ward_fallback: Option<WardFallback>,
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub model_selection: Vec<serde_json::Value>,
+    /// `--model auto`: how the candidates were compared (validation, folds, rule, metric) and
+    /// which was chosen.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub selection: Option<serde_json::Value>,
     /// Fit quality: noise verdict, distinct minima, residual structure (absent in files written
     /// before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -313,6 +319,9 @@ pub struct Knobs {
     pub separable: bool,
     pub starts: usize,
     pub seed: u64,
+    /// Why the fit used its metric (the data, the config, `--metric`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub metric_reason: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -433,5 +442,6 @@ pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
         separable: cfg.optimizer.separable,
         starts: cfg.starts,
         seed: cfg.seed,
+        metric_reason: cfg.metric_reason.clone(),
     }
 }

@@ -206,6 +206,13 @@ pub struct FitConfig {
     /// ignored): shown with the fit's warnings. Not a key of the file.
     #[serde(skip)]
     pub notes: Vec<String>,
+    /// Neither the file nor `--metric` named the metric: the fit takes the one the data ask for
+    /// ([`metric_for_data`], applied by `api::fit`). Not a key of the file.
+    #[serde(skip)]
+    pub metric_follows_data: bool,
+    /// Why the fit uses its metric (said in the report and the result). Not a key of the file.
+    #[serde(skip)]
+    pub metric_reason: Option<String>,
 }
 
 /// Parameters no fit frees unless `[parameters]` lists them: the albedos (solved, always free),
@@ -330,12 +337,33 @@ pub struct Selection {
     /// Rungs tried by `--model auto`, cheapest first.
     #[serde(default = "default_rungs")]
     pub rungs: Vec<String>,
-    /// Fraction of samples held out (seeded split).
+    /// Fraction of samples held out (seeded split) when the data are many (at least
+    /// `cv_below` samples); fewer are cross-validated instead.
     #[serde(default = "default_holdout")]
     pub holdout: f64,
-    /// Relative tolerance on the held-out error; default: the data's relative noise level when
-    /// sigmas are given, else 0.05.
+    /// Relative tolerance on the cross-validated error: with it, the simplest candidate within
+    /// this fraction of the best error is chosen instead of the one within one standard error.
     pub tolerance: Option<f64>,
+    /// Folds of the k-fold cross-validation (every sample held out once) used below `cv_below`
+    /// samples.
+    #[serde(default = "default_folds")]
+    pub folds: usize,
+    /// Data with fewer samples than this are cross-validated in `folds` folds; from this many
+    /// on, one seeded split holds out `holdout` of them.
+    #[serde(default = "default_cv_below")]
+    pub cv_below: usize,
+    /// Try every rung with and without the fuzz layer (false, or `--no-fuzz`: only without,
+    /// unless `--fuzz` or `[parameters]` asks for the layer, which then goes over every rung).
+    #[serde(default = "yes")]
+    pub fuzz: bool,
+    /// The candidates are ranked on at most this many samples (seeded) with coarse knobs; those
+    /// within reach of the best are refined at the config's knobs.
+    #[serde(default = "default_rank_samples")]
+    pub rank_samples: usize,
+    /// Rank with coarse knobs first ([`crate::fit::selection::ranking_config`]); false: every
+    /// candidate is measured at the config's knobs (slower, for comparison).
+    #[serde(default = "yes")]
+    pub coarse_ranking: bool,
 }
 
 impl Default for Selection {
@@ -344,7 +372,74 @@ impl Default for Selection {
             rungs: default_rungs(),
             holdout: default_holdout(),
             tolerance: None,
+            folds: default_folds(),
+            cv_below: default_cv_below(),
+            fuzz: true,
+            rank_samples: default_rank_samples(),
+            coarse_ranking: true,
         }
+    }
+}
+
+fn default_folds() -> usize {
+    5
+}
+
+fn default_cv_below() -> usize {
+    2000
+}
+
+fn default_rank_samples() -> usize {
+    1000
+}
+
+/// How many of the data's positive values must lie above the 99th over the 1st percentile for
+/// the metric to follow the data into the log metric: an order of magnitude.
+pub const LOG_METRIC_SPAN: f64 = 10.0;
+
+/// The metric the data ask for when neither the config nor `--metric` names one: the log metric
+/// when the data carry no sigmas and their positive values span more than an order of
+/// magnitude (99th over 1st percentile above [`LOG_METRIC_SPAN`]), else the linear one; with
+/// the reason, in words.
+pub fn metric_for_data(samples: &crate::load::samples::Samples) -> (Metric, String) {
+    let ch = samples.channels.max(1);
+    if !samples.samples.is_empty() && samples.samples.iter().all(|s| s.sigma.is_some()) {
+        return (
+            Metric::Linear,
+            "linear: the data give sigmas (chi-square against their noise)".into(),
+        );
+    }
+    let mut v: Vec<f64> = samples
+        .samples
+        .iter()
+        .flat_map(|s| s.value[..ch].iter().copied())
+        .filter(|x| *x > 0.0 && x.is_finite())
+        .collect();
+    if v.len() < 2 {
+        return (
+            Metric::Linear,
+            "linear: too few positive values to measure their span".into(),
+        );
+    }
+    v.sort_by(f64::total_cmp);
+    let at = |q: f64| v[((v.len() - 1) as f64 * q).round() as usize];
+    let span = at(0.99) / at(0.01);
+    match span > LOG_METRIC_SPAN {
+        true => (
+            Metric::Log,
+            format!(
+                "log, chosen from the data: no sigmas and the values span {span:.0}x (99th over \
+                 1st percentile of the positive values, above {LOG_METRIC_SPAN:.0}x); --metric \
+                 linear overrides"
+            ),
+        ),
+        false => (
+            Metric::Linear,
+            format!(
+                "linear, chosen from the data: the values span {span:.1}x (99th over 1st \
+                 percentile, at most {LOG_METRIC_SPAN:.0}x); --metric log overrides"
+            ),
+        ),
     }
 }
 
@@ -375,6 +470,10 @@ impl FitConfig {
         let text = crate::load::input::read_text_as(path, "fit config")?;
         let mut cfg: FitConfig = toml::from_str(&text)
             .map_err(|e| anyhow!("{}: {}", path.display(), e.to_string().trim_end()))?;
+        // a file that names no metric lets the data choose it
+        cfg.metric_follows_data = toml::from_str::<toml::Table>(&text)
+            .map(|t| !t.contains_key("metric"))
+            .unwrap_or(false);
         if let Some(map) = cfg.knobs.topology_map.clone() {
             // relative to the config's folder, wherever fibrefit runs: say so when it is missing
             let resolved = match map.is_relative() {
@@ -431,14 +530,23 @@ impl FitConfig {
             .global_candidates
             .unwrap_or_else(|| default_candidates(8)) as f64;
         let iterations = self.optimizer.max_iterations as f64;
-        let rungs = if self.model == "auto" {
-            self.selection.rungs.len().max(1) as f64
-        } else {
-            1.0
-        };
         let nodes = (self.knobs.quadrature_order * self.knobs.azimuth_nodes) as f64 / 256.0;
-        rungs
-            * (candidates * sub + self.starts as f64 * iterations * sub + iterations * n)
+        if self.model != "auto" {
+            return (candidates * sub + self.starts as f64 * iterations * sub + iterations * n)
+                * nodes.max(1.0);
+        }
+        // auto: per candidate (each rung, with and without the fuzz layer) a fit on the ranking
+        // samples and a warm-started refit per fold, plus the chosen one's fit on all samples
+        let per_rung = if self.selection.fuzz { 2.0 } else { 1.0 };
+        let tried = self.selection.rungs.len().max(1) as f64 * per_rung;
+        let rank = n.min(self.selection.rank_samples as f64);
+        let folds = self.selection.folds as f64;
+        (tried
+            * (candidates * sub + self.starts as f64 * iterations * sub + iterations * rank
+                + folds * iterations * rank)
+            + candidates * sub
+            + self.starts as f64 * iterations * sub
+            + iterations * n)
             * nodes.max(1.0)
     }
 
@@ -686,6 +794,18 @@ impl FitConfig {
             if !["tied", "free", "off"].contains(&sub.as_str()) {
                 bail!("components.substrate = '{sub}': expected \"tied\", \"free\" or \"off\"");
             }
+        }
+        if !(2..=100).contains(&self.selection.folds) {
+            bail!(
+                "selection.folds = {} must lie in [2, 100]",
+                self.selection.folds
+            );
+        }
+        if self.selection.rank_samples < 10 {
+            bail!(
+                "selection.rank_samples = {} must be at least 10",
+                self.selection.rank_samples
+            );
         }
         if !(self.selection.holdout > 0.0 && self.selection.holdout < 1.0) {
             bail!(

@@ -7,5 +7,6 @@ pub mod felt;
 pub mod maps;
 pub mod robustness;
 pub mod sampling;
+pub mod selection;
 pub mod shader;
 pub mod speed;
