@@ -589,7 +589,7 @@ pub fn memory_rows(
     bar.set_message("camera: fit, score and inspect at 512 x 512");
     let m = scratch.join("m");
     std::fs::create_dir_all(&m)?;
-    std::fs::write(m.join("synth.toml"), synth_config(MEMORY_SIZE))?;
+    std::fs::write(m.join("synth.toml"), synth_config(MEMORY_SIZE, Rig::Distant))?;
     crate::synth::run(&m.join("synth.toml"), &m.join("d"), true)?;
     let capture = m.join("d/capture.toml");
     let there = counted(&capture)?;
