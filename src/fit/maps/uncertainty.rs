@@ -566,10 +566,10 @@ mod tests {
             for t in 0..texels {
                 for r in t * rows..(t + 1) * rows {
                     for g in 0..globals {
-                        full[(r, g)] = rng.gen_range(-1.0..1.0);
+                        full[(r, g)] = rng.random_range(-1.0..1.0);
                     }
                     for k in 0..unknowns {
-                        full[(r, globals + t * unknowns + k)] = rng.gen_range(-1.0..1.0);
+                        full[(r, globals + t * unknowns + k)] = rng.random_range(-1.0..1.0);
                     }
                 }
             }
