@@ -53,6 +53,7 @@ fn camera(c: &mut Criterion) {
                 &globals.outcome.set,
                 (0, rows),
                 globals.texel_variance,
+                Some(&globals.schur),
                 true,
             )
             .unwrap()

@@ -400,7 +400,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                 st.iterations,
                 st.seconds,
             );
-            (global, Some((st.costs, st.texel_variance, work)))
+            (global, Some((st.costs, st.texel_variance, work, st.schur)))
         }
         false => (
             fit::fit_with_hints(&samples, &cfg, quiet, &hints)
@@ -584,8 +584,8 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         report_text += &format!("[[Model selection]]\n{}", fit::selection::table(s));
     }
     let mut maps = None;
-    if let Some((costs, texel_variance, work)) = &stage_costs {
-        let method = fit::maps::method(&cfg, costs, *texel_variance);
+    if let Some((costs, texel_variance, work, schur)) = &stage_costs {
+        let method = fit::maps::method(&cfg, costs, *texel_variance, schur);
         match &req.maps {
             Maps::Globals => {
                 result.maps = Some(serde_json::json!({
@@ -613,6 +613,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                     &globals,
                     (0, h as u32),
                     *texel_variance,
+                    Some(schur),
                     quiet,
                 )?;
                 crate::progress::line(quiet, "maps: standard errors and flags");

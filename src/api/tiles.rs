@@ -138,7 +138,23 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
     let hint = g["maps"]["method"]["texel_variance"]
         .as_f64()
         .unwrap_or(f64::INFINITY);
-    let part = maps::texel_stage(&store, cfg, &cfg.maps, &set, rows, hint, !req.progress)?;
+    // the globals' Schur complement (older globals: none, the texel errors conditional on them)
+    let schur: Option<maps::GlobalSchur> = match &g["maps"]["method"]["global_schur"] {
+        serde_json::Value::Null => None,
+        v => Some(serde_json::from_value(v.clone()).map_err(|e| {
+            anyhow!("{}: maps.method.global_schur: {e}", globals.display())
+        })?),
+    };
+    let part = maps::texel_stage(
+        &store,
+        cfg,
+        &cfg.maps,
+        &set,
+        rows,
+        hint,
+        schur.as_ref(),
+        !req.progress,
+    )?;
     let global_free = g["statistics"]["free_parameters"].as_u64().unwrap_or(0) as usize;
     let t = TileFile {
         schema: TILE_SCHEMA.into(),

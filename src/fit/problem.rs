@@ -606,22 +606,10 @@ impl<'a> FitProblem<'a> {
         let ch = self.channels();
         // derivatives in external units (ln for log-space parameters), stepping into the
         // valid range
-        let d = set.shape_value(Shape::Spacing);
         let shape_cols: Vec<DVector<f64>> = (0..self.free_shapes.len())
             .into_par_iter()
             .map(|k| {
-                let sh = &set.shapes[self.free_shapes[k]];
-                let x = sh.kind.to_internal(sh.value);
-                let top = match coordinate(sh) {
-                    Coordinate::Periodic => f64::INFINITY,
-                    Coordinate::UnderMaxHeight => height_range(sh, d).1,
-                    _ => sh.kind.to_internal(sh.max),
-                };
-                let h = 1e-6 * x.abs().max(1.0);
-                let h = if x + h > top { -h } else { h };
-                let mut s2 = set.clone();
-                let sh = &mut s2.shapes[self.free_shapes[k]];
-                sh.value = sh.kind.to_external(x + h);
+                let (s2, h) = jacobian_step(set, self.free_shapes[k]);
                 let c2 = self.columns(&s2)?;
                 Ok((self.residuals(&c2, &s2) - &r0) / h)
             })
@@ -682,6 +670,26 @@ impl<'a> FitProblem<'a> {
     pub fn free_albedos(&self) -> &[(usize, usize)] {
         &self.free_albedos
     }
+}
+
+/// The forward-difference step of shape `index` of `set` for a Jacobian column, in the
+/// optimizer's coordinates (internal units, ln for log-space parameters), stepping into the
+/// valid range: the set with that shape moved by the step, and the step.
+pub fn jacobian_step(set: &ParamSet, index: usize) -> (ParamSet, f64) {
+    let d = set.shape_value(Shape::Spacing);
+    let sh = &set.shapes[index];
+    let x = sh.kind.to_internal(sh.value);
+    let top = match coordinate(sh) {
+        Coordinate::Periodic => f64::INFINITY,
+        Coordinate::UnderMaxHeight => height_range(sh, d).1,
+        _ => sh.kind.to_internal(sh.max),
+    };
+    let h = 1e-6 * x.abs().max(1.0);
+    let h = if x + h > top { -h } else { h };
+    let mut s2 = set.clone();
+    let sh = &mut s2.shapes[index];
+    sh.value = sh.kind.to_external(x + h);
+    (s2, h)
 }
 
 /// How a shape parameter appears to the optimizer, so that every point it can reach is a valid

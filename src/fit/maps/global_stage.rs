@@ -20,6 +20,9 @@ pub struct GlobalStage {
     pub seconds: f64,
     /// Texels the stage sampled.
     pub texels: usize,
+    /// The globals' Schur complement over the sampled texels: the texel stage's errors include
+    /// the globals' uncertainty through it.
+    pub schur: GlobalSchur,
 }
 
 /// Stage 1 of map recovery: the global parameters, alternating per-texel fits and the global
@@ -80,12 +83,22 @@ pub fn global_stage(
             f64::INFINITY
         };
         let before = *costs.last().expect("non-empty");
-        let now = if total_new < after_texels {
+        let mut now = if total_new < after_texels {
             set = new_set;
             total_new
         } else {
             after_texels
         };
+        // then globals and maps together, along the valleys where they trade off (without the
+        // smoothness prior, which couples the texels)
+        if req.smoothness == 0.0 {
+            let (s2, v2, c2, taken) =
+                joint_refine(&sub, &sub_layout, cfg, &set, &values, free, now);
+            if taken > 0 {
+                (set, values, now) = (s2, v2, c2);
+                iterations += taken;
+            }
+        }
         costs.push(now);
         bar.inc(1);
         if round > 0 && before - now <= 1e-6 * before {
@@ -102,7 +115,7 @@ pub fn global_stage(
     }
     let mut outcome = final_global(&sub, cfg, &set, &values, &sub_layout.members, free)?;
     // the globals' errors with the sampled texels' maps free too
-    let inflation = map_inflation(&sub, &sub_layout, cfg, &set, &values, free)?;
+    let (schur, inflation) = global_schur(&sub, &sub_layout, cfg, &set, &values, free)?;
     if let Some(w) = inflate_records(&mut outcome, &set, &inflation) {
         warnings.push(w);
     }
@@ -128,6 +141,7 @@ pub fn global_stage(
         iterations,
         seconds,
         texels: sub_layout.texels.len(),
+        schur,
     })
 }
 
@@ -294,4 +308,216 @@ pub(super) fn final_global(
     }
     outcome.fitted = fitted;
     Ok(outcome)
+}
+
+/// Joint Gauss–Newton iterations of the global stage per round at most.
+pub const JOINT_ITERATIONS: usize = 20;
+
+/// Per texel, the sum of squared weighted residuals of its pixels at the globals `g` and each
+/// of `candidates` (values per texel).
+fn texel_costs(
+    problems: &[Texel],
+    g: &Globals,
+    candidates: &[&[TexelValues]],
+) -> Vec<Vec<f64>> {
+    problems
+        .par_iter()
+        .enumerate()
+        .map(|(t, p)| {
+            candidates
+                .iter()
+                .map(|vs| {
+                    let v = &vs[t];
+                    let cols = p.columns(g, v.height, v.psi);
+                    p.residuals(g, &cols, v).iter().map(|x| x * x).sum()
+                })
+                .collect()
+        })
+        .collect()
+}
+
+/// `set` with its free globals moved by `delta` (columns as [`GlobalSteps`]: shapes in the
+/// optimizer's internal units, then albedo channels), kept within their bounds.
+fn moved_globals(set: &ParamSet, delta: &[f64]) -> ParamSet {
+    let mut s = set.clone();
+    let d = set.shape_value(Shape::Spacing);
+    let shapes = set.free_shapes();
+    for (j, &i) in shapes.iter().enumerate() {
+        let sh = &mut s.shapes[i];
+        let v = sh.kind.to_external(sh.kind.to_internal(sh.value) + delta[j]);
+        sh.value = match problem::coordinate(sh) {
+            problem::Coordinate::Periodic => wrap_azimuth(v),
+            problem::Coordinate::UnderMaxHeight => {
+                v.clamp(sh.min, problem::height_range(sh, d).1)
+            }
+            _ => v.clamp(sh.min, sh.max),
+        };
+    }
+    for (k, (a, c)) in set.free_albedos().into_iter().enumerate() {
+        let al = &mut s.albedos[a];
+        al.value[c] = (al.value[c] + delta[shapes.len() + k]).clamp(al.min, al.max);
+    }
+    s
+}
+
+/// A texel's values moved by `delta` (its unknowns in [`Texel::jacobian`]'s order), within
+/// their bounds (H in [0, `h_max`], psi wrapped, albedos in [0, 1]).
+fn moved_texel(v: &TexelValues, which: &[(u8, usize)], delta: &[f64], h_max: f64) -> TexelValues {
+    let mut w = *v;
+    for (&(kind, c), d) in which.iter().zip(delta) {
+        match kind {
+            0 => w.height = (w.height + d).clamp(0.0, h_max),
+            1 => w.psi = wrap_azimuth(w.psi + d),
+            2 => w.kd[c] = (w.kd[c] + d).clamp(0.0, 1.0),
+            _ => w.ks[c] = (w.ks[c] + d).clamp(0.0, 1.0),
+        }
+    }
+    w
+}
+
+/// One texel's part of the joint normal equations: C_t, B_t (globals x unknowns), J_t^T r_t,
+/// what its unknowns are, and its part of A and J_g^T r.
+struct JointTerms {
+    c: DMatrix<f64>,
+    b: DMatrix<f64>,
+    gt: DVector<f64>,
+    which: Vec<(u8, usize)>,
+    a: DMatrix<f64>,
+    gg: DVector<f64>,
+}
+
+/// `m` with `lambda` times its diagonal added (Levenberg–Marquardt damping).
+fn damped(m: &DMatrix<f64>, lambda: f64) -> DMatrix<f64> {
+    let mut d = m.clone();
+    let top = (0..m.nrows()).map(|k| m[(k, k)]).fold(0.0f64, f64::max);
+    for k in 0..m.nrows() {
+        d[(k, k)] += lambda * m[(k, k)].max(1e-12 * top).max(1e-300);
+    }
+    d
+}
+
+/// Damped Gauss–Newton (Levenberg–Marquardt) iterations over the globals and every sampled
+/// texel's unknowns at once, from (`set`, `values`) at `cost`: the block-arrow normal equations
+/// solved through the globals' Schur complement, as bundle adjustment does (the globals' step
+/// from S dg = -J_g^T r + sum_t B_t C_t^-1 J_t^T r_t, then each texel's from its own block).
+/// Alternating fits crawl along the valleys where the globals and the maps trade off (light and
+/// view near the normal: kd, ks, the exponent and the heights); these steps go along them. The
+/// result is never worse than the start: (globals, maps, cost, iterations taken).
+pub(super) fn joint_refine(
+    sub: &Samples,
+    layout: &Layout,
+    cfg: &FitConfig,
+    set: &ParamSet,
+    values: &[TexelValues],
+    free: Free,
+    cost: f64,
+) -> (ParamSet, Vec<TexelValues>, f64, u64) {
+    let ch = sub.channels;
+    let all: Vec<usize> = (0..layout.texels.len()).collect();
+    let (mut set, mut values, mut cost) = (set.clone(), values.to_vec(), cost);
+    let mut lambda = 1e-3;
+    let mut taken = 0;
+    for _ in 0..JOINT_ITERATIONS {
+        let model = rung_of(&set, cfg);
+        let g = Globals::of(&set, model.as_ref(), ch);
+        let steps = GlobalSteps::new(&set, cfg);
+        let side = GlobalSide::new(&steps, ch, None);
+        let ng = steps.len();
+        let problems = layout.problems(sub, &all, &values, free, 0.0);
+        let terms: Vec<JointTerms> = problems
+            .par_iter()
+            .zip(values.par_iter())
+            .map(|(p, v)| {
+                let jg = p.global_jacobian(&g, &side, v);
+                let n = jg.nrows();
+                let cols = p.columns(&g, v.height, v.psi);
+                let r = DVector::from_vec(p.residuals(&g, &cols, v)[..n].to_vec());
+                let (jcols, which) = p.jacobian(&g, v);
+                let jt = DMatrix::from_fn(n, jcols.len(), |i, k| jcols[k][i]);
+                JointTerms {
+                    c: jt.transpose() * &jt,
+                    b: jg.transpose() * &jt,
+                    gt: jt.transpose() * &r,
+                    which,
+                    a: jg.transpose() * &jg,
+                    gg: jg.transpose() * &r,
+                }
+            })
+            .collect();
+        let mut a = DMatrix::zeros(ng, ng);
+        let mut gg = DVector::zeros(ng);
+        for t in &terms {
+            a += &t.a;
+            gg += &t.gg;
+        }
+        let mut improved = None;
+        for _ in 0..10 {
+            // the texels' blocks, damped and factored, then the globals' step
+            let factored: Option<Vec<_>> = terms
+                .iter()
+                .map(|t| damped(&t.c, lambda).cholesky())
+                .collect();
+            let Some(factored) = factored else {
+                lambda *= 10.0;
+                continue;
+            };
+            let mut s = damped(&a, lambda);
+            let mut rhs = -&gg;
+            for (t, f) in terms.iter().zip(&factored) {
+                let cib = f.solve(&t.b.transpose());
+                s -= &t.b * &cib;
+                rhs += &t.b * f.solve(&t.gt);
+            }
+            let Some(dg) = (0.5 * (&s + s.transpose())).cholesky().map(|f| f.solve(&rhs)) else {
+                lambda *= 10.0;
+                continue;
+            };
+            let new_set = moved_globals(&set, dg.as_slice());
+            let h_max = max_height(new_set.shape_value(Shape::Spacing));
+            let new_values: Vec<TexelValues> = terms
+                .iter()
+                .zip(&factored)
+                .zip(&values)
+                .map(|((t, f), v)| {
+                    let dx = -f.solve(&(&t.gt + t.b.transpose() * &dg));
+                    moved_texel(v, &t.which, dx.as_slice(), h_max)
+                })
+                .collect();
+            // the cost is a sum over texels given the globals: each texel keeps its step or its
+            // old values, whichever fits better at the new globals (a texel whose cost is kinked
+            // in H, where occlusion changes, cannot spoil the step of all the others)
+            let new_model = rung_of(&new_set, cfg);
+            let new_g = Globals::of(&new_set, new_model.as_ref(), ch);
+            let each = texel_costs(&problems, &new_g, &[&new_values, &values]);
+            let mut new_cost = 0.0;
+            let new_values: Vec<TexelValues> = each
+                .iter()
+                .enumerate()
+                .map(|(t, c)| {
+                    new_cost += c[0].min(c[1]);
+                    if c[0] <= c[1] {
+                        new_values[t]
+                    } else {
+                        values[t]
+                    }
+                })
+                .collect();
+            if new_cost < cost {
+                improved = Some((new_set, new_values, new_cost));
+                lambda = (lambda * 0.3).max(1e-9);
+                break;
+            }
+            lambda *= 10.0;
+        }
+        let Some((s2, v2, c2)) = improved else {
+            break;
+        };
+        let gain = (cost - c2) / cost.max(1e-300);
+        (set, values, cost) = (s2, v2, c2);
+        taken += 1;
+        if gain < 1e-9 {
+            break;
+        }
+    }
+    (set, values, cost, taken)
 }

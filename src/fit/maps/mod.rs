@@ -17,16 +17,18 @@
 //!    smoothness prior: Jacobi sweeps with the neighbours' previous values), over any band of
 //!    rows, so tiles can be fitted apart; [`finish_maps`] assembles the bands.
 //!
-//! Standard errors per texel come from the texel's Jacobian over all its unknowns, scaled by the
-//! residual variance over all pixels (N - P degrees of freedom, P counting every texel's unknowns
-//! and the globals): honest when the model fits within the noise, large (or infinite) where the
-//! images leave a value undetermined, and widened to cover any other minimum or grid value whose
-//! cost lies within [`AMBIGUITY_DELTA`] residual variances of the best. An optional smoothness
+//! Standard errors per texel are the texel's block of the joint covariance of the globals and the
+//! maps: the texel's own (its Jacobian over all its unknowns) plus what the globals' uncertainty
+//! moves it by (the Schur-complement term, [`uncertainty`]), scaled by the residual variance over
+//! all pixels (N - P degrees of freedom, P counting every texel's unknowns and the globals):
+//! honest when the model fits within the noise, large (or infinite) where the images leave a
+//! value undetermined, and widened to cover any other minimum or grid value whose cost lies
+//! within [`AMBIGUITY_DELTA`] residual variances of the best. An optional smoothness
 //! prior (`[maps] smoothness`, off by default) pulls H and psi towards their neighbours' mean.
 //!
 //! Files: `texel.rs` (one texel's search and errors), `column_table.rs` (the shared model
 //! columns), `global_stage.rs` (stage 1 and the globals' widened errors), `texel_stage.rs`
-//! (stage 2 and the assembly of bands), `uncertainty.rs` (texel errors, the globals' widening),
+//! (stage 2 and the assembly of bands), `uncertainty.rs` (texel errors with the globals' Schur complement, the globals' widening),
 //! `outputs.rs` (the whole recovery, the model at every sample, the result's `method` block); this file: the types, the request check and the
 //! helpers they share.
 
@@ -62,6 +64,7 @@ pub use global_stage::*;
 pub use outputs::*;
 use texel::*;
 pub use texel_stage::*;
+pub use uncertainty::GlobalSchur;
 use uncertainty::*;
 
 /// Grid minima a per-texel fit polishes (besides its start).

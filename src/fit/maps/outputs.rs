@@ -22,6 +22,7 @@ pub fn recover(
         &stage.outcome.set,
         (0, h as u32),
         stage.texel_variance,
+        Some(&stage.schur),
         quiet,
     )?;
     let global_free = stage.outcome.statistics.free_parameters;
@@ -77,10 +78,17 @@ pub fn fitted_all(
     Ok(fitted)
 }
 
-/// The `method` block of a result's `maps`.
-pub fn method(cfg: &FitConfig, costs: &[f64], texel_variance: f64) -> serde_json::Value {
+/// The `method` block of a result's `maps`, with the globals' Schur complement `schur` (what
+/// tiles need for texel errors that include the globals' uncertainty).
+pub fn method(
+    cfg: &FitConfig,
+    costs: &[f64],
+    texel_variance: f64,
+    schur: &GlobalSchur,
+) -> serde_json::Value {
     serde_json::json!({
         "texel_variance": texel_variance,
+        "global_schur": schur,
         "global_stage_rounds": costs.len().saturating_sub(1),
         "global_stage_cost_per_round": costs,
         "global_texels": cfg.maps.global_texels,

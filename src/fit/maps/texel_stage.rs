@@ -15,8 +15,15 @@ pub struct TexelPart {
     pub rows: [u32; 2],
     pub texels: Vec<(u32, u32)>,
     pub values: Vec<TexelValues>,
-    /// sqrt of the diagonal of (J^T J)^-1 per value (infinity where singular).
+    /// Standard errors before scaling by the residual variance: sqrt of the diagonal of the
+    /// texel's block of the joint covariance, C^-1 + C^-1 B^T S^-1 B C^-1 with the globals'
+    /// Schur complement S ([`GlobalSchur`]), or of C^-1 alone when `globals_in_errors` is
+    /// false; infinity where the data leave a value undetermined.
     pub unscaled_std_errors: Vec<TexelValues>,
+    /// Whether the errors include the globals' uncertainty (false: fitted from globals without
+    /// a Schur complement, e.g. a `--map-globals` file of an older fibrefit).
+    #[serde(default)]
+    pub globals_in_errors: bool,
     /// Other minima of each texel: (cost above the best, |dH|, |dpsi| in degrees), those
     /// costing less than `minima_below` above the best (all when `None`).
     pub other_minima: Vec<Vec<[f64; 3]>>,
@@ -34,6 +41,11 @@ pub struct TexelPart {
 /// `variance_hint` is the residual variance the global stage expects ([`GlobalStage`]): other
 /// minima costing more than [`MINIMA_MARGIN`] x [`AMBIGUITY_DELTA`] of it above the best are
 /// not kept (at camera resolution they are most of the memory); infinity keeps every one.
+/// `schur` is the global stage's Schur complement of the globals ([`GlobalStage::schur`]): with
+/// it each texel's errors include the globals' uncertainty (its cross block with the globals is
+/// made from its own pixels when its errors are, and dropped); without it they are conditional
+/// on the globals.
+#[allow(clippy::too_many_arguments)]
 pub fn texel_stage(
     store: &CaptureStore,
     cfg: &FitConfig,
@@ -41,6 +53,7 @@ pub fn texel_stage(
     set: &ParamSet,
     rows: (u32, u32),
     variance_hint: f64,
+    schur: Option<&GlobalSchur>,
     quiet: bool,
 ) -> Result<TexelPart> {
     let minima_below = (variance_hint.is_finite() && variance_hint > 0.0)
@@ -50,6 +63,20 @@ pub fn texel_stage(
     let set = fix_mapped(set, req);
     let model = rung_of(&set, cfg);
     let g = Globals::of(&set, model.as_ref(), store.channels).with_lattice(store, free);
+    // the globals free in the global stage are those its Schur complement names (a result read
+    // back holds every global fixed)
+    let steps = GlobalSteps::new(&freed(&set, schur), cfg);
+    if let Some(s) = schur {
+        let n = s.names.len();
+        if s.names != steps.names || s.matrix.len() != n * n || s.reference.len() != n {
+            bail!(
+                "the globals' Schur complement (maps.method.global_schur) is over [{}], but these globals have [{}] to free: fit the texels with the globals and config it was made with",
+                s.names.join(", "),
+                steps.names.join(", ")
+            );
+        }
+    }
+    let side = GlobalSide::new(&steps, store.channels, schur);
     let sweeps = if req.smoothness > 0.0 {
         1 + PRIOR_SWEEPS
     } else {
@@ -122,7 +149,7 @@ pub fn texel_stage(
             let p = problem(t, &values, smoothness);
             let v = &fits[t - t0].0;
             (
-                p.std_errors(&g, v, 1.0),
+                p.std_errors(&g, v, Some(&side), 1.0),
                 p.relative_residual(&g, v),
                 p.obs.len() * store.channels,
             )
@@ -145,9 +172,26 @@ pub fn texel_stage(
             .map(|&t| std::mem::take(&mut fits[t - t0].2))
             .collect(),
         residual: details.iter().map(|d| d.1).collect(),
+        globals_in_errors: schur.is_some(),
         minima_below,
         row_costs,
     })
+}
+
+/// `set` with exactly the globals `schur` names free (unchanged without one).
+fn freed(set: &ParamSet, schur: Option<&GlobalSchur>) -> ParamSet {
+    let Some(s) = schur else {
+        return set.clone();
+    };
+    let mut out = set.clone();
+    for sh in &mut out.shapes {
+        sh.vary = s.names.iter().any(|n| n == sh.kind.name());
+    }
+    for a in 0..out.albedos.len() {
+        let on = (0..out.channels).any(|c| s.names.contains(&problem::albedo_label(set, a, c)));
+        out.albedos[a].vary = on;
+    }
+    out
 }
 
 /// The other minima of a texel fitted to `v` at `cost`, those at most `below` above it, as
@@ -240,6 +284,7 @@ pub fn finish_maps(
     };
     let mut ambiguous = 0;
     let mut minima_cut = false;
+    let conditional = parts.iter().any(|p| !p.globals_in_errors);
     // each part moved into the maps and dropped, so the maps never exist twice
     for mut p in parts {
         minima_cut |= p
@@ -274,6 +319,11 @@ pub fn finish_maps(
         maps.residual.append(&mut p.residual);
     }
     let mut warnings = Vec::new();
+    if conditional {
+        warnings.push(
+            "per-texel standard errors leave out the globals' uncertainty (the globals came without their Schur complement, maps.method.global_schur: a `--map-globals` result of an older fibrefit), so they are too small where the globals trade off with the maps: refit the globals with `--map-globals`".to_string(),
+        );
+    }
     if minima_cut {
         warnings.push(format!(
             "the residual variance over every pixel ({variance:.3e}) is far above what the global stage's texels gave: other minima beyond {MINIMA_MARGIN} x {AMBIGUITY_DELTA} of that were not kept, so some ambiguous texels may not be flagged; raise [maps] global_texels"
