@@ -196,13 +196,20 @@ fn the_spread_is_recovered_from_noisy_data() {
 
 #[test]
 fn on_real_felt_a_fibre_rung_with_spread_beats_ward() {
-    // a fast version of the felt comparison: 1200 directions, poulin-fournier against Ward,
-    // both with the log metric, scored on 600 other directions
+    // a fast version of the felt comparison: 1200 directions, poulin-fournier (with the fuzz
+    // layer) against Ward, both with the log metric, scored on 600 other directions
     let auto: fibrefit::fit::config::FitConfig =
         toml::from_str("model = \"auto\"\nmetric = \"log\"\n[knobs]\nazimuth_nodes = 12\n")
             .unwrap();
     let ward = common::felt_heldout(&auto.for_rung(ModelId::Ward));
-    let pf = common::felt_heldout(&auto.for_rung(ModelId::PoulinFournier));
+    // the fibres' surface term is grey (issue 23 item 5): the felt's coloured broad lobe, light
+    // scattered inside the dyed fibres, is the fuzz layer's (without it poulin-fournier predicts
+    // 0.457 against Ward's 0.419; with a coloured ks 0.327: docs/guide/fit.md)
+    let fuzzed: fibrefit::fit::config::FitConfig = toml::from_str(
+        "model = \"auto\"\nmetric = \"log\"\n[knobs]\nazimuth_nodes = 12\n[parameters]\nfuzz_depth = {}\n",
+    )
+    .unwrap();
+    let pf = common::felt_heldout(&fuzzed.for_rung(ModelId::PoulinFournier));
     eprintln!("felt held-out: ward {ward:?}; poulin-fournier {pf:?}");
     assert!(
         pf.log_error <= 0.85 * ward.log_error,

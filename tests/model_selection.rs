@@ -221,9 +221,21 @@ fn fibrefit() -> Command {
 /// `gonio.csv` of `d` without its sigma columns, written to `out`.
 fn strip_sigmas(d: &Path, out: &Path) {
     let text = std::fs::read_to_string(d.join("gonio.csv")).unwrap();
+    // the columns whose header does not name a sigma (comment lines kept as they are)
+    let header = text.lines().find(|l| !l.starts_with('#')).unwrap();
+    let keep: Vec<bool> = header.split(',').map(|c| !c.starts_with("sigma")).collect();
     let lines: Vec<String> = text
         .lines()
-        .map(|l| l.split(',').take(7).collect::<Vec<_>>().join(","))
+        .map(|l| match l.starts_with('#') {
+            true => l.to_string(),
+            false => l
+                .split(',')
+                .zip(&keep)
+                .filter(|(_, k)| **k)
+                .map(|(c, _)| c)
+                .collect::<Vec<_>>()
+                .join(","),
+        })
         .collect();
     std::fs::write(out, lines.join("\n") + "\n").unwrap();
 }
@@ -235,14 +247,15 @@ fn data_spanning_decades_without_sigmas_are_fitted_in_the_log_metric_and_the_rep
     let d = synth_text(
         dir.path(),
         "hdr",
-        "model = \"max-normal\"\n[params]\nkd = 0.02\nks = 0.6\nexponent = 200\n\
+        "model = \"max-normal\"\n[params]\nkd = 0.02\nks = 0.6\nexponent = 20\n\
          [gonio]\nrandom = { count = 300, seed = 7, max_theta_deg = 75 }\n\
          [noise]\nrelative = 0.01\nseed = 8\n",
     );
     let csv = dir.path().join("hdr.csv");
     strip_sigmas(&d, &csv);
     let data = load_data(&csv, &LoadOptions::default()).unwrap();
-    assert_eq!(fibrefit::fit::config::metric_for_data(&data).0, Metric::Log);
+    let why = fibrefit::fit::config::metric_for_data(&data);
+    assert_eq!(why.0, Metric::Log, "{}", why.1);
     let out = dir.path().join("r.json");
     let o = fibrefit()
         .arg("fit")
