@@ -158,7 +158,17 @@ pub fn result_from_value(
         metric_reason: None,
     };
     cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
-    let set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
+    let mut set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;
+    // an albedo the result says was fitted grey stays one value for every channel when a later
+    // stage frees it again (the texel stage's globals, a tile's): its labels are the fit's
+    for a in &mut set.albedos {
+        a.grey |= channels > 1
+            && params
+                .get(a.name)
+                .and_then(|e| e.get("grey"))
+                .and_then(|g| g.as_bool())
+                .unwrap_or(false);
+    }
     Ok(FittedResult {
         set,
         metric,
