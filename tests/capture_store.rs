@@ -41,8 +41,8 @@ unsafe impl GlobalAlloc for Counting {
         let q = unsafe { System.realloc(p, layout, size) };
         if !q.is_null() {
             if size >= layout.size() {
-                let now = NOW.fetch_add(size - layout.size(), Ordering::Relaxed) + size
-                    - layout.size();
+                let now =
+                    NOW.fetch_add(size - layout.size(), Ordering::Relaxed) + size - layout.size();
                 PEAK.fetch_max(now, Ordering::Relaxed);
             } else {
                 NOW.fetch_sub(layout.size() - size, Ordering::Relaxed);
@@ -250,7 +250,11 @@ fn a_global_fit_on_sampled_texels_agrees_with_all_texels_and_is_checked_on_every
 /// Every number of two scores, the JSON's, to 1e-12 of its size (sums in another grouping
 /// differ in the last bits), and their text exactly.
 fn assert_same_score(streamed: &score::Score, every: &score::Score, what: &str) {
-    assert_eq!(score::text(streamed), score::text(every), "{what}: the printed score");
+    assert_eq!(
+        score::text(streamed),
+        score::text(every),
+        "{what}: the printed score"
+    );
     fn close(a: &serde_json::Value, b: &serde_json::Value, at: &str) {
         match (a, b) {
             (serde_json::Value::Number(x), serde_json::Value::Number(y)) => {
@@ -319,7 +323,10 @@ fn score_and_inspect_of_a_capture_from_the_store_equal_those_of_every_sample() {
         .stdout(printed.unwrap());
     // inspect: the summary counted from the store is the one of every sample
     let from_store = serde_json::to_value(Summary::of_capture(&store)).unwrap();
-    assert_eq!(from_store, serde_json::to_value(Summary::of(&every)).unwrap());
+    assert_eq!(
+        from_store,
+        serde_json::to_value(Summary::of(&every)).unwrap()
+    );
     let out = fibrefit()
         .arg("inspect")
         .arg(&data)

@@ -45,8 +45,11 @@ fn a_texel_seen_in_one_image_reports_an_infinite_error() {
         fibrefit::export::images::write_exr(&path, img.width, img.height, img.channels, &img.data)
             .unwrap();
     }
-    let store = CaptureStore::load(&maps::write_blind(&d.join("d")).unwrap(), Default::default())
-        .unwrap();
+    let store = CaptureStore::load(
+        &maps::write_blind(&d.join("d")).unwrap(),
+        Default::default(),
+    )
+    .unwrap();
     let cfg: FitConfig = toml::from_str(maps::FIT).unwrap();
     let o = fibrefit::fit::maps::recover(&store, &cfg, &cfg.maps, true).unwrap();
     let k = o
@@ -64,7 +67,11 @@ fn a_texel_seen_in_one_image_reports_an_infinite_error() {
         .iter()
         .filter(|e| e.height.is_finite() && e.psi.is_finite())
         .count();
-    assert!(finite >= o.maps.texels.len() - 3, "{finite} of {}", o.maps.texels.len());
+    assert!(
+        finite >= o.maps.texels.len() - 3,
+        "{finite} of {}",
+        o.maps.texels.len()
+    );
     assert!(
         o.warnings
             .iter()

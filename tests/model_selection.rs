@@ -113,7 +113,8 @@ fn same_choice_on_every_fold(s: &SelectionOutcome) {
     for j in 0..s.folds {
         let k = rule_choice(&s.candidates, Some(j), None).unwrap();
         assert_eq!(
-            s.candidates[k].name, s.candidates[pooled].name,
+            s.candidates[k].name,
+            s.candidates[pooled].name,
             "fold {j} alone chooses otherwise:\n{}",
             table(s)
         );
@@ -141,7 +142,11 @@ fn cross_validation_picks_lambert_for_a_small_noisy_lambertian_set() {
          [noise]\nrelative = 0.05\nseed = 6\n",
     );
     let data = without_sigmas(&d);
-    let s = select(&data, &small_auto("\"lambert\", \"hast-diffuse\", \"ward\", \"max-normal\"")).unwrap();
+    let s = select(
+        &data,
+        &small_auto("\"lambert\", \"hast-diffuse\", \"ward\", \"max-normal\""),
+    )
+    .unwrap();
     eprintln!("{}", table(&s));
     assert_eq!(s.chosen, "lambert");
     assert_eq!(s.validation, "5-fold cross-validation");
@@ -151,7 +156,11 @@ fn cross_validation_picks_lambert_for_a_small_noisy_lambertian_set() {
     assert!(s.candidates.iter().any(|c| c.name == "ward + fuzz"));
     for c in s.candidates.iter().filter(|c| c.error.is_none()) {
         assert_eq!(c.fold_errors.len(), 5, "{}", c.name);
-        assert!(c.cv_standard_error > 0.0 && c.cv_standard_error < c.cv_error, "{}", c.name);
+        assert!(
+            c.cv_standard_error > 0.0 && c.cv_standard_error < c.cv_error,
+            "{}",
+            c.name
+        );
     }
     same_choice_on_every_fold(&s);
 }
@@ -205,12 +214,16 @@ fn the_no_fuzz_setting_and_the_fuzz_flag_set_the_candidates() {
             .map(|c| c.0)
             .collect()
     };
-    assert_eq!(names(&cfg), ["lambert", "lambert + fuzz", "ward", "ward + fuzz"]);
+    assert_eq!(
+        names(&cfg),
+        ["lambert", "lambert + fuzz", "ward", "ward + fuzz"]
+    );
     cfg.selection.fuzz = false;
     assert_eq!(names(&cfg), ["lambert", "ward"]);
     // --fuzz (a fuzz parameter listed): every rung with the layer
     let mut with = small_auto("\"lambert\", \"ward\"");
-    with.parameters.insert("fuzz_depth".into(), Default::default());
+    with.parameters
+        .insert("fuzz_depth".into(), Default::default());
     assert_eq!(names(&with), ["lambert + fuzz", "ward + fuzz"]);
 }
 
@@ -266,8 +279,12 @@ fn data_spanning_decades_without_sigmas_are_fitted_in_the_log_metric_and_the_rep
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let report = String::from_utf8_lossy(&o.stdout);
-    assert!(report.contains("metric: log, chosen from the data"), "{report}");
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(
+        report.contains("metric: log, chosen from the data"),
+        "{report}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(r["knobs"]["metric"], "log");
     assert!(
         r["knobs"]["metric_reason"]
@@ -285,11 +302,15 @@ fn data_spanning_decades_without_sigmas_are_fitted_in_the_log_metric_and_the_rep
         .output()
         .unwrap();
     assert!(o.status.success());
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
     assert_eq!(r["knobs"]["metric"], "linear");
     // with sigmas the same values stay linear (chi-square against their noise)
     let with = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
-    assert_eq!(fibrefit::fit::config::metric_for_data(&with).0, Metric::Linear);
+    assert_eq!(
+        fibrefit::fit::config::metric_for_data(&with).0,
+        Metric::Linear
+    );
     // and a Lambertian set without sigmas (a factor of a few) stays linear
     let l = synth_text(
         dir.path(),
@@ -298,5 +319,8 @@ fn data_spanning_decades_without_sigmas_are_fitted_in_the_log_metric_and_the_rep
          random = { count = 100, seed = 4, max_theta_deg = 60 }\n\
          [noise]\nrelative = 0.02\nseed = 6\n",
     );
-    assert_eq!(fibrefit::fit::config::metric_for_data(&without_sigmas(&l)).0, Metric::Linear);
+    assert_eq!(
+        fibrefit::fit::config::metric_for_data(&without_sigmas(&l)).0,
+        Metric::Linear
+    );
 }

@@ -141,9 +141,10 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
     // the globals' Schur complement (older globals: none, the texel errors conditional on them)
     let schur: Option<maps::GlobalSchur> = match &g["maps"]["method"]["global_schur"] {
         serde_json::Value::Null => None,
-        v => Some(serde_json::from_value(v.clone()).map_err(|e| {
-            anyhow!("{}: maps.method.global_schur: {e}", globals.display())
-        })?),
+        v => Some(
+            serde_json::from_value(v.clone())
+                .map_err(|e| anyhow!("{}: maps.method.global_schur: {e}", globals.display()))?,
+        ),
     };
     let part = maps::texel_stage(
         &store,

@@ -569,7 +569,11 @@ pub fn memory_rows(
     let counted = |capture: &Path| -> Result<(usize, usize, f64)> {
         let store = CaptureStore::load(capture, Default::default())?;
         let values = store.sample_count();
-        Ok((store.texels().len(), values, store.bytes() as f64 / values as f64))
+        Ok((
+            store.texels().len(),
+            values,
+            store.bytes() as f64 / values as f64,
+        ))
     };
     let here = counted(&capture)?;
     let goal_bytes = (size == MEMORY_SIZE).then_some(MEMORY_GOAL_BYTES);
@@ -589,7 +593,10 @@ pub fn memory_rows(
     bar.set_message("camera: fit, score and inspect at 512 x 512");
     let m = scratch.join("m");
     std::fs::create_dir_all(&m)?;
-    std::fs::write(m.join("synth.toml"), synth_config(MEMORY_SIZE, Rig::Distant))?;
+    std::fs::write(
+        m.join("synth.toml"),
+        synth_config(MEMORY_SIZE, Rig::Distant),
+    )?;
     crate::synth::run(&m.join("synth.toml"), &m.join("d"), true)?;
     let capture = m.join("d/capture.toml");
     let there = counted(&capture)?;
@@ -611,7 +618,10 @@ pub fn memory_rows(
         there.2,
         goal_mb,
         Some(MEMORY_GOAL_BYTES),
-        format!("sample of {} texels", crate::fit::config::Knobs::default().fit_texels),
+        format!(
+            "sample of {} texels",
+            crate::fit::config::Knobs::default().fit_texels
+        ),
     ));
     rows.extend(score_and_inspect(
         exe,

@@ -170,7 +170,10 @@ pub type Measured = (MapRow, TexelMaps, Vec<(f64, f64)>);
 pub fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
     let dir = scratch.join(case.name.replace(' ', "_"));
     std::fs::create_dir_all(&dir)?;
-    std::fs::write(dir.join("synth.toml"), synth_config(&case.images, case.size))?;
+    std::fs::write(
+        dir.join("synth.toml"),
+        synth_config(&case.images, case.size),
+    )?;
     crate::synth::run(&dir.join("synth.toml"), &dir.join("d"), true)?;
     let store = CaptureStore::load(&write_blind(&dir.join("d"))?, Default::default())?;
     let cfg: FitConfig = toml::from_str(FIT)?;

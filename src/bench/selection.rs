@@ -66,7 +66,13 @@ pub fn auto_fit(
     data: &Samples,
     slow: bool,
     quiet: bool,
-) -> Result<(selection::SelectionOutcome, crate::fit::FitOutcome, FitConfig, f64, f64)> {
+) -> Result<(
+    selection::SelectionOutcome,
+    crate::fit::FitOutcome,
+    FitConfig,
+    f64,
+    f64,
+)> {
     let t = Instant::now();
     let mut cfg: FitConfig = toml::from_str("model = \"auto\"\n")?;
     cfg.metric = crate::fit::config::metric_for_data(data).0;
@@ -175,7 +181,12 @@ pub fn run(
                 data: name.clone(),
                 truth: truth.clone(),
                 samples: data.samples.len(),
-                path: if slow_path { "config knobs" } else { "coarse ranking" }.into(),
+                path: if slow_path {
+                    "config knobs"
+                } else {
+                    "coarse ranking"
+                }
+                .into(),
                 validation: s.validation.clone(),
                 metric: s.metric.clone(),
                 chosen: s.chosen.clone(),

@@ -245,7 +245,12 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
     if let Some(file) = &args.selection {
         let t = Instant::now();
-        let synth: Vec<usize> = args.synth_sizes.iter().copied().filter(|&n| n > 0).collect();
+        let synth: Vec<usize> = args
+            .synth_sizes
+            .iter()
+            .copied()
+            .filter(|&n| n > 0)
+            .collect();
         let rows =
             crate::bench::selection::run(Some(file), &args.sizes, &synth, args.slow, args.quiet)?;
         let list = |v: &[usize]| {

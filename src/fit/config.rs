@@ -542,7 +542,9 @@ impl FitConfig {
         let rank = n.min(self.selection.rank_samples as f64);
         let folds = self.selection.folds as f64;
         (tried
-            * (candidates * sub + self.starts as f64 * iterations * sub + iterations * rank
+            * (candidates * sub
+                + self.starts as f64 * iterations * sub
+                + iterations * rank
                 + folds * iterations * rank)
             + candidates * sub
             + self.starts as f64 * iterations * sub

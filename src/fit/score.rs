@@ -67,13 +67,8 @@ pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
     let problem = problem_for(result, &map, samples.samples.iter().collect(), eps);
     let mut run = Running::new(ch, eps);
     run.add(result, &problem)?;
-    let repeats = || {
-        quality::repeats_estimate(quality::repeats_sums(
-            &problem.samples,
-            problem.scale(),
-            ch,
-        ))
-    };
+    let repeats =
+        || quality::repeats_estimate(quality::repeats_sums(&problem.samples, problem.scale(), ch));
     Ok(run.finish(result, repeats))
 }
 

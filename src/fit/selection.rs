@@ -122,7 +122,11 @@ pub fn model_values_on<'a>(
 
 /// Unweighted RMSE, relative RMSE and log error of `values` against the samples `test`
 /// (`ch` channels).
-fn plain_errors(values: &[[f64; 3]], test: &[&crate::load::samples::Sample], ch: usize) -> (f64, f64, f64) {
+fn plain_errors(
+    values: &[[f64; 3]],
+    test: &[&crate::load::samples::Sample],
+    ch: usize,
+) -> (f64, f64, f64) {
     let raw: Vec<[f64; 3]> = test.iter().map(|s| s.value).collect();
     let floors: Vec<f64> = (0..ch)
         .map(|c| super::problem::log_floor(&raw, c))
@@ -211,7 +215,11 @@ fn knobs_matter(set: &ParamSet) -> bool {
         .shapes
         .iter()
         .any(|s| s.kind == Shape::AzimuthSpread && (s.vary || s.value > 0.0));
-    spread || matches!(set.rung, ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference)
+    spread
+        || matches!(
+            set.rung,
+            ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference
+        )
 }
 
 /// A fit of `train` warm-started at `start` (LM only, at most `iterations`; none: the albedos
@@ -225,7 +233,12 @@ fn refit_and_predict(
     iterations: u64,
 ) -> Result<(ParamSet, Vec<f64>, Vec<[f64; 3]>)> {
     let st = super::setup::setup(train, rc)?;
-    fn make<'s>(s: &'s Samples, template: &ParamSet, rc: &FitConfig, st: &super::setup::Setup) -> FitProblem<'s> {
+    fn make<'s>(
+        s: &'s Samples,
+        template: &ParamSet,
+        rc: &FitConfig,
+        st: &super::setup::Setup,
+    ) -> FitProblem<'s> {
         FitProblem::new(
             s.samples.iter().collect(),
             template.clone(),
@@ -410,7 +423,10 @@ pub const REFINE_ITERATIONS: u64 = 10;
 pub fn undecided(candidates: &[Candidate], tolerance: Option<f64>) -> Vec<usize> {
     let coarse = |c: &Candidate| c.knobs == "coarse";
     let range = |c: &Candidate| match coarse(c) {
-        true => (c.cv_error * (1.0 - KNOBS_TOLERANCE), c.cv_error * (1.0 + KNOBS_TOLERANCE)),
+        true => (
+            c.cv_error * (1.0 - KNOBS_TOLERANCE),
+            c.cv_error * (1.0 + KNOBS_TOLERANCE),
+        ),
         false => (c.cv_error, c.cv_error),
     };
     let ok: Vec<usize> = (0..candidates.len())
@@ -422,8 +438,14 @@ pub fn undecided(candidates: &[Candidate], tolerance: Option<f64>) -> Vec<usize>
     else {
         return vec![];
     };
-    let best_lo = ok.iter().map(|&k| range(&candidates[k]).0).fold(f64::INFINITY, f64::min);
-    let best_hi = ok.iter().map(|&k| range(&candidates[k]).1).fold(f64::INFINITY, f64::min);
+    let best_lo = ok
+        .iter()
+        .map(|&k| range(&candidates[k]).0)
+        .fold(f64::INFINITY, f64::min);
+    let best_hi = ok
+        .iter()
+        .map(|&k| range(&candidates[k]).1)
+        .fold(f64::INFINITY, f64::min);
     let se = candidates[best].cv_standard_error;
     let threshold = |b: f64| match tolerance {
         Some(t) => b * (1.0 + t),
@@ -459,7 +481,11 @@ pub fn undecided(candidates: &[Candidate], tolerance: Option<f64>) -> Vec<usize>
 /// fold's: the simplest (fewest free parameters, then the list's order) whose error is at
 /// most the best's plus its standard error (or, with `tolerance`, the best's times 1 +
 /// tolerance). `None` when none was measured.
-pub fn rule_choice(candidates: &[Candidate], fold: Option<usize>, tolerance: Option<f64>) -> Option<usize> {
+pub fn rule_choice(
+    candidates: &[Candidate],
+    fold: Option<usize>,
+    tolerance: Option<f64>,
+) -> Option<usize> {
     let score = |c: &Candidate| -> Option<(f64, f64)> {
         if c.error.is_some() {
             return None;
@@ -607,7 +633,11 @@ pub fn select_with(
                 false => 0,
             };
             let m = measure(samples, &plan, &coarse, &o.set, iters, o.channels)?;
-            let ns = ns_per_sample(&problem_at(&o, &coarse, &anchor_samples), &o.set, &anchor_samples);
+            let ns = ns_per_sample(
+                &problem_at(&o, &coarse, &anchor_samples),
+                &o.set,
+                &anchor_samples,
+            );
             hints.push(o.set.shapes.iter().map(|s| (s.kind, s.value)).collect());
             let p = o.statistics.free_parameters;
             let exact = !knobs_matter(&o.set);
@@ -659,7 +689,11 @@ pub fn select_with(
                     c.cv_error,
                     c.cv_standard_error,
                     metric_name(cfg.metric),
-                    if c.knobs == "coarse" { ", coarse knobs" } else { "" }
+                    if c.knobs == "coarse" {
+                        ", coarse knobs"
+                    } else {
+                        ""
+                    }
                 ),
                 Some(e) => format!(
                     "auto: {name} failed after {}: {e}",
@@ -694,18 +728,26 @@ pub fn select_with(
                 continue;
             };
             let (name, _, _, rc) = &list[k];
-            crate::progress::line(quiet, &format!("auto: refining {name} at the config's knobs"));
+            crate::progress::line(
+                quiet,
+                &format!("auto: refining {name} at the config's knobs"),
+            );
             let t = Instant::now();
-            let refined =
-                refit_and_predict(&anchor_samples, &anchor_samples, rc, &set, REFINE_ITERATIONS)
-                    .and_then(|(s, _, _)| {
-                        let iters = match plan.cross_validated {
-                            true => REFINE_ITERATIONS,
-                            false => 0,
-                        };
-                        let m = measure(samples, &plan, rc, &s, iters, s.channels)?;
-                        Ok((s, m))
-                    });
+            let refined = refit_and_predict(
+                &anchor_samples,
+                &anchor_samples,
+                rc,
+                &set,
+                REFINE_ITERATIONS,
+            )
+            .and_then(|(s, _, _)| {
+                let iters = match plan.cross_validated {
+                    true => REFINE_ITERATIONS,
+                    false => 0,
+                };
+                let m = measure(samples, &plan, rc, &s, iters, s.channels)?;
+                Ok((s, m))
+            });
             match refined {
                 Ok((s, m)) => {
                     let c = &mut candidates[k];

@@ -433,7 +433,8 @@ impl CaptureStore {
         (0..self.images())
             .into_par_iter()
             .flat_map_iter(|k| {
-                (0..self.texels.len()).filter_map(move |t| self.sample(t, k).map(|s| s.value[c].abs()))
+                (0..self.texels.len())
+                    .filter_map(move |t| self.sample(t, k).map(|s| s.value[c].abs()))
             })
             .collect()
     }

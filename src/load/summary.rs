@@ -136,7 +136,10 @@ impl Tally {
 /// sample at once; other data are loaded whole (a goniometric CSV with what its header said).
 pub fn summarise(path: &Path, opts: &LoadOptions) -> Result<Summary> {
     if is_capture(path) {
-        return Ok(Summary::of_capture(&CaptureStore::load(path, opts.subsample)?));
+        return Ok(Summary::of_capture(&CaptureStore::load(
+            path,
+            opts.subsample,
+        )?));
     }
     let (samples, format) = load_data_with_format(path, opts)?;
     let mut summary = Summary::of(&samples);
@@ -153,7 +156,13 @@ impl Summary {
         for smp in &s.samples {
             tally.add(smp);
         }
-        tally.summary(&s.source, s.kind, s.channels, &s.dropped, &s.skipped_examples)
+        tally.summary(
+            &s.source,
+            s.kind,
+            s.channels,
+            &s.dropped,
+            &s.skipped_examples,
+        )
     }
 
     /// The summary of a capture's every sample (those of [`CaptureStore::to_samples`]), made

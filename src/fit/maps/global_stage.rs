@@ -315,11 +315,7 @@ pub const JOINT_ITERATIONS: usize = 20;
 
 /// Per texel, the sum of squared weighted residuals of its pixels at the globals `g` and each
 /// of `candidates` (values per texel).
-fn texel_costs(
-    problems: &[Texel],
-    g: &Globals,
-    candidates: &[&[TexelValues]],
-) -> Vec<Vec<f64>> {
+fn texel_costs(problems: &[Texel], g: &Globals, candidates: &[&[TexelValues]]) -> Vec<Vec<f64>> {
     problems
         .par_iter()
         .enumerate()
@@ -344,12 +340,12 @@ fn moved_globals(set: &ParamSet, delta: &[f64]) -> ParamSet {
     let shapes = set.free_shapes();
     for (j, &i) in shapes.iter().enumerate() {
         let sh = &mut s.shapes[i];
-        let v = sh.kind.to_external(sh.kind.to_internal(sh.value) + delta[j]);
+        let v = sh
+            .kind
+            .to_external(sh.kind.to_internal(sh.value) + delta[j]);
         sh.value = match problem::coordinate(sh) {
             problem::Coordinate::Periodic => wrap_azimuth(v),
-            problem::Coordinate::UnderMaxHeight => {
-                v.clamp(sh.min, problem::height_range(sh, d).1)
-            }
+            problem::Coordinate::UnderMaxHeight => v.clamp(sh.min, problem::height_range(sh, d).1),
             _ => v.clamp(sh.min, sh.max),
         };
     }
@@ -468,7 +464,10 @@ pub(super) fn joint_refine(
                 s -= &t.b * &cib;
                 rhs += &t.b * f.solve(&t.gt);
             }
-            let Some(dg) = (0.5 * (&s + s.transpose())).cholesky().map(|f| f.solve(&rhs)) else {
+            let Some(dg) = (0.5 * (&s + s.transpose()))
+                .cholesky()
+                .map(|f| f.solve(&rhs))
+            else {
                 lambda *= 10.0;
                 continue;
             };

@@ -235,7 +235,11 @@ pub(super) struct GlobalSide<'a> {
 }
 
 impl<'a> GlobalSide<'a> {
-    pub(super) fn new(steps: &'a GlobalSteps, channels: usize, schur: Option<&GlobalSchur>) -> Self {
+    pub(super) fn new(
+        steps: &'a GlobalSteps,
+        channels: usize,
+        schur: Option<&GlobalSchur>,
+    ) -> Self {
         Self {
             steps,
             stepped: steps.globals(channels),
@@ -332,7 +336,12 @@ impl Texel {
     /// The Jacobian of the texel's pixel residuals over the free globals (columns as
     /// [`GlobalSteps`]: shapes by the global fit's own steps, albedos analytic) at `v`. A global
     /// the texel does not map moves the texel's unmapped values with it (as its start does).
-    pub(super) fn global_jacobian(&self, g: &Globals, side: &GlobalSide, v: &TexelValues) -> DMatrix<f64> {
+    pub(super) fn global_jacobian(
+        &self,
+        g: &Globals,
+        side: &GlobalSide,
+        v: &TexelValues,
+    ) -> DMatrix<f64> {
         let ch = g.channels;
         let n = self.obs.len() * ch;
         let cols0 = self.columns(g, v.height, v.psi);
@@ -416,7 +425,6 @@ impl Texel {
         (jcols, which)
     }
 }
-
 
 /// Texels per chunk of the sums over texels (fixed, so the sums' bits do not depend on the
 /// thread count).
@@ -624,7 +632,9 @@ mod tests {
         /// The diagonal of A.
         fn reference(&self) -> Vec<f64> {
             let g = self.full.columns(0, self.globals);
-            (0..self.globals).map(|k| g.column(k).norm_squared()).collect()
+            (0..self.globals)
+                .map(|k| g.column(k).norm_squared())
+                .collect()
         }
 
         /// Texel t's variances by the Schur-complement formula.
@@ -652,7 +662,12 @@ mod tests {
             let alone = texel_variances(&(jt.transpose() * &jt), None);
             for k in 0..p.unknowns {
                 let i = p.globals + t * p.unknowns + k;
-                assert!(close(vars[k], dense[(i, i)]), "texel {t} unknown {k}: {} vs {}", vars[k], dense[(i, i)]);
+                assert!(
+                    close(vars[k], dense[(i, i)]),
+                    "texel {t} unknown {k}: {} vs {}",
+                    vars[k],
+                    dense[(i, i)]
+                );
                 // the globals' uncertainty only ever adds
                 assert!(alone[k] <= vars[k] * (1.0 + 1e-12));
                 grew |= vars[k] > 1.01 * alone[k];
@@ -697,14 +712,20 @@ mod tests {
         // singular, and only that unknown (and the global) is undetermined
         let mut p = Tiny::new(2, 4, 2, 5, 3);
         for r in 0..p.texels * p.rows {
-            p.full[(r, 0)] = if r < p.rows { p.full[(r, p.globals)] } else { 0.0 };
+            p.full[(r, 0)] = if r < p.rows {
+                p.full[(r, p.globals)]
+            } else {
+                0.0
+            };
         }
         let schur = p.schur();
         let s = SymInverse::scaled(&schur, &p.reference());
         assert!(s.quadratic(&[1.0, 0.0]).is_infinite());
         let v0 = p.texel(0, &s);
         assert!(v0[0].is_infinite(), "{v0:?}");
-        let pinv = (p.full.transpose() * &p.full).pseudo_inverse(1e-12).unwrap();
+        let pinv = (p.full.transpose() * &p.full)
+            .pseudo_inverse(1e-12)
+            .unwrap();
         let i = p.globals + 1;
         assert!(close(v0[1], pinv[(i, i)]), "{v0:?} vs {}", pinv[(i, i)]);
         for t in 1..p.texels {
