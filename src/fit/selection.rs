@@ -63,6 +63,17 @@ pub struct Candidate {
     pub error: Option<String>,
 }
 
+impl Candidate {
+    /// The per-fold held-out errors, "0.123, 0.145, ...", for the tables.
+    pub fn folds_text(&self) -> String {
+        self.fold_errors
+            .iter()
+            .map(|e| format!("{e:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SelectionOutcome {
     pub candidates: Vec<Candidate>,
@@ -882,11 +893,7 @@ pub fn table(s: &SelectionOutcome) -> String {
                     c.free_parameters,
                     c.cv_error,
                     c.cv_standard_error,
-                    c.fold_errors
-                        .iter()
-                        .map(|e| format!("{e:.3}"))
-                        .collect::<Vec<_>>()
-                        .join(", "),
+                    c.folds_text(),
                     c.heldout_rmse,
                     100.0 * c.heldout_relative_rmse,
                     c.heldout_log_error,

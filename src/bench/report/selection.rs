@@ -102,11 +102,7 @@ pub fn write(dir: &Path, rows: &[SelectionRow], command: &str, seconds: f64) -> 
                         c.free_parameters,
                         c.cv_error,
                         c.cv_standard_error,
-                        c.fold_errors
-                            .iter()
-                            .map(|e| format!("{e:.3}"))
-                            .collect::<Vec<_>>()
-                            .join(", "),
+                        c.folds_text(),
                         c.knobs,
                         if c.chosen { "**yes**" } else { "" }
                     )
