@@ -651,7 +651,9 @@ pub fn select_with(
             );
             hints.push(o.set.shapes.iter().map(|s| (s.kind, s.value)).collect());
             let p = o.statistics.free_parameters;
-            let exact = !knobs_matter(&o.set);
+            // measured at the config's knobs: a model the knobs do not change, or no coarse
+            // ranking asked for (then nothing is refined)
+            let exact = !cfg.selection.coarse_ranking || !knobs_matter(&o.set);
             anchors.push(Some(o.set.clone()));
             fitted = Some(o);
             Ok((p, m, ns, exact))
