@@ -14,7 +14,7 @@ fn a_fit_through_the_api_is_the_cli_fit() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     let data = root().join("data_synthetic/brushed/gonio.csv");
-    let cfg = fit::configure(None, Some("poulin-fournier"), None, false, &data).unwrap();
+    let cfg = fit::configure(None, Some("poulin-fournier"), None, None, &data).unwrap();
     let req = FitRequest {
         data: data.clone(),
         load: fibrefit::load::LoadOptions::default(),
@@ -59,15 +59,13 @@ fn a_fit_through_the_api_is_the_cli_fit() {
 #[test]
 fn configure_names_what_is_wrong() {
     let data = root().join("data_synthetic/brushed/gonio.csv");
-    let e = fit::configure(None, None, None, false, &data)
-        .err()
-        .unwrap();
+    let e = fit::configure(None, None, None, None, &data).err().unwrap();
     assert!(e.to_string().contains("--model"), "{e}");
-    let e = fit::configure(None, Some("lambert"), Some("cubic"), false, &data)
+    let e = fit::configure(None, Some("lambert"), Some("cubic"), None, &data)
         .err()
         .unwrap();
     assert!(e.to_string().contains("--metric cubic"), "{e}");
-    let e = fit::configure(None, Some("no-such-rung"), None, false, &data)
+    let e = fit::configure(None, Some("no-such-rung"), None, None, &data)
         .err()
         .unwrap();
     assert!(e.to_string().contains("no-such-rung"), "{e}");
@@ -76,9 +74,34 @@ fn configure_names_what_is_wrong() {
         None,
         Some("lambert"),
         None,
-        false,
+        None,
         std::path::Path::new("x.bsdf"),
     )
     .unwrap();
     assert_eq!(c.metric, fibrefit::fit::config::Metric::Log);
+}
+
+#[test]
+fn fuzz_true_false_and_none_set_auto_s_candidates() {
+    let data = root().join("data_synthetic/brushed/gonio.csv");
+    let names = |fuzz: Option<bool>| -> Vec<String> {
+        let c = fit::configure(None, Some("auto"), None, fuzz, &data).unwrap();
+        fibrefit::fit::selection::candidates_of(&c)
+            .unwrap()
+            .into_iter()
+            .map(|c| c.0)
+            .collect()
+    };
+    let (default, with, without) = (names(None), names(Some(true)), names(Some(false)));
+    assert_eq!(default.len(), 12, "{default:?}");
+    assert!(with.iter().all(|n| n.ends_with("+ fuzz")) && with.len() == 6);
+    assert!(without.iter().all(|n| !n.contains("fuzz")) && without.len() == 6);
+    // --no-fuzz against a config that lists a fuzz parameter: refused, naming it
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("auto.toml");
+    std::fs::write(&cfg, "model = \"auto\"\n[parameters]\nfuzz = {}\n").unwrap();
+    let e = fit::configure(Some(&cfg), None, None, Some(false), &data)
+        .err()
+        .unwrap();
+    assert!(e.to_string().contains("parameter `fuzz`"), "{e}");
 }

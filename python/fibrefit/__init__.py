@@ -284,7 +284,7 @@ def fit(
     model: Optional[str] = None,
     *,
     metric: Optional[str] = None,
-    fuzz: bool = False,
+    fuzz: Optional[bool] = None,
     maps: Optional[PathLike] = None,
     progress: bool = False,
     **options: Any,
@@ -294,7 +294,9 @@ def fit(
 
     ``config``: a fit config TOML (``configs/fit_*.toml``); ``model``: a rung id or ``"auto"``
     (overrides the config's; needed without a config); ``metric``: ``"linear"``, ``"log"`` or
-    ``"cosine"``; ``fuzz``: add the fuzz layer; ``maps``: a directory for per-texel maps
+    ``"cosine"``; ``fuzz``: ``True`` adds the fuzz layer (to the rung, or to every candidate of
+    ``"auto"``), ``False`` leaves it out (``--no-fuzz``), ``None`` the config's or the default
+    (``"auto"`` tries each rung without and with it); ``maps``: a directory for per-texel maps
     (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr.
     Further keyword options are loading options (see :func:`load_data`).
     """

@@ -50,7 +50,7 @@ def fit(
     config: Optional[str] = None,
     model: Optional[str] = None,
     metric: Optional[str] = None,
-    fuzz: bool = False,
+    fuzz: Optional[bool] = None,
     maps: Optional[str] = None,
     progress: bool = False,
     options: Optional[Dict[str, Any]] = None,

@@ -466,10 +466,11 @@ impl FitResult {
 
 /// Fit `data` (goniometric CSV, capture TOML or measured-BRDF file): `config` a fit config
 /// TOML, `model` a rung id or "auto" (overrides the config's), `metric` (linear, log, cosine),
-/// `fuzz` (add the fuzz layer), `maps` a directory for per-texel maps (captures), `progress`
+/// `fuzz` (True: add the fuzz layer; False: leave it out, `auto` tries no candidate with it;
+/// None: the config's, or auto's default of each rung without and with it), `maps` a directory for per-texel maps (captures), `progress`
 /// (bars on stderr), loading options as `load_data`.
 #[pyfunction]
-#[pyo3(signature = (data, config=None, model=None, metric=None, fuzz=false, maps=None, progress=false, options=None))]
+#[pyo3(signature = (data, config=None, model=None, metric=None, fuzz=None, maps=None, progress=false, options=None))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -477,7 +478,7 @@ fn fit(
     config: Option<PathBuf>,
     model: Option<String>,
     metric: Option<String>,
-    fuzz: bool,
+    fuzz: Option<bool>,
     maps: Option<PathBuf>,
     progress: bool,
     options: Option<Bound<'_, PyDict>>,

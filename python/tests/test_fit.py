@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import fibrefit
-from conftest import CONFIGS, DATA
+from conftest import CONFIGS, DATA, write_params
 
 
 def test_load_data_gonio():
@@ -93,3 +93,25 @@ def test_maps_fit_material_looks_up_the_maps(tmp_path):
     uv = np.array([[0.1, 0.1], [0.9, 0.8]])
     f = m.eval(l, l, uv)
     assert f.shape == (2, m.channels) and not np.allclose(f[0], f[1], rtol=1e-9)
+
+
+def test_auto_fuzz_true_false_and_default_set_the_candidates(tmp_path):
+    cfg = write_params(
+        tmp_path, "auto.toml", 'model = "auto"\n[selection]\nrungs = ["lambert", "ward"]\n'
+    )
+    data = tmp_path / "gonio.csv"
+    rows = (DATA / "brushed" / "gonio.csv").read_text().splitlines(keepends=True)
+    data.write_text("".join(rows[:301]))
+
+    def names(**kw):
+        r = fibrefit.fit(data, config=cfg, **kw)
+        return [c["name"] for c in r.result["model_selection"]]
+
+    assert names() == ["lambert", "lambert + fuzz", "ward", "ward + fuzz"]
+    assert names(fuzz=False) == ["lambert", "ward"]
+    assert names(fuzz=True) == ["lambert + fuzz", "ward + fuzz"]
+    listed = write_params(
+        tmp_path, "listed.toml", 'model = "auto"\n[parameters]\nfuzz_depth = {}\n'
+    )
+    with pytest.raises(fibrefit.FibrefitError, match="lists the fuzz layer's parameter `fuzz_depth`"):
+        fibrefit.fit(data, config=listed, fuzz=False)

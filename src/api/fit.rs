@@ -20,7 +20,10 @@ use anyhow::{anyhow, bail, Context, Result};
 use std::path::{Path, PathBuf};
 
 /// The configuration of a fit: a config file, or the defaults of a rung (`model`), with
-/// `model`, `metric` and `fuzz` overriding it; validated. Without a config a measured-BRDF file
+/// `model`, `metric` and `fuzz` overriding it; validated. `fuzz`: `Some(true)` adds the fuzz
+/// layer (to the rung, or to every candidate of `auto`), `Some(false)` leaves it out (`auto`
+/// tries no candidate with it; refused when the config lists one of its parameters), `None`
+/// the config's (or the default: `auto` tries each rung without and with it). Without a config a measured-BRDF file
 /// (.bsdf, .binary) is fitted with the log metric; other data without a named metric (no
 /// `--metric`, no `metric` in the config) take the metric they ask for when loaded
 /// ([`crate::fit::config::metric_for_data`]). A named rung frees every shape parameter
@@ -31,7 +34,7 @@ pub fn configure(
     config: Option<&Path>,
     model: Option<&str>,
     metric: Option<&str>,
-    fuzz: bool,
+    fuzz: Option<bool>,
     data: &Path,
 ) -> Result<FitConfig> {
     let mut cfg = match (config, model) {
@@ -68,8 +71,23 @@ pub fn configure(
         let m = crate::fit::selection::metric_name(cfg.metric);
         cfg.metric_reason = Some(format!("{m}: the config's `metric`"));
     }
-    if fuzz {
-        cfg.parameters.entry("fuzz_depth".into()).or_default();
+    match fuzz {
+        Some(true) => {
+            cfg.parameters.entry("fuzz_depth".into()).or_default();
+        }
+        Some(false) => {
+            if let Some(p) = crate::model::FUZZ_PARAMETERS
+                .iter()
+                .find(|p| cfg.parameters.contains_key(**p))
+            {
+                bail!(
+                    "--no-fuzz (fuzz = False): the config lists the fuzz layer's parameter `{p}`; \
+                     remove it from [parameters] to fit without the layer"
+                );
+            }
+            cfg.selection.fuzz = false;
+        }
+        None => {}
     }
     cfg.validate().map_err(|e| anyhow!("--model: {e}"))?;
     if config.is_none() && cfg.model != "auto" {

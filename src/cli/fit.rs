@@ -56,7 +56,8 @@ pub struct FitArgs {
     #[arg(long, conflicts_with = "no_fuzz")]
     pub fuzz: bool,
     /// `--model auto`: try the rungs without the fuzz layer only (by default each rung is tried
-    /// without and with it; as `[selection] fuzz = false`)
+    /// without and with it; as `[selection] fuzz = false`; refused when the config lists a fuzz
+    /// parameter)
     #[arg(long)]
     pub no_fuzz: bool,
     /// Result JSON for renderers (and `fibrefit eval --params`) [default: none: the report is
@@ -92,16 +93,17 @@ pub struct FitArgs {
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
-    let mut config = fit_api::configure(
+    let config = fit_api::configure(
         args.config.as_deref(),
         args.model.as_deref(),
         args.metric.as_deref(),
-        args.fuzz,
+        match (args.fuzz, args.no_fuzz) {
+            (true, _) => Some(true),
+            (_, true) => Some(false),
+            _ => None,
+        },
         &args.data,
     )?;
-    if args.no_fuzz {
-        config.selection.fuzz = false;
-    }
     let load =
         args.load
             .options_with(config.knobs.stride, config.knobs.fraction, &config.columns)?;
