@@ -2,12 +2,12 @@
 //! fibre-direction spread, the Fresnel factor on the lobe, the fuzz layer), under the linear and
 //! the log metric, fitted to a measured felt (the RGL database's acrylic felt in
 //! `../shared/data/rgl`) on a seeded 80 % of 3000 direction pairs and measured on the other 20 %:
-//! relative RMSE and log error (train and held-out), cost per evaluation, fit time, and which
-//! rung `--model auto` would choose (log metric, without the opt-in components: the cheapest
-//! within 5 % of the best held-out log error).
+//! relative RMSE and log error (train and held-out, with the held-out error's standard error),
+//! cost per evaluation, fit time, and which candidate `--model auto`'s rule picks on this split
+//! ([`auto_choice`]).
 
 use crate::fit::config::FitConfig;
-use crate::fit::selection::{heldout, model_values_on};
+use crate::fit::selection::{heldout, heldout_log_terms, model_values_on, rms_and_se};
 use crate::load::rgl::MeasuredOptions;
 use crate::load::samples::Samples;
 use crate::load::{load_data, LoadOptions};
@@ -30,6 +30,9 @@ pub struct FeltRow {
     pub train_log_error: f64,
     pub heldout_relative_rmse: f64,
     pub heldout_log_error: f64,
+    /// Standard error of `heldout_log_error` (from the spread of the per-sample squared log
+    /// errors, as auto's).
+    pub heldout_log_standard_error: f64,
     pub ns_per_eval: f64,
     pub fit_seconds: f64,
     pub azimuth_spread_deg: Option<f64>,
@@ -141,6 +144,7 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun>
                 let fit_seconds = t.elapsed().as_secs_f64();
                 let (_, train_rel, train_log, _) = heldout(&o, &cfg, &train)?;
                 let (_, rel, log, ns) = heldout(&o, &cfg, &test)?;
+                let (_, log_se) = rms_and_se(&heldout_log_terms(&o, &cfg, &test)?);
                 let (grazing_forward_ratio, near_normal_ratio) =
                     region_ratios(&test, &model_values_on(&o, &cfg, &test)?.1);
                 let fitted = |name: &str| {
@@ -158,6 +162,7 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun>
                     train_log_error: train_log,
                     heldout_relative_rmse: rel,
                     heldout_log_error: log,
+                    heldout_log_standard_error: log_se,
                     ns_per_eval: ns,
                     fit_seconds,
                     azimuth_spread_deg: fitted("azimuth_spread_deg"),
@@ -172,22 +177,42 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun>
             }
         }
     }
-    // the auto rule under the log metric, among the log rows auto fits by default (the rungs
-    // with their spread; cheapest first = table order)
-    let default =
-        |r: &FeltRow| r.metric == "log" && matches!(r.components.as_str(), "-" | "spread");
-    let best = rows
-        .iter()
-        .filter(|r| default(r))
-        .map(|r| r.heldout_log_error)
-        .fold(f64::INFINITY, f64::min);
-    if let Some(r) = rows
-        .iter_mut()
-        .find(|r| default(r) && r.heldout_log_error <= 1.05 * best)
-    {
-        r.chosen = true;
+    if let Some(k) = auto_choice(&rows) {
+        rows[k].chosen = true;
     }
     Ok(FeltRun { rows, fits, test })
+}
+
+/// Is `r` a candidate `--model auto` tries by default on data without sigmas spanning decades
+/// (the log metric; each rung with every shape parameter free, its spread included where it
+/// has one, without and with the fuzz layer; no Fresnel factor)?
+pub fn auto_candidate(r: &FeltRow) -> bool {
+    let spread = variants(&r.rung).contains(&"spread");
+    r.metric == "log"
+        && match spread {
+            true => matches!(r.components.as_str(), "spread" | "spread + fuzz"),
+            false => matches!(r.components.as_str(), "-" | "fuzz"),
+        }
+}
+
+/// The row `--model auto`'s rule picks on this split: among [`auto_candidate`]s, the simplest
+/// (fewest free parameters, then the table's order: cheapest rung, without the fuzz layer
+/// first) whose held-out log error is at most the best's plus the best's standard error.
+pub fn auto_choice(rows: &[FeltRow]) -> Option<usize> {
+    let ok: Vec<usize> = (0..rows.len())
+        .filter(|&k| auto_candidate(&rows[k]) && rows[k].heldout_log_error.is_finite())
+        .collect();
+    let best = ok.iter().copied().min_by(|&a, &b| {
+        rows[a]
+            .heldout_log_error
+            .total_cmp(&rows[b].heldout_log_error)
+    })?;
+    let threshold = rows[best].heldout_log_error + rows[best].heldout_log_standard_error;
+    let mut order = ok;
+    order.sort_by_key(|&k| (rows[k].free_parameters, k));
+    order
+        .into_iter()
+        .find(|&k| rows[k].heldout_log_error <= threshold)
 }
 
 /// Fits the report runs (for the progress bar).
@@ -199,4 +224,55 @@ pub fn fit_count() -> u64 {
         .iter()
         .map(|r| variants(r).len() as u64)
         .sum::<u64>()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(rung: &str, components: &str, metric: &str, free: usize, err: f64, se: f64) -> FeltRow {
+        FeltRow {
+            rung: rung.into(),
+            components: components.into(),
+            metric: metric.into(),
+            free_parameters: free,
+            train_relative_rmse: 0.0,
+            train_log_error: 0.0,
+            heldout_relative_rmse: 0.0,
+            heldout_log_error: err,
+            heldout_log_standard_error: se,
+            ns_per_eval: 1.0,
+            fit_seconds: 0.0,
+            azimuth_spread_deg: None,
+            fuzz_depth: None,
+            fuzz_asymmetry: None,
+            grazing_forward_ratio: 1.0,
+            near_normal_ratio: 1.0,
+            chosen: false,
+        }
+    }
+
+    #[test]
+    fn auto_choice_is_the_simplest_default_candidate_within_one_standard_error() {
+        let rows = vec![
+            row("lambert", "-", "log", 3, 0.50, 0.03),
+            row("lambert", "fuzz", "log", 8, 0.22, 0.01),
+            row("ward", "-", "log", 9, 0.42, 0.02),
+            row("ward", "fuzz", "log", 14, 0.176, 0.010),
+            // not a default candidate: the plain fibre rung without its spread, and Fresnel
+            row("poulin-fournier", "-", "log", 7, 0.10, 0.01),
+            row("poulin-fournier", "spread + fresnel", "log", 9, 0.10, 0.01),
+            row("poulin-fournier", "spread + fuzz", "log", 13, 0.184, 0.010),
+            // another metric
+            row("lambert", "-", "linear", 3, 0.01, 0.01),
+        ];
+        // best 0.176 + 0.010: poulin-fournier + spread + fuzz (13 free) is within it and simpler
+        assert_eq!(auto_choice(&rows), Some(6));
+        assert!(!auto_candidate(&rows[4]) && !auto_candidate(&rows[5]));
+        assert!(!auto_candidate(&rows[7]));
+        // beyond the noise: ward + fuzz
+        let mut far = rows.clone();
+        far[6].heldout_log_error = 0.19;
+        assert_eq!(auto_choice(&far), Some(3));
+    }
 }

@@ -154,6 +154,32 @@ fn plain_errors(
     ((se / n).sqrt(), (se / sy).sqrt(), (sl / n).sqrt())
 }
 
+/// Per held-out sample of `test`, the mean over channels of the squared log error
+/// (ln(m + eps) - ln(y + eps))^2 of the fitted outcome `o` (eps: the `log` metric's floor of
+/// `test`): the terms of [`heldout`]'s log error, whose RMS and standard error
+/// [`rms_and_se`] gives.
+pub fn heldout_log_terms(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<Vec<f64>> {
+    let (_, values) = model_values_on(o, cfg, test)?;
+    let ch = o.channels;
+    let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
+    let floors: Vec<f64> = (0..ch)
+        .map(|c| super::problem::log_floor(&raw, c))
+        .collect();
+    Ok(values
+        .iter()
+        .zip(&test.samples)
+        .map(|(m, s)| {
+            (0..ch)
+                .map(|c| {
+                    ((m[c].max(0.0) + floors[c]).ln() - (s.value[c].max(0.0) + floors[c]).ln())
+                        .powi(2)
+                })
+                .sum::<f64>()
+                / ch as f64
+        })
+        .collect())
+}
+
 /// Held-out RMSE, relative RMSE and log error of a fitted outcome, and the single-thread cost
 /// per sample.
 pub fn heldout(o: &FitOutcome, cfg: &FitConfig, test: &Samples) -> Result<(f64, f64, f64, f64)> {

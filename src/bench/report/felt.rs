@@ -88,19 +88,22 @@ pub fn write(
          and with the optional components: the fibre-direction spread (`azimuth_spread_deg`), the \
          Fresnel factor on the lobe (`fresnel_ior`) and the fuzz layer (`fuzz`, `fuzz_depth`, \
          `fuzz_asymmetry`; docs/model.md, \"Optional components\"), under the linear and the log metric. \
-         Log error: RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median. Chosen: the \
-         rung `--model auto` picks under the log metric without opt-in components (cheapest within \
-         5 % of the best held-out log error among the plain and spread rows). The ratio column is the \
+         Log error: RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median. Chosen: what \
+         `--model auto`'s rule picks on this one split under the log metric, among the candidates \
+         it tries by default (each rung with its spread where it has one, without and with the \
+         fuzz layer; no Fresnel factor): the simplest whose held-out log error is at most the \
+         best's plus its standard error (`fibrefit fit --model auto` itself cross-validates below \
+         2000 samples: reports/selection.md). The ratio column is the \
          held-out log error over plain Ward's (same metric). Grazing fwd and near normal: held-out sum \
          of data over sum of model where theta_i and theta_o both exceed 55 deg with light and view on \
          opposite sides (the grazing forward peak, 2/3 of the sum of f^2), and where both are below \
          30 deg; 1 = matched, above 1 = the model underpredicts.\n\n"
     );
     md += "![held-out log error vs cost](felt.png)\n\n";
-    md += "| metric | rung | components | free | spread [deg] | fuzz depth, g | train rel. RMSE | train log err. | held-out rel. RMSE | held-out log err. | / Ward | grazing fwd | near normal | ns / eval | fit [s] | chosen |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
+    md += "| metric | rung | components | free | spread [deg] | fuzz depth, g | train rel. RMSE | train log err. | held-out rel. RMSE | held-out log err. | standard error | / Ward | grazing fwd | near normal | ns / eval | fit [s] | chosen |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|\n";
     for r in rows {
         md += &format!(
-            "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.4} | {:.2} % | {:.4} | {:.2} | {:.2} | {:.2} | {:.0} | {:.1} | {} |\n",
+            "| {} | {} | {} | {} | {} | {} | {:.2} % | {:.4} | {:.2} % | {:.4} | {:.4} | {:.2} | {:.2} | {:.2} | {:.0} | {:.1} | {} |\n",
             r.metric,
             r.rung,
             r.components,
@@ -114,6 +117,7 @@ pub fn write(
             r.train_log_error,
             100.0 * r.heldout_relative_rmse,
             r.heldout_log_error,
+            r.heldout_log_standard_error,
             r.heldout_log_error / ward(&r.metric),
             r.grazing_forward_ratio,
             r.near_normal_ratio,
