@@ -432,6 +432,22 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
             "{f} differs between the single run and the merged tiles"
         );
     }
+    // nor do the maps depend on how many threads fit the texels, in whatever order they reach
+    // them (which texels read a shared column table is planned before any is fitted)
+    for threads in ["1", "3"] {
+        let maps = format!("threads_{threads}");
+        let mut c = fit(&["--out", &p(&format!("{maps}.json")), "--maps", &p(&maps)]);
+        c.env("RAYON_NUM_THREADS", threads);
+        ok(c);
+        for f in ["height.exr", "height_std_error.exr", "residual.exr"] {
+            let a = std::fs::read(d.join("single").join(f)).unwrap();
+            let b = std::fs::read(d.join(&maps).join(f)).unwrap();
+            assert!(
+                a == b,
+                "{f} differs between the default run and {threads} thread(s)"
+            );
+        }
+    }
     // and so does the maps' summary in the result
     let read = |f: &str| -> serde_json::Value {
         serde_json::from_slice(&std::fs::read(d.join(f)).unwrap()).unwrap()

@@ -3,6 +3,7 @@
 
 use super::*;
 use crate::model::frame::Vec3;
+use std::sync::OnceLock;
 
 /// Column tables kept at most, and direction sets tracked before giving up (texels whose
 /// directions all differ, a pinhole camera's or a point light's, read a [`DirectionLattice`]
@@ -199,39 +200,154 @@ impl Tabled {
     }
 }
 
-/// Column tables by direction set: a table is built the second time its directions are met
-/// (a set met once, as a pinhole camera's texels each are, is not worth one).
+/// Which direction sets get a column table, decided before any texel is fitted, in texel
+/// order: a set is tabled when it is met a second time (a set met once, as a pinhole camera's
+/// texels each are, is not worth a table), for the first [`TABLE_ENTRIES`] sets to be met twice
+/// among the first [`TRACKED_KEYS`] met. Deciding it up front, over every texel of the capture,
+/// makes a texel's fit independent of the order the threads reach the texels in and of how
+/// the image is cut into tiles: a texel fitted with a table and the same texel fitted without
+/// one land on the same minimum, but not to the last bit.
+#[derive(Default)]
+pub(super) struct TablePlan {
+    /// Direction sets met, and whether each has been met twice.
+    met: HashMap<Vec<u64>, bool>,
+    /// The tabled sets, in the order their second meeting came.
+    tabled: Vec<Vec<u64>>,
+}
+
+impl TablePlan {
+    /// Whether no more sets can be tabled (no later texel changes the plan).
+    pub(super) fn is_full(&self) -> bool {
+        self.tabled.len() >= TABLE_ENTRIES
+    }
+
+    /// Meets the next texel's direction set (its [`Texel::grid_key`]).
+    pub(super) fn meet(&mut self, key: Vec<u64>) {
+        if self.is_full() {
+            return;
+        }
+        match self.met.get_mut(&key) {
+            Some(twice) => {
+                if !*twice {
+                    *twice = true;
+                    self.tabled.push(key);
+                }
+            }
+            None => {
+                if self.met.len() < TRACKED_KEYS {
+                    self.met.insert(key, false);
+                }
+            }
+        }
+    }
+
+    /// The plan's tables, each built by the first texel that needs it.
+    pub(super) fn into_cache(self) -> TableCache {
+        TableCache {
+            tables: self
+                .tabled
+                .into_iter()
+                .map(|k| (k, OnceLock::new()))
+                .collect(),
+        }
+    }
+}
+
+/// Column tables by direction set, for the sets a [`TablePlan`] chose (none by default).
+/// A table depends only on its directions and the globals, so whichever texel builds it
+/// builds the same table.
 #[derive(Default)]
 pub(super) struct TableCache {
-    pub(super) tables: Mutex<HashMap<Vec<u64>, Option<Arc<ColumnTable>>>>,
+    tables: HashMap<Vec<u64>, OnceLock<Arc<ColumnTable>>>,
 }
 
 impl TableCache {
+    /// The table of direction set `key` (built with `make` on first use), or `None` where the
+    /// plan gave the set none.
     pub(super) fn get(
         &self,
-        key: Vec<u64>,
+        key: &[u64],
         make: impl FnOnce() -> ColumnTable,
     ) -> Option<Arc<ColumnTable>> {
-        {
-            let mut tables = self.tables.lock().expect("table cache");
-            match tables.get(&key) {
-                Some(Some(t)) => return Some(t.clone()),
-                Some(None) => {}
-                None => {
-                    if tables.len() < TRACKED_KEYS {
-                        tables.insert(key, None);
-                    }
-                    return None;
-                }
-            }
-            let built = tables.values().filter(|t| t.is_some()).count();
-            if built >= TABLE_ENTRIES {
-                return None;
-            }
+        self.tables
+            .get(key)
+            .map(|slot| slot.get_or_init(|| Arc::new(make())).clone())
+    }
+
+    /// Direction sets with a table, built or not.
+    #[cfg(test)]
+    pub(super) fn planned(&self) -> usize {
+        self.tables.len()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    fn key(i: u64) -> Vec<u64> {
+        vec![i, i ^ 0xff]
+    }
+
+    #[test]
+    fn a_set_is_tabled_when_met_twice_for_the_first_sets_met_twice() {
+        let mut plan = TablePlan::default();
+        // 0..40 once each (a pinhole camera's texels), then set 39 again, then 0..40 again
+        for i in 0..40 {
+            plan.meet(key(i));
         }
-        let table = Arc::new(make());
-        let mut tables = self.tables.lock().expect("table cache");
-        let slot = tables.entry(key).or_insert(None);
-        Some(slot.get_or_insert_with(|| table.clone()).clone())
+        assert!(plan.tabled.is_empty(), "a set met once has no table");
+        plan.meet(key(39));
+        for i in 0..40 {
+            plan.meet(key(i));
+        }
+        assert!(plan.is_full());
+        let mut want = vec![key(39)];
+        want.extend((0..TABLE_ENTRIES as u64 - 1).map(key));
+        assert_eq!(
+            plan.tabled, want,
+            "tabled in the order of their second meeting"
+        );
+        let cache = plan.into_cache();
+        assert_eq!(cache.planned(), TABLE_ENTRIES);
+        assert!(cache.get(&key(20), || unreachable!()).is_none());
+    }
+
+    #[test]
+    fn sets_met_after_the_tracker_is_full_are_never_tabled() {
+        let mut plan = TablePlan::default();
+        for i in 0..TRACKED_KEYS as u64 + 5 {
+            plan.meet(key(i));
+        }
+        let late = key(TRACKED_KEYS as u64 + 2);
+        plan.meet(late.clone());
+        plan.meet(late.clone());
+        plan.meet(key(7));
+        assert_eq!(plan.tabled, vec![key(7)]);
+    }
+
+    #[test]
+    fn a_planned_table_is_built_once_whichever_thread_asks_first() {
+        let mut plan = TablePlan::default();
+        plan.meet(key(1));
+        plan.meet(key(1));
+        let cache = plan.into_cache();
+        let built = AtomicUsize::new(0);
+        let make = || {
+            built.fetch_add(1, Ordering::SeqCst);
+            ColumnTable {
+                nh: 1,
+                np: 1,
+                nobs: 1,
+                cols: vec![[0.5; 4]],
+            }
+        };
+        let tables: Vec<Arc<ColumnTable>> = (0..16)
+            .into_par_iter()
+            .map(|_| cache.get(&key(1), make).expect("planned"))
+            .collect();
+        assert_eq!(built.load(Ordering::SeqCst), 1);
+        assert!(tables.iter().all(|t| Arc::ptr_eq(t, &tables[0])));
     }
 }

@@ -33,6 +33,8 @@ const PROBES: usize = 9;
 
 /// Light and view direction of every image at one pixel (`None` where an image has none).
 type NodeDirections = Vec<Option<(Vec3, Vec3)>>;
+/// The nodes around a texel with their weights, and the image each of its observations is in.
+type Corners = (Vec<(usize, f64)>, Vec<usize>);
 
 /// A lattice of column tables over the image ([module docs](self)).
 pub(super) struct DirectionLattice {
@@ -188,10 +190,11 @@ impl DirectionLattice {
             .clone()
     }
 
-    /// The blend serving `texel`, or `None` where it cannot (no pixel origin, a node without
-    /// directions, or the texel's own directions off the blend of its nodes' by more than
-    /// [`LATTICE_DIRECTION_SLACK_DEG`]).
-    pub(super) fn blend(&self, texel: &Texel, g: &Globals) -> Option<Blend> {
+    /// The nodes around `texel` with their weights, and the image of each of its
+    /// observations, or `None` where the lattice cannot serve it (no pixel origin, a node
+    /// without directions in some image, or the texel's own directions off the blend of its
+    /// nodes' by more than [`LATTICE_DIRECTION_SLACK_DEG`]). Builds no table.
+    fn corners(&self, texel: &Texel) -> Option<Corners> {
         let (x, y, rows) = {
             let mut xy = None;
             let mut rows = Vec::with_capacity(texel.obs.len());
@@ -240,6 +243,25 @@ impl DirectionLattice {
                 return None;
             }
         }
+        // a node's table needs every image's directions there
+        if weighted
+            .iter()
+            .any(|&(n, _)| self.directions[n].iter().any(Option::is_none))
+        {
+            return None;
+        }
+        Some((weighted, rows))
+    }
+
+    /// Whether [`Self::blend`] serves `texel` (without building a table).
+    pub(super) fn serves(&self, texel: &Texel) -> bool {
+        self.corners(texel).is_some()
+    }
+
+    /// The blend serving `texel`, or `None` where the lattice cannot ([`Self::serves`]);
+    /// builds the tables of its nodes on first use.
+    pub(super) fn blend(&self, texel: &Texel, g: &Globals) -> Option<Blend> {
+        let (weighted, rows) = self.corners(texel)?;
         let corners = weighted
             .into_iter()
             .map(|(n, w)| self.table(g, n).map(|t| (t, w)))

@@ -61,8 +61,13 @@ pub fn global_stage(
     for round in 0..req.rounds {
         // per texel given the globals
         let model = rung_of(&set, cfg);
-        let g = Globals::of(&set, model.as_ref(), sub.channels);
         let problems = sub_layout.problems(&sub, &all, &values, free, req.smoothness);
+        // tables decided before the texels are fitted, in their order (not the threads')
+        let mut plan = TablePlan::default();
+        for (p, v) in problems.iter().zip(&values) {
+            plan.meet(p.grid_key(v));
+        }
+        let g = Globals::of(&set, model.as_ref(), sub.channels).with_tables(plan);
         let fitted: Vec<(TexelValues, f64)> = problems
             .par_iter()
             .zip(values.par_iter())

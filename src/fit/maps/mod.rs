@@ -45,7 +45,7 @@ use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
 use std::collections::HashMap;
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 
 mod column_table;
 mod direction_lattice;

@@ -14,7 +14,8 @@ pub(super) struct Globals<'m> {
     pub(super) channels: usize,
     /// Global albedo per component index and channel (0 where absent).
     pub(super) albedo: [[f64; 3]; 4],
-    /// Model columns over (H, psi) by the texels' directions ([`ColumnTable`]).
+    /// Model columns over (H, psi) by the texels' directions ([`ColumnTable`]), for the
+    /// direction sets a [`TablePlan`] chose: [`Globals::with_tables`].
     pub(super) tables: TableCache,
     /// Column tables over the image for texels with directions of their own (pinhole
     /// cameras, point lights): [`Globals::with_lattice`].
@@ -52,6 +53,19 @@ impl<'m> Globals<'m> {
     pub(super) fn with_lattice(mut self, store: &CaptureStore, free: Free) -> Self {
         self.lattice = DirectionLattice::of_store(store, free);
         self
+    }
+
+    /// With the column tables of `plan` (none without one: every texel then evaluates the
+    /// model in its grid and coarse searches).
+    pub(super) fn with_tables(mut self, plan: TablePlan) -> Self {
+        self.tables = plan.into_cache();
+        self
+    }
+
+    /// Whether [`Texel::fit`] reads `texel`'s columns from the lattice rather than from a
+    /// shared table (so the texel has no say in the [`TablePlan`]).
+    pub(super) fn lattice_serves(&self, texel: &Texel) -> bool {
+        self.lattice.as_ref().is_some_and(|l| l.serves(texel))
     }
 }
 
@@ -293,7 +307,7 @@ impl Texel {
             Some(b) => Some(Tabled::Blend(b)),
             None => g
                 .tables
-                .get(self.grid_key(start), || ColumnTable::build(self, g, start))
+                .get(&self.grid_key(start), || ColumnTable::build(self, g, start))
                 .map(Tabled::Shared),
         };
         let grid: Vec<(f64, TexelValues)> = (0..nh * np)

@@ -63,6 +63,10 @@ pub fn texel_stage(
     let set = fix_mapped(set, req);
     let model = rung_of(&set, cfg);
     let g = Globals::of(&set, model.as_ref(), store.channels).with_lattice(store, free);
+    let g = {
+        let plan = plan_tables(store, &g, free, &set);
+        g.with_tables(plan)
+    };
     // the globals free in the global stage are those its Schur complement names (a result read
     // back holds every global fixed)
     let steps = GlobalSteps::new(&freed(&set, schur), cfg);
@@ -361,4 +365,33 @@ pub fn finish_maps(
         ));
     }
     Ok((maps, variance, warnings))
+}
+
+/// The [`TablePlan`] of the whole capture, texel by texel in order (not of `rows` alone: a tile
+/// fitted in a process of its own then tables the texels a single run tables, and fits them to
+/// the same bit). Texels the lattice serves read no shared table and have no say.
+fn plan_tables(store: &CaptureStore, g: &Globals, free: Free, set: &ParamSet) -> TablePlan {
+    // keys in parallel, a chunk at a time, met in order; stops once the plan is full
+    const CHUNK: usize = 4096;
+    let mut plan = TablePlan::default();
+    let n = store.texels().len();
+    for lo in (0..n).step_by(CHUNK) {
+        let keys: Vec<Option<Vec<u64>>> = (lo..(lo + CHUNK).min(n))
+            .into_par_iter()
+            .map(|t| {
+                let texel = Texel::new(store.texel_samples(t), free, None);
+                if texel.obs.is_empty() || g.lattice_serves(&texel) {
+                    return None;
+                }
+                Some(texel.grid_key(&start_value(&texel.obs[0], set)))
+            })
+            .collect();
+        for key in keys.into_iter().flatten() {
+            plan.meet(key);
+        }
+        if plan.is_full() {
+            break;
+        }
+    }
+    plan
 }
