@@ -63,10 +63,6 @@ pub fn texel_stage(
     let set = fix_mapped(set, req);
     let model = rung_of(&set, cfg);
     let g = Globals::of(&set, model.as_ref(), store.channels).with_lattice(store, free);
-    let g = {
-        let plan = plan_tables(store, &g, free, &set);
-        g.with_tables(plan)
-    };
     // the globals free in the global stage are those its Schur complement names (a result read
     // back holds every global fixed)
     let steps = GlobalSteps::new(&freed(&set, schur), cfg);
@@ -80,6 +76,15 @@ pub fn texel_stage(
             );
         }
     }
+    let start_of = |t: usize| -> TexelValues {
+        let s = (0..store.images())
+            .find_map(|k| store.sample(t, k))
+            .expect("a stored texel has a sample");
+        start_value(&s, &set)
+    };
+    // the texels' keys from the starts they are fitted from
+    let plan = plan_tables(store, &g, free, &start_of);
+    let g = g.with_tables(plan);
     let side = GlobalSide::new(&steps, store.channels, schur);
     let sweeps = if req.smoothness > 0.0 {
         1 + PRIOR_SWEEPS
@@ -94,12 +99,6 @@ pub fn texel_stage(
     // texels are row-major: those of rows [lo, hi) are the ids [t0, t1)
     let t0 = texels.partition_point(|t| t.1 < lo);
     let t1 = texels.partition_point(|t| t.1 < hi);
-    let start_of = |t: usize| -> TexelValues {
-        let s = (0..store.images())
-            .find_map(|k| store.sample(t, k))
-            .expect("a stored texel has a sample");
-        start_value(&s, &set)
-    };
     let start: Vec<TexelValues> = (t0..t1).into_par_iter().map(start_of).collect();
     let neighbours = |t: usize| -> Vec<usize> {
         let (x, y) = (texels[t].0 as i64, texels[t].1 as i64);
@@ -370,7 +369,12 @@ pub fn finish_maps(
 /// The [`TablePlan`] of the whole capture, texel by texel in order (not of `rows` alone: a tile
 /// fitted in a process of its own then tables the texels a single run tables, and fits them to
 /// the same bit). Texels the lattice serves read no shared table and have no say.
-fn plan_tables(store: &CaptureStore, g: &Globals, free: Free, set: &ParamSet) -> TablePlan {
+fn plan_tables(
+    store: &CaptureStore,
+    g: &Globals,
+    free: Free,
+    start_of: &(impl Fn(usize) -> TexelValues + Sync),
+) -> TablePlan {
     // keys in parallel, a chunk at a time, met in order; stops once the plan is full
     const CHUNK: usize = 4096;
     let mut plan = TablePlan::default();
@@ -380,10 +384,7 @@ fn plan_tables(store: &CaptureStore, g: &Globals, free: Free, set: &ParamSet) ->
             .into_par_iter()
             .map(|t| {
                 let texel = Texel::new(store.texel_samples(t), free, None);
-                if texel.obs.is_empty() || g.lattice_serves(&texel) {
-                    return None;
-                }
-                Some(texel.grid_key(&start_value(&texel.obs[0], set)))
+                (!g.lattice_serves(&texel)).then(|| texel.grid_key(&start_of(t)))
             })
             .collect();
         for key in keys.into_iter().flatten() {
