@@ -350,12 +350,13 @@ pub fn fit_level(root: &Path, quick: bool, bar: &ProgressBar) -> Result<Vec<FitR
     };
     let orders: &[usize] = if quick { &[4, 16] } else { &[4, 16, 64] };
     let want = |name: &str| -> Option<f64> {
-        match name {
-            "exponent" => truth.exponent,
-            "height" => truth.height,
-            "map_scale" => truth.map_scale,
-            "kd" => truth.kd.map(|a| a.channels()[0]),
-            "ks" => truth.ks.map(|a| a.channels()[0]),
+        use crate::model::Param;
+        match Param::from_name(name)? {
+            Param::Exponent => truth.exponent,
+            Param::Height => truth.height,
+            Param::MapScale => truth.map_scale,
+            Param::Kd => truth.kd.map(|a| a.channels()[0]),
+            Param::Ks => truth.ks.map(|a| a.channels()[0]),
             _ => None,
         }
     };

@@ -231,7 +231,7 @@ fn seed_001_grid_and_bad_input() {
     let d = dir.path();
     fibrefit()
         .current_dir(d)
-        .args(["render", "--seed001", "--out", "grid.png", "-q"])
+        .args(["render", "--paper-figures", "--out", "grid.png", "-q"])
         .assert()
         .success();
     let grid = image::open(d.join("grid.png")).unwrap().to_rgb8();

@@ -537,8 +537,8 @@ fn gltf_previews_of_every_object() {
 struct PbrRung(fibrefit::fit::gltf_material::PbrMaterial);
 
 impl model::ShadingModel for PbrRung {
-    fn id(&self) -> ModelId {
-        ModelId::Ward
+    fn rung(&self) -> &'static model::Rung {
+        ModelId::Ward.rung()
     }
     fn basis_above_horizon(&self, pair: &model::DirectionPair) -> model::Basis {
         let m = &self.0;
@@ -765,7 +765,7 @@ fn bad_input_exits_2_and_writes_nothing() {
 fn bench_shader_quick_measures_every_rung() {
     let dir = tempfile::tempdir().unwrap();
     fibrefit()
-        .args(["bench", "--shader", "--quick", "-q", "--out"])
+        .args(["bench", "shader", "--quick", "-q", "--out"])
         .arg(dir.path())
         .assert()
         .success();

@@ -566,7 +566,7 @@ fn capture_image<'py>(
     index: usize,
 ) -> PyResult<(Bound<'py, numpy::PyArray3<f32>>, Bound<'py, PyArray2<bool>>)> {
     let img = py
-        .detach(|| fibrefit::load::capture::radiance_image(&capture, index))
+        .detach(|| fibrefit::load::capture_store::radiance_image(&capture, index))
         .map_err(err)?;
     let (w, h, c) = (img.width, img.height, img.channels);
     let data = img

@@ -110,7 +110,7 @@ impl Evaluation {
         let albedos = params.albedos;
         // a kd column replaces the substrate's albedo too when it shares kd
         let tied = raw.substrate_albedo.is_none();
-        let preview = (id == ModelId::Lambert
+        let preview = (id.has(crate::model::Ability::PreviewLighting)
             && (params.preview.two_sided || params.preview.ambient > 0.0))
             .then_some(params.preview);
         let bar = crate::progress::bar(self.queries.rows.len() as u64, "eval", quiet);

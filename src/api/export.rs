@@ -249,7 +249,7 @@ fn map_textures(
 ) -> Result<Option<TexturesOut>> {
     let (w, h) = (maps.width, maps.rows);
     let h_max = max_height(params.spacing);
-    let topology = model.id().has_topology();
+    let topology = model.rung().has(crate::model::Ability::Topology);
     let heights = topology.then_some(maps.height.as_ref()).flatten();
     let range = heights.and_then(|m| {
         let finite = m.data.iter().filter(|v| v.is_finite());
@@ -396,7 +396,7 @@ fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> 
             a.diffuse, a.specular, a.substrate, a.fuzz
         ),
     ];
-    if id.is_cross_section() || id == ModelId::MaxNormal {
+    if id.has(crate::model::Ability::SpecularLobe) {
         lines.push(format!(
             "exponent {}, spacing {}, fibre azimuth {} deg, spread {} deg, Fresnel ior {}",
             p.exponent,
@@ -406,7 +406,7 @@ fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> 
             p.fresnel_ior
         ));
     }
-    if id == ModelId::Ward {
+    if id.has(crate::model::Ability::WardLobe) {
         lines.push(format!("alpha_x {}, alpha_y {}", p.alpha_x, p.alpha_y));
     }
     if id.has_topology() {

@@ -11,7 +11,7 @@ use crate::fit::config::{FitConfig, Metric};
 use crate::fit::maps::TexelMaps;
 use crate::fit::problem::{albedos_of, model_for};
 use crate::fit::selection::SelectionOutcome;
-use crate::fit::{self, parameters::Shape, ward_fallback, FitOutcome};
+use crate::fit::{self, parameters::Param, ward_fallback, FitOutcome};
 use crate::load::capture_store::CaptureStore;
 use crate::load::samples::{DataKind, Samples};
 use crate::load::{load_data, LoadOptions};
@@ -56,10 +56,13 @@ pub fn configure(
         (None, None) => bail!("give --config FILE, or --model ID|auto to fit with the defaults"),
     };
     if let Some(m) = model {
-        match (config.is_some(), m.parse::<ModelId>()) {
+        let choice: crate::fit::config::ModelChoice = m
+            .parse()
+            .map_err(|e: String| anyhow!("--model: `model`: {e}"))?;
+        match (config.is_some(), choice) {
             // a config written for another rung (or for auto) tried with this one
-            (true, Ok(id)) if cfg.model != m => cfg.retarget(id)?,
-            _ => cfg.model = m.to_string(),
+            (true, crate::fit::config::ModelChoice::Rung(id)) if cfg.model != choice => cfg.retarget(id)?,
+            _ => cfg.model = choice,
         }
     }
     if let Some(m) = metric {
@@ -73,13 +76,10 @@ pub fn configure(
     }
     match fuzz {
         Some(true) => {
-            cfg.parameters.entry("fuzz_depth".into()).or_default();
+            cfg.add_fuzz_layer();
         }
         Some(false) => {
-            if let Some(p) = crate::model::FUZZ_PARAMETERS
-                .iter()
-                .find(|p| cfg.parameters.contains_key(**p))
-            {
+            if let Some(p) = cfg.listed_fuzz_parameter() {
                 bail!(
                     "--no-fuzz (fuzz = False): the config lists the fuzz layer's parameter `{p}`; \
                      remove it from [parameters] to fit without the layer"
@@ -90,7 +90,7 @@ pub fn configure(
         None => {}
     }
     cfg.validate().map_err(|e| anyhow!("--model: {e}"))?;
-    if config.is_none() && cfg.model != "auto" {
+    if config.is_none() && !cfg.model.is_auto() {
         // no config: a named rung fits what the data can determine, as auto's rungs do
         let id = cfg.model_id()?;
         cfg.free_unlisted_shapes(id);
@@ -153,7 +153,7 @@ pub fn inputs(req: &FitRequest, config_file: Option<&Path>) -> Vec<PathBuf> {
 /// Checks of a request that need no data (before any output is reserved).
 pub fn check(req: &FitRequest) -> Result<()> {
     if req.maps != Maps::None {
-        if req.config.model == "auto" && matches!(req.maps, Maps::Into(_)) {
+        if req.config.model.is_auto() && matches!(req.maps, Maps::Into(_)) {
             bail!("--maps: name a rung (`model` or --model), not auto");
         }
         fit::maps::check_request(&req.config, &req.config.maps)?;
@@ -343,7 +343,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
             f(&mut s.lock().unwrap_or_else(|p| p.into_inner()));
         }
     };
-    let selection = if cfg.model == "auto" {
+    let selection = if cfg.model.is_auto() {
         with_sink(&mut |p| {
             p.rungs = fit::selection::candidates_of(&cfg)
                 .map(|l| l.into_iter().map(|c| c.0).collect())
@@ -467,7 +467,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         outcome.map.clone(),
     );
     let albedos = albedos_of(&outcome.set);
-    let psi = outcome.set.shape_value(Shape::Azimuth).to_radians();
+    let psi = outcome.set.shape_value(Param::Azimuth).to_radians();
     let check_values = rj::check_directions()
         .into_iter()
         .map(|d| rj::CheckValue {
@@ -480,13 +480,14 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         .collect();
     // an optional stage: its failure is a warning, never the loss of the fit
     let mut warnings = outcome.warnings.clone();
-    let ward = if id == ModelId::Ward {
+    // a rung with Ward's lobe is its own fallback
+    let ward = if id.has(crate::model::Ability::WardLobe) {
         None
     } else {
         crate::progress::line(quiet, "fit: the Ward fallback");
         match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
             Ok(w) => Some(rj::WardFallback {
-                model: "ward".into(),
+                model: ModelId::Ward.to_string(),
                 parameters: w
                     .parameters
                     .into_iter()
@@ -642,10 +643,10 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
                     channels,
                     &cfg.maps,
                     outcome.statistics.free_parameters,
-                    crate::model::topology::max_height(globals.shape_value(Shape::Spacing)),
+                    crate::model::topology::max_height(globals.shape_value(Param::Spacing)),
                 )?;
                 let texel_seconds = t0.elapsed().as_secs_f64();
-                let h_max = crate::model::topology::max_height(globals.shape_value(Shape::Spacing));
+                let h_max = crate::model::topology::max_height(globals.shape_value(Param::Spacing));
                 let summaries = fit::maps::summary(&texel_maps, &cfg.maps, h_max);
                 let sweeps = match cfg.maps.smoothness > 0.0 {
                     true => 1 + fit::maps::PRIOR_SWEEPS,
@@ -710,20 +711,21 @@ pub fn relative_to(path: &Path, dir: &Path) -> Option<PathBuf> {
 
 /// The global parameters a `[maps]` request recovers per texel instead.
 fn per_texel_names(req: &crate::fit::config::MapsConfig) -> Vec<&'static str> {
+    use crate::model::Param;
     let mut v = Vec::new();
     if req.height {
-        v.extend(["height", "map_scale"]);
+        v.extend([Param::Height, Param::MapScale]);
     }
     if req.fibre_azimuth {
-        v.push("fibre_azimuth_deg");
+        v.push(Param::Azimuth);
     }
     if req.kd {
-        v.extend(["kd", "rho_d"]);
+        v.extend([Param::Kd, Param::RhoD]);
     }
     if req.ks {
-        v.extend(["ks", "rho_s"]);
+        v.extend([Param::Ks, Param::RhoS]);
     }
-    v
+    v.into_iter().map(Param::name).collect()
 }
 
 /// The files a fit writes, reserved before the work.

@@ -325,7 +325,7 @@ impl Material {
     /// Image `index` of the capture `capture` as this material renders it, noise-free: per
     /// pixel f(l, v) E cos(theta_i) at the swatch point under the pixel's centre, with the maps
     /// looked up at the pixel's texel (uv = ((x + 0.5) / W, 1 - (y + 0.5) / H)); in the units of
-    /// `load::capture::radiance_image` (radiance per unit irradiance, the exposure applied).
+    /// `load::capture_store::radiance_image` (radiance per unit irradiance, the exposure applied).
     /// Call it on [`Material::with_capture`] of the same capture to see what its fit saw.
     pub fn render_capture(&self, capture: &Path, index: usize) -> Result<LinearImage> {
         let store = CaptureStore::load(capture, Subsample::default())?;

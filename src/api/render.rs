@@ -1,6 +1,6 @@
 //! `render`: a material on an object (or a scene), as a picture and its AOVs.
 //! [`Render::prepare`] loads the parameters, the scene and the maps (so the caller can reserve
-//! its outputs knowing every input), [`Render::run`] renders; [`seed001`] renders seed 001's
+//! its outputs knowing every input), [`Render::run`] renders; [`paper_figures`] renders the topology-map paper's
 //! figures 6 and 7 as one grid. Files are written by [`crate::export::picture`].
 
 use crate::load::texel_maps::TexelMapsIn;
@@ -90,7 +90,7 @@ impl Render {
         }
         inputs.extend(raw.topology_map.iter().cloned());
         if let Some(f) = req.ward_curvature_alpha {
-            if id != ModelId::Ward {
+            if !id.has(crate::model::Ability::WardLobe) {
                 bail!("--ward-curvature-alpha: the Ward rung's alphas; this is `{id}`");
             }
             if !(f.is_finite() && f > 0.0) {
@@ -250,18 +250,18 @@ fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
     })
 }
 
-/// Seed 001's figures 6 and 7: the torus in four rows (max-normal, poulin-fournier,
+/// The topology-map paper's figures 6 and 7: the torus in four rows (max-normal, poulin-fournier,
 /// varying-topology, varying-topology with a topology map of scale 0.25) under two lightings,
 /// as one picture of `tile` x `tile` renders seen from `camera` with `supersample`^2 rays per
 /// pixel, with the rows' and columns' labels.
-pub struct Seed001 {
+pub struct PaperFigures {
     pub grid: Picture,
     pub tile: usize,
     pub rows: Vec<String>,
     pub columns: Vec<String>,
 }
 
-pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<Seed001> {
+pub fn paper_figures(camera: Vec3, supersample: usize, quiet: bool) -> Result<PaperFigures> {
     let size = 256usize;
     let deg = |t: f64, p: f64| direction_from_angles(t.to_radians(), p.to_radians());
     let lightings = [
@@ -277,7 +277,7 @@ pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<Seed001>
             seed: 1,
             waves: 48,
         }),
-        source: PathBuf::from("seed001-noise"),
+        source: PathBuf::from("paper-figures-noise"),
     };
     let rows: [(&str, ModelId, bool); 4] = [
         ("max-normal", ModelId::MaxNormal, false),
@@ -287,7 +287,7 @@ pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<Seed001>
     ];
     let bar = crate::progress::bar(
         (rows.len() * lightings.len() * size) as u64,
-        "seed 001",
+        "paper figures",
         quiet,
     );
     let mut tiles = Vec::new();
@@ -354,7 +354,7 @@ pub fn seed001(camera: Vec3, supersample: usize, quiet: bool) -> Result<Seed001>
             }
         }
     }
-    Ok(Seed001 {
+    Ok(PaperFigures {
         grid,
         tile: size,
         rows: rows.iter().map(|r| r.0.to_string()).collect(),

@@ -94,7 +94,7 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
     let cfg = &req.config;
     let globals = &req.globals;
     let dir = &req.dir;
-    if cfg.model == "auto" {
+    if cfg.model.is_auto() {
         bail!("--tile: name a rung (`model` or --model), not auto");
     }
     maps::check_request(cfg, &cfg.maps)?;
@@ -107,7 +107,7 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
             globals.display()
         );
     }
-    if g["model"].as_str() != Some(cfg.model.as_str()) {
+    if g["model"].as_str() != Some(cfg.model.to_string().as_str()) {
         bail!(
             "{}: globals of model `{}`, but the config fits `{}`",
             globals.display(),
@@ -273,7 +273,7 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     )?
     .set;
     let h_max =
-        crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Shape::Spacing));
+        crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Param::Spacing));
     let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
     let (maps, variance, warns) =
         maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;

@@ -1,4 +1,4 @@
-//! `fibrefit bench --camera`: captures at camera resolution. A synthetic RGB capture of
+//! `fibrefit bench camera`: captures at camera resolution. A synthetic RGB capture of
 //! 8 images x N x N pixels (default 1024: 8.4 M pixel values of 3 channels) with known topology and
 //! tangent maps, fitted by the `fibrefit` binary as a user runs it, each run a child process
 //! whose wall time, CPU time and peak resident memory are read from `/proc`:
@@ -19,7 +19,7 @@ use std::path::Path;
 use std::process::{Command, Stdio};
 use std::time::{Duration, Instant};
 
-/// (light theta, phi; camera theta, phi) in degrees, as `bench --maps`' 8-image case, but for
+/// (light theta, phi; camera theta, phi) in degrees, as `bench maps`' 8-image case, but for
 /// image 0's light: the flash beside its camera's lens ([`flash_direction`]).
 const IMAGES: [[f64; 4]; 8] = super::maps::EIGHT_IMAGES;
 
@@ -297,13 +297,15 @@ pub fn run(
         serde_json::from_slice(&std::fs::read(scratch.join("global.json"))?)?;
     let mut acc = Vec::new();
     // per channel where the result has channels (kd here; ks is fitted per channel too)
-    for (name, truth) in [
-        ("kd", [0.45, 0.35, 0.25]),
-        ("ks", [0.3; 3]),
-        ("exponent", [40.0; 3]),
-        ("height", [0.9; 3]),
-        ("map_scale", [0.6; 3]),
+    use crate::model::Param;
+    for (param, truth) in [
+        (Param::Kd, [0.45, 0.35, 0.25]),
+        (Param::Ks, [0.3; 3]),
+        (Param::Exponent, [40.0; 3]),
+        (Param::Height, [0.9; 3]),
+        (Param::MapScale, [0.6; 3]),
     ] {
+        let name = param.name();
         let p = &g["parameters"][name];
         let list = |x: &serde_json::Value| -> Vec<f64> {
             match x {

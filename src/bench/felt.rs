@@ -1,4 +1,4 @@
-//! `fibrefit bench --felt FILE`: every rung, alone and with each optional component (the
+//! `fibrefit bench felt FILE`: every rung, alone and with each optional component (the
 //! fibre-direction spread, the Fresnel factor on the lobe, the fuzz layer), under the linear and
 //! the log metric, fitted to a measured felt (the RGL database's acrylic felt in
 //! `../shared/data/rgl`) on a seeded 80 % of 3000 direction pairs and measured on the other 20 %:
@@ -11,6 +11,7 @@ use crate::fit::selection::{heldout, heldout_log_terms, model_values_on, rms_and
 use crate::load::rgl::MeasuredOptions;
 use crate::load::samples::Samples;
 use crate::load::{load_data, LoadOptions};
+use crate::model::{Ability, ModelId, Param};
 use anyhow::Result;
 use indicatif::ProgressBar;
 use rand::seq::SliceRandom;
@@ -47,29 +48,33 @@ pub struct FeltRow {
     pub chosen: bool,
 }
 
-/// The component variants measured with a rung, plain first.
+/// The component variants measured with a rung, plain first: the spread where the rung takes
+/// one, the Fresnel factor where its lobe does.
 pub fn variants(rung: &str) -> Vec<&'static str> {
-    match rung {
-        "lambert" | "ward" => vec!["-", "fuzz"],
-        "hast-diffuse" => vec!["-", "spread", "spread + fuzz"],
-        _ => vec!["-", "spread", "spread + fresnel", "spread + fuzz"],
+    let has = |a: Ability| rung.parse::<ModelId>().is_ok_and(|id| id.has(a));
+    match (has(Ability::DirectionSpread), has(Ability::Fresnel)) {
+        (false, _) => vec!["-", "fuzz"],
+        (true, false) => vec!["-", "spread", "spread + fuzz"],
+        (true, true) => vec!["-", "spread", "spread + fresnel", "spread + fuzz"],
     }
 }
 
 /// `cfg` (an auto config narrowed to one rung) with the components of `variant`.
 fn with_variant(mut cfg: FitConfig, variant: &str) -> FitConfig {
     if !variant.contains("spread") {
-        cfg.parameters.remove("azimuth_spread_deg");
+        cfg.parameters.remove(Param::AzimuthSpread.name());
     }
     let free = || crate::fit::config::ParamEntry {
         vary: Some(true),
         ..Default::default()
     };
     if variant.contains("fresnel") {
-        cfg.parameters.insert("fresnel_ior".into(), free());
+        cfg.parameters
+            .insert(Param::FresnelIor.name().into(), free());
     }
     if variant.contains("fuzz") {
-        cfg.parameters.insert("fuzz_depth".into(), free());
+        cfg.parameters
+            .insert(Param::FuzzDepth.name().into(), free());
     }
     cfg
 }
@@ -165,9 +170,9 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun>
                     heldout_log_standard_error: log_se,
                     ns_per_eval: ns,
                     fit_seconds,
-                    azimuth_spread_deg: fitted("azimuth_spread_deg"),
-                    fuzz_depth: fitted("fuzz_depth"),
-                    fuzz_asymmetry: fitted("fuzz_asymmetry"),
+                    azimuth_spread_deg: fitted(Param::AzimuthSpread.name()),
+                    fuzz_depth: fitted(Param::FuzzDepth.name()),
+                    fuzz_asymmetry: fitted(Param::FuzzAsymmetry.name()),
                     grazing_forward_ratio,
                     near_normal_ratio,
                     chosen: false,

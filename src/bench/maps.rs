@@ -1,4 +1,4 @@
-//! `fibrefit bench --maps`: the accuracy of per-texel map recovery on synthetic captures whose
+//! `fibrefit bench maps`: the accuracy of per-texel map recovery on synthetic captures whose
 //! maps are known (32 x 32 texels, varying-topology at d = 2, H from a topology map in
 //! [0.3, 1.5], psi from -30 to 40 deg across the swatch, 1 % noise): RMS error of H and psi
 //! against the truth and against the reported standard errors, and the coverage (texels whose

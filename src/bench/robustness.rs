@@ -1,4 +1,4 @@
-//! `fibrefit bench --robustness`: how often the default fit finds the global minimum.
+//! `fibrefit bench robustness`: how often the default fit finds the global minimum.
 //!
 //! Hard synthetic truths (climbing fibres at d = 2 near both flat limits, gapped d > 3, sharp
 //! specular e = 1000, the fibre azimuth near the wrap at +-90 deg, a topology map, and diffuse-only
@@ -14,7 +14,7 @@ use crate::fit::{fit, parameters::ParamSet};
 use crate::load::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::{direction_from_angles, FibreFrame};
 use crate::model::params::{ModelParams, RawParams};
-use crate::model::{self, DirectionPair, ModelId};
+use crate::model::{self, DirectionPair, ModelId, Param};
 use anyhow::{Context, Result};
 use indicatif::ProgressBar;
 use rand::{Rng, SeedableRng};
@@ -249,12 +249,12 @@ pub fn case_config(case: &Case, map: Option<&Path>, start_seed: u64) -> Result<F
 fn truth_chi2(case: &Case, map: Option<&Path>, data: &Samples, cfg: &FitConfig) -> Result<f64> {
     let mut set = ParamSet::from_config(cfg, 1)?;
     for s in set.shapes.iter_mut() {
-        s.value = match s.kind.name() {
-            "spacing" => case.spacing,
-            "height" => case.height,
-            "exponent" => case.exponent.max(s.min),
-            "fibre_azimuth_deg" => case.azimuth_deg,
-            "map_scale" => case.map_scale,
+        s.value = match s.kind {
+            Param::Spacing => case.spacing,
+            Param::Height => case.height,
+            Param::Exponent => case.exponent.max(s.min),
+            Param::Azimuth => case.azimuth_deg,
+            Param::MapScale => case.map_scale,
             _ => s.value,
         };
         s.vary = false;

@@ -1,4 +1,4 @@
-//! `fibrefit bench --sampling`: what the importance sampler of `model::sampling` buys.
+//! `fibrefit bench sampling`: what the importance sampler of `model::sampling` buys.
 //!
 //! For each rung at exponent 1000 (ward: alpha 0.05 x 0.2) and a set of views, the directional
 //! albedo a(v) = int f(l, v) (N.l) d omega estimated from one-sample weights: the per-sample
@@ -11,6 +11,7 @@
 
 use crate::model::frame::Local;
 use crate::model::params::{ModelParams, RawParams};
+use crate::model::rungs::Cost;
 use crate::model::sampling::{Sampler, LOBE_WIDTH};
 use crate::model::{self, lambert::Lambert, DirectionPair, ModelId};
 use anyhow::{anyhow, Result};
@@ -77,15 +78,7 @@ pub const VIEWS: [(f64, f64); 10] = [
 
 /// The parameter text of `rung` at exponent `e`.
 pub fn params_text(id: ModelId, e: f64) -> String {
-    match id {
-        ModelId::Lambert | ModelId::HastDiffuse => "kd = 0.5\n".into(),
-        ModelId::Ward => "rho_d = 0.3\nrho_s = 0.6\nalpha_x = 0.05\nalpha_y = 0.2\n".into(),
-        ModelId::MaxNormal => format!("kd = 0.3\nks = 0.6\nexponent = {e}\n"),
-        ModelId::PoulinFournier => format!("kd = 0.3\nks = 0.6\nexponent = {e}\nspacing = 2.6\n"),
-        ModelId::VaryingTopology | ModelId::Reference => format!(
-            "kd = 0.3\nks = 0.6\nexponent = {e}\nspacing = 2.4\nheight = 0.9\nmap_scale = 0.2\n"
-        ),
-    }
+    id.rung().example_text(Some(e))
 }
 
 pub fn params(id: ModelId, text: &str) -> Result<ModelParams> {
@@ -185,8 +178,8 @@ pub fn variance_row(
 
 /// Samples per rung and view of the study (cost-limited for the slow rungs).
 fn samples_for(id: ModelId, quick: bool) -> usize {
-    let n = match id {
-        ModelId::VaryingTopology => 40_000,
+    let n = match id.rung().cost {
+        Cost::HeightHistogram => 40_000,
         _ => 400_000,
     };
     if quick {
@@ -265,7 +258,7 @@ pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
         // the reference's values cost ~10 ms each, too many for a cosine estimate that must
         // hit a 1/sqrt(1000) lobe often enough; its sampler is varying-topology's (same table,
         // same lobe) and its model is varying-topology's to the quadrature error
-        .filter(|(id, _, _)| *id != ModelId::Reference)
+        .filter(|(id, _, _)| id.rung().cost != Cost::Adaptive)
         .collect();
     bar.set_length((jobs.len() + 2 * 5 * 3 + 2 * 4 * 3 + 11) as u64);
     let variance = jobs
@@ -324,7 +317,7 @@ pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
     let budget = if quick { 0.05 } else { 0.5 };
     let mut speed = Vec::new();
     for id in ModelId::ALL {
-        let budget = if id == ModelId::Reference {
+        let budget = if id.rung().cost == Cost::Adaptive {
             budget * 4.0
         } else {
             budget

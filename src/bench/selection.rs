@@ -1,4 +1,4 @@
-//! `fibrefit bench --selection FILE`: `--model auto` as a user runs it (no config; the metric
+//! `fibrefit bench selection FILE`: `--model auto` as a user runs it (no config; the metric
 //! the data ask for), on sparse subsets of a measured felt (200, 500, 3000 direction pairs) and
 //! on synthetic fabrics with known truth: every candidate's cross-validated error with its
 //! standard error, the rule's choice, the wall time of the whole run (selection and the final
@@ -191,7 +191,7 @@ pub fn run(
             crate::progress::line(
                 quiet,
                 &format!(
-                    "bench --selection: {name}, {} samples{}",
+                    "bench selection: {name}, {} samples{}",
                     data.samples.len(),
                     if slow_path { ", config knobs" } else { "" }
                 ),

@@ -1,4 +1,4 @@
-//! `fibrefit bench --shader`: what the exported shader costs. For each rung (representative
+//! `fibrefit bench shader`: what the exported shader costs. For each rung (representative
 //! parameters), evaluations per second of `fibrefit_brdf` on this machine's GPU driver (one
 //! dispatch over many pairs, median of repeats) against the Rust model on the CPU (`basis_many`,
 //! one thread and all threads), the SPIR-V instruction count of the exported library (naga) and

@@ -1,89 +1,196 @@
 //! `fibrefit bench`: measure the speed–accuracy trade and write a report.
 
 use anyhow::{bail, Result};
-use clap::Args;
+use clap::{Args, Subcommand};
 use std::path::PathBuf;
 use std::time::Instant;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-Writes OUT/speed_accuracy.md (tables), OUT/speed_accuracy_forward.csv, OUT/speed_accuracy_fit.csv,
-OUT/pareto.png (error vs cost per rung, log axes) and OUT/fit_time_vs_error.png. The fit level
-uses the shipped silk capture under ROOT/data_synthetic/silk and ROOT/configs/fit_silk.toml.")]
+STUDIES (each writes its tables, CSV and plots into OUT and says the command that made them):
+  speed        (the default) every rung's and knob's cost and error against `reference`:
+               OUT/speed_accuracy.md, _forward.csv, _fit.csv, pareto.png, fit_time_vs_error.png;
+               the fit level uses ROOT/data_synthetic/silk and ROOT/configs/fit_silk.toml
+  robustness   how often the default fit finds the global minimum (OUT/fit_robustness.*)
+  felt FILE    every rung on a real measured felt (OUT/felt.*)
+  maps         per-texel map recovery on synthetic captures (OUT/maps_accuracy.*)
+  camera [N]   captures at camera resolution, 8 images x N x N (OUT/camera_resolution.*)
+  shader       the exported shader's cost per rung on this machine's GPU driver (OUT/shader_cost.*)
+  sampling     the importance sampler against cosine sampling (OUT/sampling.*)
+  selection FILE  `--model auto` on sparse subsets of a felt and on synthetic fabrics
+               (OUT/selection.*)
+`fibrefit bench STUDY --help` gives each study's options.")]
 pub struct BenchArgs {
+    /// The study (default: speed)
+    #[command(subcommand)]
+    pub study: Option<Study>,
     /// Fewer directions, repeats, fractions and orders: finishes in well under a minute
-    #[arg(long)]
+    #[arg(long, global = true)]
     pub quick: bool,
     /// Output directory
-    #[arg(long, value_name = "DIR", default_value = "reports")]
+    #[arg(long, value_name = "DIR", default_value = "reports", global = true)]
     pub out: PathBuf,
     /// Repository root holding data_synthetic/ and configs/
-    #[arg(long, value_name = "DIR", default_value = ".")]
+    #[arg(long, value_name = "DIR", default_value = ".", global = true)]
     pub root: PathBuf,
     /// No progress bar
-    #[arg(long, short)]
+    #[arg(long, short, global = true)]
     pub quiet: bool,
-    /// Instead: the fit robustness study (hard synthetic truths x noise seeds, random starts):
-    /// writes OUT/fit_robustness.md, .csv and .png
-    #[arg(long)]
-    pub robustness: bool,
-    /// Noise seeds per case of the robustness study
+    /// The options of the studies before they were subcommands (`--robustness`, `--felt FILE`,
+    /// ...): still accepted, not shown
+    #[command(flatten)]
+    pub legacy: Legacy,
+}
+
+/// One study of `fibrefit bench`.
+#[derive(Debug, Clone, Subcommand)]
+pub enum Study {
+    /// Every rung's and knob's cost and error against `reference` (the default)
+    Speed,
+    /// The fit robustness study (hard synthetic truths x noise seeds, random starts): writes
+    /// OUT/fit_robustness.md, .csv and .png
+    Robustness(RobustnessArgs),
+    /// The real-felt comparison on a measured file (every rung, aligned and with the
+    /// fibre-direction spread, linear and log metric): writes OUT/felt.md, .csv and .png
+    Felt(FeltArgs),
+    /// The per-texel map recovery study (synthetic captures with known maps, shrinking
+    /// light/view sets): writes OUT/maps_accuracy.md, .csv and .png
+    Maps,
+    /// Captures at camera resolution (a synthetic RGB capture of 8 images x N x N pixels; the
+    /// global fit and maps + globals run as `fibrefit fit` child processes, their wall time, CPU
+    /// time and peak memory measured): writes OUT/camera_resolution.md and .csv
+    Camera {
+        /// Image size N (pixels per side)
+        #[arg(value_name = "N", default_value_t = 1024)]
+        size: usize,
+    },
+    /// The exported shader's cost per rung (evaluations per second on this machine's GPU
+    /// driver against the Rust model on the CPU, SPIR-V instruction counts): writes
+    /// OUT/shader_cost.md and .csv
+    Shader,
+    /// The importance sampler's variance against cosine sampling per rung and view (exponent
+    /// 1000, the lobe width swept, other exponents) and its samples per second: writes
+    /// OUT/sampling.md and .csv
+    Sampling,
+    /// `--model auto` on sparse subsets of a measured felt (--sizes) and on synthetic fabrics
+    /// with known truth (--synth-sizes): every candidate's cross-validated error, the choice,
+    /// the run's wall time: writes OUT/selection.md and .csv
+    Selection(SelectionArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RobustnessArgs {
+    /// Noise seeds per case
     #[arg(long, value_name = "N", default_value_t = 20)]
     pub seeds: u64,
-    /// Goniometric samples per dataset of the robustness study
+    /// Goniometric samples per dataset
     #[arg(long, value_name = "N", default_value_t = 1000)]
     pub samples: usize,
-    /// Instead: the real-felt comparison on this measured file (every rung, aligned and with
-    /// the fibre-direction spread, linear and log metric): writes OUT/felt.md, .csv and .png
-    #[arg(long, value_name = "FILE")]
-    pub felt: Option<PathBuf>,
-    /// Direction pairs of the felt comparison
-    #[arg(long, value_name = "N", default_value_t = 3000)]
-    pub directions: usize,
-    /// Instead: the per-texel map recovery study (synthetic captures with known maps, shrinking
-    /// light/view sets): writes OUT/maps_accuracy.md, .csv and .png
-    #[arg(long)]
-    pub maps: bool,
-    /// Instead: captures at camera resolution (a synthetic RGB capture of 8 images x N x N
-    /// pixels; the global fit and maps + globals run as `fibrefit fit` child processes, their
-    /// wall time, CPU time and peak memory measured): writes OUT/camera_resolution.md and .csv
-    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "1024")]
-    pub camera: Option<usize>,
-    /// Instead: the exported shader's cost per rung (evaluations per second on this machine's
-    /// GPU driver against the Rust model on the CPU, SPIR-V instruction counts): writes
-    /// OUT/shader_cost.md and .csv
-    #[arg(long)]
-    pub shader: bool,
-    /// Instead: the importance sampler's variance against cosine sampling per rung and view
-    /// (exponent 1000, the lobe width swept, other exponents) and its samples per second:
-    /// writes OUT/sampling.md and .csv
-    #[arg(long)]
-    pub sampling: bool,
-    /// Instead: `--model auto` on sparse subsets of this measured felt (--sizes) and on
-    /// synthetic fabrics with known truth (--synth-sizes): every candidate's cross-validated
-    /// error, the choice, the run's wall time: writes OUT/selection.md and .csv
-    #[arg(long, value_name = "FILE")]
-    pub selection: Option<PathBuf>,
-    /// Felt direction pairs of the selection study (comma-separated)
-    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000])]
-    pub sizes: Vec<usize>,
-    /// Samples of the selection study's synthetic fabrics (comma-separated; none: skip them)
-    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000])]
-    pub synth_sizes: Vec<usize>,
-    /// The selection study also measures every candidate at the config's knobs (the slow
-    /// path), side by side with the default coarse ranking
-    #[arg(long)]
-    pub slow: bool,
-    /// Only these cases of the robustness study (comma-separated names)
+    /// Only these cases (comma-separated names)
     #[arg(long, value_name = "NAMES", value_delimiter = ',')]
     pub cases: Vec<String>,
 }
 
-fn robustness(args: &BenchArgs) -> Result<()> {
+#[derive(Debug, Clone, Args)]
+pub struct FeltArgs {
+    /// The measured felt (.bsdf)
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+    /// Direction pairs drawn from it
+    #[arg(long, value_name = "N", default_value_t = 3000)]
+    pub directions: usize,
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct SelectionArgs {
+    /// The measured felt (.bsdf)
+    #[arg(value_name = "FILE")]
+    pub file: PathBuf,
+    /// Felt direction pairs (comma-separated)
+    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000])]
+    pub sizes: Vec<usize>,
+    /// Samples of the synthetic fabrics (comma-separated; none: skip them)
+    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000])]
+    pub synth_sizes: Vec<usize>,
+    /// Also measure every candidate at the config's knobs (the slow path), side by side with
+    /// the default coarse ranking
+    #[arg(long)]
+    pub slow: bool,
+}
+
+/// The studies' options as flags of `bench` itself (before the subcommands), hidden.
+#[derive(Debug, Default, Args)]
+pub struct Legacy {
+    #[arg(long, hide = true)]
+    pub robustness: bool,
+    #[arg(long, value_name = "N", default_value_t = 20, hide = true)]
+    pub seeds: u64,
+    #[arg(long, value_name = "N", default_value_t = 1000, hide = true)]
+    pub samples: usize,
+    #[arg(long, value_name = "FILE", hide = true)]
+    pub felt: Option<PathBuf>,
+    #[arg(long, value_name = "N", default_value_t = 3000, hide = true)]
+    pub directions: usize,
+    #[arg(long, hide = true)]
+    pub maps: bool,
+    #[arg(long, value_name = "N", num_args = 0..=1, default_missing_value = "1024", hide = true)]
+    pub camera: Option<usize>,
+    #[arg(long, hide = true)]
+    pub shader: bool,
+    #[arg(long, hide = true)]
+    pub sampling: bool,
+    #[arg(long, value_name = "FILE", hide = true)]
+    pub selection: Option<PathBuf>,
+    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000], hide = true)]
+    pub sizes: Vec<usize>,
+    #[arg(long, value_name = "N,..", value_delimiter = ',', default_values_t = [200, 500, 3000], hide = true)]
+    pub synth_sizes: Vec<usize>,
+    #[arg(long, hide = true)]
+    pub slow: bool,
+    #[arg(long, value_name = "NAMES", value_delimiter = ',', hide = true)]
+    pub cases: Vec<String>,
+}
+
+impl Legacy {
+    /// The study the legacy flags ask for (speed when none).
+    fn study(&self) -> Study {
+        if self.robustness {
+            Study::Robustness(RobustnessArgs {
+                seeds: self.seeds,
+                samples: self.samples,
+                cases: self.cases.clone(),
+            })
+        } else if self.sampling {
+            Study::Sampling
+        } else if let Some(size) = self.camera {
+            Study::Camera { size }
+        } else if self.shader {
+            Study::Shader
+        } else if self.maps {
+            Study::Maps
+        } else if let Some(file) = &self.selection {
+            Study::Selection(SelectionArgs {
+                file: file.clone(),
+                sizes: self.sizes.clone(),
+                synth_sizes: self.synth_sizes.clone(),
+                slow: self.slow,
+            })
+        } else if let Some(file) = &self.felt {
+            Study::Felt(FeltArgs {
+                file: file.clone(),
+                directions: self.directions,
+            })
+        } else {
+            Study::Speed
+        }
+    }
+}
+
+fn robustness(args: &BenchArgs, r: &RobustnessArgs) -> Result<()> {
     use crate::bench::robustness::{self as study, StudySize, CASES};
     let cases: Vec<study::Case> = CASES
         .iter()
-        .filter(|c| args.cases.is_empty() || args.cases.iter().any(|n| n == c.name))
+        .filter(|c| r.cases.is_empty() || r.cases.iter().any(|n| n == c.name))
         .copied()
         .collect();
     if cases.is_empty() {
@@ -91,20 +198,20 @@ fn robustness(args: &BenchArgs) -> Result<()> {
         bail!("--cases: no such case; the cases are {}", names.join(", "));
     }
     let size = StudySize {
-        samples: args.samples,
-        seeds: args.seeds,
+        samples: r.samples,
+        seeds: r.seeds,
     };
     let t = Instant::now();
-    let bar = crate::progress::bar(cases.len() as u64 * args.seeds, "robustness", args.quiet);
+    let bar = crate::progress::bar(cases.len() as u64 * r.seeds, "robustness", args.quiet);
     let scratch = tempfile::tempdir()?;
     let runs = study::run(&cases, size, scratch.path(), &bar)?;
     bar.finish_and_clear();
     let mut command = format!(
-        "fibrefit bench --robustness --seeds {} --samples {}",
-        args.seeds, args.samples
+        "fibrefit bench robustness --seeds {} --samples {}",
+        r.seeds, r.samples
     );
-    if !args.cases.is_empty() {
-        command += &format!(" --cases {}", args.cases.join(","));
+    if !r.cases.is_empty() {
+        command += &format!(" --cases {}", r.cases.join(","));
     }
     crate::bench::report::robustness::write(
         &args.out,
@@ -128,9 +235,9 @@ fn sampling(args: &BenchArgs) -> Result<()> {
     let run = crate::bench::sampling::run(args.quick, &bar)?;
     bar.finish_and_clear();
     let command = if args.quick {
-        "fibrefit bench --sampling --quick"
+        "fibrefit bench sampling --quick"
     } else {
-        "fibrefit bench --sampling"
+        "fibrefit bench sampling"
     };
     crate::bench::report::sampling::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
     if !args.quiet {
@@ -154,161 +261,164 @@ fn sampling(args: &BenchArgs) -> Result<()> {
 }
 
 pub fn run(args: &BenchArgs) -> Result<()> {
-    if args.robustness {
-        return robustness(args);
+    let study = args.study.clone().unwrap_or_else(|| args.legacy.study());
+    match study {
+        Study::Speed => speed(args),
+        Study::Robustness(r) => robustness(args, &r),
+        Study::Sampling => sampling(args),
+        Study::Camera { size } => camera(args, size),
+        Study::Shader => shader(args),
+        Study::Maps => maps(args),
+        Study::Selection(sel) => selection(args, &sel),
+        Study::Felt(f) => felt(args, &f),
     }
-    if args.sampling {
-        return sampling(args);
+}
+
+fn camera(args: &BenchArgs, size: usize) -> Result<()> {
+    if size < 8 {
+        bail!("bench camera {size}: the capture needs at least 8 x 8 pixels");
     }
-    if let Some(size) = args.camera {
-        if size < 8 {
-            bail!("--camera {size}: the capture needs at least 8 x 8 pixels");
+    let t = Instant::now();
+    let bar = crate::progress::bar(3, "camera", args.quiet);
+    let scratch = tempfile::tempdir()?;
+    let exe = std::env::current_exe()?;
+    let run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;
+    bar.finish_and_clear();
+    let command = match size {
+        1024 => "fibrefit bench camera".to_string(),
+        n => format!("fibrefit bench camera {n}"),
+    };
+    crate::bench::report::camera::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        for r in &run.rows {
+            eprintln!(
+                "{}: {:.1} s wall, {:.1} s CPU, {:.0} MB peak ({})",
+                r.job,
+                r.wall_seconds,
+                r.cpu_seconds,
+                r.peak_mb,
+                if r.met { "goal met" } else { "GOAL MISSED" }
+            );
         }
-        let t = Instant::now();
-        let bar = crate::progress::bar(3, "camera", args.quiet);
-        let scratch = tempfile::tempdir()?;
-        let exe = std::env::current_exe()?;
-        let run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;
-        bar.finish_and_clear();
-        let command = match size {
-            1024 => "fibrefit bench --camera".to_string(),
-            n => format!("fibrefit bench --camera {n}"),
-        };
-        crate::bench::report::camera::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
-        if !args.quiet {
-            for r in &run.rows {
-                eprintln!(
-                    "{}: {:.1} s wall, {:.1} s CPU, {:.0} MB peak ({})",
-                    r.job,
-                    r.wall_seconds,
-                    r.cpu_seconds,
-                    r.peak_mb,
-                    if r.met { "goal met" } else { "GOAL MISSED" }
-                );
-            }
-            eprintln!("wrote {}", args.out.join("camera_resolution.md").display());
-        }
-        return Ok(());
+        eprintln!("wrote {}", args.out.join("camera_resolution.md").display());
     }
-    if args.shader {
-        let t = Instant::now();
-        let bar = crate::progress::bar(
-            crate::bench::shader::RUNGS.len() as u64,
-            "shader",
-            args.quiet,
-        );
-        let (pairs, min_pairs, repeats) = if args.quick {
-            (4096, 256, 3)
-        } else {
-            (262_144, 2048, 5)
-        };
-        let run = crate::bench::shader::run(pairs, min_pairs, repeats, &bar)?;
-        bar.finish_and_clear();
-        let command = if args.quick {
-            "fibrefit bench --shader --quick"
-        } else {
-            "fibrefit bench --shader"
-        };
-        crate::bench::report::shader::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
-        if !args.quiet {
-            for r in &run.rows {
-                eprintln!(
-                    "{}: shader {:.3e} evals/s, Rust {:.3e} (all threads): ratio {:.2}",
-                    r.rung,
-                    r.gpu_evals_per_second,
-                    r.cpu_all_threads_evals_per_second,
-                    r.ratio_gpu_to_cpu
-                );
-            }
-            eprintln!("wrote {}", args.out.join("shader_cost.md").display());
+    Ok(())
+}
+
+fn shader(args: &BenchArgs) -> Result<()> {
+    let t = Instant::now();
+    let bar = crate::progress::bar(
+        crate::bench::shader::RUNGS.len() as u64,
+        "shader",
+        args.quiet,
+    );
+    let (pairs, min_pairs, repeats) = if args.quick {
+        (4096, 256, 3)
+    } else {
+        (262_144, 2048, 5)
+    };
+    let run = crate::bench::shader::run(pairs, min_pairs, repeats, &bar)?;
+    bar.finish_and_clear();
+    let command = if args.quick {
+        "fibrefit bench shader --quick"
+    } else {
+        "fibrefit bench shader"
+    };
+    crate::bench::report::shader::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        for r in &run.rows {
+            eprintln!(
+                "{}: shader {:.3e} evals/s, Rust {:.3e} (all threads): ratio {:.2}",
+                r.rung,
+                r.gpu_evals_per_second,
+                r.cpu_all_threads_evals_per_second,
+                r.ratio_gpu_to_cpu
+            );
         }
-        return Ok(());
+        eprintln!("wrote {}", args.out.join("shader_cost.md").display());
     }
-    if args.maps {
-        let t = Instant::now();
-        let bar =
-            crate::progress::bar(crate::bench::maps::cases().len() as u64, "maps", args.quiet);
-        let scratch = tempfile::tempdir()?;
-        let (rows, pictures) = crate::bench::maps::run(scratch.path(), &bar)?;
-        bar.finish_and_clear();
-        crate::bench::report::maps::write(
-            &args.out,
-            &rows,
-            &pictures,
-            "fibrefit bench --maps",
-            t.elapsed().as_secs_f64(),
-        )?;
-        if !args.quiet {
-            eprintln!("wrote {}", args.out.join("maps_accuracy.md").display());
+    Ok(())
+}
+
+fn maps(args: &BenchArgs) -> Result<()> {
+    let t = Instant::now();
+    let bar = crate::progress::bar(crate::bench::maps::cases().len() as u64, "maps", args.quiet);
+    let scratch = tempfile::tempdir()?;
+    let (rows, pictures) = crate::bench::maps::run(scratch.path(), &bar)?;
+    bar.finish_and_clear();
+    crate::bench::report::maps::write(
+        &args.out,
+        &rows,
+        &pictures,
+        "fibrefit bench maps",
+        t.elapsed().as_secs_f64(),
+    )?;
+    if !args.quiet {
+        eprintln!("wrote {}", args.out.join("maps_accuracy.md").display());
+    }
+    Ok(())
+}
+
+fn selection(args: &BenchArgs, sel: &SelectionArgs) -> Result<()> {
+    let file = &sel.file;
+    let t = Instant::now();
+    let synth: Vec<usize> = sel.synth_sizes.iter().copied().filter(|&n| n > 0).collect();
+    let rows = crate::bench::selection::run(Some(file), &sel.sizes, &synth, sel.slow, args.quiet)?;
+    let list = |v: &[usize]| {
+        v.iter()
+            .map(|n| n.to_string())
+            .collect::<Vec<_>>()
+            .join(",")
+    };
+    let command = format!(
+        "fibrefit bench selection {} --sizes {} --synth-sizes {}{}",
+        file.display(),
+        list(&sel.sizes),
+        match synth.is_empty() {
+            true => "0".to_string(),
+            false => list(&synth),
+        },
+        if sel.slow { " --slow" } else { "" }
+    );
+    crate::bench::report::selection::write(&args.out, &rows, &command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        for r in &rows {
+            eprintln!(
+                "{} {} ({}): chose {} in {:.1} s",
+                r.data, r.samples, r.path, r.chosen, r.seconds
+            );
         }
-        return Ok(());
+        eprintln!("wrote {}", args.out.join("selection.md").display());
     }
-    if let Some(file) = &args.selection {
-        let t = Instant::now();
-        let synth: Vec<usize> = args
-            .synth_sizes
-            .iter()
-            .copied()
-            .filter(|&n| n > 0)
-            .collect();
-        let rows =
-            crate::bench::selection::run(Some(file), &args.sizes, &synth, args.slow, args.quiet)?;
-        let list = |v: &[usize]| {
-            v.iter()
-                .map(|n| n.to_string())
-                .collect::<Vec<_>>()
-                .join(",")
-        };
-        let command = format!(
-            "fibrefit bench --selection {} --sizes {} --synth-sizes {}{}",
-            file.display(),
-            list(&args.sizes),
-            match synth.is_empty() {
-                true => "0".to_string(),
-                false => list(&synth),
-            },
-            if args.slow { " --slow" } else { "" }
-        );
-        crate::bench::report::selection::write(
-            &args.out,
-            &rows,
-            &command,
-            t.elapsed().as_secs_f64(),
-        )?;
-        if !args.quiet {
-            for r in &rows {
-                eprintln!(
-                    "{} {} ({}): chose {} in {:.1} s",
-                    r.data, r.samples, r.path, r.chosen, r.seconds
-                );
-            }
-            eprintln!("wrote {}", args.out.join("selection.md").display());
-        }
-        return Ok(());
+    Ok(())
+}
+
+fn felt(args: &BenchArgs, f: &FeltArgs) -> Result<()> {
+    let file = &f.file;
+    let t = Instant::now();
+    let bar = crate::progress::bar(crate::bench::felt::fit_count(), "felt", args.quiet);
+    let run = crate::bench::felt::run(file, f.directions, &bar)?;
+    bar.finish_and_clear();
+    let command = format!(
+        "fibrefit bench felt {} --directions {}",
+        file.display(),
+        f.directions
+    );
+    let measured = crate::load::measured_brdf(file)?;
+    crate::bench::report::felt::write(
+        &args.out,
+        &run,
+        measured.as_deref(),
+        &command,
+        t.elapsed().as_secs_f64(),
+    )?;
+    if !args.quiet {
+        eprintln!("wrote {}", args.out.join("felt.md").display());
     }
-    if let Some(file) = &args.felt {
-        let t = Instant::now();
-        let bar = crate::progress::bar(crate::bench::felt::fit_count(), "felt", args.quiet);
-        let run = crate::bench::felt::run(file, args.directions, &bar)?;
-        bar.finish_and_clear();
-        let command = format!(
-            "fibrefit bench --felt {} --directions {}",
-            file.display(),
-            args.directions
-        );
-        let measured = crate::load::measured_brdf(file)?;
-        crate::bench::report::felt::write(
-            &args.out,
-            &run,
-            measured.as_deref(),
-            &command,
-            t.elapsed().as_secs_f64(),
-        )?;
-        if !args.quiet {
-            eprintln!("wrote {}", args.out.join("felt.md").display());
-        }
-        return Ok(());
-    }
+    Ok(())
+}
+
+fn speed(args: &BenchArgs) -> Result<()> {
     if !args.root.join("data_synthetic/silk/capture.toml").exists() {
         bail!(
             "{}: no data_synthetic/silk/capture.toml here; run from the repository root or pass --root",

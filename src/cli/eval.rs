@@ -28,7 +28,7 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
                      [-0.9, 0.95] (> 0: forward scattering); docs/model.md, Optional components
   quadrature_order   specular Gauss-Legendre order N                 (default 16)
   histogram_bins     height histogram bins K                         (default 16)
-  two_sided, ambient lambert preview shading of seed 003 (intensity column only)
+  two_sided, ambient lambert's two-sided and ambient preview shading (intensity column only)
   model           model id (used when --model is not given)
 
 QUERIES: CSV with header theta_i,phi_i,theta_o,phi_o in degrees (theta from the normal, phi from

@@ -23,7 +23,7 @@ Every rung but `reference` (an adaptive integration, the yardstick).
 --check runs the exported shader as a compute shader on this machine's Vulkan driver against the
 Rust model (10 000 random light/view pairs in random frames, texel heights, and the extremes)
 and refuses to write it if it disagrees by more than f32 allows (the bound is printed).
-GLTF: a preview mesh (swatch, sphere, seed 001's torus, or an OBJ with curvature-aligned tangents)
+GLTF: a preview mesh (swatch, sphere, the topology-map paper's torus, or an OBJ with curvature-aligned tangents)
 with NORMAL, TANGENT (the fibre direction), TEXCOORD_0 and a glTF material fitted to the model:
 base colour, roughness, KHR_materials_anisotropy and KHR_materials_ior, fitted over 1500
 direction pairs like the result's Ward fallback; the material's extras state its error. A

@@ -129,7 +129,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let targets =
         FitTargets::reserve(&mut outs, &req, out_path.as_deref(), args.report.as_deref())?;
     // an interrupted auto run writes the rungs it finished, marked partial
-    let sink = (req.config.model == "auto").then(fit_api::AutoSink::default);
+    let sink = (req.config.model.is_auto()).then(fit_api::AutoSink::default);
     if let Some(sink) = &sink {
         let (sink, json, report, inputs) = (
             sink.clone(),

@@ -49,7 +49,7 @@ pub enum Command {
     Render(render::RenderArgs),
     /// The fitted model as shader code (WGSL, GLSL, HLSL, MSL) or a glTF preview with a fitted material.
     Export(export::ExportArgs),
-    /// Principal curvature directions of a mesh (seed 004's tangent field) as CSV or glTF.
+    /// Principal curvature directions of a mesh (the tangent field of principal-curvature-aligned shading) as CSV or glTF.
     Tangents(tangents::TangentsArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),

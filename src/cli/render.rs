@@ -1,5 +1,5 @@
-//! `fibrefit render`: a material on an object, as a picture and its AOVs; `--seed001` renders
-//! seed 001's figures 6 and 7 as one grid ([`crate::api::render`]).
+//! `fibrefit render`: a material on an object, as a picture and its AOVs; `--paper-figures` renders
+//! the topology-map paper's figures 6 and 7 as one grid ([`crate::api::render`]).
 
 use crate::api::render::{self as render_api, FlagScene, Render, RenderRequest, SceneSource};
 use crate::export::atomic::Outputs;
@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-OBJECTS: torus (seed 001: fibres wound round the tube, climbing twice from the outer to the inner
+OBJECTS: torus (the topology-map paper's: fibres wound round the tube, climbing twice from the outer to the inner
 side; a topology map adds map_scale (2 m - 1) to that height), sphere (fibres along the circles of
 latitude about z, turned by fibre_azimuth_deg towards the meridians), swatch (the square
 [-1, 1]^2 in z = 0, fibres at fibre_azimuth_deg from x). The objects sit at the origin in a world
@@ -25,7 +25,7 @@ outside the object) and, for fibre rungs with a topology, height.exr (H in fibre
 outside) from each pixel's centre ray.")]
 pub struct RenderArgs {
     /// A result JSON written by `fibrefit fit`, or a parameter TOML (MODEL.md §5)
-    #[arg(long, value_name = "FILE", required_unless_present = "seed001")]
+    #[arg(long, value_name = "FILE", required_unless_present = "paper_figures")]
     pub params: Option<PathBuf>,
     /// Model id [default: the parameter file's `model`]
     #[arg(long, value_name = "ID")]
@@ -33,7 +33,7 @@ pub struct RenderArgs {
     /// torus, sphere, swatch or a triangle mesh MESH.obj
     #[arg(long, value_name = "OBJECT", default_value = "torus")]
     pub object: String,
-    /// Meshes: the fibre tangent field: curvature (k1's direction, seed 004), uv (dp/du of the
+    /// Meshes: the fibre tangent field: curvature (k1's direction, as principal-curvature-aligned shading does), uv (dp/du of the
     /// texture coordinates) or constant (fibre_azimuth_deg from x, projected on the surface)
     #[arg(long, value_name = "FIELD", default_value = "curvature")]
     pub tangents: String,
@@ -72,17 +72,18 @@ pub struct RenderArgs {
     /// the object's (u, v) [default: the maps a fitted result names, found beside it]
     #[arg(long, value_name = "DIR")]
     pub maps: Option<PathBuf>,
-    /// Ward on a mesh with curvature tangents: its alphas follow the curvature (seed 004):
+    /// Ward on a mesh with curvature tangents: its alphas follow the curvature (principal-curvature-aligned shading):
     /// alpha_x = F |k1|, alpha_y = F |k2|, clamped to [0.01, 1] (F in the mesh's length unit)
     #[arg(long, value_name = "F")]
     pub ward_curvature_alpha: Option<f64>,
     /// Also write the per-pixel AOVs into DIR
     #[arg(long, value_name = "DIR")]
     pub aovs: Option<PathBuf>,
-    /// Instead: seed 001's figures 6 and 7 as one grid (rows max-normal, poulin-fournier,
-    /// varying-topology, varying-topology with a topology map; columns two lightings) into --out
-    #[arg(long)]
-    pub seed001: bool,
+    /// Instead: figures 6 and 7 of the topology-map paper (Poulin-Fournier fibres climbing by a
+    /// topology map) as one grid (rows max-normal, poulin-fournier, varying-topology,
+    /// varying-topology with a topology map; columns two lightings) into --out
+    #[arg(long, alias = "seed001")]
+    pub paper_figures: bool,
     /// Output image (.exr or .png)
     #[arg(long, value_name = "FILE")]
     pub out: PathBuf,
@@ -126,10 +127,10 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         bail!("--supersample {}: expected 1 to 16", args.supersample);
     }
     let camera = direction(&args.camera, "--camera")?;
-    if args.seed001 {
+    if args.paper_figures {
         let mut outs = Outputs::new(&[]);
         let picture_out = outs.file(&args.out, "--out")?;
-        let s = render_api::seed001(camera, args.supersample, args.quiet)?;
+        let s = render_api::paper_figures(camera, args.supersample, args.quiet)?;
         let (rows, cols) = (&s.rows, &s.columns);
         write_labelled_grid(&mut outs, picture_out, &s.grid, s.tile, rows, cols)?;
         outs.commit()?;
@@ -155,7 +156,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         params: args
             .params
             .clone()
-            .expect("clap: --params unless --seed001"),
+            .expect("clap: --params unless --paper-figures"),
         model: args.model.clone(),
         scene: match &args.scene {
             Some(path) => SceneSource::File(path.clone()),

@@ -1,4 +1,4 @@
-//! `fibrefit tangents MESH.obj --out T.csv|T.glb`: seed 004's curvature-aligned tangent field.
+//! `fibrefit tangents MESH.obj --out T.csv|T.glb`: the principal-curvature-aligned tangent field.
 
 use crate::export::atomic::Outputs;
 use crate::load::mesh;

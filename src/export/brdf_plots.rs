@@ -429,37 +429,6 @@ fn save(path: Sink, w: u32, h: u32, buf: Vec<u8>) -> Result<()> {
     path.png(&img)
 }
 
-/// Viridis-like colour of t in [0, 1].
-pub(crate) fn sequential(t: f64) -> RGBColor {
-    const C: [(f64, f64, f64); 5] = [
-        (68.0, 1.0, 84.0),
-        (59.0, 82.0, 139.0),
-        (33.0, 145.0, 140.0),
-        (94.0, 201.0, 98.0),
-        (253.0, 231.0, 37.0),
-    ];
-    let x = t.clamp(0.0, 1.0) * (C.len() - 1) as f64;
-    let i = (x.floor() as usize).min(C.len() - 2);
-    let f = x - i as f64;
-    let mix = |a: f64, b: f64| (a + f * (b - a)).round() as u8;
-    RGBColor(
-        mix(C[i].0, C[i + 1].0),
-        mix(C[i].1, C[i + 1].1),
-        mix(C[i].2, C[i + 1].2),
-    )
-}
-
-/// Blue (model below data) - white - red (above) for t in [-1, 1].
-pub(crate) fn diverging(t: f64) -> RGBColor {
-    let t = t.clamp(-1.0, 1.0);
-    let a = (255.0 * (1.0 - t.abs())) as u8;
-    if t >= 0.0 {
-        RGBColor(255, a, a)
-    } else {
-        RGBColor(a, a, 255)
-    }
-}
-
 /// Most rows of a capture's hemisphere maps (one per image, the images with the most samples).
 pub const MAX_IMAGE_ROWS: usize = 6;
 /// Measured samples on a hemisphere map are averaged in cells of this many screen pixels.

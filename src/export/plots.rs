@@ -222,8 +222,8 @@ impl MapScale {
     pub fn colour(&self, v: f64) -> RGBColor {
         let t = self.t(v);
         match self.map {
-            ColourMap::Sequential => super::brdf_plots::sequential(t),
-            ColourMap::Diverging => super::brdf_plots::diverging(2.0 * t - 1.0),
+            ColourMap::Sequential => sequential(t),
+            ColourMap::Diverging => diverging(2.0 * t - 1.0),
             ColourMap::Cyclic => hue(t),
         }
     }
@@ -770,4 +770,35 @@ pub fn residual_map(path: Sink, title: &str, r: &ImageResiduals) -> Result<Drawn
     };
     let panels: Vec<(String, Vec<f32>)> = names.into_iter().zip(pct).collect();
     image_panels(path, title, r.width, r.height, &panels, &scale)
+}
+
+/// Viridis-like colour of t in [0, 1].
+pub(crate) fn sequential(t: f64) -> RGBColor {
+    const C: [(f64, f64, f64); 5] = [
+        (68.0, 1.0, 84.0),
+        (59.0, 82.0, 139.0),
+        (33.0, 145.0, 140.0),
+        (94.0, 201.0, 98.0),
+        (253.0, 231.0, 37.0),
+    ];
+    let x = t.clamp(0.0, 1.0) * (C.len() - 1) as f64;
+    let i = (x.floor() as usize).min(C.len() - 2);
+    let f = x - i as f64;
+    let mix = |a: f64, b: f64| (a + f * (b - a)).round() as u8;
+    RGBColor(
+        mix(C[i].0, C[i + 1].0),
+        mix(C[i].1, C[i + 1].1),
+        mix(C[i].2, C[i + 1].2),
+    )
+}
+
+/// Blue (model below data) - white - red (above) for t in [-1, 1].
+pub(crate) fn diverging(t: f64) -> RGBColor {
+    let t = t.clamp(-1.0, 1.0);
+    let a = (255.0 * (1.0 - t.abs())) as u8;
+    if t >= 0.0 {
+        RGBColor(255, a, a)
+    } else {
+        RGBColor(a, a, 255)
+    }
 }

@@ -212,7 +212,7 @@ pub fn write_dir(
     let ch = samples.channels;
     let psi_deg = outcome
         .set
-        .shape_value(crate::fit::parameters::Shape::Azimuth);
+        .shape_value(crate::fit::parameters::Param::Azimuth);
     // measured data spanning decades reads best on a log axis
     let positive: Vec<f64> = samples
         .samples

@@ -142,7 +142,9 @@ pub fn result_from_value(
         ..FitKnobs::default()
     };
     let cfg = FitConfig {
-        model: model.to_string(),
+        model: model
+            .parse()
+            .map_err(|e: String| at(&format!("`model`: {e}")))?,
         metric,
         starts: 1,
         seed: 0,
@@ -275,7 +277,7 @@ impl Default for Conventions {
             angles: "degrees; theta from N, phi from the swatch x axis towards y; directions point away from the surface".into(),
             lengths: "fibre radii (spacing, height, map_scale)".into(),
             brdf: "f(l, v) in 1/sr; 0 when l or v is at or below the horizon".into(),
-            intensity: "I = f cos(theta_i): radiance per unit irradiance perpendicular to the light; a shader's colour per light is E * I (seed 003's Lambert c = pi * I)".into(),
+            intensity: "I = f cos(theta_i): radiance per unit irradiance perpendicular to the light; a shader's colour per light is E * I (Lambert's shaded colour c = pi * I)".into(),
             albedos: "grey: one number; RGB: [r, g, b], linear".into(),
         }
     }

@@ -3,7 +3,7 @@
 //! outside their bounds are errors that name the key.
 
 use crate::model::params::Albedo;
-use crate::model::ModelId;
+use crate::model::{ModelId, Param};
 use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -173,10 +173,57 @@ fn default_starts() -> usize {
     6
 }
 
+/// What a fit fits: one rung, or `auto` (every candidate rung, chosen by held-out error).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum ModelChoice {
+    Auto,
+    Rung(ModelId),
+}
+
+impl ModelChoice {
+    pub fn is_auto(self) -> bool {
+        self == ModelChoice::Auto
+    }
+}
+
+impl std::str::FromStr for ModelChoice {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s {
+            "auto" => Ok(ModelChoice::Auto),
+            _ => s.parse().map(ModelChoice::Rung),
+        }
+    }
+}
+
+impl TryFrom<String> for ModelChoice {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<ModelChoice> for String {
+    fn from(m: ModelChoice) -> String {
+        m.to_string()
+    }
+}
+
+impl std::fmt::Display for ModelChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            ModelChoice::Auto => f.write_str("auto"),
+            ModelChoice::Rung(id) => write!(f, "{id}"),
+        }
+    }
+}
+
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FitConfig {
-    pub model: String,
+    /// A rung, or `auto` (model selection).
+    pub model: ModelChoice,
     #[serde(default = "default_metric")]
     pub metric: Metric,
     /// Local polishing runs started from the best candidates of the global stage.
@@ -215,23 +262,9 @@ pub struct FitConfig {
     pub metric_reason: Option<String>,
 }
 
-/// Parameters no fit frees unless `[parameters]` lists them: the albedos (solved, always free),
-/// the Fresnel factor and the fuzz layer (optional components, on only when listed).
-const NOT_SHAPES: [&str; 9] = [
-    "kd",
-    "ks",
-    "substrate_albedo",
-    "rho_d",
-    "rho_s",
-    "fresnel_ior",
-    "fuzz",
-    "fuzz_depth",
-    "fuzz_asymmetry",
-];
-
 /// The one parameter with a colour choice (`[parameters] ks = { colour = true }`): the specular
 /// weight of the fibre rungs, grey unless asked.
-pub const COLOUR_CHOICE: &str = "ks";
+pub const COLOUR_CHOICE: Param = Param::Ks;
 
 /// `[maps]`: which per-texel maps `fit --maps` recovers beside the global parameters, and how.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
@@ -444,17 +477,10 @@ pub fn metric_for_data(samples: &crate::load::samples::Samples) -> (Metric, Stri
 }
 
 fn default_rungs() -> Vec<String> {
-    [
-        "lambert",
-        "hast-diffuse",
-        "ward",
-        "max-normal",
-        "poulin-fournier",
-        "varying-topology",
-    ]
-    .iter()
-    .map(|s| s.to_string())
-    .collect()
+    crate::model::rungs::auto_candidates()
+        .iter()
+        .map(|id| id.to_string())
+        .collect()
 }
 
 fn default_holdout() -> f64 {
@@ -466,6 +492,23 @@ fn default_metric() -> Metric {
 }
 
 impl FitConfig {
+    /// Whether `[parameters]` lists `p`.
+    pub fn lists(&self, p: Param) -> bool {
+        self.parameters.contains_key(p.name())
+    }
+
+    /// The first fuzz-layer parameter `[parameters]` lists (the layer is on when any is).
+    pub fn listed_fuzz_parameter(&self) -> Option<Param> {
+        crate::model::parameter::fuzz_parameters().find(|&p| self.lists(p))
+    }
+
+    /// Switch the fuzz layer on (its parameters at their defaults unless listed).
+    pub fn add_fuzz_layer(&mut self) {
+        self.parameters
+            .entry(Param::FuzzDepth.name().into())
+            .or_default();
+    }
+
     pub fn load(path: &Path) -> Result<Self> {
         let text = crate::load::input::read_text_as(path, "fit config")?;
         let mut cfg: FitConfig = toml::from_str(&text)
@@ -513,9 +556,12 @@ impl FitConfig {
     }
 
     pub fn model_id(&self) -> Result<ModelId> {
-        self.model
-            .parse()
-            .map_err(|e: String| anyhow!("`model`: {e}"))
+        match self.model {
+            ModelChoice::Rung(id) => Ok(id),
+            ModelChoice::Auto => "auto"
+                .parse()
+                .map_err(|e: String| anyhow!("`model`: {e}")),
+        }
     }
 
     /// The work a fit of `samples` samples plans at most, in sample evaluations at the default
@@ -531,7 +577,7 @@ impl FitConfig {
             .unwrap_or_else(|| default_candidates(8)) as f64;
         let iterations = self.optimizer.max_iterations as f64;
         let nodes = (self.knobs.quadrature_order * self.knobs.azimuth_nodes) as f64 / 256.0;
-        if self.model != "auto" {
+        if !self.model.is_auto() {
             return (candidates * sub + self.starts as f64 * iterations * sub + iterations * n)
                 * nodes.max(1.0);
         }
@@ -568,7 +614,7 @@ impl FitConfig {
                     .map_or("default".to_string(), |c| c.to_string()),
                 self.optimizer.global_subsample,
                 self.knobs.quadrature_order * self.knobs.azimuth_nodes,
-                if self.model == "auto" {
+                if self.model.is_auto() {
                     format!(", {} rungs tried", self.selection.rungs.len())
                 } else {
                     String::new()
@@ -580,7 +626,7 @@ impl FitConfig {
 
     /// Checks that need no data: names, bounds, starts, knob ranges.
     pub fn validate(&self) -> Result<()> {
-        if self.model != "auto" {
+        if !self.model.is_auto() {
             return self.validate_rung();
         }
         // `auto`: each rung sees only its own parameters, so check the names against all rungs
@@ -617,10 +663,10 @@ impl FitConfig {
     /// ([`FitConfig::free_unlisted_shapes`]).
     pub fn for_rung(&self, id: ModelId) -> FitConfig {
         let mut c = self.clone();
-        c.model = id.to_string();
+        c.model = ModelChoice::Rung(id);
         let allowed = id.parameter_names();
         c.parameters.retain(|k, _| allowed.contains(&k.as_str()));
-        if self.model == "auto" {
+        if self.model.is_auto() {
             c.free_unlisted_shapes(id);
         }
         c
@@ -636,10 +682,12 @@ impl FitConfig {
     /// carries) and what `[components]` switch off are still held fixed, and the report says why.
     /// `--model auto` and a named rung without a config fit this way.
     pub fn free_unlisted_shapes(&mut self, id: ModelId) {
-        for name in id.parameter_names() {
-            if !NOT_SHAPES.contains(&name) {
+        // the albedos (solved, always free), the Fresnel factor and the fuzz layer (optional
+        // components) are freed only when listed
+        for p in id.parameters() {
+            if !p.info().listed_only {
                 self.parameters
-                    .entry(name.to_string())
+                    .entry(p.name().to_string())
                     .or_insert(ParamEntry {
                         vary: Some(true),
                         ..Default::default()
@@ -679,7 +727,7 @@ impl FitConfig {
                     .join(", ")
             ));
         }
-        self.model = id.to_string();
+        self.model = ModelChoice::Rung(id);
         Ok(())
     }
 
@@ -693,7 +741,7 @@ impl FitConfig {
                     allowed.join(", ")
                 );
             }
-            if e.colour.is_some() && name != COLOUR_CHOICE {
+            if e.colour.is_some() && name != COLOUR_CHOICE.name() {
                 bail!(
                     "parameters.{name}.colour: only `{COLOUR_CHOICE}` has a colour choice (the \
                      albedos kd, substrate_albedo and fuzz are always fitted per channel: the dye's \
@@ -701,7 +749,7 @@ impl FitConfig {
                 );
             }
             // a fixed `ks` may be RGB (it is not fitted): a result's values read back, say
-            if name == COLOUR_CHOICE && e.colour != Some(true) && e.vary != Some(false) {
+            if name == COLOUR_CHOICE.name() && e.colour != Some(true) && e.vary != Some(false) {
                 if let Some(v) = e.value.filter(|v| v.is_rgb()) {
                     bail!(
                         "parameters.{name}.value = {:?}: an RGB start for a grey `{name}` (fitted as \

@@ -1,7 +1,7 @@
 //! The last stage: at the best minimum, the albedos, residuals, standard errors, correlations,
 //! statistics and per-parameter records; the other distinct minima for the quality checks.
 
-use super::parameters::{ParamSet, Shape};
+use super::parameters::{Param, ParamSet};
 use super::problem::{coordinate, height_range, Coordinate, FitProblem};
 use super::{quality, uncertainty, wrap_azimuth, FitOutcome, ParamRecord};
 use crate::load::samples::Samples;
@@ -13,7 +13,7 @@ fn shape_at_bound(set: &ParamSet, i: usize) -> bool {
     let s = &set.shapes[i];
     let (lo, hi) = match coordinate(s) {
         Coordinate::Periodic => return false,
-        Coordinate::UnderMaxHeight => height_range(s, set.shape_value(Shape::Spacing)),
+        Coordinate::UnderMaxHeight => height_range(s, set.shape_value(Param::Spacing)),
         _ => (s.min, s.max),
     };
     near(s.value, lo, s.min, s.max) || near(s.value, hi, s.min, s.max)
@@ -123,7 +123,7 @@ pub fn finish(
         } else {
             (None, false, None)
         };
-        let value = if s.kind == Shape::Azimuth {
+        let value = if s.kind == Param::Azimuth {
             wrap_azimuth(s.value)
         } else {
             s.value
@@ -210,7 +210,7 @@ pub fn finish(
         channels: ch,
         free_parameters: p,
         sigmas_given: sigmas,
-        psi: set.shape_value(Shape::Azimuth).to_radians(),
+        psi: set.shape_value(Param::Azimuth).to_radians(),
         minima: &minima,
     });
     quality.degeneracies = degeneracies;

@@ -780,7 +780,9 @@ impl TexelMaterials {
             Targets::new(model, albedos, seed).base_law(&base),
         );
         let mut nodes = Vec::new();
-        if let Some((lo, hi)) = heights.filter(|_| model.id().has_topology()) {
+        if let Some((lo, hi)) =
+            heights.filter(|_| model.rung().has(crate::model::Ability::Topology))
+        {
             let k = if hi - lo > 1e-9 { HEIGHT_NODES } else { 1 };
             let hs: Vec<f64> = (0..k)
                 .map(|i| {

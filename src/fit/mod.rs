@@ -32,7 +32,7 @@ use crate::model::topology::TopologyMap;
 use anyhow::Result;
 use config::FitConfig;
 use nalgebra::DVector;
-use parameters::{ParamSet, Shape};
+use parameters::{Param, ParamSet};
 use problem::FitProblem;
 use rand::seq::SliceRandom;
 use rand::SeedableRng;
@@ -105,7 +105,7 @@ pub fn fit_with_hints(
     samples: &Samples,
     cfg: &FitConfig,
     quiet: bool,
-    hints: &[Vec<(Shape, f64)>],
+    hints: &[Vec<(Param, f64)>],
 ) -> Result<FitOutcome> {
     let t0 = Instant::now();
     let setup::Setup {
@@ -149,7 +149,7 @@ pub fn fit_with_hints(
                 match h.iter().find(|x| x.0 == s.kind) {
                     Some(&(_, v)) => s.value = v.clamp(s.min, s.max),
                     // a simpler rung is this one with no climbing and no spread of heights
-                    None if matches!(s.kind, Shape::Height | Shape::MapScale) => s.value = s.min,
+                    None if matches!(s.kind, Param::Height | Param::MapScale) => s.value = s.min,
                     None => {}
                 }
             }
@@ -235,7 +235,7 @@ pub fn fitted_brdf(o: &FitOutcome, cfg: &FitConfig) -> crate::model::BrdfFn {
     );
     let albedos = problem::albedos_of(&o.set);
     let frame =
-        crate::model::FibreFrame::from_azimuth(o.set.shape_value(Shape::Azimuth).to_radians());
+        crate::model::FibreFrame::from_azimuth(o.set.shape_value(Param::Azimuth).to_radians());
     let channels = o.channels;
     Box::new(move |l, v| {
         let b = m.basis(&crate::model::DirectionPair::new(&frame, l, v));

@@ -3,82 +3,15 @@
 //! whether it varies. Exponent and Ward roughness are fitted in log space.
 
 use super::config::{FitConfig, ParamEntry};
-use crate::model::fuzz::{ASYMMETRY_RANGE, DEPTH_RANGE};
 use crate::model::params::Albedo;
-use crate::model::topology::max_height;
 use crate::model::ModelId;
 use anyhow::{bail, Result};
 
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Shape {
-    Exponent,
-    Spacing,
-    Height,
-    MapScale,
-    Azimuth,
-    AlphaX,
-    AlphaY,
-    AzimuthSpread,
-    FresnelIor,
-    FuzzDepth,
-    FuzzAsymmetry,
-}
-
-impl Shape {
-    pub fn name(self) -> &'static str {
-        match self {
-            Shape::Exponent => "exponent",
-            Shape::Spacing => "spacing",
-            Shape::Height => "height",
-            Shape::MapScale => "map_scale",
-            Shape::Azimuth => "fibre_azimuth_deg",
-            Shape::AlphaX => "alpha_x",
-            Shape::AzimuthSpread => "azimuth_spread_deg",
-            Shape::FresnelIor => "fresnel_ior",
-            Shape::FuzzDepth => "fuzz_depth",
-            Shape::FuzzAsymmetry => "fuzz_asymmetry",
-            Shape::AlphaY => "alpha_y",
-        }
-    }
-
-    /// Fitted as ln(value)?
-    pub fn log_space(self) -> bool {
-        matches!(
-            self,
-            Shape::Exponent | Shape::AlphaX | Shape::AlphaY | Shape::FuzzDepth
-        )
-    }
-
-    pub fn to_internal(self, v: f64) -> f64 {
-        if self.log_space() {
-            v.ln()
-        } else {
-            v
-        }
-    }
-
-    pub fn to_external(self, v: f64) -> f64 {
-        if self.log_space() {
-            v.exp()
-        } else {
-            v
-        }
-    }
-}
-
-/// The linear components, in basis order.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Component {
-    Diffuse,
-    Specular,
-    Substrate,
-    /// The fuzz layer's weight.
-    Fuzz,
-}
+pub use crate::model::parameter::{Component, Param};
 
 #[derive(Clone, Debug, PartialEq)]
 pub struct ShapeParam {
-    pub kind: Shape,
+    pub kind: Param,
     /// External units (degrees for the azimuth).
     pub value: f64,
     pub init: f64,
@@ -114,74 +47,21 @@ pub struct ParamSet {
     pub channels: usize,
 }
 
-struct Default3 {
-    value: f64,
-    min: f64,
-    max: f64,
-    vary: bool,
-}
-
-fn defaults(name: &str, spacing_max: f64, spacing0: f64) -> Default3 {
-    let d = |value, min, max, vary| Default3 {
-        value,
-        min,
-        max,
-        vary,
-    };
-    match name {
-        "kd" => d(0.5, 0.0, 1.0, true),
-        "ks" => d(0.2, 0.0, 1.0, true),
-        "substrate_albedo" => d(0.5, 0.0, 1.0, true),
-        "rho_d" => d(0.3, 0.0, 1.0, true),
-        "rho_s" => d(0.2, 0.0, 1.0, true),
-        "exponent" => d(20.0, 1.0, 1e4, true),
-        "spacing" => d(2.0, 2.0, 20.0, false),
-        "height" => d(
-            0.5 * max_height(spacing0),
-            0.0,
-            max_height(spacing_max),
-            true,
-        ),
-        "map_scale" => d(0.0, 0.0, max_height(spacing_max), false),
-        "fibre_azimuth_deg" => d(0.0, -90.0, 90.0, false),
-        "azimuth_spread_deg" => d(0.0, 0.0, 180.0, false),
-        "fresnel_ior" => d(0.0, 0.0, 10.0, false),
-        // the fuzz layer, when listed: a thin forward-scattering layer of unit strength to start
-        "fuzz" => d(1.0, 0.0, crate::model::fuzz::WEIGHT_MAX, true),
-        "fuzz_depth" => d(0.3, DEPTH_RANGE.0, DEPTH_RANGE.1, true),
-        "fuzz_asymmetry" => d(0.5, ASYMMETRY_RANGE.0, ASYMMETRY_RANGE.1, true),
-        "alpha_x" | "alpha_y" => d(0.2, 0.0011, 1.0, true),
-        _ => unreachable!("names come from ModelId::parameter_names"),
-    }
-}
-
-/// Hard limits of MODEL.md §5 that no config may widen.
-fn hard_limits(name: &str, spacing_max: f64) -> (f64, f64) {
-    match name {
-        "kd" | "ks" | "substrate_albedo" | "rho_d" | "rho_s" => (0.0, 1.0),
-        "exponent" => (1.0, 1e4),
-        "spacing" => (2.0, 20.0),
-        "height" | "map_scale" => (0.0, max_height(spacing_max)),
-        "fibre_azimuth_deg" => (-90.0, 90.0),
-        "azimuth_spread_deg" => (0.0, 180.0),
-        "fresnel_ior" => (0.0, 10.0),
-        "fuzz" => (0.0, crate::model::fuzz::WEIGHT_MAX),
-        "fuzz_depth" => DEPTH_RANGE,
-        "fuzz_asymmetry" => ASYMMETRY_RANGE,
-        "alpha_x" | "alpha_y" => (1e-3, 1.0),
-        _ => (f64::NEG_INFINITY, f64::INFINITY),
-    }
-}
-
 impl ParamSet {
     pub fn from_config(cfg: &FitConfig, channels: usize) -> Result<Self> {
         let rung = cfg.model_id()?;
         // components switch parameters on and off on top of [parameters]
         let mut listed_params = cfg.parameters.clone();
         let comp = &cfg.components;
-        if !comp.specular && rung.parameter_names().contains(&"ks") {
+        let (ks, exponent, spacing, substrate) = (
+            Param::Ks.name(),
+            Param::Exponent.name(),
+            Param::Spacing.name(),
+            Param::SubstrateAlbedo.name(),
+        );
+        if !comp.specular && rung.reads(Param::Ks) {
             listed_params.insert(
-                "ks".into(),
+                ks.into(),
                 ParamEntry {
                     value: Some(Albedo::Grey(0.0)),
                     vary: Some(false),
@@ -189,11 +69,11 @@ impl ParamSet {
                 },
             );
             // without a lobe the exponent means nothing: fixed (at its start), not fitted
-            listed_params.entry("exponent".into()).or_default().vary = Some(false);
+            listed_params.entry(exponent.into()).or_default().vary = Some(false);
         }
-        if comp.spacing_free == Some(false) && rung.parameter_names().contains(&"spacing") {
+        if comp.spacing_free == Some(false) && rung.reads(Param::Spacing) {
             listed_params.insert(
-                "spacing".into(),
+                spacing.into(),
                 ParamEntry {
                     value: Some(Albedo::Grey(2.0)),
                     vary: Some(false),
@@ -201,13 +81,13 @@ impl ParamSet {
                 },
             );
         }
-        if comp.spacing_free == Some(true) && rung.parameter_names().contains(&"spacing") {
-            listed_params.entry("spacing".into()).or_default().vary = Some(true);
+        if comp.spacing_free == Some(true) && rung.reads(Param::Spacing) {
+            listed_params.entry(spacing.into()).or_default().vary = Some(true);
         }
         match comp.substrate.as_deref() {
-            Some("off") if rung.parameter_names().contains(&"substrate_albedo") => {
+            Some("off") if rung.reads(Param::SubstrateAlbedo) => {
                 listed_params.insert(
-                    "substrate_albedo".into(),
+                    substrate.into(),
                     ParamEntry {
                         value: Some(Albedo::Grey(0.0)),
                         vary: Some(false),
@@ -215,11 +95,11 @@ impl ParamSet {
                     },
                 );
             }
-            Some("free") if rung.parameter_names().contains(&"substrate_albedo") => {
-                listed_params.entry("substrate_albedo".into()).or_default();
+            Some("free") if rung.reads(Param::SubstrateAlbedo) => {
+                listed_params.entry(substrate.into()).or_default();
             }
             Some("tied") => {
-                listed_params.remove("substrate_albedo");
+                listed_params.remove(substrate);
             }
             _ => {}
         }
@@ -229,12 +109,12 @@ impl ParamSet {
         };
         let empty = ParamEntry::default();
         let entry = |name: &str| cfg.parameters.get(name).unwrap_or(&empty);
-        let spacing_entry = entry("spacing");
+        let spacing_entry = entry(spacing);
         let spacing0 = spacing_entry.value.map(|v| v.channels()[0]).unwrap_or(2.0);
         let spacing_max = if rung.is_cross_section() {
             if spacing_entry
                 .vary
-                .unwrap_or(cfg.parameters.contains_key("spacing"))
+                .unwrap_or(cfg.parameters.contains_key(spacing))
             {
                 spacing_entry.max.unwrap_or(20.0)
             } else {
@@ -245,29 +125,26 @@ impl ParamSet {
         };
         let mut shapes = Vec::new();
         let mut albedos = Vec::new();
-        let fuzz_layer = crate::model::FUZZ_PARAMETERS
-            .iter()
-            .any(|n| cfg.parameters.contains_key(*n));
-        for name in rung.parameter_names() {
+        let fuzz_layer = crate::model::parameter::fuzz_parameters()
+            .any(|p| cfg.parameters.contains_key(p.name()));
+        for param in rung.parameters() {
+            let info = param.info();
+            let name = info.name;
             let listed = cfg.parameters.contains_key(name);
             let e = entry(name);
-            let def = defaults(name, spacing_max, spacing0);
-            let (hard_lo, hard_hi) = hard_limits(name, spacing_max);
-            let min = e.min.unwrap_or(def.min);
-            let max = e.max.unwrap_or(def.max);
+            let level = |l: crate::model::parameter::Level| l.at(spacing_max, spacing0);
+            let (hard_lo, hard_hi) = (level(info.limits.0), level(info.limits.1));
+            let min = e.min.unwrap_or(level(info.fit_range.0));
+            let max = e.max.unwrap_or(level(info.fit_range.1));
             if min < hard_lo - 1e-12 || max > hard_hi + 1e-12 {
                 bail!("parameters.{name}: bounds [{min}, {max}] exceed the model's range [{hard_lo}, {hard_hi}]");
             }
-            let vary = e.vary.unwrap_or(listed || def.vary);
-            let value = e.value.unwrap_or(Albedo::Grey(def.value.clamp(min, max)));
-            let albedo_component = match name {
-                "kd" | "rho_d" => Some(Component::Diffuse),
-                "ks" | "rho_s" => Some(Component::Specular),
-                "substrate_albedo" => Some(Component::Substrate),
-                "fuzz" => Some(Component::Fuzz),
-                _ => None,
-            };
-            if crate::model::FUZZ_PARAMETERS.contains(&name) && !fuzz_layer {
+            let vary = e.vary.unwrap_or(listed || info.free);
+            let value = e
+                .value
+                .unwrap_or(Albedo::Grey(level(info.start).clamp(min, max)));
+            let albedo_component = param.component();
+            if param.is_fuzz() && !fuzz_layer {
                 continue; // an optional component, on when any of its parameters is listed
             }
             match albedo_component {
@@ -289,7 +166,7 @@ impl ParamSet {
                     // RGB start for it)
                     let grey = channels > 1
                         && vary
-                        && name == super::config::COLOUR_CHOICE
+                        && param == super::config::COLOUR_CHOICE
                         && e.colour != Some(true);
                     if grey && value.is_rgb() {
                         bail!("parameters.{name}: an RGB start for a grey `{name}`; give one number or `colour = true`");
@@ -310,20 +187,7 @@ impl ParamSet {
                         bail!("parameters.{name}: takes one number, not three");
                     }
                     let v = value.channels()[0];
-                    let kind = match name {
-                        "exponent" => Shape::Exponent,
-                        "spacing" => Shape::Spacing,
-                        "height" => Shape::Height,
-                        "map_scale" => Shape::MapScale,
-                        "fibre_azimuth_deg" => Shape::Azimuth,
-                        "azimuth_spread_deg" => Shape::AzimuthSpread,
-                        "fresnel_ior" => Shape::FresnelIor,
-                        "fuzz_depth" => Shape::FuzzDepth,
-                        "fuzz_asymmetry" => Shape::FuzzAsymmetry,
-                        "alpha_x" => Shape::AlphaX,
-                        "alpha_y" => Shape::AlphaY,
-                        _ => unreachable!(),
-                    };
+                    let kind = param;
                     if v < min || v > max {
                         bail!("parameters.{name}.value = {v} is outside its bounds [{min}, {max}]");
                     }
@@ -338,8 +202,7 @@ impl ParamSet {
                 }
             }
         }
-        let substrate_tied =
-            rung.is_cross_section() && !cfg.parameters.contains_key("substrate_albedo");
+        let substrate_tied = rung.is_cross_section() && !cfg.parameters.contains_key(substrate);
         Ok(ParamSet {
             rung,
             shapes,
@@ -349,20 +212,15 @@ impl ParamSet {
         })
     }
 
-    pub fn shape(&self, kind: Shape) -> Option<&ShapeParam> {
+    pub fn shape(&self, kind: Param) -> Option<&ShapeParam> {
         self.shapes.iter().find(|s| s.kind == kind)
     }
 
     /// External value of a shape parameter, or the model default when the rung lacks it.
-    pub fn shape_value(&self, kind: Shape) -> f64 {
-        self.shape(kind).map(|s| s.value).unwrap_or(match kind {
-            Shape::Exponent => 1.0,
-            Shape::Spacing => 2.0,
-            Shape::Height | Shape::MapScale | Shape::Azimuth => 0.0,
-            Shape::AlphaX | Shape::AlphaY => 0.2,
-            Shape::AzimuthSpread | Shape::FresnelIor => 0.0,
-            Shape::FuzzDepth | Shape::FuzzAsymmetry => 0.0, // no layer
-        })
+    pub fn shape_value(&self, kind: Param) -> f64 {
+        self.shape(kind)
+            .map(|s| s.value)
+            .unwrap_or(kind.info().absent)
     }
 
     /// Varying shape parameters, in order.
@@ -419,25 +277,25 @@ pub fn explain_fixed(
         }
         let name = r.name.as_str();
         let entry = cfg.parameters.get(name);
+        let param = Param::from_name(name);
+        let is = |p: Param| param == Some(p);
         let why = if per_texel.contains(&name) {
             PER_TEXEL.to_string()
-        } else if name == "fibre_azimuth_deg" && data_azimuth {
+        } else if is(Param::Azimuth) && data_azimuth {
             "the data give the fibre direction (every sample carries it)".to_string()
-        } else if !comp.specular && matches!(name, "ks" | "exponent") {
-            match name {
-                "ks" => "components.specular = false (no specular lobe)".to_string(),
-                _ => "components.specular = false: without a lobe the exponent means nothing"
-                    .to_string(),
-            }
-        } else if name == "spacing" && comp.spacing_free == Some(false) {
+        } else if !comp.specular && is(Param::Ks) {
+            "components.specular = false (no specular lobe)".to_string()
+        } else if !comp.specular && is(Param::Exponent) {
+            "components.specular = false: without a lobe the exponent means nothing".to_string()
+        } else if is(Param::Spacing) && comp.spacing_free == Some(false) {
             "components.spacing_free = false (touching fibres, d = 2)".to_string()
-        } else if name == "substrate_albedo" && comp.substrate.as_deref() == Some("off") {
+        } else if is(Param::SubstrateAlbedo) && comp.substrate.as_deref() == Some("off") {
             "components.substrate = \"off\"".to_string()
         } else if entry.is_some_and(|e| e.vary == Some(false)) {
             "vary = false in the config".to_string()
         } else if r.min >= r.max {
             format!("its bounds are equal ([{}, {}])", r.min, r.max)
-        } else if matches!(name, "fresnel_ior" | "azimuth_spread_deg") && entry.is_none() {
+        } else if (is(Param::FresnelIor) || is(Param::AzimuthSpread)) && entry.is_none() {
             format!("an optional component, off unless [parameters] lists `{name}`")
         } else if entry.is_none() {
             format!(

@@ -8,11 +8,11 @@
 //! albedo channels (needed for the `log` metric, which is not linear in them).
 
 use super::config::Metric;
-use super::parameters::{Component, ParamSet, Shape, ShapeParam};
+use super::parameters::{Component, Param, ParamSet, ShapeParam};
 use crate::load::samples::Sample;
 use crate::model::frame::FibreFrame;
 use crate::model::topology::{Topology, TopologyMap};
-use crate::model::{self, Basis, DirectionPair, ModelId, ShadingModel};
+use crate::model::{self, Basis, DirectionPair, ShadingModel};
 use argmin::core::{Error as ArgminError, Jacobian, Operator};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -233,7 +233,7 @@ impl<'a> FitProblem<'a> {
     pub fn spacing_entry(&self) -> Option<usize> {
         self.free_shapes
             .iter()
-            .position(|&i| self.template.shapes[i].kind == Shape::Spacing)
+            .position(|&i| self.template.shapes[i].kind == Param::Spacing)
     }
 
     /// Which theta entries describe the fibre geometry (spacing, height, map scale).
@@ -244,7 +244,7 @@ impl<'a> FitProblem<'a> {
             .map(|&i| {
                 matches!(
                     self.template.shapes[i].kind,
-                    Shape::Spacing | Shape::Height | Shape::MapScale
+                    Param::Spacing | Param::Height | Param::MapScale
                 )
             })
             .collect();
@@ -256,7 +256,7 @@ impl<'a> FitProblem<'a> {
 
     /// theta of a parameter set.
     pub fn theta_of(&self, set: &ParamSet) -> DVector<f64> {
-        let d = set.shape_value(Shape::Spacing);
+        let d = set.shape_value(Param::Spacing);
         let mut v: Vec<f64> = self
             .free_shapes
             .iter()
@@ -282,7 +282,7 @@ impl<'a> FitProblem<'a> {
             for (k, &i) in self.free_shapes.iter().enumerate() {
                 let c = coordinate(&set.shapes[i]);
                 if matches!(c, Coordinate::UnderMaxHeight) == pass {
-                    let d = set.shape_value(Shape::Spacing);
+                    let d = set.shape_value(Param::Spacing);
                     let s = &mut set.shapes[i];
                     s.value = c.to_value(s, theta[k], d);
                 }
@@ -342,11 +342,11 @@ impl<'a> FitProblem<'a> {
     pub fn columns(&self, set: &ParamSet) -> Result<Vec<Columns>, anyhow::Error> {
         self.evaluations.fetch_add(1, Ordering::Relaxed);
         let m = self.model_for(set);
-        let psi = set.shape_value(Shape::Azimuth).to_radians();
-        let d = set.shape_value(Shape::Spacing);
+        let psi = set.shape_value(Param::Azimuth).to_radians();
+        let d = set.shape_value(Param::Spacing);
         let topology = Topology {
-            height: set.shape_value(Shape::Height),
-            map_scale: set.shape_value(Shape::MapScale),
+            height: set.shape_value(Param::Height),
+            map_scale: set.shape_value(Param::MapScale),
             map: None,
         };
         let has_topology = set.rung.has_topology();
@@ -676,7 +676,7 @@ impl<'a> FitProblem<'a> {
 /// optimizer's coordinates (internal units, ln for log-space parameters), stepping into the
 /// valid range: the set with that shape moved by the step, and the step.
 pub fn jacobian_step(set: &ParamSet, index: usize) -> (ParamSet, f64) {
-    let d = set.shape_value(Shape::Spacing);
+    let d = set.shape_value(Param::Spacing);
     let sh = &set.shapes[index];
     let x = sh.kind.to_internal(sh.value);
     let top = match coordinate(sh) {
@@ -709,12 +709,13 @@ pub enum Coordinate {
 }
 
 pub fn coordinate(s: &ShapeParam) -> Coordinate {
-    match s.kind {
-        _ if s.kind.log_space() => Coordinate::Log,
-        Shape::Azimuth if s.max - s.min >= 180.0 - 1e-9 => Coordinate::Periodic,
-        Shape::Height | Shape::MapScale => Coordinate::UnderMaxHeight,
-        Shape::Spacing => Coordinate::Reciprocal,
-        _ => Coordinate::Linear,
+    use crate::model::parameter::Scale;
+    match s.kind.info().scale {
+        Scale::Log => Coordinate::Log,
+        Scale::Periodic(period) if s.max - s.min >= period - 1e-9 => Coordinate::Periodic,
+        Scale::UnderMaxHeight => Coordinate::UnderMaxHeight,
+        Scale::Reciprocal => Coordinate::Reciprocal,
+        Scale::Linear | Scale::Periodic(_) => Coordinate::Linear,
     }
 }
 
@@ -799,14 +800,14 @@ pub fn model_for(
         model::with_spread(
             model::with_fresnel(
                 aligned_model_for(set, quadrature_order, histogram_bins, map),
-                set.shape_value(Shape::FresnelIor),
+                set.shape_value(Param::FresnelIor),
             ),
-            set.shape_value(Shape::AzimuthSpread),
+            set.shape_value(Param::AzimuthSpread),
             azimuth_nodes,
-            set.shape_value(Shape::Azimuth).to_radians(),
+            set.shape_value(Param::Azimuth).to_radians(),
         ),
-        set.shape_value(Shape::FuzzDepth),
-        set.shape_value(Shape::FuzzAsymmetry),
+        set.shape_value(Param::FuzzDepth),
+        set.shape_value(Param::FuzzAsymmetry),
     )
 }
 
@@ -816,34 +817,20 @@ fn aligned_model_for(
     histogram_bins: usize,
     map: Option<Arc<TopologyMap>>,
 ) -> Box<dyn ShadingModel> {
-    let d = set.shape_value(Shape::Spacing);
-    let e = set.shape_value(Shape::Exponent);
     let topology = Topology {
-        height: set.shape_value(Shape::Height),
-        map_scale: set.shape_value(Shape::MapScale),
+        height: set.shape_value(Param::Height),
+        map_scale: set.shape_value(Param::MapScale),
         map,
     };
-    match set.rung {
-        ModelId::Lambert => Box::new(model::lambert::Lambert),
-        ModelId::MaxNormal => Box::new(model::max_normal::MaxNormal::new(e)),
-        ModelId::HastDiffuse => Box::new(model::hast_diffuse::HastDiffuse),
-        ModelId::PoulinFournier => Box::new(model::poulin_fournier::PoulinFournier::new(
-            d,
-            e,
-            quadrature_order,
-        )),
-        ModelId::VaryingTopology => Box::new(model::varying_topology::VaryingTopology::new(
-            d,
-            e,
-            quadrature_order,
-            topology.discretise(d, histogram_bins),
-        )),
-        ModelId::Reference => Box::new(model::reference::Reference::new(d, e, topology)),
-        ModelId::Ward => Box::new(model::ward::Ward::new(
-            set.shape_value(Shape::AlphaX),
-            set.shape_value(Shape::AlphaY),
-        )),
-    }
+    (set.rung.rung().build)(&model::AlignedInputs {
+        exponent: set.shape_value(Param::Exponent),
+        spacing: set.shape_value(Param::Spacing),
+        alpha_x: set.shape_value(Param::AlphaX),
+        alpha_y: set.shape_value(Param::AlphaY),
+        quadrature_order,
+        histogram_bins,
+        topology: &topology,
+    })
 }
 
 /// The albedos of `set` as the model takes them (a tied substrate shares kd).

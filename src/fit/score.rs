@@ -12,7 +12,7 @@
 //! block's residual-structure bins.
 
 use super::config::{Knobs, Metric};
-use super::parameters::{ParamSet, Shape};
+use super::parameters::{Param, ParamSet};
 use super::problem::FitProblem;
 use super::quality;
 use super::uncertainty::{statistics_of_sums, Statistics};
@@ -215,7 +215,7 @@ impl Running {
             &problem.samples,
             r.as_slice(),
             ch,
-            result.set.shape_value(Shape::Azimuth).to_radians(),
+            result.set.shape_value(Param::Azimuth).to_radians(),
         );
         Ok(())
     }

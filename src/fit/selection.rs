@@ -20,7 +20,7 @@
 //!   tolerance on the RMS error.
 
 use super::config::{FitConfig, Metric};
-use super::parameters::{ParamSet, Shape};
+use super::parameters::{Param, ParamSet};
 use super::problem::FitProblem;
 use super::{fit_with_hints, FitOutcome};
 use crate::load::samples::Samples;
@@ -91,7 +91,7 @@ pub struct SelectionOutcome {
     pub heldout_samples: usize,
     /// Shape values of the chosen candidate's fit: an extra start for the final fit.
     #[serde(skip)]
-    pub hints: Vec<Vec<(Shape, f64)>>,
+    pub hints: Vec<Vec<(Param, f64)>>,
     /// The configuration of the chosen candidate (its rung, the fuzz layer on or off).
     #[serde(skip)]
     pub chosen_config: Option<FitConfig>,
@@ -251,12 +251,8 @@ fn knobs_matter(set: &ParamSet) -> bool {
     let spread = set
         .shapes
         .iter()
-        .any(|s| s.kind == Shape::AzimuthSpread && (s.vary || s.value > 0.0));
-    spread
-        || matches!(
-            set.rung,
-            ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference
-        )
+        .any(|s| s.kind == Param::AzimuthSpread && (s.vary || s.value > 0.0));
+    spread || set.rung.is_cross_section()
 }
 
 /// A fit of `train` warm-started at `start` (LM only, at most `iterations`; none: the albedos
@@ -444,7 +440,7 @@ pub fn rms_and_se(e: &[f64]) -> (f64, f64) {
 }
 
 /// How far a candidate's error measured with the coarse ranking knobs may lie from its error
-/// at the config's knobs (relative, either way); `fibrefit bench --selection --slow` measures
+/// at the config's knobs (relative, either way); `fibrefit bench selection --slow` measures
 /// both (reports/selection.md).
 pub const KNOBS_TOLERANCE: f64 = 0.05;
 
@@ -570,9 +566,7 @@ pub struct RungDone<'a> {
 /// config lists a fuzz parameter or `--fuzz` asked; only without when `selection.fuzz` is
 /// false): (name, rung, fuzz, config).
 pub fn candidates_of(cfg: &FitConfig) -> Result<Vec<(String, ModelId, bool, FitConfig)>> {
-    let listed = crate::model::FUZZ_PARAMETERS
-        .iter()
-        .any(|p| cfg.parameters.contains_key(*p));
+    let listed = cfg.listed_fuzz_parameter().is_some();
     let mut out = Vec::new();
     for name in &cfg.selection.rungs {
         let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
@@ -585,7 +579,7 @@ pub fn candidates_of(cfg: &FitConfig) -> Result<Vec<(String, ModelId, bool, FitC
         for &fuzz in variants {
             let mut c = rc.clone();
             if fuzz && !listed {
-                c.parameters.entry("fuzz_depth".into()).or_default();
+                c.add_fuzz_layer();
             }
             let label = match fuzz {
                 true => format!("{id} + fuzz"),
@@ -622,7 +616,7 @@ pub fn select_with(
     let fold_iterations = cfg.optimizer.max_iterations.min(REFINE_ITERATIONS);
     let mut candidates: Vec<Candidate> = Vec::new();
     let mut anchors: Vec<Option<ParamSet>> = Vec::new();
-    let mut hints: Vec<Vec<(Shape, f64)>> = Vec::new();
+    let mut hints: Vec<Vec<(Param, f64)>> = Vec::new();
     let started = Instant::now();
     // the time left, estimated from the seconds per unit of planned work of the candidates
     // done; a candidate's work: its planned evaluations times the cost of one
@@ -878,7 +872,7 @@ fn set_errors(c: &mut Candidate, m: &Measured) {
     c.heldout_log_error = m.log;
 }
 
-fn hints_for(a: &Option<ParamSet>) -> Vec<(Shape, f64)> {
+fn hints_for(a: &Option<ParamSet>) -> Vec<(Param, f64)> {
     a.as_ref()
         .map(|s| s.shapes.iter().map(|s| (s.kind, s.value)).collect())
         .unwrap_or_default()

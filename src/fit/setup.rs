@@ -6,7 +6,7 @@
 //!   channel: three copies of one number are one measurement, not three.
 
 use super::config::FitConfig;
-use super::parameters::{ParamSet, Shape};
+use super::parameters::{Param, ParamSet};
 use crate::load::samples::Samples;
 use crate::model::topology::TopologyMap;
 use anyhow::{Context, Result};
@@ -48,7 +48,7 @@ pub fn setup(samples: &Samples, cfg: &FitConfig) -> Result<Setup> {
         if let Some(s) = template
             .shapes
             .iter_mut()
-            .find(|s| s.kind == Shape::Azimuth && s.vary)
+            .find(|s| s.kind == Param::Azimuth && s.vary)
         {
             s.vary = false;
             // the data's direction: axial mean (angles doubled, period 180 degrees)

@@ -472,23 +472,3 @@ pub fn geometry_json(path: &Path) -> Result<String> {
         "images": images,
     }))?)
 }
-
-/// Image `index` of a capture as the fit reads it: linear values times the image's exposure
-/// (radiance per unit irradiance), channels interleaved, row 0 at the top; with its width,
-/// height and channel count, and per pixel whether it is saturated.
-pub fn radiance_image(path: &Path, index: usize) -> Result<LinearImage> {
-    let desc = CaptureFile::load(path)?;
-    let spec = desc.images.get(index).ok_or_else(|| {
-        anyhow!(
-            "{}: image {index} asked for, but the capture has {} images",
-            path.display(),
-            desc.images.len()
-        )
-    })?;
-    let base = path.parent().unwrap_or(Path::new("."));
-    let mut img = super::capture_store::read_image(base, spec)?.image;
-    for x in &mut img.data {
-        *x *= spec.exposure as f32;
-    }
-    Ok(img)
-}

@@ -26,7 +26,7 @@ use super::image_io::{self, LinearImage};
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::Vec3;
 use crate::model::topology::TopologyMap;
-use anyhow::{bail, Result};
+use anyhow::{anyhow, bail, Result};
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -678,4 +678,24 @@ impl CaptureStore {
             height: self.height_map.clone(),
         }
     }
+}
+
+/// Image `index` of a capture as the fit reads it: linear values times the image's exposure
+/// (radiance per unit irradiance), channels interleaved, row 0 at the top; with its width,
+/// height and channel count, and per pixel whether it is saturated.
+pub fn radiance_image(path: &Path, index: usize) -> Result<LinearImage> {
+    let desc = CaptureFile::load(path)?;
+    let spec = desc.images.get(index).ok_or_else(|| {
+        anyhow!(
+            "{}: image {index} asked for, but the capture has {} images",
+            path.display(),
+            desc.images.len()
+        )
+    })?;
+    let base = path.parent().unwrap_or(Path::new("."));
+    let mut img = read_image(base, spec)?.image;
+    for x in &mut img.data {
+        *x *= spec.exposure as f32;
+    }
+    Ok(img)
 }

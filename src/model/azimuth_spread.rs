@@ -20,11 +20,11 @@
 
 use super::frame::DirectionPair;
 use super::numerics::quadrature::adaptive_gk15_vec;
-use super::{Basis, ModelId, ShadingModel};
+use super::{Basis, ShadingModel};
 use std::f64::consts::{FRAC_PI_2, PI};
 
 /// The spread at which the law is uniform (isotropic), degrees.
-pub const ISOTROPIC_DEG: f64 = 180.0;
+pub const ISOTROPIC_DEG: f64 = super::parameter::ISOTROPIC_SPREAD_DEG;
 /// Default node count N of the azimuth quadrature.
 pub const DEFAULT_AZIMUTH_NODES: usize = 16;
 /// Largest node count any command accepts.
@@ -88,7 +88,7 @@ impl AzimuthSpread {
     /// (radians; it fixes the absolute node positions of the isotropic limit) with `nodes` nodes,
     /// or adaptively when `inner` is the reference.
     pub fn new(inner: Box<dyn ShadingModel>, sigma_deg: f64, nodes: usize, psi: f64) -> Self {
-        let adaptive = inner.id() == ModelId::Reference;
+        let adaptive = inner.rung().cost == super::rung::Cost::Adaptive;
         Self {
             inner,
             sigma: sigma_deg.to_radians(),
@@ -149,8 +149,8 @@ impl AzimuthSpread {
 }
 
 impl ShadingModel for AzimuthSpread {
-    fn id(&self) -> ModelId {
-        self.inner.id()
+    fn rung(&self) -> &'static super::Rung {
+        self.inner.rung()
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
@@ -163,7 +163,7 @@ impl ShadingModel for AzimuthSpread {
     }
 
     fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        if !self.inner.id().has_topology() {
+        if !self.inner.rung().has(crate::model::Ability::Topology) {
             return None;
         }
         if self.adaptive {
@@ -186,7 +186,7 @@ impl ShadingModel for AzimuthSpread {
         height: f64,
         out: &mut [Basis],
     ) -> bool {
-        if !self.inner.id().has_topology() {
+        if !self.inner.rung().has(crate::model::Ability::Topology) {
             return false;
         }
         if self.adaptive {

@@ -9,145 +9,21 @@ pub mod cross_section;
 pub mod frame;
 pub mod fresnel;
 pub mod fuzz;
-pub mod hast_diffuse;
-pub mod lambert;
-pub mod max_normal;
 pub mod numerics;
+pub mod parameter;
 pub mod params;
-pub mod poulin_fournier;
-pub mod reference;
+pub mod rung;
+pub mod rungs;
 pub mod sampling;
 pub mod topology;
-pub mod varying_topology;
-pub mod ward;
-
-use std::fmt;
-use std::str::FromStr;
 
 pub use frame::{DirectionPair, FibreFrame, Local, Vec3};
+pub use parameter::{Ability, Param};
 pub use params::{Albedo, ModelParams};
-
-/// The rungs of the ladder, by the ids the CLI and JSON use.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
-pub enum ModelId {
-    Lambert,
-    MaxNormal,
-    HastDiffuse,
-    PoulinFournier,
-    VaryingTopology,
-    Reference,
-    Ward,
-}
-
-/// The fuzz layer's parameters: its weight (linear, per channel), optical depth and phase
-/// asymmetry.
-pub const FUZZ_PARAMETERS: [&str; 3] = ["fuzz", "fuzz_depth", "fuzz_asymmetry"];
-
-impl ModelId {
-    /// Cheapest first.
-    pub const ALL: [ModelId; 7] = [
-        ModelId::Lambert,
-        ModelId::MaxNormal,
-        ModelId::HastDiffuse,
-        ModelId::Ward,
-        ModelId::PoulinFournier,
-        ModelId::VaryingTopology,
-        ModelId::Reference,
-    ];
-
-    pub fn as_str(self) -> &'static str {
-        match self {
-            ModelId::Lambert => "lambert",
-            ModelId::MaxNormal => "max-normal",
-            ModelId::HastDiffuse => "hast-diffuse",
-            ModelId::PoulinFournier => "poulin-fournier",
-            ModelId::VaryingTopology => "varying-topology",
-            ModelId::Reference => "reference",
-            ModelId::Ward => "ward",
-        }
-    }
-
-    /// Models built on the fibre cross-section of MODEL.md §2 (reciprocal, with hiding and
-    /// shadowing).
-    pub fn is_cross_section(self) -> bool {
-        matches!(
-            self,
-            ModelId::PoulinFournier | ModelId::VaryingTopology | ModelId::Reference
-        )
-    }
-
-    /// Names of the parameters this rung has (MODEL.md §5, and the optional components), as fit
-    /// configs list them.
-    pub fn parameter_names(self) -> Vec<&'static str> {
-        use ModelId::*;
-        let mut names = match self {
-            Lambert => vec!["kd"],
-            MaxNormal => vec![
-                "kd",
-                "ks",
-                "exponent",
-                "fibre_azimuth_deg",
-                "azimuth_spread_deg",
-                "fresnel_ior",
-            ],
-            HastDiffuse => vec!["kd", "fibre_azimuth_deg", "azimuth_spread_deg"],
-            Ward => vec!["rho_d", "rho_s", "alpha_x", "alpha_y", "fibre_azimuth_deg"],
-            PoulinFournier => vec![
-                "kd",
-                "ks",
-                "substrate_albedo",
-                "exponent",
-                "spacing",
-                "fibre_azimuth_deg",
-                "azimuth_spread_deg",
-                "fresnel_ior",
-            ],
-            VaryingTopology | Reference => vec![
-                "kd",
-                "ks",
-                "substrate_albedo",
-                "exponent",
-                "spacing",
-                "height",
-                "map_scale",
-                "fibre_azimuth_deg",
-                "azimuth_spread_deg",
-                "fresnel_ior",
-            ],
-        };
-        // the fuzz layer goes over any rung
-        names.extend(FUZZ_PARAMETERS);
-        names
-    }
-
-    /// Models whose elevation comes from the topology (height, map).
-    pub fn has_topology(self) -> bool {
-        matches!(self, ModelId::VaryingTopology | ModelId::Reference)
-    }
-}
-
-impl fmt::Display for ModelId {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.as_str())
-    }
-}
-
-impl FromStr for ModelId {
-    type Err = String;
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        ModelId::ALL
-            .iter()
-            .copied()
-            .find(|m| m.as_str() == s)
-            .ok_or_else(|| {
-                let ids: Vec<&str> = ModelId::ALL.iter().map(|m| m.as_str()).collect();
-                format!(
-                    "unknown model id '{s}'; expected one of: {}",
-                    ids.join(", ")
-                )
-            })
-    }
-}
+pub use rungs::{
+    hast_diffuse, lambert, max_normal, poulin_fournier, reference, varying_topology, ward,
+    AlignedInputs, ModelId, Rung,
+};
 
 /// BRDF (1/sr) per unit albedo of each linear component.
 ///
@@ -234,7 +110,13 @@ impl Albedos {
 /// One rung of the ladder. Implementations check their ranges at construction so evaluation is
 /// cheap and never produces NaN.
 pub trait ShadingModel: Send + Sync {
-    fn id(&self) -> ModelId;
+    /// The rung this model is (its registry entry).
+    fn rung(&self) -> &'static Rung;
+
+    /// The rung's id.
+    fn id(&self) -> ModelId {
+        ModelId::of(self.rung())
+    }
 
     /// The basis for a pair with both directions strictly above the horizon.
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis;
@@ -266,7 +148,7 @@ pub trait ShadingModel: Send + Sync {
 
     /// The basis at one height (see [`ShadingModel::basis_at_height_above_horizon`]).
     fn basis_at_height(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
-        if !self.id().has_topology() {
+        if !self.rung().has(crate::model::Ability::Topology) {
             None
         } else if pair.above_horizon() {
             self.basis_at_height_above_horizon(pair, height)
@@ -286,7 +168,7 @@ pub trait ShadingModel: Send + Sync {
         out: &mut [Basis],
     ) -> bool {
         assert_eq!(pairs.len(), out.len());
-        if !self.id().has_topology() {
+        if !self.rung().has(crate::model::Ability::Topology) {
             return false;
         }
         for (p, o) in pairs.iter().zip(out.iter_mut()) {
@@ -329,8 +211,8 @@ impl<T: BasisTransform> Transformed<T> {
 }
 
 impl<T: BasisTransform> ShadingModel for Transformed<T> {
-    fn id(&self) -> ModelId {
-        self.inner.id()
+    fn rung(&self) -> &'static Rung {
+        self.inner.rung()
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
@@ -374,7 +256,7 @@ pub fn bases_at_heights(
 ) {
     assert_eq!(pairs.len(), heights.len());
     assert_eq!(pairs.len(), out.len());
-    if !m.id().has_topology() {
+    if !m.rung().has(crate::model::Ability::Topology) {
         m.basis_many(pairs, out);
         return;
     }
@@ -426,7 +308,7 @@ pub fn brdf_at_degrees(
 pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
     Ok(with_fuzz(
         with_spread(
-            with_fresnel(build_aligned(id, p)?, p.fresnel_ior),
+            with_fresnel(build_aligned(id, p), p.fresnel_ior),
             p.azimuth_spread_deg,
             p.azimuth_nodes,
             p.fibre_azimuth,
@@ -448,21 +330,22 @@ pub fn with_fuzz(m: Box<dyn ShadingModel>, depth: f64, g: f64) -> Box<dyn Shadin
 
 /// `m` with a Fresnel factor on its specular lobe (rungs with a lobe; `ior` 0: `m` itself).
 pub fn with_fresnel(m: Box<dyn ShadingModel>, ior: f64) -> Box<dyn ShadingModel> {
-    if ior > 0.0 && m.id().parameter_names().contains(&"fresnel_ior") {
+    if ior > 0.0 && m.rung().has(Ability::Fresnel) {
         Box::new(fresnel::FresnelLobe::new(m, ior))
     } else {
         m
     }
 }
 
-/// `m` averaged over a fibre-direction spread of `spread_deg` (fibre rungs only; 0: `m` itself).
+/// `m` averaged over a fibre-direction spread of `spread_deg` (rungs that take one; 0: `m`
+/// itself).
 pub fn with_spread(
     m: Box<dyn ShadingModel>,
     spread_deg: f64,
     nodes: usize,
     psi: f64,
 ) -> Box<dyn ShadingModel> {
-    if spread_deg > 0.0 && !matches!(m.id(), ModelId::Lambert | ModelId::Ward) {
+    if spread_deg > 0.0 && m.rung().has(Ability::DirectionSpread) {
         Box::new(azimuth_spread::AzimuthSpread::new(
             m, spread_deg, nodes, psi,
         ))
@@ -471,27 +354,15 @@ pub fn with_spread(
     }
 }
 
-fn build_aligned(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
-    Ok(match id {
-        ModelId::Lambert => Box::new(lambert::Lambert),
-        ModelId::MaxNormal => Box::new(max_normal::MaxNormal::new(p.exponent)),
-        ModelId::HastDiffuse => Box::new(hast_diffuse::HastDiffuse),
-        ModelId::PoulinFournier => Box::new(poulin_fournier::PoulinFournier::new(
-            p.spacing,
-            p.exponent,
-            p.quadrature_order,
-        )),
-        ModelId::VaryingTopology => Box::new(varying_topology::VaryingTopology::new(
-            p.spacing,
-            p.exponent,
-            p.quadrature_order,
-            p.topology.discretise(p.spacing, p.histogram_bins),
-        )),
-        ModelId::Reference => Box::new(reference::Reference::new(
-            p.spacing,
-            p.exponent,
-            p.topology.clone(),
-        )),
-        ModelId::Ward => Box::new(ward::Ward::new(p.alpha_x, p.alpha_y)),
+/// The aligned rung `id` (no spread, Fresnel factor or fuzz layer) from validated parameters.
+pub fn build_aligned(id: ModelId, p: &ModelParams) -> Box<dyn ShadingModel> {
+    (id.rung().build)(&AlignedInputs {
+        exponent: p.exponent,
+        spacing: p.spacing,
+        alpha_x: p.alpha_x,
+        alpha_y: p.alpha_y,
+        quadrature_order: p.quadrature_order,
+        histogram_bins: p.histogram_bins,
+        topology: &p.topology,
     })
 }

@@ -2,7 +2,8 @@
 //! turned into the values models are built from (radians, heights, albedos per channel).
 
 use super::lambert::Preview;
-use super::topology::{max_elevation, max_height, Topology, TopologyMap};
+use super::parameter::{Ability, Param};
+use super::topology::{max_elevation, max_height, Topology};
 use super::{Albedos, ModelId};
 use anyhow::{anyhow, bail, Result};
 use serde::Deserialize;
@@ -128,7 +129,7 @@ pub struct ModelParams {
     pub preview: Preview,
 }
 
-fn check_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64> {
+fn check_range(name: Param, v: f64, lo: f64, hi: f64) -> Result<f64> {
     if !v.is_finite() {
         bail!("parameter `{name}` is {v}; it must be a finite number in [{lo}, {hi}]");
     }
@@ -138,7 +139,7 @@ fn check_range(name: &str, v: f64, lo: f64, hi: f64) -> Result<f64> {
     Ok(v)
 }
 
-fn check_albedo(name: &str, a: &Albedo) -> Result<()> {
+fn check_albedo(name: Param, a: &Albedo) -> Result<()> {
     for c in a.channels() {
         check_range(name, c, 0.0, 1.0)?;
     }
@@ -146,25 +147,41 @@ fn check_albedo(name: &str, a: &Albedo) -> Result<()> {
 }
 
 /// Which parameters and knobs each model reads (for warnings about ignored ones, and so a
-/// fit's result carries only the knobs its model reads).
+/// fit's result carries only the knobs its model reads); names the table does not know (such as
+/// `model`) are read by every rung.
 pub fn uses(id: ModelId, name: &str) -> bool {
-    use ModelId::*;
-    match name {
-        "kd" => id != Ward,
-        "ks" | "exponent" => matches!(id, MaxNormal | PoulinFournier | VaryingTopology | Reference),
-        "spacing" | "substrate_albedo" | "quadrature_order" => {
-            matches!(id, PoulinFournier | VaryingTopology | Reference)
+    Param::from_name(name).is_none_or(|p| id.reads(p))
+}
+
+impl RawParams {
+    /// Whether the file gives parameter or knob `p`.
+    pub fn gives(&self, p: Param) -> bool {
+        match p {
+            Param::RhoD => self.rho_d.is_some(),
+            Param::RhoS => self.rho_s.is_some(),
+            Param::AlphaX => self.alpha_x.is_some(),
+            Param::AlphaY => self.alpha_y.is_some(),
+            Param::Kd => self.kd.is_some(),
+            Param::Ks => self.ks.is_some(),
+            Param::SubstrateAlbedo => self.substrate_albedo.is_some(),
+            Param::Exponent => self.exponent.is_some(),
+            Param::Spacing => self.spacing.is_some(),
+            Param::Height => self.height.is_some(),
+            Param::MapScale => self.map_scale.is_some(),
+            Param::Azimuth => self.fibre_azimuth_deg.is_some(),
+            Param::AzimuthSpread => self.azimuth_spread_deg.is_some(),
+            Param::FresnelIor => self.fresnel_ior.is_some(),
+            Param::Fuzz => self.fuzz.is_some(),
+            Param::FuzzDepth => self.fuzz_depth.is_some(),
+            Param::FuzzAsymmetry => self.fuzz_asymmetry.is_some(),
+            Param::ElevationDeg => self.elevation_deg.is_some(),
+            Param::TopologyMap => self.topology_map.is_some(),
+            Param::QuadratureOrder => self.quadrature_order.is_some(),
+            Param::HistogramBins => self.histogram_bins.is_some(),
+            Param::AzimuthNodes => self.azimuth_nodes.is_some(),
+            Param::TwoSided => self.two_sided.is_some(),
+            Param::Ambient => self.ambient.is_some(),
         }
-        "height" | "elevation_deg" | "map_scale" | "topology_map" => {
-            matches!(id, VaryingTopology | Reference)
-        }
-        "histogram_bins" => id == VaryingTopology,
-        "fibre_azimuth_deg" => id != Lambert,
-        "azimuth_spread_deg" | "azimuth_nodes" => !matches!(id, Lambert | Ward),
-        "fresnel_ior" => matches!(id, MaxNormal | PoulinFournier | VaryingTopology | Reference),
-        "alpha_x" | "alpha_y" | "rho_d" | "rho_s" => id == Ward,
-        "two_sided" | "ambient" => id == Lambert,
-        _ => true,
     }
 }
 
@@ -173,69 +190,77 @@ impl ModelParams {
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
         let mut warnings = Vec::new();
-        let given: [(&str, bool); 24] = [
-            ("fuzz", raw.fuzz.is_some()),
-            ("fuzz_depth", raw.fuzz_depth.is_some()),
-            ("fuzz_asymmetry", raw.fuzz_asymmetry.is_some()),
-            ("fresnel_ior", raw.fresnel_ior.is_some()),
-            ("azimuth_spread_deg", raw.azimuth_spread_deg.is_some()),
-            ("azimuth_nodes", raw.azimuth_nodes.is_some()),
-            ("kd", raw.kd.is_some()),
-            ("ks", raw.ks.is_some()),
-            ("exponent", raw.exponent.is_some()),
-            ("spacing", raw.spacing.is_some()),
-            ("height", raw.height.is_some()),
-            ("elevation_deg", raw.elevation_deg.is_some()),
-            ("map_scale", raw.map_scale.is_some()),
-            ("fibre_azimuth_deg", raw.fibre_azimuth_deg.is_some()),
-            ("substrate_albedo", raw.substrate_albedo.is_some()),
-            ("alpha_x", raw.alpha_x.is_some()),
-            ("alpha_y", raw.alpha_y.is_some()),
-            ("rho_d", raw.rho_d.is_some()),
-            ("rho_s", raw.rho_s.is_some()),
-            ("topology_map", raw.topology_map.is_some()),
-            ("quadrature_order", raw.quadrature_order.is_some()),
-            ("histogram_bins", raw.histogram_bins.is_some()),
-            ("two_sided", raw.two_sided.is_some()),
-            ("ambient", raw.ambient.is_some()),
+        // in the order users have always been warned in: the optional components first
+        use Param::*;
+        let order = [
+            Fuzz,
+            FuzzDepth,
+            FuzzAsymmetry,
+            FresnelIor,
+            AzimuthSpread,
+            AzimuthNodes,
+            Kd,
+            Ks,
+            Exponent,
+            Spacing,
+            Height,
+            ElevationDeg,
+            MapScale,
+            Azimuth,
+            SubstrateAlbedo,
+            AlphaX,
+            AlphaY,
+            RhoD,
+            RhoS,
+            TopologyMap,
+            QuadratureOrder,
+            HistogramBins,
+            TwoSided,
+            Ambient,
         ];
-        for (name, present) in given {
-            if present && !uses(id, name) {
-                warnings.push(format!("parameter `{name}` is not used by model `{id}`"));
+        for p in order {
+            if raw.gives(p) && !id.reads(p) {
+                warnings.push(format!("parameter `{p}` is not used by model `{id}`"));
             }
         }
 
-        let spacing = check_range("spacing", raw.spacing.unwrap_or(2.0), 2.0, 20.0)?;
+        let spacing = check_range(Param::Spacing, raw.spacing.unwrap_or(2.0), 2.0, 20.0)?;
         let h_max = max_height(spacing);
         let psi_deg = check_range(
-            "fibre_azimuth_deg",
+            Param::Azimuth,
             raw.fibre_azimuth_deg.unwrap_or(0.0),
             -90.0,
             90.0,
         )?;
-        let exponent = check_range("exponent", raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
+        let exponent = check_range(Param::Exponent, raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
         let azimuth_spread_deg = check_range(
-            "azimuth_spread_deg",
+            Param::AzimuthSpread,
             raw.azimuth_spread_deg.unwrap_or(0.0),
             0.0,
             super::azimuth_spread::ISOTROPIC_DEG,
         )?;
-        let fresnel_ior = check_range("fresnel_ior", raw.fresnel_ior.unwrap_or(0.0), 0.0, 10.0)?;
+        let fresnel_ior =
+            check_range(Param::FresnelIor, raw.fresnel_ior.unwrap_or(0.0), 0.0, 10.0)?;
         let (fuzz_lo, fuzz_hi) = super::fuzz::DEPTH_RANGE;
-        let fuzz_depth = check_range("fuzz_depth", raw.fuzz_depth.unwrap_or(0.0), 0.0, fuzz_hi)?;
+        let fuzz_depth = check_range(
+            Param::FuzzDepth,
+            raw.fuzz_depth.unwrap_or(0.0),
+            0.0,
+            fuzz_hi,
+        )?;
         if fuzz_depth > 0.0 && fuzz_depth < fuzz_lo {
             bail!("parameter `fuzz_depth` = {fuzz_depth}: give 0 (no layer) or a depth in [{fuzz_lo}, {fuzz_hi}]");
         }
         let (g_lo, g_hi) = super::fuzz::ASYMMETRY_RANGE;
         let fuzz_asymmetry = check_range(
-            "fuzz_asymmetry",
+            Param::FuzzAsymmetry,
             raw.fuzz_asymmetry.unwrap_or(0.0),
             g_lo,
             g_hi,
         )?;
         let fuzz = raw.fuzz.unwrap_or(Albedo::Grey(0.0));
         for c in fuzz.channels() {
-            check_range("fuzz", c, 0.0, super::fuzz::WEIGHT_MAX)?;
+            check_range(Param::Fuzz, c, 0.0, super::fuzz::WEIGHT_MAX)?;
         }
         if fuzz_depth > 0.0 && raw.fuzz.is_none() {
             bail!("parameter `fuzz_depth` > 0 needs the layer's weight `fuzz`");
@@ -260,29 +285,31 @@ impl ModelParams {
 
         let height = match (raw.height, raw.elevation_deg) {
             (Some(_), Some(_)) => bail!("give either `height` or `elevation_deg`, not both"),
-            (Some(h), None) => check_range("height", h, 0.0, h_max * (1.0 + 1e-9))?.min(h_max),
+            (Some(h), None) => check_range(Param::Height, h, 0.0, h_max * (1.0 + 1e-9))?.min(h_max),
             (None, Some(e)) => {
                 let e_max = max_elevation(spacing).to_degrees();
-                let e = check_range("elevation_deg", e, 0.0, e_max * (1.0 + 1e-9))?.min(e_max);
+                let e = check_range(Param::ElevationDeg, e, 0.0, e_max * (1.0 + 1e-9))?.min(e_max);
                 spacing * e.to_radians().sin()
             }
             (None, None) => 0.0,
         };
-        let map_scale = check_range("map_scale", raw.map_scale.unwrap_or(0.0), 0.0, h_max)?;
+        let map_scale = check_range(Param::MapScale, raw.map_scale.unwrap_or(0.0), 0.0, h_max)?;
         let map = match &raw.topology_map {
-            Some(path) if uses(id, "topology_map") => Some(Arc::new(TopologyMap::load(path)?)),
+            Some(path) if id.reads(Param::TopologyMap) => {
+                Some(Arc::new(super::topology::TopologyMap::load(path)?))
+            }
             _ => None,
         };
 
-        let (albedos, alpha_x, alpha_y) = if id == ModelId::Ward {
+        let (albedos, alpha_x, alpha_y) = if id.has(Ability::WardLobe) {
             let ax = raw
                 .alpha_x
                 .ok_or_else(|| anyhow!("model `ward` needs `alpha_x`"))?;
             let ay = raw
                 .alpha_y
                 .ok_or_else(|| anyhow!("model `ward` needs `alpha_y`"))?;
-            check_range("alpha_x", ax, 1e-3, 1.0)?;
-            check_range("alpha_y", ay, 1e-3, 1.0)?;
+            check_range(Param::AlphaX, ax, 1e-3, 1.0)?;
+            check_range(Param::AlphaY, ay, 1e-3, 1.0)?;
             if ax <= 1e-3 || ay <= 1e-3 {
                 bail!("parameters `alpha_x`, `alpha_y` must lie in (0.001, 1]");
             }
@@ -290,8 +317,8 @@ impl ModelParams {
             let rho_s = raw
                 .rho_s
                 .ok_or_else(|| anyhow!("model `ward` needs `rho_s`"))?;
-            check_albedo("rho_d", &rho_d)?;
-            check_albedo("rho_s", &rho_s)?;
+            check_albedo(Param::RhoD, &rho_d)?;
+            check_albedo(Param::RhoS, &rho_s)?;
             let a = Albedos {
                 diffuse: rho_d.channels(),
                 specular: rho_s.channels(),
@@ -304,14 +331,14 @@ impl ModelParams {
             let kd = raw
                 .kd
                 .ok_or_else(|| anyhow!("model `{id}` needs `kd` (fibre diffuse albedo)"))?;
-            check_albedo("kd", &kd)?;
+            check_albedo(Param::Kd, &kd)?;
             let ks = raw.ks.unwrap_or(Albedo::Grey(0.0));
-            check_albedo("ks", &ks)?;
+            check_albedo(Param::Ks, &ks)?;
             let sub = raw.substrate_albedo.unwrap_or(kd);
-            check_albedo("substrate_albedo", &sub)?;
-            let uses_spec = uses(id, "ks");
+            check_albedo(Param::SubstrateAlbedo, &sub)?;
+            let uses_spec = id.reads(Param::Ks);
             let ks_c = if uses_spec { ks.channels() } else { [0.0; 3] };
-            let sub_c = if uses(id, "substrate_albedo") {
+            let sub_c = if id.reads(Param::SubstrateAlbedo) {
                 sub.channels()
             } else {
                 [0.0; 3]
@@ -323,7 +350,7 @@ impl ModelParams {
                 fuzz: [0.0; 3],
                 rgb: kd.is_rgb()
                     || (uses_spec && ks.is_rgb())
-                    || (uses(id, "substrate_albedo") && sub.is_rgb()),
+                    || (id.reads(Param::SubstrateAlbedo) && sub.is_rgb()),
             };
             (a, 1.0, 1.0)
         };
@@ -332,7 +359,7 @@ impl ModelParams {
             albedos.fuzz = fuzz.channels();
             albedos.rgb |= fuzz.is_rgb();
         }
-        let ambient = check_range("ambient", raw.ambient.unwrap_or(0.0), 0.0, 1.0)?;
+        let ambient = check_range(Param::Ambient, raw.ambient.unwrap_or(0.0), 0.0, 1.0)?;
 
         Ok((
             Self {

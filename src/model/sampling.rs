@@ -137,7 +137,8 @@ use super::azimuth_spread::spread_nodes;
 use super::frame::Local;
 use super::fresnel::schlick;
 use super::params::ModelParams;
-use super::{Albedos, DirectionPair, ModelId, ShadingModel};
+use super::rung::{LobeAlbedo, LobeSampling, Rung};
+use super::{Ability, Albedos, DirectionPair, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
 
 /// Width c of the fibre lobe's Cauchy law in units of 1/sqrt(exponent).
@@ -188,8 +189,9 @@ struct ConeTable {
 /// The importance sampler of one rung with its parameters.
 #[derive(Clone, Debug)]
 pub struct Sampler {
-    id: ModelId,
     lobe: Lobe,
+    /// How the lobe's directional albedo is estimated.
+    lobe_albedo: LobeAlbedo,
     /// The cone's longitude law (cross-section rungs; uniform without one).
     cone: Option<ConeTable>,
     exponent: f64,
@@ -226,19 +228,19 @@ impl Sampler {
     /// The sampler of rung `id` with validated parameters `p` (exponent, alpha_x/alpha_y, spread,
     /// nodes, fuzz...).
     pub fn new(id: ModelId, p: &ModelParams) -> Sampler {
-        use ModelId::*;
-        let lobe = match id {
-            Lambert | HastDiffuse => Lobe::None,
-            Ward => Lobe::Ward {
+        let rung = id.rung().sampling;
+        let lobe = match rung.lobe {
+            LobeSampling::None => Lobe::None,
+            LobeSampling::Ward => Lobe::Ward {
                 ax: p.alpha_x,
                 ay: p.alpha_y,
             },
-            MaxNormal | PoulinFournier | VaryingTopology | Reference => Lobe::Fibre {
+            LobeSampling::FibreCone => Lobe::Fibre {
                 gamma: LOBE_WIDTH / p.exponent.max(1.0).sqrt(),
             },
         };
         // the spread applies where `model::with_spread` applies it
-        let spread = p.azimuth_spread_deg > 0.0 && !matches!(id, Lambert | Ward);
+        let spread = p.azimuth_spread_deg > 0.0 && id.has(Ability::DirectionSpread);
         let nodes = if spread {
             spread_nodes(p.azimuth_spread_deg, p.azimuth_nodes, p.fibre_azimuth)
         } else {
@@ -256,19 +258,11 @@ impl Sampler {
             *last = 1.0;
         }
         // directional albedo per unit kd of the diffuse term, by technique
-        let (kd_tube, kd_cos) = match id {
-            MaxNormal => (FRAC_PI_2, 0.0),
-            HastDiffuse => (0.5, FRAC_1_PI),
-            _ => (0.0, 1.0),
-        };
-        let fresnel = p.fresnel_ior > 0.0 && id.parameter_names().contains(&"fresnel_ior");
-        let cone = if id.is_cross_section() {
-            ConeTable::new(id, p)
-        } else {
-            None
-        };
+        let (kd_tube, kd_cos) = (rung.diffuse_tube, rung.diffuse_cosine);
+        let fresnel = p.fresnel_ior > 0.0 && id.has(Ability::Fresnel);
+        let cone = rung.cone_from.and_then(|from| ConeTable::new(from, p));
         Sampler {
-            id,
+            lobe_albedo: rung.lobe_albedo,
             lobe,
             cone,
             exponent: p.exponent,
@@ -282,7 +276,7 @@ impl Sampler {
     }
 
     /// The same sampler with the fibre lobe's Cauchy width c / sqrt(exponent) (default
-    /// [`LOBE_WIDTH`]); for the width study of `fibrefit bench --sampling`. No effect on rungs
+    /// [`LOBE_WIDTH`]); for the width study of `fibrefit bench sampling`. No effect on rungs
     /// without a fibre lobe.
     pub fn with_lobe_width(mut self, c: f64) -> Sampler {
         if let Lobe::Fibre { gamma } = &mut self.lobe {
@@ -464,37 +458,38 @@ impl Sampler {
         } else {
             1.0
         };
-        let shape = match (self.lobe, self.id) {
+        let shape = match (self.lobe, self.lobe_albedo) {
             (Lobe::None, _) => 0.0,
             // int cos^e(th - th_r) cos(th) dth dphi ~ pi cos(th_r) W(e), W the Wallis integral
-            (_, ModelId::MaxNormal) => {
+            (_, LobeAlbedo::Wallis) => {
                 let w = wallis(self.exponent);
                 PI * w * v.projected_len().max(0.5 * w)
             }
             // the cross-section rungs: the lobe at latitude 0 times cos(th_r) (the lobe's
             // integral over the fibre's normals goes like 1 / sqrt(|l_p| |v_p|))
-            (_, id) if id.is_cross_section() => match &self.cone {
+            (_, LobeAlbedo::ConeTable) => match &self.cone {
                 Some(t) => t.albedos(v)[0] * v.projected_len(),
                 None => 1.0,
             },
             // normalised lobes
-            _ => 1.0,
+            (_, LobeAlbedo::Normalised) => 1.0,
         };
         fresnel * shape
     }
 }
 
 impl ConeTable {
-    /// The table of rung `id` (a cross-section rung) with parameters `p`, from the aligned rung
-    /// (no spread, Fresnel or fuzz: those the mixture and the uniform share absorb; the
-    /// reference through varying-topology, which is it to the quadrature error), for v in the
+    /// The table of rung `id` (a cross-section rung: the reference's is varying-topology's,
+    /// which is it to the quadrature error, as its [`super::rungs::Sampling::cone_from`] says)
+    /// with parameters `p`, from the aligned rung (no spread, Fresnel or fuzz: those the
+    /// mixture and the uniform share absorb), for v in the
     /// cross-section plane at the centre of each row with alpha_v >= 0: the lobe's intensity
     /// f_s (N.l) at l in the plane (latitude 0, the cone of v) at each alpha_l bin's centre, and
     /// the diffuse and substrate directional albedos per unit albedo by an 8 x 8 cosine-weighted
     /// product rule (at most 16 heights and 16 lobe nodes). The rows of alpha_v < 0 are their
     /// mirror images (T -> -T), exactly. `None` if the rung cannot be built (then the cone's
     /// longitude law is uniform).
-    fn new(id: ModelId, p: &ModelParams) -> Option<ConeTable> {
+    fn new(rung: &Rung, p: &ModelParams) -> Option<ConeTable> {
         let mut q = p.clone();
         q.azimuth_spread_deg = 0.0;
         q.fresnel_ior = 0.0;
@@ -503,12 +498,7 @@ impl ConeTable {
         // its cost bounded whatever the rung's own knobs (up to 65536 heights)
         q.histogram_bins = q.histogram_bins.min(16);
         q.quadrature_order = q.quadrature_order.min(16);
-        let rung = if id == ModelId::Reference {
-            ModelId::VaryingTopology
-        } else {
-            id
-        };
-        let m = super::build(rung, &q).ok()?;
+        let m = super::build(ModelId::of(rung), &q).ok()?;
         const GRID: usize = 8;
         let half = CONE_ROWS / 2;
         let bin = PI / CONE_BINS as f64;

@@ -220,7 +220,7 @@ impl Material<'_> {
     /// The fibre height at a hit, where the model has a topology and the hit fixes one;
     /// `None`: the model's own height distribution (a constant swatch).
     pub fn height_at(&self, hit: &objects::Hit) -> Option<f64> {
-        if !self.model.id().has_topology() {
+        if !self.model.rung().has(crate::model::Ability::Topology) {
             return None;
         }
         let h_max = max_height(self.spacing);

@@ -767,7 +767,7 @@ fn render_capture(
                                 .as_ref()
                                 .map(|m| p.topology.texel_height(m.texel(x, y), p.spacing)));
                         let basis = match height {
-                            Some(hh) if shading.id().has_topology() => {
+                            Some(hh) if shading.rung().has(crate::model::Ability::Topology) => {
                                 shading.basis_at_height(&pair, hh).unwrap_or_default()
                             }
                             _ => shading.basis(&pair),

@@ -201,20 +201,23 @@ pub fn reference(s: &Section) -> Box<dyn ShadingModel> {
 
 /// Every rung, built at the given section.
 pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
+    let topology = Topology {
+        height: s.height,
+        map_scale: 0.0,
+        map: None,
+    };
     ModelId::ALL
         .iter()
-        .map(|&id| -> Box<dyn ShadingModel> {
-            match id {
-                ModelId::Lambert => Box::new(model::lambert::Lambert),
-                ModelId::MaxNormal => Box::new(model::max_normal::MaxNormal::new(s.exponent)),
-                ModelId::HastDiffuse => Box::new(model::hast_diffuse::HastDiffuse),
-                ModelId::PoulinFournier => Box::new(model::poulin_fournier::PoulinFournier::new(
-                    s.spacing, s.exponent, 16,
-                )),
-                ModelId::VaryingTopology => vt(s, 16),
-                ModelId::Reference => reference(s),
-                ModelId::Ward => Box::new(model::ward::Ward::new(0.05, 0.4)),
-            }
+        .map(|&id| {
+            (id.rung().build)(&model::AlignedInputs {
+                exponent: s.exponent,
+                spacing: s.spacing,
+                alpha_x: 0.05,
+                alpha_y: 0.4,
+                quadrature_order: 16,
+                histogram_bins: 16,
+                topology: &topology,
+            })
         })
         .collect()
 }

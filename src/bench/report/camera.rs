@@ -1,5 +1,5 @@
 //! `reports/camera_resolution.md` (+ CSV) from the camera-resolution benchmark
-//! (`fibrefit bench --camera`).
+//! (`fibrefit bench camera`).
 
 use crate::bench::camera::{self, CameraRow, CameraRun, MEMORY_GOAL_BYTES, MEMORY_SIZE};
 use anyhow::Result;

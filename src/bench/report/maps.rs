@@ -1,10 +1,10 @@
 //! `reports/maps_accuracy.md` (+ CSV and a PNG of true and recovered maps side by side) from
-//! the map-recovery study (`fibrefit bench --maps`).
+//! the map-recovery study (`fibrefit bench maps`).
 
 use crate::bench::maps::{MapRow, Pictures, SIZE};
 use crate::export::atomic::AtomicFile;
-use crate::export::brdf_plots::{diverging, sequential};
 use crate::export::plots::{colour_bar, font, ColourMap, MapScale};
+use crate::export::plots::{diverging, sequential};
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 use std::io::Write;

@@ -6,6 +6,10 @@ use crate::model::sampling::{DIFFUSE_MIN, LOBE_MIN, LOBE_WIDTH};
 use anyhow::Result;
 use std::path::Path;
 
+/// The first column of the exponent table: the parameter's own name.
+const EXPONENT_COLUMN: &str =
+    crate::model::parameter::TABLE[crate::model::Param::Exponent as usize].name;
+
 /// The ratio, or "exact" where the sampler's weight is constant (zero variance up to rounding).
 fn ratio(r: &VarianceRow) -> String {
     let tiny = 1e-24 * r.albedo_sampled * r.albedo_sampled;
@@ -26,7 +30,7 @@ fn table(rows: &[VarianceRow], first: &str) -> String {
     for r in rows {
         let key = match first {
             "lobe width c" => format!("{} c = {:.3}", r.rung, r.lobe_width),
-            "exponent" => format!("{} e = {}", r.rung, r.exponent),
+            EXPONENT_COLUMN => format!("{} e = {}", r.rung, r.exponent),
             _ => r.rung.clone(),
         };
         md += &format!(
@@ -125,7 +129,7 @@ pub fn write(dir: &Path, run: &SamplingRun, command: &str, seconds: f64) -> Resu
     );
     md += &table(&run.widths, "lobe width c");
     md += "\n## Other exponents\n\n";
-    md += &table(&run.exponents, "exponent");
+    md += &table(&run.exponents, EXPONENT_COLUMN);
 
     md += "\n## Samples per second (one thread)\n\n\
            `sample` with the rung's own evaluation (what a renderer pays per sample), the sampler \

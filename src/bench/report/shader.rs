@@ -1,4 +1,4 @@
-//! `reports/shader_cost.md` (+ CSV) from `fibrefit bench --shader`.
+//! `reports/shader_cost.md` (+ CSV) from `fibrefit bench shader`.
 
 use crate::bench::shader::ShaderCostRun;
 use anyhow::Result;

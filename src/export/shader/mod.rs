@@ -11,8 +11,9 @@ pub mod gpu;
 
 use crate::model::azimuth_spread::spread_nodes;
 use crate::model::numerics::quadrature::GaussLegendre;
+use crate::model::rungs::ShaderSection;
 use crate::model::topology::max_height;
-use crate::model::{ModelId, ModelParams};
+use crate::model::{Ability, ModelId, ModelParams};
 use anyhow::{anyhow, bail, Result};
 use std::fmt::Write as _;
 
@@ -111,21 +112,13 @@ struct FibrefitParams {
 }
 ";
 
-/// The sections of the master each rung needs, after `common`.
-fn sections(id: ModelId) -> Result<&'static [&'static str]> {
-    Ok(match id {
-        ModelId::Lambert => &["lambert"],
-        ModelId::MaxNormal => &["max_normal"],
-        ModelId::HastDiffuse => &["hast_diffuse"],
-        ModelId::Ward => &["ward"],
-        ModelId::PoulinFournier | ModelId::VaryingTopology => &["cross_section"],
-        ModelId::Reference => bail!(
-            "model `reference` has no shader: it integrates adaptively to 1e-8 and is the \
-             yardstick, not a rung to render with; fit or export `varying-topology` (the same \
-             parameters; reports/speed_accuracy.md gives its error against the reference per \
-             quadrature order)"
-        ),
-    })
+/// The sections of the master each rung needs, after `common`, and the body of its
+/// `fibrefit_rung` (the rung's [`ShaderSection`]).
+fn sections(id: ModelId) -> Result<(&'static [&'static str], &'static str)> {
+    match id.rung().shader {
+        ShaderSection::Sections { sections, body } => Ok((sections, body)),
+        ShaderSection::None(why) => bail!("{why}"),
+    }
 }
 
 /// The text of one master section.
@@ -175,12 +168,12 @@ pub struct Baked {
 impl Baked {
     pub fn new(id: ModelId, p: &ModelParams) -> Result<Self> {
         sections(id)?;
-        let heights = match id {
-            ModelId::VaryingTopology => p.topology.discretise(p.spacing, p.histogram_bins),
-            _ => vec![(0.0, 1.0)],
+        let heights = if id.has(Ability::HeightHistogram) {
+            p.topology.discretise(p.spacing, p.histogram_bins)
+        } else {
+            vec![(0.0, 1.0)]
         };
-        let fibre = !matches!(id, ModelId::Lambert | ModelId::Ward);
-        let spread = if fibre && p.azimuth_spread_deg > 0.0 {
+        let spread = if id.has(Ability::DirectionSpread) && p.azimuth_spread_deg > 0.0 {
             spread_nodes(p.azimuth_spread_deg, p.azimuth_nodes, p.fibre_azimuth)
         } else {
             vec![(1.0, 0.0, 1.0)]
@@ -231,34 +224,6 @@ pub fn params_uniform(id: ModelId, p: &ModelParams) -> Result<Vec<u8>> {
         .iter()
         .flat_map(|r| r.iter().flat_map(|&x| (x as f32).to_le_bytes()))
         .collect())
-}
-
-/// The rung's part of `fibrefit_rung`: the basis at local directions (both above the horizon),
-/// at `height` when `at_height`.
-fn rung_body(id: ModelId) -> &'static str {
-    match id {
-        ModelId::Lambert => "    return fibrefit_lambert(l, v);\n",
-        ModelId::MaxNormal => "    return fibrefit_max_normal(l, v, p.shape.x);\n",
-        ModelId::HastDiffuse => "    return fibrefit_hast_diffuse(l, v);\n",
-        ModelId::Ward => "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);\n",
-        ModelId::PoulinFournier => {
-            "    let sp = fibrefit_pair(l, v, p.shape.w);
-    let b = fibrefit_pattern(sp, p.shape.y, 0.0, 1.0, p.shape.x);
-    return vec4<f32>(b, 0.0);\n"
-        }
-        _ => {
-            "    let sp = fibrefit_pair(l, v, p.shape.w);
-    if (at_height) {
-        return vec4<f32>(fibrefit_pattern(sp, p.shape.y, height, 1.0, p.shape.x), 0.0);
-    }
-    var heights = p.heights;
-    var b = vec3<f32>(0.0);
-    for (var k = 0u; k < FIBREFIT_HEIGHT_NODES; k++) {
-        b += fibrefit_pattern(sp, p.shape.y, heights[k].x, heights[k].y, p.shape.x);
-    }
-    return vec4<f32>(b, 0.0);\n"
-        }
-    }
 }
 
 /// The WGSL library for rung `id` with parameters `p`; `provenance` (one line per entry) says
@@ -357,7 +322,8 @@ fn fibrefit_params() -> FibrefitParams {{
         fmt(spread).join(",\n            "),
     )?;
     s.push_str(section("common"));
-    for name in sections(id)? {
+    let (names, body) = sections(id)?;
+    for name in names {
         s.push_str(section(name));
     }
     writeln!(
@@ -369,7 +335,7 @@ fn fibrefit_params() -> FibrefitParams {{
 
 fn fibrefit_rung(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, height: f32, at_height: bool) -> vec4<f32> {{
 {}}}",
-        rung_body(id)
+        body
     )?;
     s.push_str(PUBLIC);
     validate(&s)?;

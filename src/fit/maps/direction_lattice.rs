@@ -303,7 +303,7 @@ pub fn lattice_nodes(store: &CaptureStore, req: &MapsConfig) -> Option<(usize, u
 }
 
 /// How well the lattice's blend stands in for the model at a texel's own directions
-/// (`fibrefit bench --camera`): the relative error of the modelled value (kd diffuse + ks
+/// (`fibrefit bench camera`): the relative error of the modelled value (kd diffuse + ks
 /// specular + ..., at the globals' albedos) over texels and (H, psi) points.
 #[derive(Clone, Debug, Default, serde::Serialize)]
 pub struct BlendError {
@@ -549,7 +549,7 @@ mod tests {
         }
         eprintln!("relative error: grid {grid_worst:.2e}, between {between_worst:.2e}, own table {own_worst:.2e}");
         // at the grid's nodes only the blend in position is off: second order in the nodes'
-        // spacing, below the 1 % noise (measured 1.9e-3 here; bench --camera: 2.8e-3 worst of
+        // spacing, below the 1 % noise (measured 1.9e-3 here; bench camera: 2.8e-3 worst of
         // 256 texels x 8 nodes)
         assert!(grid_worst < 4e-3, "{grid_worst}");
         // between the nodes the table's own interpolation dominates: the blend adds little

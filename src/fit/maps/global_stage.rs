@@ -341,7 +341,7 @@ fn texel_costs(problems: &[Texel], g: &Globals, candidates: &[&[TexelValues]]) -
 /// optimizer's internal units, then albedo channels), kept within their bounds.
 fn moved_globals(set: &ParamSet, delta: &[f64]) -> ParamSet {
     let mut s = set.clone();
-    let d = set.shape_value(Shape::Spacing);
+    let d = set.shape_value(Param::Spacing);
     let shapes = set.free_shapes();
     for (j, &i) in shapes.iter().enumerate() {
         let sh = &mut s.shapes[i];
@@ -477,7 +477,7 @@ pub(super) fn joint_refine(
                 continue;
             };
             let new_set = moved_globals(&set, dg.as_slice());
-            let h_max = max_height(new_set.shape_value(Shape::Spacing));
+            let h_max = max_height(new_set.shape_value(Param::Spacing));
             let new_values: Vec<TexelValues> = terms
                 .iter()
                 .zip(&factored)

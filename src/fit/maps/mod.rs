@@ -33,7 +33,7 @@
 //! helpers they share.
 
 use super::config::{FitConfig, MapsConfig};
-use super::parameters::{Component, ParamSet, Shape};
+use super::parameters::{Component, Param, ParamSet};
 use super::problem::{self, bounded_small_lsq, component_index, FitProblem, SampleMaps};
 use super::{polish, wrap_azimuth, FitOutcome};
 use crate::load::capture_store::CaptureStore;
@@ -138,17 +138,16 @@ struct Free {
 /// Check that the rung of `cfg` can honour every requested map.
 pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
     let id = cfg.model_id()?;
-    let names = id.parameter_names();
     if req.requested().is_empty() {
         bail!("--maps: [maps] in the config requests no map; set height, fibre_azimuth, kd or ks = true");
     }
     if req.height && !id.has_topology() {
         bail!("[maps] height = true: model `{id}` has no fibre topology (use varying-topology or reference)");
     }
-    if req.fibre_azimuth && !names.contains(&"fibre_azimuth_deg") {
+    if req.fibre_azimuth && !id.reads(Param::Azimuth) {
         bail!("[maps] fibre_azimuth = true: model `{id}` has no fibre direction");
     }
-    if req.ks && !(names.contains(&"ks") || names.contains(&"rho_s")) {
+    if req.ks && !(id.reads(Param::Ks) || id.reads(Param::RhoS)) {
         bail!("[maps] ks = true: model `{id}` has no specular lobe");
     }
     if req.ks && !cfg.components.specular {
@@ -202,8 +201,8 @@ fn fix_mapped(set: &ParamSet, req: &MapsConfig) -> ParamSet {
     let mut s = set.clone();
     for sh in &mut s.shapes {
         let mapped = match sh.kind {
-            Shape::Height | Shape::MapScale => req.height,
-            Shape::Azimuth => req.fibre_azimuth,
+            Param::Height | Param::MapScale => req.height,
+            Param::Azimuth => req.fibre_azimuth,
             _ => false,
         };
         if mapped {
@@ -298,10 +297,10 @@ impl Layout {
 /// A texel's start: the capture's own maps where it has them (height or topology map, tangent
 /// or azimuth map), else the globals `set`; `s` is any of its samples.
 fn start_value(s: &Sample, set: &ParamSet) -> TexelValues {
-    let d = set.shape_value(Shape::Spacing);
+    let d = set.shape_value(Param::Spacing);
     let topo = crate::model::topology::Topology {
-        height: set.shape_value(Shape::Height),
-        map_scale: set.shape_value(Shape::MapScale),
+        height: set.shape_value(Param::Height),
+        map_scale: set.shape_value(Param::MapScale),
         map: None,
     };
     let galb = globals_albedo(set);
@@ -313,7 +312,7 @@ fn start_value(s: &Sample, set: &ParamSet) -> TexelValues {
         psi: s
             .fibre_azimuth
             .map(|p| p.to_degrees())
-            .unwrap_or(set.shape_value(Shape::Azimuth)),
+            .unwrap_or(set.shape_value(Param::Azimuth)),
         kd: galb[0],
         ks: galb[1],
     }

@@ -26,7 +26,7 @@ pub fn recover(
         quiet,
     )?;
     let global_free = stage.outcome.statistics.free_parameters;
-    let h_max = max_height(stage.outcome.set.shape_value(Shape::Spacing));
+    let h_max = max_height(stage.outcome.set.shape_value(Param::Spacing));
     let (maps, variance, mut warnings) =
         finish_maps(vec![part], w, h, store.channels, req, global_free, h_max)?;
     warnings.splice(0..0, stage.warnings.iter().cloned());

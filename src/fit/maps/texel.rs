@@ -38,7 +38,7 @@ impl<'m> Globals<'m> {
         Self {
             model,
             has_topology: set.rung.has_topology(),
-            h_max: max_height(set.shape_value(Shape::Spacing)),
+            h_max: max_height(set.shape_value(Param::Spacing)),
             tied: set.substrate_tied,
             channels,
             albedo: globals_albedo(set),

@@ -4,15 +4,39 @@
 //! (MODEL.md §1) that is c = pi * E * I with I = f (N.l) and f = c_r / pi. The seed's preview
 //! variants (two-sided and ambient) are [`preview_intensity`].
 
-use super::{Basis, DirectionPair, ModelId, ShadingModel};
+use crate::model::parameter::{Ability::*, Param};
+use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
+use crate::model::{Basis, DirectionPair, ShadingModel};
 use std::f64::consts::FRAC_1_PI;
+
+/// The rung.
+pub static RUNG: Rung = Rung {
+    name: "lambert",
+    description: "isotropic baseline, f = kd/pi",
+    abilities: &[FibreDiffuse, PreviewLighting],
+    build: |_| Box::new(Lambert),
+    sampling: Sampling {
+        lobe: LobeSampling::None,
+        diffuse_tube: 0.0,
+        diffuse_cosine: 1.0,
+        lobe_albedo: LobeAlbedo::Normalised,
+        cone_from: None,
+    },
+    shader: ShaderSection::Sections {
+        sections: &["lambert"],
+        body: "    return fibrefit_lambert(l, v);\n",
+    },
+    cost: Cost::ClosedForm,
+    auto_rank: Some(0),
+    example: &[(Param::Kd, 0.5)],
+};
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct Lambert;
 
 impl ShadingModel for Lambert {
-    fn id(&self) -> ModelId {
-        ModelId::Lambert
+    fn rung(&self) -> &'static Rung {
+        &RUNG
     }
 
     fn basis_above_horizon(&self, _pair: &DirectionPair) -> Basis {

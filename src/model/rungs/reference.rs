@@ -4,11 +4,45 @@
 //! distribution integrated exactly (uniform: adaptive in H plus the clamped end masses; maps:
 //! every distinct texel value, or 4096 bin means beyond that).
 
-use super::cross_section::{Fibre, Pattern, SectionPair};
-use super::numerics::quadrature::adaptive_gk15_vec;
-use super::topology::{elevation_from_height, HeightLaw, Topology};
-use super::{Basis, DirectionPair, ModelId, ShadingModel};
+use crate::model::cross_section::{Fibre, Pattern, SectionPair};
+use crate::model::numerics::quadrature::adaptive_gk15_vec;
+use crate::model::parameter::Ability::*;
+use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
+use crate::model::topology::{elevation_from_height, HeightLaw, Topology};
+use crate::model::{Basis, DirectionPair, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
+
+/// The rung.
+pub static RUNG: Rung = Rung {
+    name: "reference",
+    description: "the exact geometry, to 1e-9 relative: the yardstick",
+    abilities: &[
+        FibreDiffuse,
+        SpecularLobe,
+        Fresnel,
+        CrossSection,
+        crate::model::Ability::Topology,
+        FibreDirection,
+        DirectionSpread,
+    ],
+    build: |a| Box::new(Reference::new(a.spacing, a.exponent, a.topology.clone())),
+    sampling: Sampling {
+        lobe: LobeSampling::FibreCone,
+        diffuse_tube: 0.0,
+        diffuse_cosine: 1.0,
+        lobe_albedo: LobeAlbedo::ConeTable,
+        cone_from: Some(&crate::model::rungs::varying_topology::RUNG),
+    },
+    shader: ShaderSection::None(
+        "model `reference` has no shader: it integrates adaptively to 1e-8 and is the \
+         yardstick, not a rung to render with; fit or export `varying-topology` (the same \
+         parameters; reports/speed_accuracy.md gives its error against the reference per \
+         quadrature order)",
+    ),
+    cost: Cost::Adaptive,
+    auto_rank: None,
+    example: crate::model::varying_topology::EXAMPLE,
+};
 
 /// Relative tolerance of each inner integral (the model promise is 1e-9).
 const REL_TOL: f64 = 1e-12;
@@ -90,8 +124,8 @@ fn to_array(b: Basis) -> [f64; 3] {
 }
 
 impl ShadingModel for Reference {
-    fn id(&self) -> ModelId {
-        ModelId::Reference
+    fn rung(&self) -> &'static Rung {
+        &RUNG
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {

@@ -10,8 +10,37 @@
 //! which needs no angles. Seed 004's simplified form divides by (v.n) and diverges at grazing
 //! view; this one does not.
 
-use super::{Basis, DirectionPair, ModelId, ShadingModel};
+use crate::model::parameter::{Ability::*, Param};
+use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
+use crate::model::{Basis, DirectionPair, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
+
+/// The rung.
+pub static RUNG: Rung = Rung {
+    name: "ward",
+    description: "Ward's anisotropic lobe: what most renderers already have",
+    abilities: &[WardLobe, FibreDirection],
+    build: |a| Box::new(Ward::new(a.alpha_x, a.alpha_y)),
+    sampling: Sampling {
+        lobe: LobeSampling::Ward,
+        diffuse_tube: 0.0,
+        diffuse_cosine: 1.0,
+        lobe_albedo: LobeAlbedo::Normalised,
+        cone_from: None,
+    },
+    shader: ShaderSection::Sections {
+        sections: &["ward"],
+        body: "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);\n",
+    },
+    cost: Cost::ClosedForm,
+    auto_rank: Some(2),
+    example: &[
+        (Param::RhoD, 0.3),
+        (Param::RhoS, 0.6),
+        (Param::AlphaX, 0.05),
+        (Param::AlphaY, 0.2),
+    ],
+};
 
 #[derive(Clone, Copy, Debug)]
 pub struct Ward {
@@ -26,8 +55,8 @@ impl Ward {
 }
 
 impl ShadingModel for Ward {
-    fn id(&self) -> ModelId {
-        ModelId::Ward
+    fn rung(&self) -> &'static Rung {
+        &RUNG
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {

@@ -15,14 +15,38 @@
 //! finite everywhere and invariant under t -> -t. It equals eq. (10) wherever l.t > 0
 //! (checked in the tests), because there n_min = t x n_max and n_min.b = -cos alpha_l.
 
-use super::{Basis, DirectionPair, ModelId, ShadingModel, Vec3};
+use crate::model::parameter::{Ability::*, Param};
+use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
+use crate::model::{Basis, DirectionPair, ShadingModel, Vec3};
 use std::f64::consts::FRAC_1_PI;
+
+/// The rung.
+pub static RUNG: Rung = Rung {
+    name: "hast-diffuse",
+    description: "light summed over the lit half of a fibre (Hast et al.)",
+    abilities: &[FibreDiffuse, FibreDirection, DirectionSpread],
+    build: |_| Box::new(HastDiffuse),
+    sampling: Sampling {
+        lobe: LobeSampling::None,
+        diffuse_tube: 0.5,
+        diffuse_cosine: FRAC_1_PI,
+        lobe_albedo: LobeAlbedo::Normalised,
+        cone_from: None,
+    },
+    shader: ShaderSection::Sections {
+        sections: &["hast_diffuse"],
+        body: "    return fibrefit_hast_diffuse(l, v);\n",
+    },
+    cost: Cost::ClosedForm,
+    auto_rank: Some(1),
+    example: &[(Param::Kd, 0.5)],
+};
 
 #[derive(Clone, Copy, Debug, Default)]
 pub struct HastDiffuse;
 
 /// Phi of seed 000 in the stable form, for a light with fibre-frame components `l`.
-pub fn phi(l: &super::Local) -> f64 {
+pub fn phi(l: &crate::model::Local) -> f64 {
     if l.n <= 0.0 {
         return 0.0;
     }
@@ -39,8 +63,8 @@ pub fn phi_eq10(l: &Vec3, t: &Vec3, b: &Vec3) -> f64 {
 }
 
 impl ShadingModel for HastDiffuse {
-    fn id(&self) -> ModelId {
-        ModelId::HastDiffuse
+    fn rung(&self) -> &'static Rung {
+        &RUNG
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {

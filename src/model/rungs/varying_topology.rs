@@ -16,17 +16,76 @@
 //! a million-fold: the fit's standard errors depended on the start.) At H = 0 the two fibres of a
 //! period have identical arcs, so one is computed and counted twice.
 
-use super::cross_section::{
+use crate::model::cross_section::{
     compact_gaps, for_each_seen_and_lit, lobe_half_width, substrate_fractions, DiffuseArc,
     DiffuseArcs, Fibre, FibreOcclusions, Pattern, Projected, SectionPair, SubstrateProblem,
 };
-use super::frame::Local;
-use super::numerics::elementary;
-use super::numerics::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
-use super::numerics::quadrature::GaussLegendre;
-use super::topology::elevation_from_height;
-use super::{Basis, DirectionPair, ModelId, ShadingModel};
+use crate::model::frame::Local;
+use crate::model::numerics::elementary;
+use crate::model::numerics::lobe_quadrature::{LobeArc, LobeRule, LobeShape};
+use crate::model::numerics::quadrature::GaussLegendre;
+use crate::model::parameter::{Ability::*, Param};
+use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
+use crate::model::topology::elevation_from_height;
+use crate::model::{Basis, DirectionPair, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
+
+/// The rung.
+pub static RUNG: Rung = Rung {
+    name: "varying-topology",
+    description: "fibres climbing on their neighbours, heights from a topology map",
+    abilities: &[
+        FibreDiffuse,
+        SpecularLobe,
+        Fresnel,
+        CrossSection,
+        crate::model::Ability::Topology,
+        HeightHistogram,
+        FibreDirection,
+        DirectionSpread,
+    ],
+    build: |a| {
+        Box::new(VaryingTopology::new(
+            a.spacing,
+            a.exponent,
+            a.quadrature_order,
+            a.topology.discretise(a.spacing, a.histogram_bins),
+        ))
+    },
+    sampling: Sampling {
+        lobe: LobeSampling::FibreCone,
+        diffuse_tube: 0.0,
+        diffuse_cosine: 1.0,
+        lobe_albedo: LobeAlbedo::ConeTable,
+        cone_from: Some(&RUNG),
+    },
+    shader: ShaderSection::Sections {
+        sections: &["cross_section"],
+        body: "    let sp = fibrefit_pair(l, v, p.shape.w);
+    if (at_height) {
+        return vec4<f32>(fibrefit_pattern(sp, p.shape.y, height, 1.0, p.shape.x), 0.0);
+    }
+    var heights = p.heights;
+    var b = vec3<f32>(0.0);
+    for (var k = 0u; k < FIBREFIT_HEIGHT_NODES; k++) {
+        b += fibrefit_pattern(sp, p.shape.y, heights[k].x, heights[k].y, p.shape.x);
+    }
+    return vec4<f32>(b, 0.0);\n",
+    },
+    cost: Cost::HeightHistogram,
+    auto_rank: Some(5),
+    example: EXAMPLE,
+};
+
+/// The varying-topology example (the reference shares it).
+pub const EXAMPLE: &[(Param, f64)] = &[
+    (Param::Kd, 0.3),
+    (Param::Ks, 0.6),
+    (Param::Exponent, 100.0),
+    (Param::Spacing, 2.4),
+    (Param::Height, 0.9),
+    (Param::MapScale, 0.2),
+];
 
 /// Closed-form diffuse + Gauss–Legendre specular over one pattern.
 #[derive(Clone, Debug)]
@@ -63,7 +122,7 @@ impl GaussSection {
     /// The bases of `pairs` (written to `out`) for the mean over `patterns` ((pattern, weight)
     /// pairs). The work is split into passes over the whole batch so that everything with
     /// data-dependent branches or long latency (divisions, square roots, polynomials) runs as
-    /// branch-free lane loops ([`super::numerics::lanes::on_widest_lanes`]); only the arc bookkeeping stays
+    /// branch-free lane loops ([`crate::model::numerics::lanes::on_widest_lanes`]); only the arc bookkeeping stays
     /// scalar. Per (pair, pattern) "visit":
     /// 1. each pair's projections and lobe window, in lanes (`GaussSection::prepare`);
     /// 2. each fibre's occlusion problem seen along v and lit along l, solved in lanes
@@ -192,12 +251,12 @@ impl GaussSection {
     }
 
     /// [`SectionPair::new`] and [`GaussSection::lobe`] of every pair, eight pairs at a time in
-    /// lanes ([`super::numerics::lanes::on_widest_lanes`]): one at a time, their two atan2, acos, square
+    /// lanes ([`crate::model::numerics::lanes::on_widest_lanes`]): one at a time, their two atan2, acos, square
     /// roots and divisions per pair were latency-bound scalar code. A batch shorter than eight
     /// (a single-pair `basis` call) goes the scalar way. Pairs below the horizon get finite
     /// placeholders (the caller skips them).
     fn prepare(&self, pairs: &[DirectionPair], out: &mut Vec<(SectionPair, Lobe)>) {
-        super::numerics::lanes::on_widest_lanes(
+        crate::model::numerics::lanes::on_widest_lanes(
             #[inline(always)]
             |_| self.prepare_lanes(pairs, out),
         )
@@ -432,7 +491,7 @@ pub struct VaryingTopology {
 }
 
 impl VaryingTopology {
-    /// `heights`: (H, weight) pairs from [`super::topology::Topology::discretise`].
+    /// `heights`: (H, weight) pairs from [`crate::model::topology::Topology::discretise`].
     pub fn new(spacing: f64, exponent: f64, order: usize, heights: Vec<(f64, f64)>) -> Self {
         let nodes = heights
             .into_iter()
@@ -451,8 +510,8 @@ impl VaryingTopology {
 }
 
 impl ShadingModel for VaryingTopology {
-    fn id(&self) -> ModelId {
-        ModelId::VaryingTopology
+    fn rung(&self) -> &'static Rung {
+        &RUNG
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {

@@ -1,0 +1,189 @@
+//! The registry: what a rung *is*, as one object, and the list of rungs.
+//!
+//! Each rung's file declares its [`Rung`] (`pub const RUNG`): its id, a one-line description,
+//! its abilities (which parameters of [`super::parameter::TABLE`] it reads follow from them),
+//! how to build it, how the importance sampler proposes directions for it, its section of the
+//! exported shader, its cost class and a typical parameter set. [`ModelId::rung`] is the one
+//! place that maps ids to rungs, so adding a rung is: its file, a variant and a line here, its
+//! shader section, its tests (ARCHITECTURE.md, "Adding a rung"). Code elsewhere asks the rung
+//! (`id.rung().has(Ability::Topology)`), never matches on the id.
+
+pub mod hast_diffuse;
+pub mod lambert;
+pub mod max_normal;
+pub mod poulin_fournier;
+pub mod reference;
+pub mod varying_topology;
+pub mod ward;
+
+use super::parameter::{Ability, Param, Reader, TABLE};
+pub use super::rung::*;
+use std::fmt;
+use std::str::FromStr;
+
+/// The rungs of the ladder, by the ids the CLI and JSON use.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum ModelId {
+    Lambert,
+    MaxNormal,
+    HastDiffuse,
+    PoulinFournier,
+    VaryingTopology,
+    Reference,
+    Ward,
+}
+
+impl fmt::Display for ModelId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl FromStr for ModelId {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        ModelId::ALL
+            .iter()
+            .copied()
+            .find(|m| m.as_str() == s)
+            .ok_or_else(|| {
+                let ids: Vec<&str> = ModelId::ALL.iter().map(|m| m.as_str()).collect();
+                format!(
+                    "unknown model id '{s}'; expected one of: {}",
+                    ids.join(", ")
+                )
+            })
+    }
+}
+
+impl ModelId {
+    /// Cheapest first (the exported shader numbers the rungs in this order).
+    pub const ALL: [ModelId; 7] = [
+        ModelId::Lambert,
+        ModelId::MaxNormal,
+        ModelId::HastDiffuse,
+        ModelId::Ward,
+        ModelId::PoulinFournier,
+        ModelId::VaryingTopology,
+        ModelId::Reference,
+    ];
+
+    /// The rung this id names: the registry's one `match`.
+    pub fn rung(self) -> &'static Rung {
+        match self {
+            ModelId::Lambert => &lambert::RUNG,
+            ModelId::MaxNormal => &max_normal::RUNG,
+            ModelId::HastDiffuse => &hast_diffuse::RUNG,
+            ModelId::PoulinFournier => &poulin_fournier::RUNG,
+            ModelId::VaryingTopology => &varying_topology::RUNG,
+            ModelId::Reference => &reference::RUNG,
+            ModelId::Ward => &ward::RUNG,
+        }
+    }
+
+    /// The id of `rung` (a registered rung's static).
+    pub fn of(rung: &Rung) -> ModelId {
+        ModelId::ALL
+            .into_iter()
+            .find(|id| std::ptr::eq(id.rung(), rung))
+            .expect("every rung is registered in ModelId::ALL")
+    }
+
+    /// The id as the CLI and JSON spell it.
+    pub fn as_str(self) -> &'static str {
+        self.rung().name
+    }
+
+    /// Whether the rung has `ability`.
+    pub fn has(self, ability: Ability) -> bool {
+        self.rung().has(ability)
+    }
+
+    /// Models built on the fibre cross-section of MODEL.md §2 (reciprocal, with hiding and
+    /// shadowing).
+    pub fn is_cross_section(self) -> bool {
+        self.has(Ability::CrossSection)
+    }
+
+    /// Models whose elevation comes from the topology (height, map).
+    pub fn has_topology(self) -> bool {
+        self.has(Ability::Topology)
+    }
+
+    /// The fitted parameters of this rung (MODEL.md §5, and the fuzz layer's), in table order.
+    pub fn parameters(self) -> Vec<Param> {
+        Param::all()
+            .filter(|p| p.is_fitted() && self.reads(*p))
+            .collect()
+    }
+
+    /// Names of the parameters this rung has, as fit configs list them.
+    pub fn parameter_names(self) -> Vec<&'static str> {
+        self.parameters().into_iter().map(Param::name).collect()
+    }
+
+    /// Whether this rung has parameter `name` (see [`ModelId::parameter_names`]).
+    pub fn has_parameter(self, name: &str) -> bool {
+        Param::from_name(name).is_some_and(|p| p.is_fitted() && self.reads(p))
+    }
+
+    /// Whether the rung (or the fuzz layer over it) reads parameter or knob `p`.
+    pub fn reads(self, p: Param) -> bool {
+        match p.info().reader {
+            Reader::Rung(a) => self.has(a),
+            Reader::FuzzLayer => true,
+        }
+    }
+}
+
+/// The rungs `--model auto` tries by default, simplest first.
+pub fn auto_candidates() -> Vec<ModelId> {
+    let mut v: Vec<ModelId> = ModelId::ALL
+        .into_iter()
+        .filter(|id| id.rung().auto_rank.is_some())
+        .collect();
+    v.sort_by_key(|id| id.rung().auto_rank);
+    v
+}
+
+/// Every knob and parameter name the table knows that `id` does not read (for warnings).
+pub fn unread(id: ModelId) -> impl Iterator<Item = Param> {
+    TABLE.iter().map(|r| r.param).filter(move |&p| !id.reads(p))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_rung_is_registered_under_its_own_id_and_name() {
+        for id in ModelId::ALL {
+            assert_eq!(ModelId::of(id.rung()), id);
+            assert_eq!(id.as_str().parse::<ModelId>(), Ok(id));
+        }
+    }
+
+    #[test]
+    fn every_example_sets_only_the_rungs_parameters() {
+        for id in ModelId::ALL {
+            for (p, _) in id.rung().example {
+                assert!(id.reads(*p), "{id} example sets {p}");
+            }
+        }
+    }
+
+    #[test]
+    fn the_ladders_parameter_lists() {
+        let names = |id: ModelId| id.parameter_names().join(" ");
+        assert_eq!(
+            names(ModelId::Ward),
+            "rho_d rho_s alpha_x alpha_y fibre_azimuth_deg fuzz fuzz_depth fuzz_asymmetry"
+        );
+        assert_eq!(
+            names(ModelId::VaryingTopology),
+            "kd ks substrate_albedo exponent spacing height map_scale fibre_azimuth_deg \
+             azimuth_spread_deg fresnel_ior fuzz fuzz_depth fuzz_asymmetry"
+        );
+        assert_eq!(names(ModelId::Lambert), "kd fuzz fuzz_depth fuzz_asymmetry");
+    }
+}
