@@ -17,16 +17,9 @@ fn params(id: ModelId, text: &str) -> ModelParams {
     ModelParams::from_raw(&raw, id).unwrap().0
 }
 
-fn text(id: ModelId) -> &'static str {
-    match id {
-        ModelId::Lambert | ModelId::HastDiffuse => "kd = 0.5\n",
-        ModelId::Ward => "rho_d = 0.3\nrho_s = 0.6\nalpha_x = 0.05\nalpha_y = 0.2\n",
-        ModelId::MaxNormal => "kd = 0.3\nks = 0.6\nexponent = 1000\n",
-        ModelId::PoulinFournier => "kd = 0.3\nks = 0.6\nexponent = 1000\nspacing = 2.6\n",
-        ModelId::VaryingTopology | ModelId::Reference => {
-            "kd = 0.3\nks = 0.6\nexponent = 1000\nspacing = 2.4\nheight = 0.9\nmap_scale = 0.2\n"
-        }
-    }
+/// The rung's typical parameters from the registry, at exponent 1000 where it has one.
+fn text(id: ModelId) -> String {
+    id.rung().example_text(Some(1000.0))
 }
 
 /// 64 fixed (view, uniforms) draws, views above the horizon.

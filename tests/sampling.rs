@@ -54,17 +54,9 @@ struct Case {
     height: Option<f64>,
 }
 
-fn base_text(id: ModelId) -> &'static str {
-    match id {
-        ModelId::Lambert => "kd = 0.6\n",
-        ModelId::HastDiffuse => "kd = 0.6\n",
-        ModelId::MaxNormal => "kd = 0.3\nks = 0.6\nexponent = 200\n",
-        ModelId::PoulinFournier => "kd = 0.3\nks = 0.6\nexponent = 200\nspacing = 2.6\n",
-        ModelId::VaryingTopology | ModelId::Reference => {
-            "kd = 0.3\nks = 0.6\nexponent = 200\nspacing = 2.4\nheight = 0.9\nmap_scale = 0.2\n"
-        }
-        ModelId::Ward => "rho_d = 0.3\nrho_s = 0.6\nalpha_x = 0.08\nalpha_y = 0.3\n",
-    }
+/// The rung's typical parameters from the registry, at exponent 200 where it has one.
+fn base_text(id: ModelId) -> String {
+    id.rung().example_text(Some(200.0))
 }
 
 fn cases() -> Vec<Case> {
@@ -79,7 +71,7 @@ fn cases() -> Vec<Case> {
         })
     };
     for id in ModelId::ALL {
-        let t = base_text(id).to_string();
+        let t = base_text(id);
         push("normal", id, t.clone(), view(0.0, 0.0), None);
         push("45 along", id, t.clone(), view(45.0, ALONG), None);
         push("45 across", id, t.clone(), view(45.0, ACROSS), None);

@@ -55,13 +55,32 @@ pub enum Command {
     MergeMaps(map_tiles::MergeMapsArgs),
 }
 
+/// The command line, with `fit --help` listing the rungs from the registry (id and what each
+/// accounts for).
+fn command() -> clap::Command {
+    use clap::CommandFactory;
+    Cli::command().mut_subcommand("fit", |c| {
+        let base = c.get_after_help().map(|s| s.to_string()).unwrap_or_default();
+        let rungs: String = crate::model::ModelId::ALL
+            .iter()
+            .map(|id| format!("  {:<18}{}\n", id.as_str(), id.rung().description))
+            .collect();
+        c.after_long_help(format!(
+            "{base}\n\nRUNGS (--model ID; cheapest first; docs/model.md):\n{rungs}"
+        ))
+    })
+}
+
 /// Parse `args` and run. Returns the process exit code (help and version print and return 0).
 pub fn run<I, T>(args: I) -> Result<()>
 where
     I: IntoIterator<Item = T>,
     T: Into<OsString> + Clone,
 {
-    let cli = match Cli::try_parse_from(args) {
+    let parsed = command()
+        .try_get_matches_from(args)
+        .and_then(|m| <Cli as clap::FromArgMatches>::from_arg_matches(&m));
+    let cli = match parsed {
         Ok(cli) => cli,
         Err(e) => {
             let code = e.exit_code();
@@ -117,7 +136,18 @@ impl std::error::Error for UsageError {}
 mod tests {
     #[test]
     fn clap_definition_is_consistent() {
-        use clap::CommandFactory;
-        super::Cli::command().debug_assert();
+        super::command().debug_assert();
+    }
+
+    #[test]
+    fn fit_help_lists_every_rung_with_its_description() {
+        let help = super::command()
+            .find_subcommand_mut("fit")
+            .expect("fit")
+            .render_long_help()
+            .to_string();
+        for id in crate::model::ModelId::ALL {
+            assert!(help.contains(id.rung().description), "{id}: {help}");
+        }
     }
 }
