@@ -1,0 +1,295 @@
+//! Issue 42, the last hostile cases: FIFOs that hang, budgets that miss a path, synth runs that
+//! mix, maps found in the wrong folder, inputs accepted that should not be. Each case exits 0 or
+//! 2 (130 when a signal is sent), never panics or aborts, leaves no temporary or staging file
+//! behind and changes no file it was not asked to write.
+
+// the helpers serve every section; a section may use only some
+#![allow(dead_code)]
+
+mod common;
+
+use assert_cmd::Command;
+use std::fs;
+use std::path::{Path, PathBuf};
+use std::process::Output;
+use std::time::{Duration, Instant};
+
+fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn fibrefit() -> Command {
+    let mut c = Command::cargo_bin("fibrefit").unwrap();
+    c.timeout(Duration::from_secs(120));
+    c
+}
+
+fn run(args: &[&str], dir: &Path) -> Output {
+    fibrefit().current_dir(dir).args(args).output().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Exit 2, an error message containing every one of `want`, no panic or abort.
+fn refused(o: &Output, want: &[&str]) -> String {
+    let e = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "{e}");
+    assert!(e.starts_with("error: "), "{e}");
+    assert!(
+        !e.contains("panicked") && !e.contains("memory allocation"),
+        "{e}"
+    );
+    for w in want {
+        assert!(e.contains(w), "expected '{w}' in: {e}");
+    }
+    e
+}
+
+fn ok(o: &Output) {
+    assert!(o.status.success(), "{}", stderr(o));
+}
+
+/// No `.fibrefit-*` temporary file or staging folder anywhere below `d`.
+fn no_leftovers(d: &Path) {
+    let left: Vec<String> = common::snapshot(d)
+        .into_iter()
+        .map(|(n, _)| n)
+        .filter(|n| n.split('/').any(|c| c.starts_with(".fibrefit-")))
+        .collect();
+    assert!(left.is_empty(), "left behind: {left:?}");
+}
+
+/// The first 301 lines of the brushed gonio set as `g.csv` in `d` (300 rows).
+fn gonio(d: &Path) {
+    let csv: String = fs::read_to_string(root().join("data_synthetic/brushed/gonio.csv"))
+        .unwrap()
+        .lines()
+        .take(301)
+        .map(|l| format!("{l}\n"))
+        .collect();
+    fs::write(d.join("g.csv"), csv).unwrap();
+}
+
+/// Query rows (the first `n` of the slices file, repeated as needed) as `name` in `d`.
+fn queries(d: &Path, name: &str, n: usize) {
+    let text = fs::read_to_string(root().join("data_synthetic/queries_slices.csv")).unwrap();
+    let mut lines = text.lines();
+    let header = lines.next().unwrap();
+    let rows: Vec<&str> = lines.collect();
+    let mut out = format!("{header}\n");
+    for k in 0..n {
+        out.push_str(rows[k % rows.len()]);
+        out.push('\n');
+    }
+    fs::write(d.join(name), out).unwrap();
+}
+
+/// A Lambert result (evaluated at once).
+const LAMBERT: &str = r#"{"schema": "fibrefit-result/1", "model": "lambert",
+ "parameters": {"kd": {"value": 0.5}}}"#;
+
+/// A small valid result of a rung that reads its knobs (Poulin-Fournier).
+const RESULT: &str = r#"{"schema": "fibrefit-result/1", "model": "poulin-fournier",
+ "parameters": {"kd": {"value": 0.5}, "ks": {"value": 0.2}, "exponent": {"value": 20}},
+ "knobs": {"quadrature_order": 16}}"#;
+
+fn mkfifo(p: &Path) {
+    let c = std::ffi::CString::new(p.as_os_str().as_encoded_bytes()).unwrap();
+    // SAFETY: a valid C string
+    assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+}
+
+/// Run fibrefit `args` in `dir`, send `signal` after `after`, and return the exit code and
+/// stderr (waiting at most 20 s for the exit).
+fn signalled(args: &[&str], dir: &Path, after: Duration, signal: i32) -> (Option<i32>, String) {
+    use std::io::Read;
+    let mut child = std::process::Command::new(assert_cmd::cargo::cargo_bin("fibrefit"))
+        .current_dir(dir)
+        .args(args)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(after);
+    // SAFETY: our own child
+    unsafe { libc::kill(child.id() as i32, signal) };
+    let start = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if start.elapsed() > Duration::from_secs(20) {
+            let _ = child.kill();
+            panic!("{args:?}: still running 20 s after signal {signal}");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    let mut err = String::new();
+    child
+        .stderr
+        .take()
+        .unwrap()
+        .read_to_string(&mut err)
+        .unwrap();
+    assert!(!err.contains("panicked"), "{err}");
+    (status.code(), err)
+}
+
+// ---------------------------------------------------------------------------------------------
+// 5. inputs accepted that should not be
+
+#[test]
+fn score_checks_a_result_exactly_as_eval_does() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    gonio(dir);
+    queries(dir, "q.csv", 3);
+    fs::write(dir.join("r.json"), RESULT).unwrap();
+    ok(&run(&["score", "r.json", "g.csv"], dir));
+    ok(&run(
+        &[
+            "eval",
+            "--params",
+            "r.json",
+            "--queries",
+            "q.csv",
+            "--out",
+            "e.csv",
+            "-q",
+        ],
+        dir,
+    ));
+    let valid: serde_json::Value = serde_json::from_str(RESULT).unwrap();
+    let mut cases = vec![];
+    let mut v = valid.clone();
+    v["parameters"] = serde_json::json!({});
+    cases.push(("empty", v, "needs `kd`"));
+    for (name, q) in [("minus", -1), ("zero", 0)] {
+        let mut v = valid.clone();
+        v["knobs"]["quadrature_order"] = serde_json::json!(q);
+        cases.push((name, v, "quadrature_order"));
+    }
+    let mut v = valid.clone();
+    v["parameters"]["exponent"]["value"] = serde_json::json!(-5.0);
+    cases.push(("exponent", v, "exponent"));
+    for (name, v, fragment) in cases {
+        let file = format!("{name}.json");
+        fs::write(dir.join(&file), v.to_string()).unwrap();
+        let before = common::snapshot(dir);
+        let score = refused(&run(&["score", &file, "g.csv"], dir), &[&file, fragment]);
+        let eval = refused(
+            &run(
+                &[
+                    "eval",
+                    "--params",
+                    &file,
+                    "--queries",
+                    "q.csv",
+                    "--out",
+                    "x.csv",
+                    "-q",
+                ],
+                dir,
+            ),
+            &[&file, fragment],
+        );
+        // one check, one message
+        assert_eq!(score, eval, "{name}");
+        assert_eq!(common::snapshot(dir), before, "{name}");
+    }
+}
+
+/// A tensor file (RGL `.bsdf`): a small isotropic one whose `rgb` table is `rgb(i)`, or with
+/// every float field `fill` when given.
+fn rgl_file(rgb: &dyn Fn(usize) -> f32, fill: Option<f32>) -> Vec<u8> {
+    let n = 4usize;
+    let field = |name: &str, shape: &[u64], v: Vec<f32>| {
+        let v = match fill {
+            Some(f) if name != "theta_i" && name != "phi_i" => vec![f; v.len()],
+            _ => v,
+        };
+        (
+            name.to_string(),
+            10u8,
+            shape.to_vec(),
+            v.iter().flat_map(|x| x.to_le_bytes()).collect::<Vec<u8>>(),
+        )
+    };
+    let table =
+        |f: &dyn Fn(usize, usize) -> f32| (0..n * n).map(|i| f(i / n, i % n)).collect::<Vec<f32>>();
+    let mut vndf = vec![];
+    let mut rgbv = vec![];
+    for t in 0..3 {
+        vndf.extend(table(&|y, x| 1.0 + 0.1 * (x + y + t) as f32));
+        for _ in 0..3 {
+            rgbv.extend((0..n * n).map(|i| rgb(i)));
+        }
+    }
+    let nu = n as u64;
+    let fields = vec![
+        ("description".to_string(), 1u8, vec![4u64], b"test".to_vec()),
+        field("phi_i", &[1], vec![0.0]),
+        field("theta_i", &[3], vec![0.0, 0.6, 1.570_796_3]),
+        field("sigma", &[nu, nu], table(&|_, x| 0.5 + 0.1 * x as f32)),
+        field("ndf", &[nu, nu], table(&|y, _| 1.0 - 0.2 * y as f32)),
+        field("vndf", &[1, 3, nu, nu], vndf),
+        field("rgb", &[1, 3, 3, nu, nu], rgbv),
+    ];
+    let mut head = b"tensor_file\0".to_vec();
+    head.extend([1, 0]);
+    head.extend((fields.len() as u32).to_le_bytes());
+    let table_len: usize = fields
+        .iter()
+        .map(|f| 2 + f.0.len() + 2 + 1 + 8 + 8 * f.2.len())
+        .sum();
+    let mut offset = (head.len() + table_len) as u64;
+    let mut data: Vec<u8> = vec![];
+    for (name, dtype, shape, bytes) in &fields {
+        head.extend((name.len() as u16).to_le_bytes());
+        head.extend(name.as_bytes());
+        head.extend((shape.len() as u16).to_le_bytes());
+        head.push(*dtype);
+        head.extend(offset.to_le_bytes());
+        for s in shape {
+            head.extend(s.to_le_bytes());
+        }
+        offset += bytes.len() as u64;
+        data.extend(bytes);
+    }
+    head.extend(data);
+    head
+}
+
+#[test]
+fn measured_files_with_non_physical_values_are_refused() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    fs::write(
+        dir.join("ok.bsdf"),
+        rgl_file(&|i| 0.2 + 0.01 * i as f32, None),
+    )
+    .unwrap();
+    ok(&run(&["inspect", "ok.bsdf"], dir));
+    fs::write(dir.join("zero.bsdf"), rgl_file(&|_| 0.0, None)).unwrap();
+    fs::write(dir.join("huge.bsdf"), rgl_file(&|_| 3e38, Some(3e38))).unwrap();
+    fs::write(dir.join("hugergb.bsdf"), rgl_file(&|_| 3e38, None)).unwrap();
+    for (file, fragment) in [
+        ("zero.bsdf", "zero"),
+        ("huge.bsdf", "not physical"),
+        ("hugergb.bsdf", "not physical"),
+    ] {
+        let before = common::snapshot(dir);
+        refused(&run(&["inspect", file], dir), &[file, fragment]);
+        refused(
+            &run(
+                &["fit", file, "--model", "lambert", "--out", "f.json", "-q"],
+                dir,
+            ),
+            &[file, fragment],
+        );
+        assert_eq!(common::snapshot(dir), before, "{file}");
+    }
+}
+
