@@ -293,3 +293,66 @@ fn measured_files_with_non_physical_values_are_refused() {
     }
 }
 
+// ---------------------------------------------------------------------------------------------
+// 6. maps found only where the format says
+
+#[test]
+fn a_results_maps_are_looked_for_beside_it_never_in_the_working_directory() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    fs::create_dir(dir.join("sub")).unwrap();
+    let mut v: serde_json::Value = serde_json::from_str(RESULT).unwrap();
+    v["maps"] = serde_json::json!({"directory": "nomaps"});
+    fs::write(dir.join("sub/m.json"), v.to_string()).unwrap();
+    // a folder of that name in the working directory, with a map that would be refused if read
+    fs::create_dir(dir.join("nomaps")).unwrap();
+    fs::write(dir.join("nomaps/kd.exr"), "not an EXR").unwrap();
+    let before = common::snapshot(dir);
+    let o = run(
+        &[
+            "render",
+            "--params",
+            "sub/m.json",
+            "--size",
+            "16",
+            "16",
+            "--out",
+            "r.png",
+        ],
+        dir,
+    );
+    ok(&o);
+    let e = stderr(&o);
+    let beside = Path::new("sub").join("nomaps");
+    assert!(
+        e.contains(&beside.display().to_string())
+            && e.contains("never looked for in the working directory"),
+        "{e}"
+    );
+    assert!(!e.contains("kd.exr"), "{e}");
+    // beside the result, the maps are found (and a broken one is an error naming it)
+    fs::create_dir(dir.join("sub/nomaps")).unwrap();
+    fs::write(dir.join("sub/nomaps/kd.exr"), "not an EXR").unwrap();
+    refused(
+        &run(
+            &[
+                "render",
+                "--params",
+                "sub/m.json",
+                "--size",
+                "16",
+                "16",
+                "--out",
+                "r2.png",
+                "-q",
+            ],
+            dir,
+        ),
+        &["sub/nomaps/kd.exr"],
+    );
+    fs::remove_file(dir.join("r.png")).unwrap();
+    fs::remove_dir_all(dir.join("sub/nomaps")).unwrap();
+    assert_eq!(common::snapshot(dir), before);
+    no_leftovers(dir);
+}
+
