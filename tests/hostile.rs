@@ -356,3 +356,46 @@ fn a_results_maps_are_looked_for_beside_it_never_in_the_working_directory() {
     no_leftovers(dir);
 }
 
+// ---------------------------------------------------------------------------------------------
+// 2. one budget for every path
+
+#[test]
+fn the_memory_budget_covers_auto_and_named_rungs_before_any_allocation() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    gonio(dir);
+    // the knobs (beyond the work budget too), and knobs within it whose memory is not
+    for (model, order, fragment) in [
+        ("auto", 1024, "sample evaluations"),
+        ("varying-topology", 1024, "sample evaluations"),
+        ("auto", 1, "GiB of memory per thread"),
+        ("varying-topology", 1, "GiB of memory per thread"),
+    ] {
+        fs::write(
+            dir.join("c.toml"),
+            format!("model = \"{model}\"\n[knobs]\nquadrature_order = {order}\nhistogram_bins = 65536\n"),
+        )
+        .unwrap();
+        let before = common::snapshot(dir);
+        let start = Instant::now();
+        let o = run(
+            &[
+                "fit", "g.csv", "--config", "c.toml", "--out", "c.json", "-q",
+            ],
+            dir,
+        );
+        refused(&o, &["g.csv", fragment, "histogram_bins = 65536"]);
+        assert!(
+            start.elapsed() < Duration::from_secs(20),
+            "{model}: refused only after {:?}",
+            start.elapsed()
+        );
+        assert_eq!(common::snapshot(dir), before, "{model}");
+    }
+    // the default bins are far within it, and a fit with them runs
+    fs::write(dir.join("d.toml"), "model = \"varying-topology\"\n").unwrap();
+    let cfg = fibrefit::fit::config::FitConfig::load(&dir.join("d.toml")).unwrap();
+    assert!(cfg.planned_scratch_bytes(300) < (64u64 << 20) as f64);
+    assert!(cfg.planned_scratch_bytes(1_000_000) < (64u64 << 20) as f64);
+}
+
