@@ -399,3 +399,85 @@ fn the_memory_budget_covers_auto_and_named_rungs_before_any_allocation() {
     assert!(cfg.planned_scratch_bytes(1_000_000) < (64u64 << 20) as f64);
 }
 
+// ---------------------------------------------------------------------------------------------
+// 3. image limits in bytes of memory, per image and per capture
+
+/// A small valid EXR (one channel Y, 4 x 4, f32) whose data window is patched to claim `w` x `h`.
+fn exr_claiming(w: i32, h: i32) -> Vec<u8> {
+    use exr::prelude::*;
+    let d = tempfile::tempdir().unwrap();
+    let p = d.path().join("s.exr");
+    let ch = AnyChannel::new("Y", FlatSamples::F32(vec![0.5f32; 16]));
+    let layer = Layer::new(
+        (4, 4),
+        LayerAttributes::named("main"),
+        Encoding::UNCOMPRESSED,
+        AnyChannels::sort(SmallVec::from_vec(vec![ch])),
+    );
+    Image::from_layer(layer).write().to_file(&p).unwrap();
+    let valid = fs::read(&p).unwrap();
+    let key = b"dataWindow\0box2i\0";
+    let at = valid.windows(key.len()).position(|x| x == key).unwrap() + key.len() + 4;
+    let mut b = valid.to_vec();
+    for (k, v) in [0i32, 0, w - 1, h - 1].iter().enumerate() {
+        b[at + 4 * k..at + 4 * k + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    b
+}
+
+fn capture_toml(images: &[&str]) -> String {
+    let mut t = "[swatch]\nsize_mm = [10.0, 10.0]\nfibre_azimuth_deg = 0\n".to_string();
+    for i in images {
+        t.push_str(&format!(
+            "[[images]]\nfile = \"{i}\"\nexposure = 1.0\nlight = {{ type = \"directional\", theta_deg = 30, phi_deg = 0, irradiance = 1.0 }}\ncamera = {{ type = \"orthographic\", theta_deg = 0, phi_deg = 0 }}\n"
+        ));
+    }
+    t
+}
+
+#[test]
+fn image_limits_hold_for_the_memory_of_each_image_and_of_the_whole_capture() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    // 16000^2 pixels: under 2^28, but 2.8 GiB to read
+    fs::write(dir.join("big.exr"), exr_claiming(16000, 16000)).unwrap();
+    fs::write(
+        dir.join("big.toml"),
+        capture_toml(&["big.exr", "big.exr", "big.exr"]),
+    )
+    .unwrap();
+    let before = common::snapshot(dir);
+    refused(
+        &run(&["inspect", "big.toml"], dir),
+        &["big.exr", "16000x16000", "GiB", "1 GiB"],
+    );
+    // 8000^2 grey: each image within its limit, three of them beyond the capture's
+    fs::write(dir.join("mid.exr"), exr_claiming(8000, 8000)).unwrap();
+    fs::write(
+        dir.join("mid.toml"),
+        capture_toml(&["mid.exr", "mid.exr", "mid.exr"]),
+    )
+    .unwrap();
+    refused(
+        &run(&["inspect", "mid.toml"], dir),
+        &["mid.toml", "3 images of 8000x8000", "2 GiB"],
+    );
+    refused(
+        &run(
+            &[
+                "fit", "mid.toml", "--model", "lambert", "--out", "f.json", "-q",
+            ],
+            dir,
+        ),
+        &["mid.toml", "2 GiB"],
+    );
+    let _ = before;
+    no_leftovers(dir);
+    assert!(!dir.join("f.json").exists());
+    // the limits as stated
+    use fibrefit::load::image_io::{image_memory, MAX_IMAGE_BYTES};
+    assert!(image_memory(16000, 16000, 3, 2).unwrap() > MAX_IMAGE_BYTES);
+    assert!(image_memory(4000, 3000, 3, 2).unwrap() < MAX_IMAGE_BYTES);
+    assert!(image_memory(u64::MAX, 2, 1, 1).is_none());
+}
+
