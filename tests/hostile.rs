@@ -481,3 +481,223 @@ fn image_limits_hold_for_the_memory_of_each_image_and_of_the_whole_capture() {
     assert!(image_memory(u64::MAX, 2, 1, 1).is_none());
 }
 
+// ---------------------------------------------------------------------------------------------
+// 1. FIFOs and devices: refused up front, or waited on so that a signal stops the wait
+
+/// A small OBJ mesh: a 3 x 3 grid of vertices, bent.
+const MESH: &str =
+    "v 0 0 0\nv 1 0 0.1\nv 2 0 0\nv 0 1 0.1\nv 1 1 0.3\nv 2 1 0.1\nv 0 2 0\nv 1 2 0.1\nv 2 2 0\n\
+f 1 2 5\nf 1 5 4\nf 2 3 6\nf 2 6 5\nf 4 5 8\nf 4 8 7\nf 5 6 9\nf 5 9 8\n";
+
+#[test]
+fn fifo_outputs_with_no_reader_are_refused_at_once() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    gonio(dir);
+    queries(dir, "q.csv", 3);
+    fs::write(dir.join("r.json"), RESULT).unwrap();
+    fs::write(dir.join("m.obj"), MESH).unwrap();
+    for name in ["o.csv", "o.json", "o.png", "o.wgsl", "o.glb"] {
+        mkfifo(&dir.join(name));
+    }
+    let before = common::snapshot(dir);
+    let cases: Vec<Vec<&str>> = vec![
+        vec![
+            "eval",
+            "--params",
+            "r.json",
+            "--queries",
+            "q.csv",
+            "--out",
+            "o.csv",
+            "-q",
+        ],
+        vec![
+            "fit", "g.csv", "--model", "lambert", "--out", "o.json", "-q",
+        ],
+        vec![
+            "render", "--params", "r.json", "--size", "8", "8", "--out", "o.png", "-q",
+        ],
+        vec![
+            "export", "r.json", "--shader", "wgsl", "--out", "o.wgsl", "-q",
+        ],
+        vec!["export", "r.json", "--gltf", "o.glb", "-q"],
+        vec!["tangents", "m.obj", "--out", "o.csv", "-q"],
+        vec!["tangents", "m.obj", "--out", "o.glb", "-q"],
+    ];
+    for args in cases {
+        let start = Instant::now();
+        let o = run(&args, dir);
+        refused(&o, &["FIFO with no reader"]);
+        assert!(start.elapsed() < Duration::from_secs(30), "{args:?}");
+        assert_eq!(common::snapshot(dir), before, "{args:?}");
+    }
+    no_leftovers(dir);
+}
+
+#[test]
+fn a_fifo_output_with_a_reader_is_streamed() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    queries(dir, "q.csv", 3);
+    fs::write(dir.join("r.json"), RESULT).unwrap();
+    mkfifo(&dir.join("o.csv"));
+    let fifo = dir.join("o.csv");
+    let reader = std::thread::spawn(move || fs::read_to_string(fifo).unwrap());
+    std::thread::sleep(Duration::from_millis(200));
+    ok(&run(
+        &[
+            "eval",
+            "--params",
+            "r.json",
+            "--queries",
+            "q.csv",
+            "--out",
+            "o.csv",
+            "-q",
+        ],
+        dir,
+    ));
+    let text = reader.join().unwrap();
+    assert_eq!(text.lines().count(), 4, "{text}");
+    no_leftovers(dir);
+}
+
+#[test]
+fn a_signal_stops_a_wait_on_a_fifo_input_or_output() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    fs::write(dir.join("r.json"), LAMBERT).unwrap();
+    queries(dir, "big.csv", 100_000);
+    mkfifo(&dir.join("in.csv"));
+    mkfifo(&dir.join("out.csv"));
+    for signal in [libc::SIGTERM, libc::SIGINT] {
+        // an input FIFO nobody writes
+        let (code, err) = signalled(
+            &[
+                "fit", "in.csv", "--model", "lambert", "--out", "f.json", "-q",
+            ],
+            dir,
+            Duration::from_millis(700),
+            signal,
+        );
+        assert_eq!(code, Some(130), "{err}");
+        assert!(err.contains("no output was written"), "{err}");
+        // an output FIFO whose reader never reads (the pipe fills)
+        use std::os::unix::fs::OpenOptionsExt;
+        let _reader = fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(dir.join("out.csv"))
+            .unwrap();
+        let (code, err) = signalled(
+            &[
+                "eval",
+                "--params",
+                "r.json",
+                "--queries",
+                "big.csv",
+                "--out",
+                "out.csv",
+                "-q",
+            ],
+            dir,
+            Duration::from_millis(1500),
+            signal,
+        );
+        assert_eq!(code, Some(130), "{err}");
+        assert!(err.contains("interrupted"), "{err}");
+        no_leftovers(dir);
+    }
+    assert!(!dir.join("f.json").exists());
+}
+
+// ---------------------------------------------------------------------------------------------
+// 4. synth: all or nothing
+
+fn synth_config(kd: f64) -> String {
+    format!(
+        "model = \"lambert\"\n[params]\nkd = {kd}\n[gonio]\nrandom = {{ count = 2000, seed = 1 }}\n\
+         [capture]\nwidth = 32\nheight = 32\nsize_mm = [1.0, 1.0]\n\
+         [[capture.images]]\nlight = {{ type = \"directional\", theta_deg = 30.0, phi_deg = 0.0, irradiance = 1.0 }}\n\
+         camera = {{ type = \"orthographic\", theta_deg = 0.0, phi_deg = 0.0 }}\n\
+         [[capture.images]]\nlight = {{ type = \"directional\", theta_deg = 50.0, phi_deg = 90.0, irradiance = 1.0 }}\n\
+         camera = {{ type = \"orthographic\", theta_deg = 10.0, phi_deg = 0.0 }}\n"
+    )
+}
+
+/// Which of the reference sets `refs` (name, snapshot) the set in `dir` is, whole.
+fn which_set(dir: &Path, refs: &[(&str, Vec<(String, Vec<u8>)>)]) -> String {
+    let now = common::snapshot(dir);
+    for (name, snap) in refs {
+        if &now == snap {
+            return name.to_string();
+        }
+    }
+    let names: Vec<String> = now.iter().map(|(n, _)| n.clone()).collect();
+    panic!("the set is no single run's: {names:?}");
+}
+
+#[test]
+fn synth_runs_into_one_set_never_mix_and_a_signal_leaves_no_staging() {
+    let d = tempfile::tempdir().unwrap();
+    let dir = d.path();
+    fs::write(dir.join("a.toml"), synth_config(0.3)).unwrap();
+    fs::write(dir.join("b.toml"), synth_config(0.7)).unwrap();
+    // the two sets, each written alone
+    ok(&run(
+        &["synth", "--config", "a.toml", "--out", "ref_a", "-q"],
+        dir,
+    ));
+    ok(&run(
+        &["synth", "--config", "b.toml", "--out", "ref_b", "-q"],
+        dir,
+    ));
+    let refs = [
+        ("a", common::snapshot(&dir.join("ref_a"))),
+        ("b", common::snapshot(&dir.join("ref_b"))),
+    ];
+    assert_ne!(refs[0].1, refs[1].1);
+    ok(&run(
+        &["synth", "--config", "a.toml", "--out", "set", "-q"],
+        dir,
+    ));
+    for round in 0..3 {
+        let spawn = |cfg: &str| {
+            std::process::Command::new(assert_cmd::cargo::cargo_bin("fibrefit"))
+                .current_dir(dir)
+                .args(["synth", "--config", cfg, "--out", "set", "-q"])
+                .output()
+        };
+        let (oa, ob) = std::thread::scope(|s| {
+            let a = s.spawn(|| spawn("a.toml").unwrap());
+            let b = s.spawn(|| spawn("b.toml").unwrap());
+            (a.join().unwrap(), b.join().unwrap())
+        });
+        ok(&oa);
+        ok(&ob);
+        which_set(&dir.join("set"), &refs);
+        no_leftovers(dir);
+        let _ = round;
+    }
+    // a signal at any moment: the set is the old one or the new one, whole; no staging left
+    for k in 0..12 {
+        ok(&run(
+            &["synth", "--config", "a.toml", "--out", "set", "-q"],
+            dir,
+        ));
+        let (code, err) = signalled(
+            &["synth", "--config", "b.toml", "--out", "set", "-q"],
+            dir,
+            Duration::from_millis(10 + 15 * k),
+            libc::SIGTERM,
+        );
+        assert!(matches!(code, Some(0) | Some(130)), "{code:?}: {err}");
+        let set = which_set(&dir.join("set"), &refs);
+        if code == Some(130) {
+            let written = err.contains("interrupted after the outputs were written");
+            assert_eq!(set == "b", written, "after {} ms: {err}", 10 + 15 * k);
+        }
+        no_leftovers(dir);
+    }
+}
