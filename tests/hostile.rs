@@ -392,6 +392,22 @@ fn the_memory_budget_covers_auto_and_named_rungs_before_any_allocation() {
         );
         assert_eq!(common::snapshot(dir), before, "{model}");
     }
+    // score plans the same memory for a result's knobs, before evaluating anything
+    let mut vt: serde_json::Value = serde_json::from_str(RESULT).unwrap();
+    vt["model"] = serde_json::json!("varying-topology");
+    vt["knobs"] = serde_json::json!({"histogram_bins": 65536});
+    fs::write(dir.join("vt.json"), vt.to_string()).unwrap();
+    refused(
+        &run(&["score", "vt.json", "g.csv"], dir),
+        &[
+            "vt.json",
+            "GiB of memory per thread",
+            "histogram_bins = 65536",
+        ],
+    );
+    vt["knobs"] = serde_json::json!({"histogram_bins": 16});
+    fs::write(dir.join("vt.json"), vt.to_string()).unwrap();
+    ok(&run(&["score", "vt.json", "g.csv"], dir));
     // the default bins are far within it, and a fit with them runs
     fs::write(dir.join("d.toml"), "model = \"varying-topology\"\n").unwrap();
     let cfg = fibrefit::fit::config::FitConfig::load(&dir.join("d.toml")).unwrap();

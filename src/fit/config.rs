@@ -144,6 +144,32 @@ pub const SCRATCH_PER_BIN: f64 = 1024.0;
 /// Most scratch memory a fit's model evaluations may take per worker thread: 1 GiB.
 pub const MAX_SCRATCH_BYTES: u64 = 1 << 30;
 
+/// [`FitConfig::planned_scratch_bytes`] of one rung with `histogram_bins`, for `samples`
+/// evaluated in batches (what `score` plans for a result's knobs).
+pub fn scratch_bytes(rung: ModelId, histogram_bins: usize, samples: usize) -> f64 {
+    if !crate::model::params::uses(rung, "histogram_bins") {
+        return 0.0;
+    }
+    samples.min(EVALUATION_BATCH) as f64 * histogram_bins as f64 * SCRATCH_PER_BIN
+}
+
+/// Refuse evaluating rung `rung` with `histogram_bins` on `samples` samples when its scratch
+/// memory per thread ([`scratch_bytes`]) is beyond [`MAX_SCRATCH_BYTES`], with the estimate.
+pub fn check_scratch(rung: ModelId, histogram_bins: usize, samples: usize) -> Result<()> {
+    let bytes = scratch_bytes(rung, histogram_bins, samples);
+    if bytes > MAX_SCRATCH_BYTES as f64 {
+        bail!(
+            "evaluating `{rung}` with histogram_bins = {histogram_bins} would take about {:.1} GiB \
+             of memory per thread ({} samples a batch x {histogram_bins} x {SCRATCH_PER_BIN} bytes): \
+             more than the {} GiB allowed per thread",
+            bytes / (1u64 << 30) as f64,
+            samples.min(EVALUATION_BATCH),
+            MAX_SCRATCH_BYTES >> 30
+        );
+    }
+    Ok(())
+}
+
 /// Candidates of the global stage when the config does not say: 32 plus 24 per free shape
 /// parameter.
 pub fn default_candidates(dim: usize) -> usize {
