@@ -118,7 +118,10 @@ fn every_registered_rung_with_a_shader_equals_the_rust_model_at_its_example() {
     for id in ModelId::ALL {
         let text = format!("model = '{id}'\n{}", id.rung().example_text(Some(60.0)));
         let (id, p) = params(&text);
-        if matches!(id.rung().shader, fibrefit::model::rung::ShaderSection::None(_)) {
+        if matches!(
+            id.rung().shader,
+            fibrefit::model::rung::ShaderSection::None(_)
+        ) {
             assert!(shader::wgsl(id, &p, &[]).is_err(), "{id} has no shader");
             continue;
         }

@@ -21,6 +21,7 @@ with the message the command line prints.
 from __future__ import annotations
 
 import json as _json
+import operator as _operator
 import os as _os
 from dataclasses import dataclass as _dataclass, field as _field
 from typing import Any, Dict, List, Optional, Tuple, Union
@@ -46,8 +47,27 @@ __version__ = _native.version()
 PathLike = Union[str, "_os.PathLike[str]"]
 
 
+def _image_index(image_index: Any) -> int:
+    """An image index as the native layer takes it: an integer >= 0 (one beyond the capture's
+    images is refused there, with the capture's count)."""
+    if isinstance(image_index, (bool, np.bool_)):
+        raise FibrefitError(f"image_index = {image_index!r}: expected an integer >= 0")
+    try:
+        i = _operator.index(image_index)
+    except TypeError:
+        raise FibrefitError(f"image_index = {image_index!r}: expected an integer >= 0") from None
+    if i < 0:
+        raise FibrefitError(f"image_index = {i}: expected an integer >= 0")
+    # beyond any capture's images, and within what the native layer converts
+    return min(i, 2**63 - 1)
+
+
 def _f64(name: str, a: Any, width: int) -> np.ndarray:
     """`a` as a C-contiguous float64 (N, width) array; one row is accepted as (width,)."""
+    if np.iscomplexobj(a):
+        raise FibrefitError(
+            f"{name}: complex values; expected real numbers (their imaginary parts would be lost)"
+        )
     try:
         arr = np.ascontiguousarray(a, dtype=np.float64)
     except (TypeError, ValueError) as e:
@@ -95,7 +115,7 @@ class Material:
         """Image ``image_index`` of a capture as this material renders it, noise-free: an
         (H, W, C) float32 array of radiance per unit irradiance (exposure applied, as
         ``fibrefit.mitsuba.captured_image``), the maps looked up at each pixel's texel."""
-        return self._m.render_capture(_os.fspath(capture_toml), int(image_index))
+        return self._m.render_capture(_os.fspath(capture_toml), _image_index(image_index))
 
     @property
     def model(self) -> str:

@@ -38,6 +38,7 @@ from typing import Any, Dict, Optional, Tuple
 import numpy as np
 
 from . import FibrefitError, Material, _native
+from . import _image_index
 from . import load as _load
 
 __all__ = ["register", "capture_scene", "captured_image", "LLVM_CANDIDATES"]
@@ -212,7 +213,7 @@ def captured_image(capture_toml: str, image_index: int) -> Tuple[np.ndarray, np.
     """Image ``image_index`` of a capture as the fit reads it, times its exposure: an
     (H, W, C) float32 array of radiance per unit irradiance (row 0 at the top) and an (H, W)
     bool array of saturated pixels."""
-    return _native.capture_image(_os.fspath(capture_toml), int(image_index))
+    return _native.capture_image(_os.fspath(capture_toml), _image_index(image_index))
 
 
 def _direction(theta_deg: float, phi_deg: float) -> np.ndarray:

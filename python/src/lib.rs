@@ -26,8 +26,32 @@ pyo3::create_exception!(
     "An error of fibrefit: bad input, a failed fit or an unwritable output. The message is the one the command line prints."
 );
 
-/// The CLI's rendering of an error (`error: {e:#}` without the prefix).
+/// The Python error (KeyboardInterrupt) a Ctrl-C raised while the crate waited on a FIFO or
+/// device: the wait stopped with an error, and this is what the call raises instead.
+static PENDING_SIGNAL: std::sync::Mutex<Option<PyErr>> = std::sync::Mutex::new(None);
+
+/// Whether Ctrl-C was pressed (Python's signal handlers run; on the main thread only): the
+/// crate asks while it waits on a FIFO or device, so the wait stops at once.
+fn check_interrupt() -> bool {
+    Python::attach(|py| match py.check_signals() {
+        Ok(()) => false,
+        Err(e) => {
+            *PENDING_SIGNAL.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+            true
+        }
+    })
+}
+
+/// The CLI's rendering of an error (`error: {e:#}` without the prefix); a wait stopped by
+/// Ctrl-C raises the KeyboardInterrupt instead.
 fn err(e: anyhow::Error) -> PyErr {
+    if let Some(signal) = PENDING_SIGNAL
+        .lock()
+        .unwrap_or_else(|p| p.into_inner())
+        .take()
+    {
+        return signal;
+    }
     FibrefitError::new_err(format!("{e:#}"))
 }
 
@@ -584,6 +608,7 @@ fn capture_image<'py>(
 
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
+    fibrefit::load::input::set_interrupt_check(check_interrupt);
     m.add("FibrefitError", m.py().get_type::<FibrefitError>())?;
     m.add_class::<Material>()?;
     m.add_class::<FitResult>()?;

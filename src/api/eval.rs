@@ -9,7 +9,7 @@ use crate::model::lambert::preview_intensity;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::topology::max_height;
 use crate::model::{self, DirectionPair, ModelId};
-use anyhow::{anyhow, bail, Result};
+use anyhow::{bail, Result};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
@@ -21,18 +21,8 @@ pub fn load_params(
     quiet: bool,
 ) -> Result<(RawParams, ModelId, ModelParams)> {
     let raw = crate::export::result_json::read_params(path)?;
-    let id_text = model
-        .map(str::to_string)
-        .or_else(|| raw.model.clone())
-        .ok_or_else(|| {
-            anyhow!(
-                "no model given: pass --model ID or set `model` in {}",
-                path.display()
-            )
-        })?;
-    let id: ModelId = id_text.parse().map_err(|e: String| anyhow!(e))?;
-    let (params, warnings) =
-        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", path.display()))?;
+    let (id, params, warnings) =
+        crate::export::result_json::checked_params(&raw, model, &path.display().to_string())?;
     if !quiet {
         for w in &warnings {
             eprintln!("warning: {}: {w}", path.display());

@@ -74,19 +74,15 @@ pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
     inputs
 }
 
-/// The maps directory a `fit --maps` result names (beside the result, then in the working
+/// The maps directory a `fit --maps` result names (beside the result, never in the working
 /// directory), with a warning when it names one that is not there.
 fn maps_of(result: &Path, quiet: bool) -> Result<Option<PathBuf>> {
     let found = crate::api::render::maps_dir(None, result, true)?;
     if found.is_none() && !quiet {
-        let named = crate::load::input::read_text(result)
-            .ok()
-            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-            .and_then(|v| v["maps"]["directory"].as_str().map(str::to_string));
-        if let Some(named) = named {
+        if let Ok(Some((named, looked))) = crate::api::render::named_maps_dir(result) {
             eprintln!(
-                "warning: {} names the maps directory {named}, which is not beside it nor in the working directory: the GLB carries no textures, only the global material",
-                result.display()
+                "warning: {}: the GLB carries no textures, only the global material",
+                crate::api::render::missing_maps(result, &named, &looked)
             );
         }
     }

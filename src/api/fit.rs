@@ -61,7 +61,9 @@ pub fn configure(
             .map_err(|e: String| anyhow!("--model: `model`: {e}"))?;
         match (config.is_some(), choice) {
             // a config written for another rung (or for auto) tried with this one
-            (true, crate::fit::config::ModelChoice::Rung(id)) if cfg.model != choice => cfg.retarget(id)?,
+            (true, crate::fit::config::ModelChoice::Rung(id)) if cfg.model != choice => {
+                cfg.retarget(id)?
+            }
             _ => cfg.model = choice,
         }
     }

@@ -61,11 +61,13 @@ impl Material {
             None => crate::api::render::maps_dir(None, result, true)?,
         };
         let (m, mut warnings) = Self::from_raw(raw, result, maps)?;
-        if m.texel_maps.is_none() && named_maps(result).is_some() {
-            warnings.push(format!(
-                "{} names a maps directory that is not beside it: the material has no maps (pass maps=DIR)",
-                result.display()
-            ));
+        if m.texel_maps.is_none() {
+            if let Ok(Some((named, looked))) = crate::api::render::named_maps_dir(result) {
+                warnings.push(format!(
+                    "{}: the material has no maps (pass maps=DIR)",
+                    crate::api::render::missing_maps(result, &named, &looked)
+                ));
+            }
         }
         Ok((m, warnings))
     }
@@ -367,12 +369,6 @@ impl Material {
 }
 
 /// The maps directory a result names, if any.
-fn named_maps(result: &Path) -> Option<String> {
-    let text = crate::load::input::read_text(result).ok()?;
-    let v: serde_json::Value = serde_json::from_str(&text).ok()?;
-    v["maps"]["directory"].as_str().map(str::to_string)
-}
-
 fn local(sp: &ShadingPoint, d: &Vec3) -> Local {
     let w = sp.local(d);
     Local {

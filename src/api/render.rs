@@ -187,12 +187,31 @@ pub fn object(name: &str, tangents: &str, params: &ModelParams) -> Result<Object
     })
 }
 
-/// The maps directory: --maps, else the one a `fit --maps` result names (relative to the
-/// result file, then to the working directory), with a warning when it cannot be found.
+/// The maps directory: --maps, else the one a `fit --maps` result names, relative to the
+/// result's folder (docs/formats.md) and never to the working directory; a warning (unless
+/// `quiet`) says where it was looked for when it is not there.
 pub fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Option<PathBuf>> {
     if let Some(d) = given {
         return Ok(Some(d.to_path_buf()));
     }
+    let Some((named, looked)) = named_maps_dir(params)? else {
+        return Ok(None);
+    };
+    if looked.is_dir() {
+        return Ok(Some(looked));
+    }
+    if !quiet {
+        eprintln!(
+            "warning: {}: rendering without the maps (give --maps DIR)",
+            missing_maps(params, &named, &looked)
+        );
+    }
+    Ok(None)
+}
+
+/// The maps directory a result JSON names (`maps.directory`) and where that is: beside the
+/// result (or the absolute path it gives). `None` for a parameter file or a result without maps.
+pub fn named_maps_dir(params: &Path) -> Result<Option<(String, PathBuf)>> {
     let is_json = params
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
@@ -204,19 +223,17 @@ pub fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Opti
     let Some(named) = v["maps"]["directory"].as_str() else {
         return Ok(None);
     };
-    let beside = params.parent().unwrap_or(Path::new(".")).join(named);
-    for d in [beside, PathBuf::from(named)] {
-        if d.is_dir() {
-            return Ok(Some(d));
-        }
-    }
-    if !quiet {
-        eprintln!(
-            "warning: {} names the maps directory {named}, which is not beside it nor in the working directory: rendering without the maps (give --maps DIR)",
-            params.display()
-        );
-    }
-    Ok(None)
+    let looked = params.parent().unwrap_or(Path::new(".")).join(named);
+    Ok(Some((named.to_string(), looked)))
+}
+
+/// What a warning says of a maps directory a result names that is not there.
+pub fn missing_maps(params: &Path, named: &str, looked: &Path) -> String {
+    format!(
+        "{} names the maps directory `{named}`, which is not there (looked for beside the result: {}; a result's maps are never looked for in the working directory)",
+        params.display(),
+        looked.display()
+    )
 }
 
 /// The scene the flags describe: one object at the origin, directional lights of unit

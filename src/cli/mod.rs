@@ -60,7 +60,10 @@ pub enum Command {
 fn command() -> clap::Command {
     use clap::CommandFactory;
     Cli::command().mut_subcommand("fit", |c| {
-        let base = c.get_after_help().map(|s| s.to_string()).unwrap_or_default();
+        let base = c
+            .get_after_help()
+            .map(|s| s.to_string())
+            .unwrap_or_default();
         let rungs: String = crate::model::ModelId::ALL
             .iter()
             .map(|id| format!("  {:<18}{}\n", id.as_str(), id.rung().description))

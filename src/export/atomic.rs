@@ -74,6 +74,9 @@ pub fn install_signal_cleanup() {
         if let Some(h) = hook.as_mut() {
             h();
         }
+        // a stream waiting on a full pipe, a wait on a FIFO input, stop now; nothing new is
+        // made from here on (what the run finished is written above)
+        crate::load::input::note_interrupt();
         // a commit in progress finishes first: outputs are all old or all new
         let _commit = lock(&COMMIT);
         remove_live_temporaries();
@@ -99,7 +102,16 @@ fn remove_live_temporaries() {
         let _ = std::fs::remove_file(p);
     }
     for p in lock(&LIVE_DIRS).iter() {
-        let _ = std::fs::remove_dir_all(p);
+        // the run may still be writing a file into it (it makes no new one once interrupted):
+        // try again until it is gone
+        for _ in 0..100 {
+            match std::fs::remove_dir_all(p) {
+                Err(e) if e.kind() != std::io::ErrorKind::NotFound => {
+                    std::thread::sleep(std::time::Duration::from_millis(10))
+                }
+                _ => break,
+            }
+        }
     }
     for p in lock(&MADE_DIRS).iter().rev() {
         let _ = std::fs::remove_dir(p);
@@ -138,6 +150,13 @@ impl Staging {
             std::process::id(),
             temp_nonce() & 0xffff_ffff_ffff
         ));
+        if crate::load::input::interrupted() {
+            bail!(
+                "{}: {}",
+                parent.display(),
+                crate::load::input::INTERRUPTED_MESSAGE
+            );
+        }
         lock(&LIVE_DIRS).push(path.clone());
         if let Err(e) = std::fs::create_dir(&path) {
             lock(&LIVE_DIRS).retain(|x| *x != path);
@@ -239,6 +258,12 @@ fn sweep_stale(dir: &Path) {
 /// A new temporary file `.fibrefit-<pid>-<random>.tmp` in `dir`, registered for the signal
 /// handler before it exists.
 fn new_temp(dir: &Path) -> std::io::Result<(PathBuf, File)> {
+    // once a signal came, nothing new is made (its handler is removing what there is)
+    if crate::load::input::interrupted() {
+        return Err(std::io::Error::other(
+            crate::load::input::INTERRUPTED_MESSAGE,
+        ));
+    }
     let mut last = None;
     for _ in 0..16 {
         let temp = dir.join(format!(
@@ -320,6 +345,8 @@ struct Entry {
     temp: PathBuf,
     file: File,
     kind: Kind,
+    /// A FIFO or device, opened non-blocking when it was reserved.
+    stream: Option<File>,
 }
 
 /// Handle of one reserved output of an [`Outputs`] set.
@@ -486,6 +513,21 @@ impl Outputs {
                 }
             }
         }
+        // a FIFO or device is opened now, without blocking: a FIFO with no reader is refused
+        // before the work (a run never waits for one, nor hangs in its commit)
+        let stream = match kind {
+            Kind::Stream => Some(open_stream(&target).map_err(|e| {
+                if e.raw_os_error() == Some(libc::ENXIO) {
+                    anyhow!(
+                        "{}: is a FIFO with no reader; start the program that reads it first (fibrefit does not wait for one)",
+                        flagged(flag, path)
+                    )
+                } else {
+                    anyhow!("{}: cannot open for writing: {e}", flagged(flag, path))
+                }
+            })?),
+            _ => None,
+        };
         let stage_dir = match kind {
             Kind::Stream => std::env::temp_dir(),
             _ => dir.clone(),
@@ -516,6 +558,7 @@ impl Outputs {
             temp,
             file,
             kind,
+            stream,
         }));
         Ok(OutputId(self.entries.len() - 1))
     }
@@ -611,7 +654,10 @@ impl Outputs {
                     let _ = std::fs::remove_file(&e.temp);
                     forget(&e.temp);
                     written.push(e.shown.clone());
-                    lock(&COMMITTED).push(e.shown.clone());
+                    // a file put into a staging directory is not yet an output
+                    if !lock(&LIVE_DIRS).iter().any(|d| e.target.starts_with(d)) {
+                        lock(&COMMITTED).push(e.shown.clone());
+                    }
                 }
                 Err(err) => {
                     let what = flagged(&e.flag, &e.shown);
@@ -673,12 +719,48 @@ impl Drop for Outputs {
     }
 }
 
-/// Stream the staged content into a FIFO or character device (never replaced).
+/// Open a FIFO or character device for writing without blocking (a FIFO with no reader fails
+/// with ENXIO instead of waiting for one).
+fn open_stream(target: &Path) -> std::io::Result<File> {
+    use std::os::unix::fs::OpenOptionsExt;
+    OpenOptions::new()
+        .write(true)
+        .custom_flags(libc::O_NONBLOCK)
+        .open(target)
+}
+
+/// Stream the staged content into a FIFO or character device (never replaced), opened when it
+/// was reserved; a full pipe is waited on by polling, so a signal stops the wait.
 fn stream(e: &mut Entry) -> std::io::Result<()> {
-    let mut dst = OpenOptions::new().write(true).open(&e.target)?;
+    use std::os::fd::AsRawFd;
+    let mut dst = match e.stream.take() {
+        Some(f) => f,
+        None => open_stream(&e.target)?,
+    };
     e.file.seek(std::io::SeekFrom::Start(0))?;
-    std::io::copy(&mut e.file, &mut dst)?;
-    dst.flush()
+    let shown = e.shown.clone();
+    let what = move || shown.display().to_string();
+    let mut buf = vec![0u8; 1 << 16];
+    loop {
+        let n = match e.file.read(&mut buf) {
+            Ok(0) => return Ok(()),
+            Ok(n) => n,
+            Err(err) if err.kind() == std::io::ErrorKind::Interrupted => continue,
+            Err(err) => return Err(err),
+        };
+        let mut at = 0;
+        while at < n {
+            match dst.write(&buf[at..n]) {
+                Ok(0) => return Err(std::io::ErrorKind::WriteZero.into()),
+                Ok(k) => at += k,
+                Err(err) if err.kind() == std::io::ErrorKind::WouldBlock => {
+                    crate::load::input::wait_ready(dst.as_raw_fd(), libc::POLLOUT, None, &what)?
+                }
+                Err(err) if err.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(err) => return Err(err),
+            }
+        }
+    }
 }
 
 /// Rename the staged file over the target; an existing file keeps its mode, owner and group.

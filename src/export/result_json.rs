@@ -8,7 +8,8 @@ use crate::fit::config::{FitConfig, Knobs as FitKnobs, Metric, ParamEntry};
 use crate::fit::parameters::ParamSet;
 use crate::fit::score::FittedResult;
 use crate::fit::FitOutcome;
-use crate::model::params::{Albedo, RawParams};
+use crate::model::params::{Albedo, ModelParams, RawParams};
+use crate::model::ModelId;
 use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -20,6 +21,10 @@ pub const SCHEMA: &str = "fibrefit-result/1";
 /// A parameter file (TOML or JSON) or a fitted result, as parameters; a result's relative
 /// topology map is taken from beside it.
 pub fn read_params(path: &Path) -> Result<RawParams> {
+    if path.is_dir() {
+        // named as what it is, whatever its name says (a folder `fit.json`, `data.csv`)
+        return RawParams::load(path);
+    }
     let is_json = path
         .extension()
         .is_some_and(|e| e.eq_ignore_ascii_case("json"));
@@ -36,7 +41,13 @@ pub fn read_params(path: &Path) -> Result<RawParams> {
     if !is_result {
         return RawParams::load(path);
     }
-    let mut raw = params_of_result(&value).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    raw_of_result(&value, path)
+}
+
+/// The parameters of the result `value` read from `path` (a relative topology map taken from
+/// beside it).
+fn raw_of_result(value: &serde_json::Value, path: &Path) -> Result<RawParams> {
+    let mut raw = params_of_result(value).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     if let Some(map) = &raw.topology_map {
         if map.is_relative() {
             raw.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
@@ -45,11 +56,36 @@ pub fn read_params(path: &Path) -> Result<RawParams> {
     Ok(raw)
 }
 
+/// The one check of a parameter set's values that every command reading a result or a
+/// parameter file makes (`eval`, `render`, `export`, `score`, map tiles): the rung (`model`,
+/// else the file's) and its validated parameters, with warnings about the parameters the rung
+/// does not use. Errors are labelled `name` (the file).
+pub fn checked_params(
+    raw: &RawParams,
+    model: Option<&str>,
+    name: &str,
+) -> Result<(ModelId, ModelParams, Vec<String>)> {
+    let id_text = model
+        .map(str::to_string)
+        .or_else(|| raw.model.clone())
+        .ok_or_else(|| anyhow!("no model given: pass --model ID or set `model` in {name}"))?;
+    let id: ModelId = id_text.parse().map_err(|e: String| anyhow!(e))?;
+    let (params, warnings) =
+        ModelParams::from_raw(raw, id).map_err(|e| anyhow!("{name}: {e:#}"))?;
+    Ok((id, params, warnings))
+}
+
 /// Read a `fibrefit-result/1` JSON for data with `channels` channels.
 pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
     let text = crate::load::input::read_text_as(path, "result file")?;
     let v: serde_json::Value =
         serde_json::from_str(&text).map_err(|e| anyhow!("{}: {e}", path.display()))?;
+    // its parameters and knobs checked exactly as `eval`, `render` and `export` check them (a
+    // partial result is refused below, with its own message)
+    if v.get("partial").and_then(|p| p.as_bool()) != Some(true) {
+        let raw = raw_of_result(&v, path)?;
+        checked_params(&raw, None, &path.display().to_string())?;
+    }
     let mut r = result_from_value(&v, &path.display().to_string(), channels)?;
     // a relative topology map lies beside the result (as fit writes it)
     if let Some(map) = r.knobs.topology_map.as_mut().filter(|m| m.is_relative()) {
@@ -223,6 +259,9 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
         ] {
             let used = model.is_none_or(|id| crate::model::params::uses(id, key));
             if let Some(x) = k.get(key).filter(|_| used) {
+                if key != "topology_map" && x.as_u64().is_none() {
+                    bail!("knobs.{key} = {x}: expected a whole number >= 1");
+                }
                 flat.insert(key.into(), x.clone());
             }
         }

@@ -68,6 +68,13 @@ impl CaptureStore {
         let base = path.parent().unwrap_or(Path::new(".")).to_path_buf();
         let name = path.display().to_string();
         check_description(&name, &desc, subsample)?;
+        // every image must have the first's size: the whole capture's memory is known from the
+        // first image's header, before any pixel is decoded
+        // (a header that cannot be read is left to the image's own reading, whose error
+        // says why in the words of its checks)
+        if let Ok((w0, h0, c0)) = image_io::header(&resolve(&base, desc.images[0].frames()[0].0)) {
+            check_capture_memory(&name, &desc, (w0, h0), c0)?;
+        }
         let ReadImage {
             image: first,
             noise: first_noise,
@@ -480,6 +487,68 @@ pub(crate) struct ReadImage {
     pub image: LinearImage,
     pub noise: Option<ImageNoise>,
     pub rows: Option<bracket::NoiseRows>,
+}
+
+/// The most memory a capture may take while it is read (docs/safety.md): 2 GiB, counted from
+/// the first image's size before any other image is decoded ([`capture_memory`]).
+pub const MAX_CAPTURE_BYTES: u64 = 2 << 30;
+
+/// The memory reading the capture `desc` of `w` x `h` images with `channels` channels takes at
+/// most: the store (4 B per value of every image, twice while the texels are compacted; 12 B
+/// per pixel of texel index and position), the maps it gives (4 B per pixel each, a view map 12
+/// B per pixel and image), and one image being read (each frame of the largest bracket as a
+/// linear image, plus the decoding of one frame, [`image_io::image_memory`] of float samples).
+pub fn capture_memory(desc: &CaptureFile, (w, h): (usize, usize), channels: usize) -> u128 {
+    let px = w as u128 * h as u128;
+    let (images, c) = (desc.images.len() as u128, channels as u128);
+    let store = px * (images * c * 4 * 2 + 12);
+    let sw = &desc.swatch;
+    let maps = [
+        &sw.mask,
+        &sw.tangent_map,
+        &sw.topology_map,
+        &sw.height_map,
+        &sw.fibre_azimuth_map,
+    ]
+    .iter()
+    .filter(|m| m.is_some())
+    .count() as u128;
+    let views = desc
+        .images
+        .iter()
+        .filter(|s| matches!(s.camera, Camera::ViewMap { .. }))
+        .count() as u128;
+    let frames = desc
+        .images
+        .iter()
+        .map(|s| s.frames().len())
+        .max()
+        .unwrap_or(1) as u128;
+    let linear = px * (c * 4 + 1);
+    let decoding = image_io::image_memory(w as u64, h as u64, channels as u64, 4)
+        .map_or(u128::MAX / 4, u128::from);
+    store + px * (maps * 4 + views * 12) + frames * linear + decoding
+}
+
+/// Refuse a capture whose reading would take more than [`MAX_CAPTURE_BYTES`], with the estimate.
+fn check_capture_memory(
+    name: &str,
+    desc: &CaptureFile,
+    size: (usize, usize),
+    channels: usize,
+) -> Result<()> {
+    let bytes = capture_memory(desc, size, channels);
+    if bytes > MAX_CAPTURE_BYTES as u128 {
+        bail!(
+            "{name}: {} images of {}x{} pixels with {channels} channels would take {:.2} GiB of memory to read; the most a capture may take is {} (docs/safety.md): use fewer or smaller images, or crop them to the swatch",
+            desc.images.len(),
+            size.0,
+            size.1,
+            bytes as f64 / (1u64 << 30) as f64,
+            super::input::bytes_text(MAX_CAPTURE_BYTES)
+        );
+    }
+    Ok(())
 }
 
 /// Image `spec` (its file, or its bracket merged), checked for negative values.

@@ -4,8 +4,9 @@
 //! Every image (captures, masks, tangent, topology, height and view maps, result maps) is read
 //! once through [`super::input`] (at most [`super::input::MAX_INPUT_BYTES`], hashed), its size
 //! taken from its header *before* any pixel is decoded: more than [`MAX_IMAGE_PIXELS`] pixels
-//! (2^28, e.g. 16384 x 16384) is refused with the image named and its claimed size, and the
-//! decoders are given a memory limit ([`MAX_DECODE_BYTES`]), so that a small file claiming a
+//! (2^28, e.g. 16384 x 16384), or more memory to read than [`MAX_IMAGE_BYTES`], is refused with
+//! the image named and its claimed size, and the decoders are given a memory limit
+//! ([`MAX_DECODE_BYTES`]), so that a small file claiming a
 //! huge image, or a compressed one that expands without end (a PNG or ZIP-EXR bomb), is an
 //! error, not an allocation failure.
 
@@ -17,9 +18,48 @@ use std::path::Path;
 /// header before decoding.
 pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
 
-/// The most bytes a decoder may allocate for one image's pixels: 4 GiB (2^28 pixels of four
-/// 32-bit channels).
-pub const MAX_DECODE_BYTES: u64 = 4 << 30;
+/// The most memory reading one image may take: 1 GiB, counted from the header before any
+/// pixel is decoded ([`image_memory`]: the decoded samples, the linear f32 copy, the
+/// intermediate codes and the saturation flags). An RGB half-float EXR reaches it at about 56
+/// million pixels (7500 x 7500), a grey 8-bit PNG at about 150 million.
+pub const MAX_IMAGE_BYTES: u64 = 1 << 30;
+
+/// The most bytes a decoder may allocate for one image's pixels (its limit, as a second
+/// guard): [`MAX_IMAGE_BYTES`].
+pub const MAX_DECODE_BYTES: u64 = MAX_IMAGE_BYTES;
+
+/// The memory reading a `width` x `height` image takes whose decoded pixels have `channels`
+/// channels of `sample_bytes` bytes each: the decoded samples, then per linear channel (1 or
+/// 3) an intermediate value (a code, or an EXR plane's f32) and the linear f32, and a
+/// saturation flag per pixel. `None` on overflow.
+pub fn image_memory(width: u64, height: u64, channels: u64, sample_bytes: u64) -> Option<u64> {
+    let linear = if channels >= 3 { 3 } else { 1 };
+    let per_pixel = channels
+        .checked_mul(sample_bytes)?
+        .checked_add(linear * 8 + 1)?;
+    width.checked_mul(height)?.checked_mul(per_pixel)
+}
+
+/// Refuse an image (at `path`, a `what`) whose reading would take more than
+/// [`MAX_IMAGE_BYTES`] ([`image_memory`]), with the estimate.
+pub fn check_image_memory(
+    path: &Path,
+    what: &str,
+    (width, height): (u64, u64),
+    channels: u64,
+    sample_bytes: u64,
+) -> Result<()> {
+    let bytes = image_memory(width, height, channels, sample_bytes);
+    if bytes.is_none_or(|b| b > MAX_IMAGE_BYTES) {
+        bail!(
+            "{}: {what} claims {width}x{height} pixels of {channels} channels ({sample_bytes} bytes each): reading it would take {} of memory; the most one image may take is {} (docs/safety.md)",
+            path.display(),
+            bytes.map_or("more than 2^64 bytes".to_string(), |b| format!("{:.2} GiB", b as f64 / (1u64 << 30) as f64)),
+            super::input::bytes_text(MAX_IMAGE_BYTES)
+        );
+    }
+    Ok(())
+}
 
 /// Refuse a `width` x `height` image (claimed by the header of `path`, a `what`) beyond
 /// [`MAX_IMAGE_PIXELS`], or with a zero side.
@@ -91,10 +131,22 @@ fn decode_limited(path: &Path, what: &str, bytes: Vec<u8>) -> Result<image::Dyna
             .with_guessed_format()
             .map_err(|e| anyhow!("{name}: cannot read {what}: {e}"))
     };
-    let (w, h) = reader()?
-        .into_dimensions()
+    use image::ImageDecoder;
+    let decoder = reader()?
+        .into_decoder()
         .map_err(|e| anyhow!("{name}: cannot decode {what}: {e}"))?;
+    let (w, h) = decoder.dimensions();
+    let colour = decoder.color_type();
+    drop(decoder);
     check_pixels(path, what, w as u64, h as u64)?;
+    let channels = colour.channel_count() as u64;
+    check_image_memory(
+        path,
+        what,
+        (w as u64, h as u64),
+        channels,
+        colour.bytes_per_pixel() as u64 / channels.max(1),
+    )?;
     let mut r = reader()?;
     let mut limits = image::Limits::default();
     limits.max_alloc = Some(MAX_DECODE_BYTES);
@@ -122,16 +174,14 @@ pub fn decode_exr(
             .iter()
             .map(|c| c.sample_type.bytes_per_sample() as u64)
             .sum();
-        let decoded = (size.0 as u64 * size.1 as u64).checked_mul(per_pixel);
-        if decoded.is_none_or(|b| b > MAX_DECODE_BYTES) {
-            bail!(
-                "{name}: {what} claims {}x{} pixels of {} channels ({per_pixel} bytes a pixel); the most one image may decode to is {}",
-                size.0,
-                size.1,
-                header.channels.list.len(),
-                super::input::bytes_text(MAX_DECODE_BYTES)
-            );
-        }
+        let channels = header.channels.list.len() as u64;
+        check_image_memory(
+            path,
+            what,
+            (size.0 as u64, size.1 as u64),
+            channels,
+            per_pixel.div_ceil(channels.max(1)),
+        )?;
     }
     use exr::prelude::traits::{ReadChannels, ReadLayers};
     let image = exr::prelude::read()
@@ -143,6 +193,70 @@ pub fn decode_exr(
         .from_buffered(Cursor::new(bytes))
         .map_err(|e| anyhow!("{name}: cannot read EXR {what}: {e}"))?;
     Ok(image.layer_data)
+}
+
+/// The size of the image at `path` and the channels it reads as (1 grey or 3 RGB), from its
+/// header alone (nothing decoded), with the per-image checks ([`check_pixels`],
+/// [`check_image_memory`]) made: what a capture's memory is planned from.
+pub fn header(path: &Path) -> Result<(usize, usize, usize)> {
+    let name = path.display();
+    let ext = path
+        .extension()
+        .and_then(|e| e.to_str())
+        .map(str::to_ascii_lowercase);
+    let (w, h, channels) = match ext.as_deref() {
+        Some("exr") => {
+            let bytes = read_with_magic(path, "image", &[0x76, 0x2f, 0x31, 0x01], "EXR")?;
+            let meta = exr::meta::MetaData::read_from_buffered(Cursor::new(&bytes[..]), false)
+                .map_err(|e| anyhow!("{name}: cannot read EXR image: {e}"))?;
+            let Some(header) = meta.headers.first() else {
+                bail!("{name}: cannot read EXR image: no layer");
+            };
+            let size = header.layer_size;
+            let per_pixel: u64 = header
+                .channels
+                .list
+                .iter()
+                .map(|c| c.sample_type.bytes_per_sample() as u64)
+                .sum();
+            let c = header.channels.list.len() as u64;
+            check_pixels(path, "image", size.0 as u64, size.1 as u64)?;
+            check_image_memory(
+                path,
+                "image",
+                (size.0 as u64, size.1 as u64),
+                c,
+                per_pixel.div_ceil(c.max(1)),
+            )?;
+            (size.0, size.1, c as usize)
+        }
+        Some(kind @ ("png" | "tif" | "tiff")) => {
+            let bytes = match kind {
+                "png" => read_with_magic(path, "image", b"\x89PNG\r\n\x1a\n", "PNG")?,
+                _ => read_with_any_magic(path, "image", &[b"II*\0", b"MM\0*"], "TIFF")?,
+            };
+            use image::ImageDecoder;
+            let decoder = image::ImageReader::new(Cursor::new(&bytes[..]))
+                .with_guessed_format()
+                .map_err(|e| anyhow!("{name}: cannot read image: {e}"))?
+                .into_decoder()
+                .map_err(|e| anyhow!("{name}: cannot decode image: {e}"))?;
+            let (w, h) = decoder.dimensions();
+            let colour = decoder.color_type();
+            let c = colour.channel_count() as u64;
+            check_pixels(path, "image", w as u64, h as u64)?;
+            check_image_memory(
+                path,
+                "image",
+                (w as u64, h as u64),
+                c,
+                colour.bytes_per_pixel() as u64 / c.max(1),
+            )?;
+            (w as usize, h as usize, c as usize)
+        }
+        _ => bail!("{name}: images must be .png, .exr or .tif/.tiff"),
+    };
+    Ok((w, h, if channels >= 3 { 3 } else { 1 }))
 }
 
 /// How a PNG's code values relate to light.

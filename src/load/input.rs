@@ -12,7 +12,10 @@
 //!   and the end of the read (or that gave fewer or more bytes than its size said) is an error
 //!   naming the file: it was written while this run read it, and what was read may be torn.
 //!
-//! A directory is refused. Opening a FIFO with no writer waits for one, as `cat` does.
+//! A directory is refused. A FIFO or device is opened without blocking and read by polling, so
+//! that a signal ([`interrupted`]: SIGINT/SIGTERM in the CLI, Ctrl-C in Python) stops the
+//! wait at once, and an input that gives no byte for [`SPECIAL_WAIT`] (a FIFO nobody writes)
+//! is an error naming it.
 
 use anyhow::{anyhow, bail, Result};
 use sha2::{Digest, Sha256};
@@ -24,6 +27,74 @@ use std::sync::{Mutex, OnceLock};
 /// The largest input file of any kind (goniometric CSV, query CSV, image, mesh): 4 GiB. A regular
 /// file above it is refused unread; a device or FIFO is read up to it and refused beyond.
 pub const MAX_INPUT_BYTES: u64 = 4 << 30;
+
+/// How long a FIFO or device input may give no byte (no writer, or a writer that writes
+/// nothing) before it is refused: 30 s.
+pub const SPECIAL_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+
+static INTERRUPTED: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+static INTERRUPT_CHECK: OnceLock<fn() -> bool> = OnceLock::new();
+
+/// Say that this process was interrupted (the CLI's signal handler, before it cleans up): every
+/// wait on a FIFO or device, and every write into one, stops with an error.
+pub fn note_interrupt() {
+    INTERRUPTED.store(true, std::sync::atomic::Ordering::SeqCst);
+}
+
+/// Install a check asked while waiting on a FIFO or device (the Python module's: whether
+/// Ctrl-C was pressed); at most one, the first.
+pub fn set_interrupt_check(check: fn() -> bool) {
+    let _ = INTERRUPT_CHECK.set(check);
+}
+
+/// Whether this process was interrupted ([`note_interrupt`], or the installed check says so).
+pub fn interrupted() -> bool {
+    INTERRUPTED.load(std::sync::atomic::Ordering::SeqCst)
+        || INTERRUPT_CHECK.get().is_some_and(|check| check())
+}
+
+/// What a wait stopped by [`interrupted`] fails with.
+pub const INTERRUPTED_MESSAGE: &str = "interrupted";
+
+/// Wait (at most `wait`, checking [`interrupted`] every 50 ms) until `fd` is ready for
+/// `events` (`libc::POLLIN` or `POLLOUT`) or hung up; `what` names it in errors.
+#[cfg(unix)]
+pub fn wait_ready(
+    fd: std::os::fd::RawFd,
+    events: libc::c_short,
+    wait: Option<std::time::Duration>,
+    what: &dyn Fn() -> String,
+) -> std::io::Result<()> {
+    let start = std::time::Instant::now();
+    loop {
+        if interrupted() {
+            return Err(std::io::Error::other(INTERRUPTED_MESSAGE));
+        }
+        let mut p = libc::pollfd {
+            fd,
+            events,
+            revents: 0,
+        };
+        // SAFETY: one valid pollfd, for the duration of the call
+        let r = unsafe { libc::poll(&mut p, 1, 50) };
+        if r > 0 {
+            return Ok(());
+        }
+        if r < 0 {
+            let e = std::io::Error::last_os_error();
+            if e.kind() != std::io::ErrorKind::Interrupted {
+                return Err(e);
+            }
+        }
+        if let Some(w) = wait.filter(|w| start.elapsed() > *w) {
+            return Err(std::io::Error::other(format!(
+                "{}: nothing came for {} s (a FIFO with no writer?); refused",
+                what(),
+                w.as_secs()
+            )));
+        }
+    }
+}
 
 /// The largest text description (capture TOML, JSON, configuration): 64 MiB.
 pub const MAX_TEXT_BYTES: u64 = 64 << 20;
@@ -113,6 +184,8 @@ pub struct Input {
     limit: u64,
     read: u64,
     hasher: Sha256,
+    /// How long a FIFO or device may give nothing.
+    wait: std::time::Duration,
 }
 
 /// Open `path` for reading with at most `limit` bytes.
@@ -124,8 +197,15 @@ pub fn open(path: &Path, limit: u64) -> Result<Input> {
 pub fn open_as(path: &Path, limit: u64, what: &str) -> Result<Input> {
     let name = path.display();
     let sep = if what.is_empty() { "" } else { " " };
-    let file =
-        std::fs::File::open(path).map_err(|e| anyhow!("{name}: cannot open{sep}{what}: {e}"))?;
+    // never blocks: a FIFO with no writer is waited for by polling, in `read`
+    let file = {
+        use std::os::unix::fs::OpenOptionsExt;
+        std::fs::OpenOptions::new()
+            .read(true)
+            .custom_flags(libc::O_NONBLOCK)
+            .open(path)
+            .map_err(|e| anyhow!("{name}: cannot open{sep}{what}: {e}"))?
+    };
     let meta = file
         .metadata()
         .map_err(|e| anyhow!("{name}: cannot read: {e}"))?;
@@ -143,6 +223,18 @@ pub fn open_as(path: &Path, limit: u64, what: &str) -> Result<Input> {
             );
         }
     }
+    if before.is_some() {
+        // a regular file reads as it always did
+        // SAFETY: fcntl on the descriptor just opened
+        unsafe {
+            use std::os::fd::AsRawFd;
+            let fd = file.as_raw_fd();
+            let flags = libc::fcntl(fd, libc::F_GETFL);
+            if flags >= 0 {
+                libc::fcntl(fd, libc::F_SETFL, flags & !libc::O_NONBLOCK);
+            }
+        }
+    }
     Ok(Input {
         path: path.to_path_buf(),
         file,
@@ -150,6 +242,7 @@ pub fn open_as(path: &Path, limit: u64, what: &str) -> Result<Input> {
         limit,
         read: 0,
         hasher: Sha256::new(),
+        wait: SPECIAL_WAIT,
     })
 }
 
@@ -169,7 +262,11 @@ impl Read for Input {
             return Err(std::io::Error::other(too_long(&self.path, self.limit)));
         }
         let want = buf.len().min(usize::try_from(room).unwrap_or(usize::MAX));
-        let n = self.file.read(&mut buf[..want])?;
+        let n = if self.before.is_some() {
+            self.file.read(&mut buf[..want])?
+        } else {
+            self.read_special(&mut buf[..want])?
+        };
         self.read += n as u64;
         if self.read > self.limit {
             return Err(std::io::Error::other(too_long(&self.path, self.limit)));
@@ -180,6 +277,28 @@ impl Read for Input {
 }
 
 impl Input {
+    /// A read of a FIFO or device (opened non-blocking): wait for data by polling, so that a
+    /// signal stops the wait and a FIFO nobody writes is refused after [`SPECIAL_WAIT`].
+    fn read_special(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+        use std::os::fd::AsRawFd;
+        let fd = self.file.as_raw_fd();
+        let path = self.path.clone();
+        let what = move || path.display().to_string();
+        // a FIFO whose writer has not come yet reads as its end: wait until it has data or
+        // its writer has come and gone
+        wait_ready(fd, libc::POLLIN, Some(self.wait), &what)?;
+        loop {
+            match self.file.read(buf) {
+                Ok(n) => return Ok(n),
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => {
+                    wait_ready(fd, libc::POLLIN, Some(self.wait), &what)?
+                }
+                Err(e) if e.kind() == std::io::ErrorKind::Interrupted => {}
+                Err(e) => return Err(e),
+            }
+        }
+    }
+
     pub fn path(&self) -> &Path {
         &self.path
     }
@@ -354,6 +473,31 @@ pub fn read_text_hashed(path: &Path, what: &str) -> Result<(String, String)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_fifo_nobody_writes_is_refused_after_the_wait_and_one_written_is_read() {
+        let d = tempfile::tempdir().unwrap();
+        let p = d.path().join("f.csv");
+        let c = std::ffi::CString::new(p.to_str().unwrap()).unwrap();
+        // SAFETY: a valid C string
+        assert_eq!(unsafe { libc::mkfifo(c.as_ptr(), 0o644) }, 0);
+        // opening never blocks; reading waits at most `wait`
+        let mut input = open(&p, 100).unwrap();
+        input.wait = std::time::Duration::from_millis(300);
+        let start = std::time::Instant::now();
+        let e = input.read_rest(&mut Vec::new()).unwrap_err().to_string();
+        assert!(e.contains("f.csv") && e.contains("nothing came"), "{e}");
+        assert!(start.elapsed() < std::time::Duration::from_secs(5));
+        // a writer that comes later is waited for, and its bytes read to the end
+        let q = p.clone();
+        let writer = std::thread::spawn(move || {
+            std::thread::sleep(std::time::Duration::from_millis(200));
+            std::fs::write(q, "abc").unwrap();
+        });
+        let b = read_input(&p, 100).unwrap();
+        writer.join().unwrap();
+        assert_eq!(b.bytes, b"abc");
+    }
 
     #[test]
     fn hash_limit_and_devices() {

@@ -197,6 +197,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
             path.display()
         );
     }
+    super::samples::check_measured_values(&samples, path)?;
     Ok(Samples {
         samples,
         channels: 3,

@@ -9,6 +9,13 @@ use std::path::Path;
 impl RawParams {
     /// Read a `.toml` or `.json` parameter file (by extension; otherwise TOML).
     pub fn load(path: &Path) -> Result<Self> {
+        if path.is_dir() {
+            bail!(
+                "{}: is a directory; expected a result JSON written by `fibrefit fit` or a \
+                 parameter TOML",
+                path.display()
+            );
+        }
         let ext = path
             .extension()
             .and_then(|e| e.to_str())

@@ -551,7 +551,8 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
                 origin: Origin::Line(k as u64 + 1),
             })
         })
-        .collect::<Result<_>>()?;
+        .collect::<Result<Vec<_>>>()?;
+    super::samples::check_measured_values(&samples, path)?;
     Ok(Samples {
         samples,
         channels: 3,

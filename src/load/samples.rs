@@ -84,3 +84,35 @@ pub struct Samples {
     /// Image captures: the images' size (width, height) in pixels, the texel grid of maps.
     pub image_size: Option<(usize, usize)>,
 }
+
+/// The largest BRDF value a measured file (RGL `.bsdf`, MERL `.binary`) may give, in 1/sr: a
+/// measured mirror-like peak stays in the thousands (the MERL and RGL databases' largest are
+/// below 10^4); beyond 10^6 the file is not a measurement.
+pub const MAX_MEASURED_BRDF: f64 = 1e6;
+
+/// Refuse a measured file whose drawn values are not physical: all zero (nothing reflected),
+/// or any beyond [`MAX_MEASURED_BRDF`]; the error names the file and the direction pair.
+pub fn check_measured_values(samples: &[Sample], path: &std::path::Path) -> anyhow::Result<()> {
+    if let Some((k, s)) = samples
+        .iter()
+        .enumerate()
+        .find(|(_, s)| s.value.iter().any(|v| v.abs() > MAX_MEASURED_BRDF))
+    {
+        anyhow::bail!(
+            "{}: gives f = {:?} 1/sr at drawn direction pair {} (light theta {:.2}, view theta {:.2} degrees): a measured BRDF beyond {MAX_MEASURED_BRDF:e} 1/sr is not physical",
+            path.display(),
+            s.value,
+            k + 1,
+            s.l.z.clamp(-1.0, 1.0).acos().to_degrees(),
+            s.v.z.clamp(-1.0, 1.0).acos().to_degrees()
+        );
+    }
+    if samples.iter().all(|s| s.value.iter().all(|&v| v == 0.0)) {
+        anyhow::bail!(
+            "{}: every drawn value is zero ({} direction pairs): the file reflects nothing, so there is nothing to fit",
+            path.display(),
+            samples.len()
+        );
+    }
+    Ok(())
+}

@@ -287,11 +287,15 @@ pub fn write_set(
     use crate::export::atomic::Outputs;
     let mut outs = Outputs::new(&[config_path.to_path_buf()]);
     let dir = outs.dir(out_dir, "--out")?;
+    // one synth run at a time writes into a folder: a second waits for the first to finish, so
+    // the set is always one run's (held until the old set's leftovers are removed)
+    let _lock = lock_folder(&dir, out_dir)?;
     let marker = dir.join("synth_info.json");
     let has_marker = marker.is_file();
     // the files of the old set, as its synth_info.json lists them
-    let old_set: Vec<String> = std::fs::read_to_string(&marker)
-        .ok()
+    let old_set: Vec<String> = has_marker
+        .then(|| crate::load::input::read_text(&marker))
+        .and_then(Result::ok)
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
         .and_then(|v| v.get("files").cloned())
         .and_then(|f| serde_json::from_value(f).ok())
@@ -345,6 +349,33 @@ pub fn write_set(
         }
     }
     Ok(info)
+}
+
+/// An exclusive lock on the folder `dir` (`shown` as the user gave it), waited for while
+/// another synth run holds it; a signal stops the wait. Released when the handle is dropped.
+fn lock_folder(dir: &Path, shown: &Path) -> Result<std::fs::File> {
+    use std::os::fd::AsRawFd;
+    let f = std::fs::File::open(dir)
+        .with_context(|| format!("--out {}: cannot open the folder", shown.display()))?;
+    loop {
+        // SAFETY: flock on a descriptor we own
+        if unsafe { libc::flock(f.as_raw_fd(), libc::LOCK_EX | libc::LOCK_NB) } == 0 {
+            return Ok(f);
+        }
+        let e = std::io::Error::last_os_error();
+        if e.kind() != std::io::ErrorKind::WouldBlock && e.kind() != std::io::ErrorKind::Interrupted
+        {
+            bail!("--out {}: cannot lock the folder: {e}", shown.display());
+        }
+        if crate::load::input::interrupted() {
+            bail!(
+                "--out {}: {}",
+                shown.display(),
+                crate::load::input::INTERRUPTED_MESSAGE
+            );
+        }
+        std::thread::sleep(std::time::Duration::from_millis(50));
+    }
 }
 
 fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
