@@ -510,11 +510,6 @@ impl Param {
         self.kind() != Knob
     }
 
-    /// A shape parameter the optimizer moves.
-    pub fn is_shape(self) -> bool {
-        self.kind() == Shape
-    }
-
     /// The albedo's basis column, for albedos.
     pub fn component(self) -> Option<Component> {
         match self.kind() {

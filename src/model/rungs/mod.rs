@@ -16,7 +16,7 @@ pub mod reference;
 pub mod varying_topology;
 pub mod ward;
 
-use super::parameter::{Ability, Param, Reader, TABLE};
+use super::parameter::{Ability, Param, Reader};
 pub use super::rung::*;
 use std::fmt;
 use std::str::FromStr;
@@ -122,11 +122,6 @@ impl ModelId {
         self.parameters().into_iter().map(Param::name).collect()
     }
 
-    /// Whether this rung has parameter `name` (see [`ModelId::parameter_names`]).
-    pub fn has_parameter(self, name: &str) -> bool {
-        Param::from_name(name).is_some_and(|p| p.is_fitted() && self.reads(p))
-    }
-
     /// Whether the rung (or the fuzz layer over it) reads parameter or knob `p`.
     pub fn reads(self, p: Param) -> bool {
         match p.info().reader {
@@ -144,11 +139,6 @@ pub fn auto_candidates() -> Vec<ModelId> {
         .collect();
     v.sort_by_key(|id| id.rung().auto_rank);
     v
-}
-
-/// Every knob and parameter name the table knows that `id` does not read (for warnings).
-pub fn unread(id: ModelId) -> impl Iterator<Item = Param> {
-    TABLE.iter().map(|r| r.param).filter(move |&p| !id.reads(p))
 }
 
 #[cfg(test)]
