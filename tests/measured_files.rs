@@ -7,7 +7,7 @@ use std::fs;
 use std::path::PathBuf;
 
 fn felt() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../shared/data/rgl/acrylic_felt_green_rgb.bsdf")
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("tests/data/rgl/acrylic_felt_green_rgb.bsdf")
 }
 
 fn fibrefit() -> Command {

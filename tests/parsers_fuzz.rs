@@ -91,7 +91,7 @@ fn gonio_csv() {
 #[test]
 fn rgl_bsdf() {
     let d = tempfile::tempdir().unwrap();
-    let valid = fs::read(root().join("../shared/data/rgl/acrylic_felt_green_rgb.bsdf")).unwrap();
+    let valid = fs::read(root().join("tests/data/rgl/acrylic_felt_green_rgb.bsdf")).unwrap();
     fuzz(
         "bsdf",
         &d.path().join("m.bsdf"),

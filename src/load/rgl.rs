@@ -568,10 +568,10 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
 mod tests {
     use super::*;
 
-    /// The shared felt against 200 values of an independent evaluator (shared/data/README.md).
+    /// The shared felt against 200 values of an independent evaluator (tests/data/rgl/README.md).
     #[test]
     fn reproduces_the_shared_check_values() {
-        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../shared/data/rgl");
+        let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/rgl");
         let b = RglBsdf::load(&dir.join("acrylic_felt_green_rgb.bsdf")).unwrap();
         assert!(b.description.contains("felt"), "{}", b.description);
         assert!((b.max_theta_i.to_degrees() - 78.56).abs() < 0.1);

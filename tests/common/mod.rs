@@ -236,11 +236,11 @@ pub struct FeltScore {
     pub grazing_forward_ratio: f64,
 }
 
-/// Fit `cfg` to 1200 seeded directions of the shared felt (`../shared/data/rgl`) and score it
+/// Fit `cfg` to 1200 seeded directions of the shared felt (`tests/data/rgl`) and score it
 /// on 600 others: a fast version of `fibrefit bench --felt`.
 pub fn felt_heldout(cfg: &fibrefit::fit::config::FitConfig) -> FeltScore {
     let felt = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../shared/data/rgl/acrylic_felt_green_rgb.bsdf");
+        .join("tests/data/rgl/acrylic_felt_green_rgb.bsdf");
     let opts = |n: usize, seed: u64| fibrefit::load::LoadOptions {
         measured: fibrefit::load::rgl::MeasuredOptions {
             directions: n,
