@@ -64,14 +64,21 @@ fn bench(c: &mut Criterion) {
     g.sample_size(10);
     for bins in [4, 8] {
         let cfg = config(dir.path(), bins);
-        let o = fit(&data, &cfg, true).unwrap();
+        let o = fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
         eprintln!(
             "fit/10k/K{bins}: {} LM iterations on all samples, {} model evaluations, relative RMSE {:.4}",
             o.iterations, o.evaluations, o.statistics.relative_rmse
         );
         g.bench_function(
             format!("varying-topology/10k-samples/7-free/K{bins}"),
-            |b| b.iter(|| fit(&data, &cfg, true).unwrap().statistics.chi_square),
+            |b| {
+                b.iter(|| {
+                    fit(&data, &cfg, &fibrefit::progress::Progress::quiet())
+                        .unwrap()
+                        .statistics
+                        .chi_square
+                })
+            },
         );
     }
     g.finish();

@@ -41,7 +41,13 @@ fn camera(c: &mut Criterion) {
         })
     });
     let cfg: FitConfig = toml::from_str(fibrefit::bench::camera::FIT_MAPS).unwrap();
-    let globals = maps::global_stage(&store, &cfg, &cfg.maps, true).unwrap();
+    let globals = maps::global_stage(
+        &store,
+        &cfg,
+        &cfg.maps,
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let rows = 8u32;
     g.throughput(Throughput::Elements(rows as u64 * SIZE as u64));
     g.bench_function("texel-stage/H+psi (per texel)", |b| {
@@ -54,7 +60,7 @@ fn camera(c: &mut Criterion) {
                 (0, rows),
                 globals.texel_variance,
                 Some(&globals.schur),
-                true,
+                &fibrefit::progress::Progress::quiet(),
             )
             .unwrap()
             .values

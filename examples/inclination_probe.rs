@@ -93,7 +93,7 @@ fn main() {
         cfg.parameters
             .insert("fuzz_depth".into(), Default::default());
     }
-    let o = fibrefit::fit::fit(&train, &cfg, true).unwrap();
+    let o = fibrefit::fit::fit(&train, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     eprintln!("{}", fibrefit::fit::problem::describe(&o.set));
     let m = fibrefit::fit::problem::model_for(&o.set, 16, 16, 16, None);
     let all: Vec<[f64; 3]> = data.samples.iter().map(|s| s.value).collect();

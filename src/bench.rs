@@ -216,7 +216,7 @@ fn best_case(
     let cfg: FitConfig = toml::from_str(&format!(
         "model = \"{rung}\"\nstarts = 2\n[optimizer]\nglobal_candidates = 16\n"
     ))?;
-    let o = crate::fit::fit(&data, &cfg, true)?;
+    let o = crate::fit::fit(&data, &cfg, &crate::progress::Progress::quiet())?;
     let m = crate::fit::problem::model_for(&o.set, 16, 16, 16, None);
     Ok((m, crate::fit::problem::albedos_of(&o.set)))
 }
@@ -377,7 +377,7 @@ pub fn fit_level(root: &Path, quick: bool, bar: &ProgressBar) -> Result<Vec<FitR
             bar.set_message(format!("fit level: fraction {fraction}, N = {n}"));
             cfg.knobs.quadrature_order = n;
             let t = Instant::now();
-            let o = crate::fit::fit(&data, &cfg, true)?;
+            let o = crate::fit::fit(&data, &cfg, &crate::progress::Progress::quiet())?;
             let seconds = t.elapsed().as_secs_f64();
             let mut errs = Vec::new();
             for r in &o.records {

@@ -17,10 +17,81 @@ fn forced() -> Option<bool> {
 }
 
 /// Whether progress is shown: not `quiet`, and stderr a terminal unless [`FORCE_ENV`] says.
-pub fn shown(quiet: bool) -> bool {
+fn shown(quiet: bool) -> bool {
     !quiet && forced().unwrap_or_else(|| std::io::stderr().is_terminal())
 }
 
+/// The one place a run speaks: progress lines and bars (shown on a terminal, or when
+/// [`FORCE_ENV`] says), notes and warnings (on stderr unless quiet). The library takes one
+/// of these instead of printing; `Progress::quiet()` says nothing at all.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Progress {
+    quiet: bool,
+}
+
+impl Progress {
+    /// Progress, notes and warnings on stderr.
+    pub fn stderr() -> Self {
+        Self { quiet: false }
+    }
+
+    /// Nothing on stderr (`--quiet`).
+    pub fn quiet() -> Self {
+        Self { quiet: true }
+    }
+
+    /// [`Progress::quiet`] when `quiet`, else [`Progress::stderr`].
+    pub fn new(quiet: bool) -> Self {
+        Self { quiet }
+    }
+
+    /// Whether notes and warnings are printed (not `--quiet`).
+    pub fn is_quiet(&self) -> bool {
+        self.quiet
+    }
+
+    /// Whether progress lines are shown: not quiet, and stderr a terminal unless [`FORCE_ENV`]
+    /// says otherwise.
+    pub fn shown(&self) -> bool {
+        shown(self.quiet)
+    }
+
+    /// A bar of `len` steps labelled `what` (hidden unless shown on a terminal).
+    pub fn bar(&self, len: u64, what: &str) -> ProgressBar {
+        bar(len, what, self.quiet)
+    }
+
+    /// One progress line (`progress: MSG`) when progress is [`Progress::shown`].
+    pub fn line(&self, msg: &str) {
+        if self.shown() {
+            eprintln!("progress: {msg}");
+        }
+    }
+
+    /// [`Progress::line`], printed above `bar` (which is redrawn below it).
+    pub fn line_above(&self, bar: &ProgressBar, msg: &str) {
+        if self.shown() {
+            bar.suspend(|| eprintln!("progress: {msg}"));
+        }
+    }
+
+    /// A warning (`warning: MSG`) unless quiet.
+    pub fn warn(&self, msg: &str) {
+        if !self.quiet {
+            eprintln!("warning: {msg}");
+        }
+    }
+
+    /// Text as it is (a table, a note) unless quiet.
+    pub fn say(&self, text: &str) {
+        if !self.quiet {
+            eprintln!("{text}");
+        }
+    }
+}
+
+/// A bar of `len` steps labelled `what`, hidden when `quiet` or stderr is no terminal
+/// (old form of [`Progress::bar`]).
 pub fn bar(len: u64, what: &str, quiet: bool) -> ProgressBar {
     if !shown(quiet) || !std::io::stderr().is_terminal() {
         return ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
@@ -35,18 +106,9 @@ pub fn bar(len: u64, what: &str, quiet: bool) -> ProgressBar {
     pb
 }
 
-/// One progress line on stderr (`progress: MSG`) when progress is [`shown`].
+/// Old form of [`Progress::line`].
 pub fn line(quiet: bool, msg: &str) {
-    if shown(quiet) {
-        eprintln!("progress: {msg}");
-    }
-}
-
-/// [`line`], printed above `bar` (which is redrawn below it).
-pub fn line_above(bar: &ProgressBar, quiet: bool, msg: &str) {
-    if shown(quiet) {
-        bar.suspend(|| eprintln!("progress: {msg}"));
-    }
+    Progress::new(quiet).line(msg)
 }
 
 /// Seconds as `0.4 s`, `12 s`, `3 min 05 s`.

@@ -19,7 +19,7 @@ fn a_fit_through_the_api_is_the_cli_fit() {
         data: data.clone(),
         load: fibrefit::load::LoadOptions::default(),
         maps: Maps::None,
-        progress: false,
+        progress: fibrefit::progress::Progress::quiet(),
         config: cfg,
     };
     let mut run = fit::fit(&req).unwrap();

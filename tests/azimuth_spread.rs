@@ -175,7 +175,7 @@ fn the_spread_is_recovered_from_noisy_data() {
          fibre_azimuth_deg = { value = 0 }\nazimuth_spread_deg = { value = 60 }\nexponent = { value = 10, max = 1000 }\n",
     )
     .unwrap();
-    let o = fibrefit::fit::fit(&data, &cfg, true).unwrap();
+    let o = fibrefit::fit::fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     let r = o
         .records
         .iter()

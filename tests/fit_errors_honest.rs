@@ -65,7 +65,7 @@ map_scale = {{ value = 0.25, min = 0, max = 0.6 }}
         );
         let cfg: FitConfig = toml::from_str(&text).unwrap();
         let data = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
-        let o = fit(&data, &cfg, true).unwrap();
+        let o = fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
         for (k, n) in names.iter().enumerate() {
             let r = o.records.iter().find(|r| r.name == *n).unwrap();
             est[k].push(r.value[0]);

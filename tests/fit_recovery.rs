@@ -161,7 +161,12 @@ fn recovers_the_truth_from_goniometric_data_from_several_starts() {
     .into_iter()
     .enumerate()
     {
-        let o = fit(&data, &config(&data_dir, &starts, ""), true).unwrap();
+        let o = fit(
+            &data,
+            &config(&data_dir, &starts, ""),
+            &fibrefit::progress::Progress::quiet(),
+        )
+        .unwrap();
         check_recovery(&o, &format!("gonio start {k}"));
         errors.push(
             TRUTH
@@ -200,7 +205,12 @@ fn recovers_the_truth_from_an_image_capture() {
     .into_iter()
     .enumerate()
     {
-        let o = fit(&data, &config(&data_dir, &starts, ""), true).unwrap();
+        let o = fit(
+            &data,
+            &config(&data_dir, &starts, ""),
+            &fibrefit::progress::Progress::quiet(),
+        )
+        .unwrap();
         check_recovery(&o, &format!("capture start {k}"));
     }
 }
@@ -217,7 +227,7 @@ fn fixed_parameters_stay_fixed_and_bounds_hold() {
     cfg.parameters.get_mut("exponent").unwrap().value = Some(fibrefit::model::Albedo::Grey(20.0));
     cfg.parameters.get_mut("spacing").unwrap().vary = Some(false);
     cfg.parameters.get_mut("spacing").unwrap().value = Some(fibrefit::model::Albedo::Grey(2.6));
-    let o = fit(&data, &cfg, true).unwrap();
+    let o = fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     let e = record(&o, "exponent");
     assert_eq!(e.value[0], 40.0, "exponent should sit on its upper bound");
     assert!(e.at_bound[0] && e.std_error[0].is_none());

@@ -30,7 +30,7 @@ fn write_map(dir: &Path) -> PathBuf {
 fn assert_global(case: &Case, map: Option<&Path>, seed: u64, samples: usize) {
     let data = case_samples(case, map, samples, 100 + seed).unwrap();
     let cfg = case_config(case, map, 100 + seed).unwrap();
-    let o = fit(&data, &cfg, true).unwrap();
+    let o = fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     let truth_cfg = {
         let mut c = cfg.clone();
         for (name, v) in [
@@ -55,7 +55,7 @@ fn assert_global(case: &Case, map: Option<&Path>, seed: u64, samples: usize) {
         c
     };
     // the truth's shapes with the best albedos: its chi-square can only be above the truth's own
-    let at_truth = fit(&data, &truth_cfg, true).unwrap();
+    let at_truth = fit(&data, &truth_cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     let s = &o.statistics;
     let spread = (2.0 * (s.n - s.free_parameters) as f64).sqrt();
     assert!(
@@ -116,7 +116,12 @@ fn quality_warns_on_a_wrong_model_and_is_silent_on_the_right_one() {
     let case = CASES[1]; // climbing fibres near the top
     let data = case_samples(&case, None, 600, 1).unwrap();
     let auto: FitConfig = toml::from_str("model = \"auto\"\n").unwrap();
-    let wrong = fit(&data, &auto.for_rung("lambert".parse().unwrap()), true).unwrap();
+    let wrong = fit(
+        &data,
+        &auto.for_rung("lambert".parse().unwrap()),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     assert_eq!(wrong.quality.verdict, "does not fit within the noise");
     assert!(wrong.quality.residual_bins.iter().any(|b| b.flagged));
     assert!(wrong
@@ -126,7 +131,7 @@ fn quality_warns_on_a_wrong_model_and_is_silent_on_the_right_one() {
     let right = fit(
         &data,
         &auto.for_rung("varying-topology".parse().unwrap()),
-        true,
+        &fibrefit::progress::Progress::quiet(),
     )
     .unwrap();
     assert_eq!(right.quality.verdict, "fits within the noise");
@@ -157,7 +162,7 @@ fn ambiguous_data_report_both_minima() {
         "model = \"varying-topology\"\n[parameters]\nheight = { value = 0.8 }\nexponent = { value = 20 }\nfibre_azimuth_deg = { value = 0 }\n",
     )
     .unwrap();
-    let o = fit(&data, &cfg, true).unwrap();
+    let o = fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     assert!(o.quality.ambiguous, "{:?}", o.quality);
     let heights: Vec<f64> = o
         .quality
@@ -172,7 +177,7 @@ fn ambiguous_data_report_both_minima() {
     assert!(o.warnings.iter().any(|w| w.contains("do not decide")));
     // and unambiguous data do not warn
     let clear = case_samples(&CASES[0], None, 600, 1).unwrap();
-    let o = fit(&clear, &cfg, true).unwrap();
+    let o = fit(&clear, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     assert!(!o.quality.ambiguous, "{:?}", o.quality.minima);
 }
 

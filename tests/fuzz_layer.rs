@@ -33,7 +33,7 @@ fn the_fuzz_layer_is_recovered_from_noisy_data() {
          fuzz = { value = 1 }\nfuzz_depth = { value = 2 }\nfuzz_asymmetry = { value = 0 }\n",
     )
     .unwrap();
-    let o = fibrefit::fit::fit(&data, &cfg, true).unwrap();
+    let o = fibrefit::fit::fit(&data, &cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     for (name, truth) in [("fuzz", 3.0), ("fuzz_depth", 0.2), ("fuzz_asymmetry", 0.6)] {
         let r = o.records.iter().find(|r| r.name == name).unwrap();
         let se = r.std_error[0].expect("a standard error");

@@ -166,7 +166,9 @@ fn a_maps_fit_exported_as_gltf_carries_its_maps_as_textures() {
     assert!(hi - lo > 50.0, "{lo} {hi}");
 
     // base colour, roughness and strength at texels: the glTF fit's own per-texel values
-    let (_, id, params) = fibrefit::api::eval::load_params(&result, None, true).unwrap();
+    let (_, id, params) =
+        fibrefit::api::eval::load_params(&result, None, &fibrefit::progress::Progress::quiet())
+            .unwrap();
     let model = fibrefit::model::build(id, &params).unwrap();
     let fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1).unwrap();
     let h_max = fibrefit::model::topology::max_height(params.spacing);
@@ -299,9 +301,12 @@ fn a_maps_fit_exported_as_gltf_carries_its_maps_as_textures() {
 fn the_texel_base_colour_law_is_the_least_squares_base_colour() {
     // the per-texel base colour (linear in the albedos) equals the least squares solved afresh
     let root = Path::new(env!("CARGO_MANIFEST_DIR"));
-    let (_, id, params) =
-        fibrefit::api::eval::load_params(&root.join("configs/silk_params.toml"), None, true)
-            .unwrap();
+    let (_, id, params) = fibrefit::api::eval::load_params(
+        &root.join("configs/silk_params.toml"),
+        None,
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let model = fibrefit::model::build(id, &params).unwrap();
     let fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1).unwrap();
     let table = TexelMaterials::new(model.as_ref(), &params.albedos, &fitted, None, 1).unwrap();

@@ -89,7 +89,12 @@ fn felts_of_one_geometry_in_three_colours_fit_one_geometry_with_a_grey_ks() {
     for (k, (name, kd)) in colours.iter().enumerate() {
         let data = synth(dir.path(), name, *kd, &ks_truth.to_string(), 20 + k as u64);
         assert_eq!(data.channels, 3);
-        let o = fit(&data, &config("{ value = 0.5 }"), true).unwrap();
+        let o = fit(
+            &data,
+            &config("{ value = 0.5 }"),
+            &fibrefit::progress::Progress::quiet(),
+        )
+        .unwrap();
         eprintln!("{name}: warnings {:?}", o.warnings);
         // the grey ks: one free parameter, equal in every channel, said so in the result
         let ks = record(&o, "ks");
@@ -111,7 +116,7 @@ fn felts_of_one_geometry_in_three_colours_fit_one_geometry_with_a_grey_ks() {
         assert_eq!(o.statistics.free_parameters, 8, "{name}");
         let json = fibrefit::export::result_json::params_out(&o);
         assert!(json["ks"].grey && !json["kd"].grey);
-        let report = fibrefit::export::report::text(&o, "varying-topology", name);
+        let report = fibrefit::export::report::text(&o, "varying-topology", name, None);
         assert!(
             report.contains("[grey: one value fitted for r, g and b]"),
             "{report}"
@@ -172,7 +177,12 @@ fn a_coloured_ks_is_fitted_per_channel_when_the_config_asks() {
         &format!("[{}, {}, {}]", ks_truth[0], ks_truth[1], ks_truth[2]),
         31,
     );
-    let coloured = fit(&data, &config("{ value = 0.5, colour = true }"), true).unwrap();
+    let coloured = fit(
+        &data,
+        &config("{ value = 0.5, colour = true }"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let ks = record(&coloured, "ks");
     assert!(!ks.grey);
     assert_eq!(coloured.statistics.free_parameters, 10);
@@ -186,7 +196,12 @@ fn a_coloured_ks_is_fitted_per_channel_when_the_config_asks() {
         );
     }
     // the grey default cannot follow a coloured lobe: its least squares are far worse
-    let grey = fit(&data, &config("{ value = 0.5 }"), true).unwrap();
+    let grey = fit(
+        &data,
+        &config("{ value = 0.5 }"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     assert!(record(&grey, "ks").grey);
     let ratio = grey.statistics.chi_square / coloured.statistics.chi_square;
     eprintln!("sum of squares grey / coloured = {ratio:.2}");

@@ -51,7 +51,13 @@ fn a_texel_seen_in_one_image_reports_an_infinite_error() {
     )
     .unwrap();
     let cfg: FitConfig = toml::from_str(maps::FIT).unwrap();
-    let o = fibrefit::fit::maps::recover(&store, &cfg, &cfg.maps, true).unwrap();
+    let o = fibrefit::fit::maps::recover(
+        &store,
+        &cfg,
+        &cfg.maps,
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let k = o
         .maps
         .texels

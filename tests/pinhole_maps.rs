@@ -29,7 +29,13 @@ fn maps_of(dir: &Path, size: usize, size_mm: f64, rig: Rig) -> (Accuracy, Option
     let store = CaptureStore::load(&blind, Default::default()).unwrap();
     let cfg: FitConfig = toml::from_str(FIT_MAPS).unwrap();
     let lattice = fibrefit::fit::maps::lattice_nodes(&store, &cfg.maps);
-    let o = fibrefit::fit::maps::recover(&store, &cfg, &cfg.maps, true).unwrap();
+    let o = fibrefit::fit::maps::recover(
+        &store,
+        &cfg,
+        &cfg.maps,
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let topo = TopologyMap::load(&dir.join("d/topology.png")).unwrap();
     let tan = TopologyMap::load_as(&dir.join("d/tangent.png"), "tangent map").unwrap();
     let (mut sq, mut in_h, mut in_p) = (0.0, 0usize, 0usize);

@@ -116,7 +116,8 @@ fn a_ward_fallback_of_a_ward_truth_has_no_warning() {
         "model = \"ward\"\nrho_d = 0.3\nrho_s = 0.2\nalpha_x = 0.15\nalpha_y = 0.4\nfibre_azimuth_deg = 20\n",
     )
     .unwrap();
-    let (_, id, params) = fibrefit::api::eval::load_params(&p, None, true).unwrap();
+    let (_, id, params) =
+        fibrefit::api::eval::load_params(&p, None, &fibrefit::progress::Progress::quiet()).unwrap();
     let model = fibrefit::model::build(id, &params).unwrap();
     let w = fibrefit::fit::ward_fallback::fit(model.as_ref(), &params.albedos, 20.0, 1, 1).unwrap();
     assert!(w.relative_rms_error < 0.01, "{}", w.relative_rms_error);

@@ -549,7 +549,7 @@ fn fit(
             Some(d) => Maps::Into(d),
             None => Maps::None,
         },
-        progress,
+        progress: fibrefit::progress::Progress::new(!progress),
     };
     fit_api::check(&request).map_err(err)?;
     let req = request.clone();

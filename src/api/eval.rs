@@ -14,19 +14,17 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// A parameter file (TOML, JSON or a fitted result) with its rung (`model`, else the file's),
-/// validated; its warnings printed unless `quiet`.
+/// validated; its warnings reported through `progress`.
 pub fn load_params(
     path: &std::path::Path,
     model: Option<&str>,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<(RawParams, ModelId, ModelParams)> {
     let raw = crate::export::result_json::read_params(path)?;
     let (id, params, warnings) =
         crate::export::result_json::checked_params(&raw, model, &path.display().to_string())?;
-    if !quiet {
-        for w in &warnings {
-            eprintln!("warning: {}: {w}", path.display());
-        }
+    for w in &warnings {
+        progress.warn(&format!("{}: {w}", path.display()));
     }
     Ok((raw, id, params))
 }
@@ -50,10 +48,15 @@ pub struct EvalOutcome {
 }
 
 impl Evaluation {
-    /// Load the parameter file (`model` overrides its rung; warnings printed unless `quiet`) and
+    /// Load the parameter file (`model` overrides its rung; warnings through `progress`) and
     /// the queries, refusing a `height` column the rung cannot use or beyond H_max.
-    pub fn load(params: &Path, model: Option<&str>, queries: &Path, quiet: bool) -> Result<Self> {
-        let (raw, id, p) = load_params(params, model, quiet)?;
+    pub fn load(
+        params: &Path,
+        model: Option<&str>,
+        queries: &Path,
+        progress: &crate::progress::Progress,
+    ) -> Result<Self> {
+        let (raw, id, p) = load_params(params, model, progress)?;
         let q = queries::load(queries)?;
         if q.rows.iter().any(|q| q.height.is_some()) {
             if !id.has_topology() {
@@ -91,8 +94,8 @@ impl Evaluation {
         v
     }
 
-    /// Evaluate every query (in parallel; a progress bar unless `quiet`).
-    pub fn run(self, quiet: bool) -> Result<EvalOutcome> {
+    /// Evaluate every query (in parallel, with a progress bar).
+    pub fn run(self, progress: &crate::progress::Progress) -> Result<EvalOutcome> {
         let (id, params) = (self.model, &self.params);
         let shading = model::build(id, params)?;
         let raw = &self.raw;
@@ -103,7 +106,7 @@ impl Evaluation {
         let preview = (id.has(crate::model::Ability::PreviewLighting)
             && (params.preview.two_sided || params.preview.ambient > 0.0))
             .then_some(params.preview);
-        let bar = crate::progress::bar(self.queries.rows.len() as u64, "eval", quiet);
+        let bar = progress.bar(self.queries.rows.len() as u64, "eval");
         let values: Vec<([f64; 3], [f64; 3])> = self
             .queries
             .rows

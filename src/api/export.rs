@@ -29,8 +29,8 @@ pub struct ExportRequest {
     pub gltf: bool,
     /// The preview mesh: swatch, sphere, torus or a .obj.
     pub object: String,
-    /// No progress lines.
-    pub quiet: bool,
+    /// Where notes, the check's figures and warnings go.
+    pub progress: crate::progress::Progress,
 }
 
 /// The exported files, in memory.
@@ -67,7 +67,9 @@ pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
     }
     if req.gltf {
         // a failure to find them is reported by `export` itself
-        if let Ok(Some(dir)) = crate::api::render::maps_dir(None, &req.result, true) {
+        if let Ok(Some(dir)) =
+            crate::api::render::maps_dir(None, &req.result, &crate::progress::Progress::quiet())
+        {
             inputs.extend(MAP_FILES.iter().map(|f| dir.join(f)));
         }
     }
@@ -76,14 +78,14 @@ pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
 
 /// The maps directory a `fit --maps` result names (beside the result, never in the working
 /// directory), with a warning when it names one that is not there.
-fn maps_of(result: &Path, quiet: bool) -> Result<Option<PathBuf>> {
-    let found = crate::api::render::maps_dir(None, result, true)?;
-    if found.is_none() && !quiet {
+fn maps_of(result: &Path, progress: &crate::progress::Progress) -> Result<Option<PathBuf>> {
+    let found = crate::api::render::maps_dir(None, result, &crate::progress::Progress::quiet())?;
+    if found.is_none() {
         if let Ok(Some((named, looked))) = crate::api::render::named_maps_dir(result) {
-            eprintln!(
-                "warning: {}: the GLB carries no textures, only the global material",
+            progress.warn(&format!(
+                "{}: the GLB carries no textures, only the global material",
                 crate::api::render::missing_maps(result, &named, &looked)
-            );
+            ));
         }
     }
     Ok(found)
@@ -92,136 +94,152 @@ fn maps_of(result: &Path, quiet: bool) -> Result<Option<PathBuf>> {
 /// Build what `req` asks for; a failure (a shader beyond its bound included) builds nothing.
 pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
     let (_, id, params) =
-        crate::api::eval::load_params(&req.result, req.model.as_deref(), req.quiet)?;
+        crate::api::eval::load_params(&req.result, req.model.as_deref(), &req.progress)?;
     if let Some(map) = &params.topology.map {
         // loaded (so it exists); say which, since the export bakes its histogram in
-        if !req.quiet {
-            eprintln!(
-                "topology map {}: its {}-bin height histogram is baked in",
-                map.source.display(),
-                params.histogram_bins
-            );
-        }
+        req.progress.say(&format!(
+            "topology map {}: its {}-bin height histogram is baked in",
+            map.source.display(),
+            params.histogram_bins
+        ));
     }
     let lines = provenance(&req.result, id, &params)?;
     // everything is built in memory first: a failure writes nothing
-    let mut shader_text = None;
-    if let Some(lang) = req.shader {
-        let mut lines = lines.clone();
-        let wgsl_src = shader::wgsl(id, &params, &lines)?;
-        let wgsl_src = if req.check {
-            let gpu = Gpu::new()?;
-            let cases = check::cases(10_000, 1, max_height(params.spacing));
-            let (a, bound) = check::on_gpu(&gpu, &wgsl_src, id, &params, &cases)?;
-            let line = format!(
-                "checked on {}: {} cases, relative error p99 {:.2e} (bound {:.1e}), max {:.2e}; \
-                 worst case at {:.2} of its tolerance ({:.1e} + {:.1e} / min(N.l, N.v))",
-                gpu.adapter,
-                a.cases,
-                a.p99_relative,
-                bound.p99,
-                a.max_relative,
-                a.worst_over_tolerance,
-                bound.max,
-                bound.grazing
-            );
-            if !req.quiet {
-                eprintln!("{line}");
-            }
-            // the values the result itself states (what a renderer port checks against)
-            let stated = crate::load::input::read_text(&req.result)
-                .ok()
-                .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-                .map(|v| check::stated_check_values(&v, params.fibre_azimuth))
-                .unwrap_or_default();
-            let mut stated_line = None;
-            if !stated.is_empty() {
-                let cases: Vec<check::Case> = stated.iter().map(|(c, _)| *c).collect();
-                let outputs = gpu.evaluate(&wgsl_src, &cases)?;
-                let (max_rel, worst) = check::compare_stated(&stated, &outputs, &bound);
-                let l = format!(
-                    "the result's {} check values: largest relative error {max_rel:.2e} ({worst:.2} of the tolerance)",
-                    stated.len()
-                );
-                if !req.quiet {
-                    eprintln!("{l}");
-                }
-                if worst > 1.0 {
-                    bail!("the exported shader disagrees with the result's own check values: {l}; nothing written");
-                }
-                stated_line = Some(l);
-            }
-            if !bound.holds(&a) {
-                bail!(
-                    "the exported shader disagrees with the Rust model on this GPU driver beyond \
-                     f32 limits: {line}; worst case {} (Rust {}, shader {}); nothing written",
-                    a.worst.0,
-                    a.worst.1,
-                    a.worst.2
-                );
-            }
-            lines.push(line);
-            lines.extend(stated_line);
-            shader::wgsl(id, &params, &lines)?
-        } else {
-            wgsl_src
-        };
-        shader_text = Some(shader::translate(&wgsl_src, lang)?);
-    }
-    let mut glb = None;
-    let mut textures = None;
-    if req.gltf {
-        let model = model::build(id, &params)?;
-        let psi_deg = params.fibre_azimuth.to_degrees();
-        let mesh = preview(&req.object, psi_deg)?;
-        let fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1)?;
-        let maps = match maps_of(&req.result, req.quiet)? {
-            Some(dir) if mesh.mesh.uvs.is_none() => {
-                if !req.quiet {
-                    eprintln!(
-                        "warning: {} has no texture coordinates: the GLB carries no textures of the maps in {}, only the global material",
-                        req.object,
-                        dir.display()
-                    );
-                }
-                None
-            }
-            other => other,
-        };
-        let mut images = Vec::new();
-        let mut material = gltf_out::fitted_material(&fitted, id, &lines);
-        if let Some(dir) = maps {
-            let loaded = TexelMapsIn::load(&dir, None)
-                .map_err(|e| anyhow!("the maps the result names: {e:#}"))?;
-            let t = map_textures(model.as_ref(), &params, &fitted, &loaded, &dir)?;
-            if let Some((tex, imgs, description)) = t {
-                material = gltf_out::textured_material(&fitted, id, &lines, Some(&description));
-                images = imgs;
-                textures = Some(tex);
-            }
+    let shader_text = match req.shader {
+        Some(lang) => Some(shader_source(req, id, &params, lines.clone(), lang)?),
+        None => None,
+    };
+    let (glb, textures) = match req.gltf {
+        true => {
+            let (glb, textures) = glb_preview(req, id, &params, &lines)?;
+            (Some(glb), textures)
         }
-        let mut bytes = Vec::new();
-        gltf_out::write_glb_with_images(
-            &mut bytes,
-            &mesh.mesh,
-            &VertexFrames {
-                normals: &mesh.normals,
-                tangents: &mesh.tangents,
-                bitangents: &mesh.bitangents,
-                undefined: &mesh.undefined,
-            },
-            Some(material),
-            &images,
-            &format!("fibrefit {} export", env!("CARGO_PKG_VERSION")),
-        )?;
-        glb = Some((bytes, fitted));
-    }
+        false => (None, None),
+    };
     Ok(ExportOutcome {
         model: id,
         shader: shader_text,
         glb,
         textures,
     })
+}
+
+/// The shader in `lang`, its provenance `lines` in its header; with `req.check`, run on the GPU
+/// driver against the Rust model and the result's own check values first (the checks' figures
+/// join the header), refused beyond the f32 bound.
+fn shader_source(
+    req: &ExportRequest,
+    id: ModelId,
+    params: &ModelParams,
+    mut lines: Vec<String>,
+    lang: Language,
+) -> Result<String> {
+    let wgsl_src = shader::wgsl(id, params, &lines)?;
+    if !req.check {
+        return shader::translate(&wgsl_src, lang);
+    }
+    let gpu = Gpu::new()?;
+    let cases = check::cases(10_000, 1, max_height(params.spacing));
+    let (a, bound) = check::on_gpu(&gpu, &wgsl_src, id, params, &cases)?;
+    let line = format!(
+        "checked on {}: {} cases, relative error p99 {:.2e} (bound {:.1e}), max {:.2e}; \
+         worst case at {:.2} of its tolerance ({:.1e} + {:.1e} / min(N.l, N.v))",
+        gpu.adapter,
+        a.cases,
+        a.p99_relative,
+        bound.p99,
+        a.max_relative,
+        a.worst_over_tolerance,
+        bound.max,
+        bound.grazing
+    );
+    req.progress.say(&line);
+    // the values the result itself states (what a renderer port checks against)
+    let stated = crate::load::input::read_text(&req.result)
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .map(|v| check::stated_check_values(&v, params.fibre_azimuth))
+        .unwrap_or_default();
+    let mut stated_line = None;
+    if !stated.is_empty() {
+        let cases: Vec<check::Case> = stated.iter().map(|(c, _)| *c).collect();
+        let outputs = gpu.evaluate(&wgsl_src, &cases)?;
+        let (max_rel, worst) = check::compare_stated(&stated, &outputs, &bound);
+        let l = format!(
+            "the result's {} check values: largest relative error {max_rel:.2e} ({worst:.2} of the tolerance)",
+            stated.len()
+        );
+        req.progress.say(&l);
+        if worst > 1.0 {
+            bail!("the exported shader disagrees with the result's own check values: {l}; nothing written");
+        }
+        stated_line = Some(l);
+    }
+    if !bound.holds(&a) {
+        bail!(
+            "the exported shader disagrees with the Rust model on this GPU driver beyond \
+             f32 limits: {line}; worst case {} (Rust {}, shader {}); nothing written",
+            a.worst.0,
+            a.worst.1,
+            a.worst.2
+        );
+    }
+    lines.push(line);
+    lines.extend(stated_line);
+    shader::translate(&shader::wgsl(id, params, &lines)?, lang)
+}
+
+/// The GLB preview: the object with the fitted glTF material, textured by the maps a
+/// `fit --maps` result names when the mesh has texture coordinates.
+fn glb_preview(
+    req: &ExportRequest,
+    id: ModelId,
+    params: &ModelParams,
+    lines: &[String],
+) -> Result<((Vec<u8>, FittedMaterial), Option<GlbTextures>)> {
+    let model = model::build(id, params)?;
+    let psi_deg = params.fibre_azimuth.to_degrees();
+    let mesh = preview(&req.object, psi_deg)?;
+    let fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1)?;
+    let maps = match maps_of(&req.result, &req.progress)? {
+        Some(dir) if mesh.mesh.uvs.is_none() => {
+            req.progress.warn(&format!(
+                "{} has no texture coordinates: the GLB carries no textures of the maps in {}, only the global material",
+                req.object,
+                dir.display()
+            ));
+            None
+        }
+        other => other,
+    };
+    let mut images = Vec::new();
+    let mut textures = None;
+    let mut material = gltf_out::fitted_material(&fitted, id, lines);
+    if let Some(dir) = maps {
+        let loaded = TexelMapsIn::load(&dir, None)
+            .map_err(|e| anyhow!("the maps the result names: {e:#}"))?;
+        let t = map_textures(model.as_ref(), params, &fitted, &loaded, &dir)?;
+        if let Some((tex, imgs, description)) = t {
+            material = gltf_out::textured_material(&fitted, id, lines, Some(&description));
+            images = imgs;
+            textures = Some(tex);
+        }
+    }
+    let mut bytes = Vec::new();
+    gltf_out::write_glb_with_images(
+        &mut bytes,
+        &mesh.mesh,
+        &VertexFrames {
+            normals: &mesh.normals,
+            tangents: &mesh.tangents,
+            bitangents: &mesh.bitangents,
+            undefined: &mesh.undefined,
+        },
+        Some(material),
+        &images,
+        &format!("fibrefit {} export", env!("CARGO_PKG_VERSION")),
+    )?;
+    Ok(((bytes, fitted), textures))
 }
 
 /// The textures of a `fit --maps` result's maps (one texel per map pixel, rows from the top: the

@@ -15,7 +15,7 @@ use crate::fit::{self, parameters::Param, ward_fallback, FitOutcome};
 use crate::load::capture_store::CaptureStore;
 use crate::load::samples::{DataKind, Samples};
 use crate::load::{load_data, LoadOptions};
-use crate::model::{brdf_at_degrees, ModelId};
+use crate::model::ModelId;
 use anyhow::{anyhow, bail, Context, Result};
 use std::path::{Path, PathBuf};
 
@@ -121,8 +121,8 @@ pub struct FitRequest {
     /// Loading options (`LoadArgs::options_with` the config's stride and fraction).
     pub load: LoadOptions,
     pub maps: Maps,
-    /// Progress bars and the model-selection table on stderr.
-    pub progress: bool,
+    /// Where progress lines, bars and the model-selection table go.
+    pub progress: crate::progress::Progress,
 }
 
 /// A finished fit.
@@ -142,6 +142,7 @@ pub struct FitRun {
     /// Warnings beside the quality checks' own (those are in `outcome.quality`).
     pub warnings: Vec<String>,
     data: PathBuf,
+    progress: crate::progress::Progress,
 }
 
 /// Every file a fit reads: its data (a capture's images and maps too), config, topology map.
@@ -316,151 +317,164 @@ pub fn fit(req: &FitRequest) -> Result<FitRun> {
     fit_reporting(req, None)
 }
 
-/// [`fit`], keeping `sink` up to date with what an auto run has finished (for a partial result).
-pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun> {
-    check(req)?;
-    let quiet = !req.progress;
-    let mut cfg = req.config.clone();
+/// The data of a fit: a capture held compactly by texel (with the texels the global fit
+/// samples), and the samples the global fit uses.
+struct Loaded {
+    store: Option<CaptureStore>,
+    fit_texels: Option<Vec<usize>>,
+    samples: Samples,
+}
+
+/// Load the data of `req`, check the work `cfg` plans on it, and let the metric follow the
+/// data when nothing named it (goniometric and measured data; a capture's pixels and per-texel
+/// maps keep the linear metric).
+fn load_stage(req: &FitRequest, cfg: &mut FitConfig) -> Result<Loaded> {
     // captures are held compactly by texel; the global fit takes a seeded sample of texels
     let store = match crate::load::is_capture(&req.data) {
         true => Some(CaptureStore::load(&req.data, req.load.subsample)?),
         false => None,
     };
-    let fit_texels = store.as_ref().map(|st| fit_texel_sample(st, &cfg));
+    let fit_texels = store.as_ref().map(|st| fit_texel_sample(st, cfg));
     let samples = match (&store, &fit_texels) {
         (Some(st), Some(ids)) => st.samples_of(ids),
         _ => load_data(&req.data, &req.load)?,
     };
     cfg.check_work(samples.samples.len())
         .map_err(|e| anyhow!("{}: {e}", req.data.display()))?;
-    // the metric follows the data when nothing named it (goniometric and measured data; a
-    // capture's pixels and per-texel maps keep the linear metric)
     if cfg.metric_follows_data && req.maps == Maps::None && samples.kind != DataKind::Capture {
         let (m, why) = crate::fit::config::metric_for_data(&samples);
         cfg.metric = m;
         cfg.metric_reason = Some(why);
     }
+    Ok(Loaded {
+        store,
+        fit_texels,
+        samples,
+    })
+}
+
+/// `--model auto`: compare the candidates, keeping `sink` up to date, and turn `cfg` into the
+/// chosen candidate's configuration.
+fn select_stage(
+    req: &FitRequest,
+    samples: &Samples,
+    cfg: &mut FitConfig,
+    sink: Option<&AutoSink>,
+) -> Result<SelectionOutcome> {
     let with_sink = |f: &mut dyn FnMut(&mut AutoProgress)| {
         if let Some(s) = sink {
             f(&mut s.lock().unwrap_or_else(|p| p.into_inner()));
         }
     };
-    let selection = if cfg.model.is_auto() {
+    with_sink(&mut |p| {
+        p.rungs = fit::selection::candidates_of(cfg)
+            .map(|l| l.into_iter().map(|c| c.0).collect())
+            .unwrap_or_default();
+        p.data_file = req
+            .data
+            .file_name()
+            .map(|f| f.to_string_lossy().into_owned())
+            .unwrap_or_default();
+        p.samples = samples.samples.len();
+    });
+    let s = fit::selection::select_with(samples, cfg, &req.progress, &mut |d| {
         with_sink(&mut |p| {
-            p.rungs = fit::selection::candidates_of(&cfg)
-                .map(|l| l.into_iter().map(|c| c.0).collect())
-                .unwrap_or_default();
-            p.data_file = req
-                .data
-                .file_name()
-                .map(|f| f.to_string_lossy().into_owned())
-                .unwrap_or_default();
-            p.samples = samples.samples.len();
-        });
-        let s = fit::selection::select_with(&samples, &cfg, quiet, &mut |d| {
-            with_sink(&mut |p| {
-                p.candidates = d.candidates.to_vec();
-                p.train_samples = d.train_samples;
-                p.heldout_samples = d.heldout_samples;
-                if let (Some(o), Some(c)) = (d.outcome, d.candidates.last()) {
-                    p.fits.push((
-                        c.name.clone(),
-                        serde_json::to_value(rj::params_out(o)).unwrap_or_default(),
-                    ));
-                }
-            })
-        })?;
-        with_sink(&mut |p| p.chosen = Some(s.chosen.clone()));
-        crate::progress::line(
-            quiet,
-            &format!(
-                "auto: chose {}; refitting it on all {} samples",
-                s.chosen,
-                samples.samples.len()
-            ),
-        );
-        let reason = cfg.metric_reason.clone();
-        cfg = match &s.chosen_config {
-            Some(c) => c.clone(),
-            None => cfg.for_rung(s.chosen_rung.parse().map_err(|e: String| anyhow!(e))?),
-        };
-        cfg.metric_reason = reason;
-        if req.progress {
-            eprintln!("{}", fit::selection::table(&s));
-        }
-        Some(s)
-    } else {
-        None
-    };
-    let id = cfg.model_id()?;
-    let hints = selection
-        .as_ref()
-        .map(|s| s.hints.clone())
-        .unwrap_or_default();
-    let (mut outcome, stage_costs) = match req.maps != Maps::None {
-        true => {
-            let store = store.as_ref().ok_or_else(|| {
-                anyhow!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels")
-            })?;
-            crate::progress::line(
-                quiet,
-                &format!(
-                    "maps: global stage ({} of {}x{} texels)",
-                    cfg.maps.global_texels, store.width, store.height
-                ),
-            );
-            let st = fit::maps::global_stage(store, &cfg, &cfg.maps, quiet).with_context(|| {
-                format!("recovering maps with {} from {}", id, req.data.display())
-            })?;
-            let mut global = st.outcome;
-            global.warnings.extend(st.warnings.iter().cloned());
-            let work = (
-                st.costs.len().saturating_sub(1),
-                st.texels,
-                st.iterations,
-                st.seconds,
-            );
-            (global, Some((st.costs, st.texel_variance, work, st.schur)))
-        }
-        false => (
-            fit::fit_with_hints(&samples, &cfg, quiet, &hints)
-                .with_context(|| format!("fitting {} to {}", id, req.data.display()))?,
-            None,
-        ),
-    };
-    // what configuring decided (parameters of another rung ignored) is read with the warnings
-    for (k, n) in cfg.notes.iter().enumerate() {
-        if !outcome.warnings.contains(n) {
-            outcome.warnings.insert(k, n.clone());
-        }
-    }
-    // parameters recovered per texel are not fixed: say so
-    if stage_costs.is_some() {
-        let per_texel = per_texel_names(&cfg.maps);
-        fit::parameters::explain_fixed(&mut outcome.records, &cfg, &samples, &per_texel);
-    }
-    let channels = samples.channels;
-    // a fit on a sample of a capture's texels, checked on every pixel
-    let mut all_pixels = None;
-    if let (Some(st), Some(ids), None) = (&store, &fit_texels, &stage_costs) {
-        let fitted_texels = ids.len();
-        if fitted_texels < st.texels().len() {
-            crate::progress::line(
-                quiet,
-                &format!(
-                    "fit: checking the fit of {fitted_texels} texels on all {}",
-                    st.texels().len()
-                ),
-            );
-            let all = fit::all_pixels::statistics(st, &cfg, &outcome, quiet)?;
-            if let Some(w) =
-                fit::all_pixels::warning(&all, outcome.statistics.reduced_chi_square, fitted_texels)
-            {
-                outcome.warnings.push(w);
+            p.candidates = d.candidates.to_vec();
+            p.train_samples = d.train_samples;
+            p.heldout_samples = d.heldout_samples;
+            if let (Some(o), Some(c)) = (d.outcome, d.candidates.last()) {
+                p.fits.push((
+                    c.name.clone(),
+                    serde_json::to_value(rj::params_out(o)).unwrap_or_default(),
+                ));
             }
-            all_pixels = Some(all);
-        }
+        })
+    })?;
+    with_sink(&mut |p| p.chosen = Some(s.chosen.clone()));
+    req.progress.line(&format!(
+        "auto: chose {}; refitting it on all {} samples",
+        s.chosen,
+        samples.samples.len()
+    ));
+    let reason = cfg.metric_reason.clone();
+    *cfg = match &s.chosen_config {
+        Some(c) => c.clone(),
+        None => cfg.for_rung(s.chosen_rung.parse().map_err(|e: String| anyhow!(e))?),
+    };
+    cfg.metric_reason = reason;
+    req.progress.say(&fit::selection::table(&s));
+    Ok(s)
+}
+
+/// The global fit: on the samples (from `hints`, the selection's starts), or, for maps, the
+/// global stage of map recovery on a sample of texels (its work returned too).
+fn global_fit(
+    req: &FitRequest,
+    cfg: &FitConfig,
+    data: &Loaded,
+    hints: &[Vec<(Param, f64)>],
+) -> Result<(FitOutcome, Option<fit::maps::GlobalWork>)> {
+    let id = cfg.model_id()?;
+    if req.maps == Maps::None {
+        let outcome = fit::fit_with_hints(&data.samples, cfg, &req.progress, hints)
+            .with_context(|| format!("fitting {} to {}", id, req.data.display()))?;
+        return Ok((outcome, None));
     }
+    let store = data.store.as_ref().ok_or_else(|| {
+        anyhow!("--maps needs an image capture (a capture TOML): per-texel maps come from pixels")
+    })?;
+    req.progress.line(&format!(
+        "maps: global stage ({} of {}x{} texels)",
+        cfg.maps.global_texels, store.width, store.height
+    ));
+    let st = fit::maps::global_stage(store, cfg, &cfg.maps, &req.progress)
+        .with_context(|| format!("recovering maps with {} from {}", id, req.data.display()))?;
+    let (outcome, work) = st.split();
+    Ok((outcome, Some(work)))
+}
+
+/// A fit on a sample of a capture's texels, checked on every pixel (a warning when the sample
+/// does not represent the capture).
+fn all_pixels_stage(
+    req: &FitRequest,
+    cfg: &FitConfig,
+    data: &Loaded,
+    outcome: &mut FitOutcome,
+) -> Result<Option<fit::all_pixels::AllPixels>> {
+    let (Some(st), Some(ids)) = (&data.store, &data.fit_texels) else {
+        return Ok(None);
+    };
+    let fitted_texels = ids.len();
+    if fitted_texels >= st.texels().len() {
+        return Ok(None);
+    }
+    req.progress.line(&format!(
+        "fit: checking the fit of {fitted_texels} texels on all {}",
+        st.texels().len()
+    ));
+    let all = fit::all_pixels::statistics(st, cfg, outcome, &req.progress)?;
+    if let Some(w) =
+        fit::all_pixels::warning(&all, outcome.statistics.reduced_chi_square, fitted_texels)
+    {
+        outcome.warnings.push(w);
+    }
+    Ok(Some(all))
+}
+
+/// Ward's lobe fitted to the model (none for a rung with Ward's lobe: it is its own
+/// fallback). An optional stage: its failure is a warning, never the loss of the fit; its
+/// warnings join `warnings` (a poor fallback must be seen).
+fn ward_stage(
+    req: &FitRequest,
+    cfg: &FitConfig,
+    outcome: &FitOutcome,
+    channels: usize,
+    warnings: &mut Vec<String>,
+) -> Result<Option<rj::WardFallback>> {
+    if cfg.model_id()?.has(crate::model::Ability::WardLobe) {
+        return Ok(None);
+    }
+    req.progress.line("fit: the Ward fallback");
     let m = model_for(
         &outcome.set,
         cfg.knobs.quadrature_order,
@@ -469,134 +483,77 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         outcome.map.clone(),
     );
     let albedos = albedos_of(&outcome.set);
+    // in degrees through radians, as it always was (the fallback's fit is seeded by it)
     let psi = outcome.set.shape_value(Param::Azimuth).to_radians();
-    let check_values = rj::check_directions()
-        .into_iter()
-        .map(|d| rj::CheckValue {
-            theta_i: d[0],
-            phi_i: d[1],
-            theta_o: d[2],
-            phi_o: d[3],
-            brdf: brdf_at_degrees(m.as_ref(), &albedos, psi, d, channels),
-        })
-        .collect();
-    // an optional stage: its failure is a warning, never the loss of the fit
-    let mut warnings = outcome.warnings.clone();
-    // a rung with Ward's lobe is its own fallback
-    let ward = if id.has(crate::model::Ability::WardLobe) {
-        None
-    } else {
-        crate::progress::line(quiet, "fit: the Ward fallback");
+    Ok(
         match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
-            Ok(w) => Some(rj::WardFallback {
-                model: ModelId::Ward.to_string(),
-                parameters: w
-                    .parameters
-                    .into_iter()
-                    .map(|(k, v)| (k, rj::number_or_rgb(&v)))
-                    .collect(),
-                rms_error: w.rms_error,
-                relative_rms_error: w.relative_rms_error,
-                directions: w.directions,
-                warnings: {
-                    // on stderr and in the result's warnings too: a poor fallback must be seen
-                    warnings.extend(w.warnings.iter().cloned());
-                    w.warnings
-                },
-            }),
+            Ok(w) => {
+                warnings.extend(w.warnings.iter().cloned());
+                Some(rj::WardFallback::of(w))
+            }
             Err(e) => {
                 warnings.push(format!(
                     "the Ward fallback could not be fitted, so the result has none: {e:#}"
                 ));
                 None
             }
+        },
+    )
+}
+
+/// [`fit`], keeping `sink` up to date with what an auto run has finished (for a partial
+/// result). The stages: load, select (auto), the global fit, the all-pixel check, the Ward
+/// fallback, the result and report, the texel stage (maps).
+pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun> {
+    check(req)?;
+    let mut cfg = req.config.clone();
+    let data = load_stage(req, &mut cfg)?;
+    let selection = match cfg.model.is_auto() {
+        true => Some(select_stage(req, &data.samples, &mut cfg, sink)?),
+        false => None,
+    };
+    let id = cfg.model_id()?;
+    let hints = selection
+        .as_ref()
+        .map(|s| s.hints.clone())
+        .unwrap_or_default();
+    let (mut outcome, global_work) = global_fit(req, &cfg, &data, &hints)?;
+    // what configuring decided (parameters of another rung ignored) is read with the warnings
+    for (k, n) in cfg.notes.iter().enumerate() {
+        if !outcome.warnings.contains(n) {
+            outcome.warnings.insert(k, n.clone());
         }
-    };
-    let mut knobs = rj::knobs(&cfg, req.load.subsample.stride, req.load.subsample.fraction);
-    if let Some(mp) = &outcome.map {
-        knobs.topology_map = Some(
-            std::fs::canonicalize(&mp.source)
-                .unwrap_or(mp.source.clone())
-                .display()
-                .to_string(),
-        );
     }
-    let mut result = rj::ResultFile {
-        schema: rj::SCHEMA.into(),
-        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
-        model: id.to_string(),
-        conventions: rj::Conventions::default(),
-        parameters: rj::params_out(&outcome),
-        correlations: outcome
-            .correlations
-            .iter()
-            .map(|(a, b, r)| rj::Correlation {
-                a: a.clone(),
-                b: b.clone(),
-                r: *r,
-            })
-            .collect(),
-        statistics: {
-            let mut v = serde_json::to_value(&outcome.statistics)?;
-            if let Some(all) = &all_pixels {
-                v["all_pixels"] = serde_json::to_value(all)?;
-            }
-            v
-        },
-        knobs,
-        data: rj::Provenance {
-            file: req
-                .data
-                .file_name()
-                .map(|f| f.to_string_lossy().into_owned())
-                .unwrap_or_default(),
-            // of the bytes the loader read, not of the file as it is now
-            sha256: crate::load::sha256_read(&req.data)
-                .with_context(|| format!("{}: its loader recorded no hash", req.data.display()))?,
-            kind: match samples.kind {
-                DataKind::Gonio => "goniometric".into(),
-                DataKind::Capture => "image capture".into(),
-                DataKind::Measured => "measured BRDF file".into(),
-            },
-            samples: samples.samples.len(),
-            channels,
-        },
-        check_values,
+    // parameters recovered per texel are not fixed: say so
+    if global_work.is_some() {
+        let per_texel = per_texel_names(&cfg.maps);
+        fit::parameters::explain_fixed(&mut outcome.records, &cfg, &data.samples, &per_texel);
+    }
+    let channels = data.samples.channels;
+    let all_pixels = match global_work {
+        None => all_pixels_stage(req, &cfg, &data, &mut outcome)?,
+        Some(_) => None,
+    };
+    let mut warnings = outcome.warnings.clone();
+    let ward = ward_stage(req, &cfg, &outcome, channels, &mut warnings)?;
+    let mut result = rj::assemble(rj::ResultParts {
+        config: &cfg,
+        outcome: &outcome,
+        samples: &data.samples,
+        data: &req.data,
+        stride: req.load.subsample.stride,
+        fraction: req.load.subsample.fraction,
+        all_pixels: all_pixels.as_ref(),
         ward_fallback: ward,
-        model_selection: selection
-            .as_ref()
-            .map(|s| {
-                s.candidates
-                    .iter()
-                    .map(|c| serde_json::to_value(c).unwrap_or_default())
-                    .collect()
-            })
-            .unwrap_or_default(),
-        selection: selection.as_ref().map(|s| {
-            serde_json::json!({
-                "validation": s.validation,
-                "folds": s.folds,
-                "rule": s.rule,
-                "metric": s.metric,
-                "chosen": s.chosen,
-                "chosen_rung": s.chosen_rung,
-                "fuzz": s.chosen_fuzz,
-                "train_samples": s.train_samples,
-                "heldout_samples": s.heldout_samples,
-            })
-        }),
-        quality: Some(serde_json::to_value(&outcome.quality)?),
-        maps: None,
+        selection: selection.as_ref(),
         warnings: warnings.clone(),
-    };
-    let mut report_text = report::text(&outcome, id.as_str(), &req.data.display().to_string());
-    if let Some(why) = &cfg.metric_reason {
-        report_text = report_text.replacen(
-            "[[Fit Statistics]]",
-            &format!("    metric: {why}\n[[Fit Statistics]]"),
-            1,
-        );
-    }
+    })?;
+    let mut report_text = report::text(
+        &outcome,
+        id.as_str(),
+        &req.data.display().to_string(),
+        cfg.metric_reason.as_deref(),
+    );
     report_text += &result
         .ward_fallback
         .as_ref()
@@ -605,80 +562,32 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         report_text += &format!("[[Model selection]]\n{}", fit::selection::table(s));
     }
     let mut maps = None;
-    if let Some((costs, texel_variance, work, schur)) = &stage_costs {
-        let method = fit::maps::method(&cfg, costs, *texel_variance, schur);
-        match &req.maps {
-            Maps::Globals => {
-                result.maps = Some(serde_json::json!({
-                    "stage": "globals",
-                    "requested": cfg.maps.requested(),
-                    "method": method,
-                }));
-            }
-            Maps::Into(dir) => {
-                // the texel stage takes the globals as the result states them, as tiles do
-                let globals = rj::result_from_value(
-                    &serde_json::to_value(&result)?,
-                    "the global fit",
-                    channels,
-                )?
-                .set;
-                let store = store.as_ref().expect("the global stage needed the capture");
-                let (w, h) = (store.width, store.height);
-                crate::progress::line(quiet, &format!("maps: texel stage ({w}x{h} texels)"));
-                let t0 = std::time::Instant::now();
-                let part = fit::maps::texel_stage(
-                    store,
-                    &cfg,
-                    &cfg.maps,
-                    &globals,
-                    (0, h as u32),
-                    *texel_variance,
-                    Some(schur),
-                    quiet,
-                )?;
-                crate::progress::line(quiet, "maps: standard errors and flags");
-                let (texel_maps, variance, warns) = fit::maps::finish_maps(
-                    vec![part],
-                    w,
-                    h,
-                    channels,
-                    &cfg.maps,
-                    outcome.statistics.free_parameters,
-                    crate::model::topology::max_height(globals.shape_value(Param::Spacing)),
-                )?;
-                let texel_seconds = t0.elapsed().as_secs_f64();
-                let h_max = crate::model::topology::max_height(globals.shape_value(Param::Spacing));
-                let summaries = fit::maps::summary(&texel_maps, &cfg.maps, h_max);
-                let sweeps = match cfg.maps.smoothness > 0.0 {
-                    true => 1 + fit::maps::PRIOR_SWEEPS,
-                    false => 1,
-                };
-                report_text += &fit::maps::report_text(
-                    *work,
-                    (texel_maps.values.len(), sweeps, texel_seconds),
-                    &summaries,
-                );
-                let mut desc = maps_out::describe(dir, &cfg.maps.requested(), &texel_maps);
-                desc["method"] = method;
-                desc["method"]["residual_variance"] = serde_json::json!(variance);
-                desc["method"]["global_stage_iterations"] = serde_json::json!(work.2);
-                desc["method"]["global_stage_seconds"] = serde_json::json!(work.3);
-                desc["method"]["texel_stage_seconds"] = serde_json::json!(texel_seconds);
-                desc["summary"] = serde_json::to_value(&summaries)?;
-                result.maps = Some(desc);
-                result.warnings.extend(warns);
-                outcome.fitted =
-                    fit::maps::fitted_all(&samples, &cfg, &cfg.maps, &globals, &texel_maps)?;
-                maps = Some(texel_maps);
-            }
-            Maps::None => {}
+    match (&global_work, &req.maps) {
+        (Some(work), Maps::Globals) => result.maps = Some(rj::globals_block(&cfg, work)),
+        (Some(work), Maps::Into(dir)) => {
+            // the texel stage takes the globals as the result states them, as tiles do
+            let globals =
+                rj::result_from_value(&serde_json::to_value(&result)?, "the global fit", channels)?
+                    .set;
+            let store = data
+                .store
+                .as_ref()
+                .expect("the global stage needed the capture");
+            let free = outcome.statistics.free_parameters;
+            let run = fit::maps::texel_run(store, &cfg, &globals, work, free, &req.progress)?;
+            report_text += &run.report_text(work);
+            result.maps = Some(rj::maps_block(dir, &cfg, work, &run)?);
+            result.warnings.extend(run.warnings);
+            outcome.fitted =
+                fit::maps::fitted_all(&data.samples, &cfg, &cfg.maps, &globals, &run.maps)?;
+            maps = Some(run.maps);
         }
+        _ => {}
     }
     Ok(FitRun {
         result,
         outcome,
-        samples,
+        samples: data.samples,
         config: cfg,
         model: id,
         selection,
@@ -686,6 +595,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         maps,
         warnings,
         data: req.data.clone(),
+        progress: req.progress,
     })
 }
 
@@ -773,6 +683,7 @@ impl FitRun {
     /// the report (optional: its failure becomes a warning in the result, never the lost fit),
     /// then the result JSON.
     pub fn write(&mut self, outs: &mut Outputs, targets: &FitTargets) -> Result<()> {
+        let progress = self.progress;
         if let (Some(files), Some(maps)) = (&targets.maps, &self.maps) {
             maps_out::write(outs, files, &self.config.maps.requested(), maps)?;
         }
@@ -789,7 +700,7 @@ impl FitRun {
                 measured.as_deref(),
             ) {
                 let w = format!("{}: the report could not be written: {e:#}", dir.display());
-                eprintln!("warning: {w}");
+                progress.warn(&w);
                 self.result.warnings.push(w);
                 files.discard(outs);
             }

@@ -58,7 +58,9 @@ impl Material {
         let raw = crate::export::result_json::read_params(result)?;
         let maps = match maps {
             Some(d) => Some(d.to_path_buf()),
-            None => crate::api::render::maps_dir(None, result, true)?,
+            None => {
+                crate::api::render::maps_dir(None, result, &crate::progress::Progress::quiet())?
+            }
         };
         let (m, mut warnings) = Self::from_raw(raw, result, maps)?;
         if m.texel_maps.is_none() {

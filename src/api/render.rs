@@ -52,8 +52,8 @@ pub struct RenderRequest {
     pub maps: Option<PathBuf>,
     /// Ward on a curvature-tangent mesh: alphas F |k1|, F |k2|.
     pub ward_curvature_alpha: Option<f64>,
-    /// No progress bar and no warnings.
-    pub quiet: bool,
+    /// Where the progress bar and warnings go.
+    pub progress: crate::progress::Progress,
 }
 
 /// A render with everything loaded.
@@ -64,14 +64,14 @@ pub struct Render {
     texel_maps: Option<TexelMapsIn>,
     ward_curvature_alpha: Option<f64>,
     inputs: Vec<PathBuf>,
-    quiet: bool,
+    progress: crate::progress::Progress,
 }
 
 impl Render {
     /// Load what `req` names and check it.
     pub fn prepare(req: &RenderRequest) -> Result<Self> {
         let (raw, id, params) =
-            crate::api::eval::load_params(&req.params, req.model.as_deref(), req.quiet)?;
+            crate::api::eval::load_params(&req.params, req.model.as_deref(), &req.progress)?;
         let scene = match &req.scene {
             SceneSource::File(path) => SceneFile::load(path)?.build(
                 path,
@@ -82,7 +82,7 @@ impl Render {
         };
         let mut inputs = vec![req.params.clone()];
         inputs.extend(scene.inputs.iter().cloned());
-        let maps = maps_dir(req.maps.as_deref(), &req.params, req.quiet)?;
+        let maps = maps_dir(req.maps.as_deref(), &req.params, &req.progress)?;
         if let Some(dir) = &maps {
             for f in ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"] {
                 inputs.push(dir.join(f));
@@ -113,7 +113,7 @@ impl Render {
             texel_maps,
             ward_curvature_alpha: req.ward_curvature_alpha,
             inputs,
-            quiet: req.quiet,
+            progress: req.progress,
         })
     }
 
@@ -140,7 +140,7 @@ impl Render {
             ward_curvature: self.ward_curvature_alpha,
         };
         let scene = &self.scene;
-        let bar = crate::progress::bar(scene.camera.height as u64, "render", self.quiet);
+        let bar = self.progress.bar(scene.camera.height as u64, "render");
         let pic = render::render(
             &scene.objects,
             &material,
@@ -188,9 +188,13 @@ pub fn object(name: &str, tangents: &str, params: &ModelParams) -> Result<Object
 }
 
 /// The maps directory: --maps, else the one a `fit --maps` result names, relative to the
-/// result's folder (docs/formats.md) and never to the working directory; a warning (unless
-/// `quiet`) says where it was looked for when it is not there.
-pub fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Option<PathBuf>> {
+/// result's folder (docs/formats.md) and never to the working directory; a warning through
+/// `progress` says where it was looked for when it is not there.
+pub fn maps_dir(
+    given: Option<&Path>,
+    params: &Path,
+    progress: &crate::progress::Progress,
+) -> Result<Option<PathBuf>> {
     if let Some(d) = given {
         return Ok(Some(d.to_path_buf()));
     }
@@ -200,12 +204,10 @@ pub fn maps_dir(given: Option<&Path>, params: &Path, quiet: bool) -> Result<Opti
     if looked.is_dir() {
         return Ok(Some(looked));
     }
-    if !quiet {
-        eprintln!(
-            "warning: {}: rendering without the maps (give --maps DIR)",
-            missing_maps(params, &named, &looked)
-        );
-    }
+    progress.warn(&format!(
+        "{}: rendering without the maps (give --maps DIR)",
+        missing_maps(params, &named, &looked)
+    ));
     Ok(None)
 }
 
@@ -278,7 +280,12 @@ pub struct PaperFigures {
     pub columns: Vec<String>,
 }
 
-pub fn paper_figures(camera: Vec3, supersample: usize, quiet: bool) -> Result<PaperFigures> {
+/// The paper figures: each rung (rows) under each lighting (columns) on a torus.
+pub fn paper_figures(
+    camera: Vec3,
+    supersample: usize,
+    progress: &crate::progress::Progress,
+) -> Result<PaperFigures> {
     let size = 256usize;
     let deg = |t: f64, p: f64| direction_from_angles(t.to_radians(), p.to_radians());
     let lightings = [
@@ -302,10 +309,9 @@ pub fn paper_figures(camera: Vec3, supersample: usize, quiet: bool) -> Result<Pa
         ("varying-topology", ModelId::VaryingTopology, false),
         ("varying-topology + map", ModelId::VaryingTopology, true),
     ];
-    let bar = crate::progress::bar(
+    let bar = progress.bar(
         (rows.len() * lightings.len() * size) as u64,
         "paper figures",
-        quiet,
     );
     let mut tiles = Vec::new();
     for (_, id, with_map) in rows {

@@ -57,7 +57,7 @@ pub struct TileRequest {
     pub dir: PathBuf,
     /// (I, N): tile I of N, I from 0.
     pub tile: (u32, u32),
-    pub progress: bool,
+    pub progress: crate::progress::Progress,
 }
 
 /// A written tile.
@@ -154,7 +154,7 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
         rows,
         hint,
         schur.as_ref(),
-        !req.progress,
+        &req.progress,
     )?;
     let global_free = g["statistics"]["free_parameters"].as_u64().unwrap_or(0) as usize;
     let t = TileFile {

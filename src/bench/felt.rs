@@ -145,7 +145,7 @@ pub fn run(file: &Path, directions: usize, bar: &ProgressBar) -> Result<FeltRun>
                 bar.set_message(format!("felt: {rung} {metric} {variant}"));
                 let cfg = with_variant(auto.for_rung(id), variant);
                 let t = Instant::now();
-                let o = crate::fit::fit(&train, &cfg, true)?;
+                let o = crate::fit::fit(&train, &cfg, &crate::progress::Progress::quiet())?;
                 let fit_seconds = t.elapsed().as_secs_f64();
                 let (_, train_rel, train_log, _) = heldout(&o, &cfg, &train)?;
                 let (_, rel, log, ns) = heldout(&o, &cfg, &test)?;

@@ -178,7 +178,7 @@ pub fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
     let store = CaptureStore::load(&write_blind(&dir.join("d"))?, Default::default())?;
     let cfg: FitConfig = toml::from_str(FIT)?;
     let t = Instant::now();
-    let o = maps::recover(&store, &cfg, &cfg.maps, true)?;
+    let o = maps::recover(&store, &cfg, &cfg.maps, &crate::progress::Progress::quiet())?;
     let seconds = t.elapsed().as_secs_f64();
     let topo = TopologyMap::load(&dir.join("d/topology.png"))?;
     let tan = TopologyMap::load_as(&dir.join("d/tangent.png"), "tangent map")?;

@@ -311,7 +311,7 @@ pub fn run(cases: &[Case], size: StudySize, scratch: &Path, bar: &ProgressBar) -
             let data = case_samples(case, map, size.samples, seed)?;
             let cfg = case_config(case, map, seed)?;
             let t = Instant::now();
-            let o = fit(&data, &cfg, true)?;
+            let o = fit(&data, &cfg, &crate::progress::Progress::quiet())?;
             let seconds = t.elapsed().as_secs_f64();
             let chi2_truth = truth_chi2(case, map, &data, &cfg)?;
             let s = &o.statistics;

@@ -104,10 +104,16 @@ pub fn auto_fit(
     let mut cfg: FitConfig = toml::from_str("model = \"auto\"\n")?;
     cfg.metric = crate::fit::config::metric_for_data(data).0;
     cfg.selection.coarse_ranking = !slow;
-    let s = selection::select_with(data, &cfg, quiet, &mut |_| {})?;
+    let s = selection::select_with(
+        data,
+        &cfg,
+        &crate::progress::Progress::new(quiet),
+        &mut |_| {},
+    )?;
     let selection_seconds = t.elapsed().as_secs_f64();
     let chosen = s.chosen_config.clone().expect("select sets it");
-    let o = crate::fit::fit_with_hints(data, &chosen, true, &s.hints)?;
+    let o =
+        crate::fit::fit_with_hints(data, &chosen, &crate::progress::Progress::quiet(), &s.hints)?;
     Ok((s, o, chosen, t.elapsed().as_secs_f64(), selection_seconds))
 }
 

@@ -63,7 +63,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         &args.params,
         args.model.as_deref(),
         &args.queries,
-        args.quiet,
+        &crate::progress::Progress::new(args.quiet),
     )?;
     // the output reserved before the work; it is never an input
     let mut outs = Outputs::new(&eval.inputs());
@@ -71,7 +71,7 @@ pub fn run(args: &EvalArgs) -> Result<()> {
         Some(path) => Some(outs.file(path, "--out")?),
         None => None,
     };
-    let outcome = eval.run(args.quiet)?;
+    let outcome = eval.run(&crate::progress::Progress::new(args.quiet))?;
     match out {
         Some(id) => {
             outcome.write(&mut outs.writer(id))?;

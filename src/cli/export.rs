@@ -77,7 +77,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         check: args.check,
         gltf: args.gltf.is_some(),
         object: args.object.clone(),
-        quiet: args.quiet,
+        progress: crate::progress::Progress::new(args.quiet),
     };
     // every output reserved before the work (none an input or another output), written together
     let mut outs = Outputs::new(&export_api::inputs(&req));

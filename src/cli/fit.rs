@@ -115,7 +115,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
             (Some(dir), false) => Maps::Into(dir.clone()),
             (None, false) => Maps::None,
         },
-        progress: !(args.quiet || args.json),
+        progress: crate::progress::Progress::new(args.quiet || args.json),
         config,
     };
     let inputs = fit_api::inputs(&req, args.config.as_deref());

@@ -130,7 +130,11 @@ pub fn run(args: &RenderArgs) -> Result<()> {
     if args.paper_figures {
         let mut outs = Outputs::new(&[]);
         let picture_out = outs.file(&args.out, "--out")?;
-        let s = render_api::paper_figures(camera, args.supersample, args.quiet)?;
+        let s = render_api::paper_figures(
+            camera,
+            args.supersample,
+            &crate::progress::Progress::new(args.quiet),
+        )?;
         let (rows, cols) = (&s.rows, &s.columns);
         write_labelled_grid(&mut outs, picture_out, &s.grid, s.tile, rows, cols)?;
         outs.commit()?;
@@ -172,7 +176,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         },
         maps: args.maps.clone(),
         ward_curvature_alpha: args.ward_curvature_alpha,
-        quiet: args.quiet,
+        progress: crate::progress::Progress::new(args.quiet),
     };
     let render = Render::prepare(&req)?;
     // outputs checked before the work; none replaces an input

@@ -6,10 +6,15 @@ use crate::fit::parameters::PER_TEXEL;
 use crate::fit::FitOutcome;
 use std::fmt::Write;
 
-pub fn text(outcome: &FitOutcome, model: &str, data: &str) -> String {
+/// The report of `outcome`: the rung `model` fitted to `data` with the metric chosen for the
+/// reason `metric` (when one was given).
+pub fn text(outcome: &FitOutcome, model: &str, data: &str, metric: Option<&str>) -> String {
     let s = &outcome.statistics;
     let mut t = String::new();
     let _ = writeln!(t, "[[Model]]\n    {model}\n    data: {data}");
+    if let Some(why) = metric {
+        let _ = writeln!(t, "    metric: {why}");
+    }
     let _ = writeln!(t, "[[Fit Statistics]]");
     let _ = writeln!(t, "    # data points      = {}", s.n);
     let _ = writeln!(t, "    # variables        = {}", s.free_parameters);

@@ -496,3 +496,177 @@ pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
         metric_reason: cfg.metric_reason.clone(),
     }
 }
+
+/// Everything a fit decided, from which its result file is assembled ([`assemble`]).
+pub struct ResultParts<'a> {
+    /// The configuration of the fitted rung (auto's choice applied).
+    pub config: &'a FitConfig,
+    pub outcome: &'a FitOutcome,
+    pub samples: &'a crate::load::samples::Samples,
+    /// The data file fitted (its name and the hash of the bytes its loader read are recorded).
+    pub data: &'a Path,
+    /// The loader's subsampling: keep every `stride`-th sample, then this fraction.
+    pub stride: usize,
+    pub fraction: f64,
+    /// A capture's fit on a sample of texels, checked on every pixel.
+    pub all_pixels: Option<&'a crate::fit::all_pixels::AllPixels>,
+    pub ward_fallback: Option<WardFallback>,
+    pub selection: Option<&'a crate::fit::selection::SelectionOutcome>,
+    /// Every warning of the run (the quality checks', the fallback's, configuring's notes).
+    pub warnings: Vec<String>,
+}
+
+/// The BRDF of the fitted model at each of [`check_directions`], per channel (1/sr).
+pub fn check_values(outcome: &FitOutcome, cfg: &FitConfig, channels: usize) -> Vec<CheckValue> {
+    let m = crate::fit::problem::model_for(
+        &outcome.set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        outcome.map.clone(),
+    );
+    let albedos = crate::fit::problem::albedos_of(&outcome.set);
+    let psi = outcome
+        .set
+        .shape_value(crate::fit::parameters::Param::Azimuth)
+        .to_radians();
+    check_directions()
+        .into_iter()
+        .map(|d| CheckValue {
+            theta_i: d[0],
+            phi_i: d[1],
+            theta_o: d[2],
+            phi_o: d[3],
+            brdf: crate::model::brdf_at_degrees(m.as_ref(), &albedos, psi, d, channels),
+        })
+        .collect()
+}
+
+impl WardFallback {
+    /// The result's record of a fitted Ward fallback.
+    pub fn of(w: crate::fit::ward_fallback::WardFallback) -> Self {
+        Self {
+            model: ModelId::Ward.to_string(),
+            parameters: w
+                .parameters
+                .into_iter()
+                .map(|(k, v)| (k, number_or_rgb(&v)))
+                .collect(),
+            rms_error: w.rms_error,
+            relative_rms_error: w.relative_rms_error,
+            directions: w.directions,
+            warnings: w.warnings,
+        }
+    }
+}
+
+/// The result file of a fit (its maps block, if any, added by the maps stage).
+pub fn assemble(p: ResultParts) -> Result<ResultFile> {
+    use crate::load::samples::DataKind;
+    let (cfg, outcome, samples) = (p.config, p.outcome, p.samples);
+    let channels = samples.channels;
+    let mut knobs = knobs(cfg, p.stride, p.fraction);
+    if let Some(mp) = &outcome.map {
+        knobs.topology_map = Some(
+            std::fs::canonicalize(&mp.source)
+                .unwrap_or(mp.source.clone())
+                .display()
+                .to_string(),
+        );
+    }
+    let selection = p.selection;
+    Ok(ResultFile {
+        schema: SCHEMA.into(),
+        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
+        model: cfg.model_id()?.to_string(),
+        conventions: Conventions::default(),
+        parameters: params_out(outcome),
+        correlations: outcome
+            .correlations
+            .iter()
+            .map(|(a, b, r)| Correlation {
+                a: a.clone(),
+                b: b.clone(),
+                r: *r,
+            })
+            .collect(),
+        statistics: {
+            let mut v = serde_json::to_value(&outcome.statistics)?;
+            if let Some(all) = p.all_pixels {
+                v["all_pixels"] = serde_json::to_value(all)?;
+            }
+            v
+        },
+        knobs,
+        data: Provenance {
+            file: p
+                .data
+                .file_name()
+                .map(|f| f.to_string_lossy().into_owned())
+                .unwrap_or_default(),
+            // of the bytes the loader read, not of the file as it is now
+            sha256: crate::load::sha256_read(p.data)
+                .ok_or_else(|| anyhow!("{}: its loader recorded no hash", p.data.display()))?,
+            kind: match samples.kind {
+                DataKind::Gonio => "goniometric".into(),
+                DataKind::Capture => "image capture".into(),
+                DataKind::Measured => "measured BRDF file".into(),
+            },
+            samples: samples.samples.len(),
+            channels,
+        },
+        check_values: check_values(outcome, cfg, channels),
+        ward_fallback: p.ward_fallback,
+        model_selection: selection
+            .map(|s| {
+                s.candidates
+                    .iter()
+                    .map(|c| serde_json::to_value(c).unwrap_or_default())
+                    .collect()
+            })
+            .unwrap_or_default(),
+        selection: selection.map(|s| {
+            serde_json::json!({
+                "validation": s.validation,
+                "folds": s.folds,
+                "rule": s.rule,
+                "metric": s.metric,
+                "chosen": s.chosen,
+                "chosen_rung": s.chosen_rung,
+                "fuzz": s.chosen_fuzz,
+                "train_samples": s.train_samples,
+                "heldout_samples": s.heldout_samples,
+            })
+        }),
+        quality: Some(serde_json::to_value(&outcome.quality)?),
+        maps: None,
+        warnings: p.warnings,
+    })
+}
+
+/// A result's `maps` block for maps written into `dir`: the files, the method (with the
+/// stages' work) and each map's summary.
+pub fn maps_block(
+    dir: &Path,
+    cfg: &FitConfig,
+    work: &crate::fit::maps::GlobalWork,
+    run: &crate::fit::maps::TexelRun,
+) -> Result<serde_json::Value> {
+    let mut desc = super::maps_out::describe(dir, &cfg.maps.requested(), &run.maps);
+    desc["method"] = work.method(cfg);
+    desc["method"]["residual_variance"] = serde_json::json!(run.variance);
+    desc["method"]["global_stage_iterations"] = serde_json::json!(work.iterations);
+    desc["method"]["global_stage_seconds"] = serde_json::json!(work.seconds);
+    desc["method"]["texel_stage_seconds"] = serde_json::json!(run.seconds);
+    desc["summary"] = serde_json::to_value(&run.summaries)?;
+    Ok(desc)
+}
+
+/// A result's `maps` block for `--map-globals` (the global stage only, shared by tiles).
+pub fn globals_block(cfg: &FitConfig, work: &crate::fit::maps::GlobalWork) -> serde_json::Value {
+    serde_json::json!({
+        "stage": "globals",
+        "requested": cfg.maps.requested(),
+        "method": work.method(cfg),
+    })
+}

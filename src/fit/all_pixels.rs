@@ -33,7 +33,7 @@ pub fn statistics(
     store: &CaptureStore,
     cfg: &FitConfig,
     outcome: &FitOutcome,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<AllPixels> {
     let texels = store.texels().len();
     let chunks: Vec<Vec<usize>> = (0..texels)
@@ -41,7 +41,7 @@ pub fn statistics(
         .chunks(CHUNK_TEXELS)
         .map(<[usize]>::to_vec)
         .collect();
-    let bar = crate::progress::bar(chunks.len() as u64, "fit: every pixel", quiet);
+    let bar = progress.bar(chunks.len() as u64, "fit: every pixel");
     // per chunk: (sum of squares, residuals, sum of squared errors, sum of squared data)
     let sums: Vec<(f64, usize, f64, f64)> = chunks
         .iter()

@@ -94,8 +94,12 @@ pub struct FitOutcome {
 }
 
 /// Fit `samples` as `cfg` says.
-pub fn fit(samples: &Samples, cfg: &FitConfig, quiet: bool) -> Result<FitOutcome> {
-    fit_with_hints(samples, cfg, quiet, &[])
+pub fn fit(
+    samples: &Samples,
+    cfg: &FitConfig,
+    progress: &crate::progress::Progress,
+) -> Result<FitOutcome> {
+    fit_with_hints(samples, cfg, progress, &[])
 }
 
 /// Fit with extra starts: each hint gives values of some shape parameters (e.g. the optimum of a
@@ -104,7 +108,7 @@ pub fn fit(samples: &Samples, cfg: &FitConfig, quiet: bool) -> Result<FitOutcome
 pub fn fit_with_hints(
     samples: &Samples,
     cfg: &FitConfig,
-    quiet: bool,
+    progress: &crate::progress::Progress,
     hints: &[Vec<(Param, f64)>],
 ) -> Result<FitOutcome> {
     let t0 = Instant::now();
@@ -130,7 +134,7 @@ pub fn fit_with_hints(
     };
     let full = make(all.clone());
     let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed);
-    let bar = crate::progress::bar(0, "fit", quiet);
+    let bar = progress.bar(0, "fit");
     let mut evaluations = 0;
     let mut starts = Vec::new();
     let mut iterations = 0;
@@ -157,7 +161,7 @@ pub fn fit_with_hints(
         }
         let stage = |what: String| {
             let took = crate::progress::seconds(t0.elapsed().as_secs_f64());
-            crate::progress::line_above(&bar, quiet, &format!("fit: {what} (at {took})"));
+            progress.line_above(&bar, &format!("fit: {what} (at {took})"));
         };
         stage(format!(
             "global search over {} free parameters on {} of {} samples",
@@ -188,13 +192,10 @@ pub fn fit_with_hints(
         minima_theta = minima.into_iter().map(|m| (m.theta, m.cost)).collect();
     }
     bar.finish_and_clear();
-    crate::progress::line(
-        quiet,
-        &format!(
-            "fit: standard errors and quality checks (at {})",
-            crate::progress::seconds(t0.elapsed().as_secs_f64())
-        ),
-    );
+    progress.line(&format!(
+        "fit: standard errors and quality checks (at {})",
+        crate::progress::seconds(t0.elapsed().as_secs_f64())
+    ));
     let minima: Vec<(ParamSet, f64)> = minima_theta
         .iter()
         .map(|(th, c)| (full.set_at(th, &template), *c))

@@ -1360,6 +1360,6 @@ mod nan_tests {
             skipped_examples: vec![],
             image_size: None,
         };
-        assert!(crate::fit::fit(&data, &cfg, true).is_err());
+        assert!(crate::fit::fit(&data, &cfg, &crate::progress::Progress::quiet()).is_err());
     }
 }

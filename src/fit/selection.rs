@@ -547,7 +547,12 @@ pub fn rule_choice(
 }
 
 pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
-    select_with(samples, cfg, true, &mut |_| {})
+    select_with(
+        samples,
+        cfg,
+        &crate::progress::Progress::quiet(),
+        &mut |_| {},
+    )
 }
 
 /// A candidate of `--model auto` just finished (measured or failed).
@@ -591,13 +596,13 @@ pub fn candidates_of(cfg: &FitConfig) -> Result<Vec<(String, ModelId, bool, FitC
     Ok(out)
 }
 
-/// [`select`], with a progress line per candidate on stderr (unless `quiet`: name, elapsed
+/// [`select`], with a progress line per candidate through `progress` (name, elapsed
 /// time, an estimate of the time left) and `on_rung` called as each candidate finishes
 /// (partial results).
 pub fn select_with(
     samples: &Samples,
     cfg: &FitConfig,
-    quiet: bool,
+    progress: &crate::progress::Progress,
     on_rung: &mut dyn FnMut(&RungDone),
 ) -> Result<SelectionOutcome> {
     let n = samples.samples.len();
@@ -620,7 +625,7 @@ pub fn select_with(
     let started = Instant::now();
     // the time left, estimated from the seconds per unit of planned work of the candidates
     // done; a candidate's work: its planned evaluations times the cost of one
-    let planned: Vec<f64> = match crate::progress::shown(quiet) {
+    let planned: Vec<f64> = match progress.shown() {
         false => vec![0.0; list.len()],
         true => list
             .iter()
@@ -645,20 +650,23 @@ pub fn select_with(
             ),
             _ => String::new(),
         };
-        crate::progress::line(
-            quiet,
-            &format!(
-                "auto: rung {}/{} {name} (elapsed {}{estimate})",
-                k + 1,
-                list.len(),
-                crate::progress::seconds(elapsed)
-            ),
-        );
+        progress.line(&format!(
+            "auto: rung {}/{} {name} (elapsed {}{estimate})",
+            k + 1,
+            list.len(),
+            crate::progress::seconds(elapsed)
+        ));
         let t = Instant::now();
         let mut fitted = None;
         // every simpler candidate's optimum is a start: a rung nested in a richer one
         // (poulin-fournier is varying-topology at height 0) then never ends worse than it
-        let result = fit_with_hints(&anchor_samples, &coarse, true, &hints).and_then(|o| {
+        let result = fit_with_hints(
+            &anchor_samples,
+            &coarse,
+            &crate::progress::Progress::quiet(),
+            &hints,
+        )
+        .and_then(|o| {
             let iters = match plan.cross_validated {
                 true => fold_iterations,
                 false => 0,
@@ -713,27 +721,24 @@ pub fn select_with(
             }
         }
         let c = candidates.last().expect("pushed");
-        crate::progress::line(
-            quiet,
-            &match &c.error {
-                None => format!(
-                    "auto: {name} fitted in {}: held-out error {:.4} +/- {:.4} ({} metric{})",
-                    crate::progress::seconds(c.fit_seconds),
-                    c.cv_error,
-                    c.cv_standard_error,
-                    metric_name(cfg.metric),
-                    if c.knobs == "coarse" {
-                        ", coarse knobs"
-                    } else {
-                        ""
-                    }
-                ),
-                Some(e) => format!(
-                    "auto: {name} failed after {}: {e}",
-                    crate::progress::seconds(c.fit_seconds)
-                ),
-            },
-        );
+        progress.line(&match &c.error {
+            None => format!(
+                "auto: {name} fitted in {}: held-out error {:.4} +/- {:.4} ({} metric{})",
+                crate::progress::seconds(c.fit_seconds),
+                c.cv_error,
+                c.cv_standard_error,
+                metric_name(cfg.metric),
+                if c.knobs == "coarse" {
+                    ", coarse knobs"
+                } else {
+                    ""
+                }
+            ),
+            Some(e) => format!(
+                "auto: {name} failed after {}: {e}",
+                crate::progress::seconds(c.fit_seconds)
+            ),
+        });
         on_rung(&RungDone {
             candidates: &candidates,
             outcome: fitted.as_ref(),
@@ -761,10 +766,7 @@ pub fn select_with(
                 continue;
             };
             let (name, _, _, rc) = &list[k];
-            crate::progress::line(
-                quiet,
-                &format!("auto: refining {name} at the config's knobs"),
-            );
+            progress.line(&format!("auto: refining {name} at the config's knobs"));
             let t = Instant::now();
             let refined = refit_and_predict(
                 &anchor_samples,
@@ -788,20 +790,16 @@ pub fn select_with(
                     c.fit_seconds += t.elapsed().as_secs_f64();
                     c.knobs = "config".into();
                     anchors[k] = Some(s);
-                    crate::progress::line(
-                        quiet,
-                        &format!(
-                            "auto: {name} refined in {}: held-out error {:.4} +/- {:.4}",
-                            crate::progress::seconds(t.elapsed().as_secs_f64()),
-                            c.cv_error,
-                            c.cv_standard_error
-                        ),
-                    );
+                    progress.line(&format!(
+                        "auto: {name} refined in {}: held-out error {:.4} +/- {:.4}",
+                        crate::progress::seconds(t.elapsed().as_secs_f64()),
+                        c.cv_error,
+                        c.cv_standard_error
+                    ));
                 }
-                Err(e) => crate::progress::line(
-                    quiet,
-                    &format!("auto: {name} could not be refined (its coarse errors stand): {e:#}"),
-                ),
+                Err(e) => progress.line(&format!(
+                    "auto: {name} could not be refined (its coarse errors stand): {e:#}"
+                )),
             }
         }
     }

@@ -109,7 +109,7 @@ pub fn fit(
         "model = \"ward\"\nseed = {seed}\n[parameters]\nfibre_azimuth_deg = {{ value = {psi}, vary = false }}\nalpha_x = {{ value = 0.2 }}\nalpha_y = {{ value = 0.2 }}\n"
     );
     let ward_cfg: FitConfig = toml::from_str(&text)?;
-    let w = super::fit(&data, &ward_cfg, true)?;
+    let w = super::fit(&data, &ward_cfg, &crate::progress::Progress::quiet())?;
     Ok(WardFallback {
         parameters: w
             .records

@@ -251,7 +251,7 @@ pub fn felt_heldout(cfg: &fibrefit::fit::config::FitConfig) -> FeltScore {
     };
     let train = fibrefit::load::load_data(&felt, &opts(1200, 1)).unwrap();
     let test = fibrefit::load::load_data(&felt, &opts(600, 2)).unwrap();
-    let o = fibrefit::fit::fit(&train, cfg, true).unwrap();
+    let o = fibrefit::fit::fit(&train, cfg, &fibrefit::progress::Progress::quiet()).unwrap();
     let (_, m) = fibrefit::fit::selection::model_values_on(&o, cfg, &test).unwrap();
     let raw: Vec<[f64; 3]> = test.samples.iter().map(|s| s.value).collect();
     let (mut sl, mut se, mut sy, mut n) = (0.0, 0.0, 0.0, 0.0);

@@ -31,7 +31,7 @@ pub fn global_stage(
     store: &CaptureStore,
     cfg: &FitConfig,
     req: &MapsConfig,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<GlobalStage> {
     let t0 = std::time::Instant::now();
     check_request(cfg, req)?;
@@ -48,11 +48,11 @@ pub fn global_stage(
         .flat_map(|&t| store.texel_samples(t))
         .collect();
     let sub_layout = Layout::new(&sub)?;
-    let first = crate::fit::fit(&sub, cfg, quiet)?;
+    let first = crate::fit::fit(&sub, cfg, progress)?;
     let mut set = fix_mapped(&first.set, req);
     let mut values = sub_layout.start_values(&sub, &set);
     let all: Vec<usize> = (0..sub_layout.texels.len()).collect();
-    let bar = crate::progress::bar(req.rounds as u64, "maps: globals", quiet);
+    let bar = progress.bar(req.rounds as u64, "maps: globals");
     let mut costs = vec![first.statistics.chi_square];
     let mut iterations = first.iterations;
     let mut evaluations = first.evaluations;

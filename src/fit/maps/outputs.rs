@@ -11,9 +11,9 @@ pub fn recover(
     store: &CaptureStore,
     cfg: &FitConfig,
     req: &MapsConfig,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<MapOutcome> {
-    let stage = global_stage(store, cfg, req, quiet)?;
+    let stage = global_stage(store, cfg, req, progress)?;
     let (w, h) = (store.width, store.height);
     let part = texel_stage(
         store,
@@ -23,7 +23,7 @@ pub fn recover(
         (0, h as u32),
         stage.texel_variance,
         Some(&stage.schur),
-        quiet,
+        progress,
     )?;
     let global_free = stage.outcome.statistics.free_parameters;
     let h_max = max_height(stage.outcome.set.shape_value(Param::Spacing));
@@ -241,4 +241,124 @@ pub fn report_text(
         );
     }
     t
+}
+
+/// What the global stage leaves for the texel stage and the result: [`GlobalStage`] without
+/// its outcome and warnings ([`GlobalStage::split`]).
+pub struct GlobalWork {
+    /// Cost over the sampled texels: the plain global fit's, then after each round.
+    pub costs: Vec<f64>,
+    /// Residual variance per pixel value the texel stage expects ([`GlobalStage`]).
+    pub texel_variance: f64,
+    /// Levenberg–Marquardt iterations of the stage.
+    pub iterations: u64,
+    /// Wall time of the stage, seconds.
+    pub seconds: f64,
+    /// Texels the stage sampled.
+    pub texels: usize,
+    /// The globals' Schur complement over the sampled texels.
+    pub schur: GlobalSchur,
+}
+
+impl GlobalStage {
+    /// The global fit (its warnings added to the outcome's) and the stage's work.
+    pub fn split(self) -> (FitOutcome, GlobalWork) {
+        let mut outcome = self.outcome;
+        outcome.warnings.extend(self.warnings);
+        let work = GlobalWork {
+            costs: self.costs,
+            texel_variance: self.texel_variance,
+            iterations: self.iterations,
+            seconds: self.seconds,
+            texels: self.texels,
+            schur: self.schur,
+        };
+        (outcome, work)
+    }
+}
+
+impl GlobalWork {
+    /// The `method` block of a result's `maps` ([`method`]).
+    pub fn method(&self, cfg: &FitConfig) -> serde_json::Value {
+        method(cfg, &self.costs, self.texel_variance, &self.schur)
+    }
+}
+
+/// The texel stage over a whole capture, with what the result and report say of it.
+pub struct TexelRun {
+    pub maps: TexelMaps,
+    /// Residual variance per pixel value over every texel.
+    pub variance: f64,
+    pub warnings: Vec<String>,
+    /// Wall time of the texel stage and the assembly, seconds.
+    pub seconds: f64,
+    pub summaries: Vec<MapSummary>,
+    /// Sweeps over the texels (1, or 1 + [`PRIOR_SWEEPS`] with the smoothness prior).
+    pub sweeps: usize,
+}
+
+/// Stage 2 over every row of `store` given the globals `globals` (as the result states them,
+/// as tiles take them) and the global stage's `work`; `global_free` globals were fitted.
+pub fn texel_run(
+    store: &CaptureStore,
+    cfg: &FitConfig,
+    globals: &ParamSet,
+    work: &GlobalWork,
+    global_free: usize,
+    progress: &crate::progress::Progress,
+) -> Result<TexelRun> {
+    let (w, h) = (store.width, store.height);
+    progress.line(&format!("maps: texel stage ({w}x{h} texels)"));
+    let t0 = std::time::Instant::now();
+    let part = texel_stage(
+        store,
+        cfg,
+        &cfg.maps,
+        globals,
+        (0, h as u32),
+        work.texel_variance,
+        Some(&work.schur),
+        progress,
+    )?;
+    progress.line("maps: standard errors and flags");
+    let h_max = max_height(globals.shape_value(Param::Spacing));
+    let (maps, variance, warnings) = finish_maps(
+        vec![part],
+        w,
+        h,
+        store.channels,
+        &cfg.maps,
+        global_free,
+        h_max,
+    )?;
+    let seconds = t0.elapsed().as_secs_f64();
+    let summaries = summary(&maps, &cfg.maps, h_max);
+    let sweeps = match cfg.maps.smoothness > 0.0 {
+        true => 1 + PRIOR_SWEEPS,
+        false => 1,
+    };
+    Ok(TexelRun {
+        maps,
+        variance,
+        warnings,
+        seconds,
+        summaries,
+        sweeps,
+    })
+}
+
+impl TexelRun {
+    /// The `[[Maps]]` section of the report ([`report_text`]).
+    pub fn report_text(&self, work: &GlobalWork) -> String {
+        report_text(
+            (
+                work.costs.len().saturating_sub(1),
+                work.texels,
+                work.iterations,
+                work.seconds,
+            ),
+            (self.maps.values.len(), self.sweeps, self.seconds),
+            &self.summaries,
+        )
+    }
 }

@@ -54,7 +54,7 @@ pub fn texel_stage(
     rows: (u32, u32),
     variance_hint: f64,
     schur: Option<&GlobalSchur>,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<TexelPart> {
     let minima_below = (variance_hint.is_finite() && variance_hint > 0.0)
         .then_some(MINIMA_MARGIN * AMBIGUITY_DELTA * variance_hint);
@@ -118,7 +118,7 @@ pub fn texel_stage(
         Texel::new(store.texel_samples(t), free, prior_of(&nbs, smoothness))
     };
     let mut values = start.clone();
-    let bar = crate::progress::bar((sweeps * (t1 - t0)) as u64, "maps: texels", quiet);
+    let bar = progress.bar((sweeps * (t1 - t0)) as u64, "maps: texels");
     let kept = |t: usize| (rows.0..rows.1).contains(&texels[t].1);
     // per texel: best values, cost, other minima (pruned; last sweep, kept texels only)
     let mut fits: Vec<(TexelValues, f64, Vec<[f64; 3]>)> = Vec::new();
