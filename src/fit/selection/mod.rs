@@ -1,0 +1,159 @@
+//! `--model auto`: choose among the candidates (every rung of `selection.rungs`, cheapest
+//! first, each without and with the fuzz layer) by their held-out error in the fit's metric.
+//!
+//! - **Cross-validation.** Data with fewer than `selection.cv_below` samples are split into
+//!   `selection.folds` seeded folds; every sample is predicted once by a fit that never saw it.
+//!   Each candidate is fitted once on all samples (the global search), and each fold's fit is
+//!   warm-started there and polished on the other folds. More data are split once
+//!   (`selection.holdout` held out) and each candidate is fitted on the training part.
+//! - **Speed.** Candidates are ranked with coarse knobs ([`ranking_config`]: fewer quadrature
+//!   nodes, histogram bins, azimuth nodes and starts) on at most `selection.rank_samples` training
+//!   samples; those within reach of the best (two standard errors) whose model the knobs change
+//!   are refined: refitted at the config's knobs, warm-started from their coarse optimum.
+//! - **The one-standard-error rule.** The error of a candidate is the RMS of its held-out
+//!   residuals in the fit's metric (what the fit minimises: log, linear, per sigma or weight);
+//!   its standard error comes from the spread of the per-sample squared residuals. The simplest
+//!   candidate (fewest free parameters, then cheapest rung, the one without the fuzz layer
+//!   before the one with it) whose mean squared held-out residual lies within one standard
+//!   error of the best's is chosen. No candidate is chosen over a simpler one that is better
+//!   beyond that noise. `selection.tolerance` replaces the standard error by a relative
+//!   tolerance on the RMS error.
+
+use super::config::{FitConfig, Metric};
+use super::parameters::{Param, ParamSet};
+use super::{fit_with_hints, FitOutcome};
+use crate::fit::problem::FitProblem;
+use crate::load::samples::Samples;
+use crate::model::ModelId;
+use anyhow::{bail, Result};
+use rand::seq::SliceRandom;
+use rand::SeedableRng;
+use rayon::prelude::*;
+use std::time::Instant;
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct Candidate {
+    /// The candidate as the table names it: the rung, `+ fuzz` with the fuzz layer.
+    pub name: String,
+    pub rung: String,
+    /// With the fuzz layer (`fuzz`, `fuzz_depth`, `fuzz_asymmetry` free).
+    pub fuzz: bool,
+    pub free_parameters: usize,
+    /// RMS of the held-out residuals in the fit's metric (`metric`), every held-out sample.
+    pub cv_error: f64,
+    /// Standard error of `cv_error` (from the per-sample squared residuals).
+    pub cv_standard_error: f64,
+    /// `cv_error` of each fold (one entry for a single split).
+    pub fold_errors: Vec<f64>,
+    /// The standard error of each fold's error.
+    pub fold_standard_errors: Vec<f64>,
+    /// Unweighted RMSE of model - data on the held-out samples, 1/sr.
+    pub heldout_rmse: f64,
+    pub heldout_relative_rmse: f64,
+    /// RMS of ln(m + eps) - ln(y + eps) on the held-out samples (eps: the `log` metric's floor).
+    pub heldout_log_error: f64,
+    /// Cost of one model evaluation (one sample, all heights), single thread, ns.
+    pub ns_per_eval: f64,
+    pub fit_seconds: f64,
+    /// The knobs the errors were measured with: "coarse" (ranking) or "config" (refined, or a
+    /// model the knobs do not change).
+    pub knobs: String,
+    pub chosen: bool,
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub error: Option<String>,
+}
+
+impl Candidate {
+    /// The per-fold held-out errors, "0.123, 0.145, ...", for the tables.
+    pub fn folds_text(&self) -> String {
+        self.fold_errors
+            .iter()
+            .map(|e| format!("{e:.3}"))
+            .collect::<Vec<_>>()
+            .join(", ")
+    }
+}
+
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SelectionOutcome {
+    pub candidates: Vec<Candidate>,
+    /// The chosen candidate's name.
+    pub chosen: String,
+    pub chosen_rung: String,
+    pub chosen_fuzz: bool,
+    pub rule: String,
+    /// "5-fold cross-validation" or "one split (20 % held out)".
+    pub validation: String,
+    pub folds: usize,
+    /// The metric the errors are in (the fit's).
+    pub metric: String,
+    pub train_samples: usize,
+    pub heldout_samples: usize,
+    /// Shape values of the chosen candidate's fit: an extra start for the final fit.
+    #[serde(skip)]
+    pub hints: Vec<Vec<(Param, f64)>>,
+    /// The configuration of the chosen candidate (its rung, the fuzz layer on or off).
+    #[serde(skip)]
+    pub chosen_config: Option<FitConfig>,
+}
+
+mod measure;
+mod rule;
+mod run;
+mod table;
+
+use measure::*;
+pub use measure::{heldout, heldout_log_terms, model_values_on, problem_at, ranking_config};
+pub use rule::*;
+pub use run::select_with;
+pub use table::{metric_name, table};
+
+pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
+    select_with(
+        samples,
+        cfg,
+        &crate::progress::Progress::quiet(),
+        &mut |_| {},
+    )
+}
+
+/// A candidate of `--model auto` just finished (measured or failed).
+pub struct RungDone<'a> {
+    /// Every candidate finished so far, this one last.
+    pub candidates: &'a [Candidate],
+    /// This candidate's anchor fit (`None` when it failed).
+    pub outcome: Option<&'a FitOutcome>,
+    /// The candidates to try, in order (their names).
+    pub rungs: &'a [String],
+    pub train_samples: usize,
+    pub heldout_samples: usize,
+}
+
+/// The candidates of `cfg`: every rung, without and with the fuzz layer (only with it when the
+/// config lists a fuzz parameter or `--fuzz` asked; only without when `selection.fuzz` is
+/// false): (name, rung, fuzz, config).
+pub fn candidates_of(cfg: &FitConfig) -> Result<Vec<(String, ModelId, bool, FitConfig)>> {
+    let listed = cfg.listed_fuzz_parameter().is_some();
+    let mut out = Vec::new();
+    for name in &cfg.selection.rungs {
+        let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
+        let rc = cfg.for_rung(id);
+        let variants: &[bool] = match (listed, cfg.selection.fuzz) {
+            (true, _) => &[true],
+            (false, true) => &[false, true],
+            (false, false) => &[false],
+        };
+        for &fuzz in variants {
+            let mut c = rc.clone();
+            if fuzz && !listed {
+                c.add_fuzz_layer();
+            }
+            let label = match fuzz {
+                true => format!("{id} + fuzz"),
+                false => id.to_string(),
+            };
+            out.push((label, id, fuzz, c));
+        }
+    }
+    Ok(out)
+}
