@@ -51,25 +51,137 @@ pub fn finish(
     let statistics = uncertainty::statistics(chi2, n, p, sigmas, &model_flat, &data_flat);
 
     // standard errors over the full parameter vector
-    let names = full.full_names();
+    let at_bound = free_at_bound(full, &set);
+    let errors = Errors::of(full, &set, &cols, &at_bound, chi2, n)?;
+    let mut warnings = notes;
+    warnings.extend(errors.cov.warnings.iter().cloned());
+    warnings.extend(errors.degeneracies.iter().map(|d| d.note.clone()));
+    let records = records(full, &set, &errors, &at_bound, ch);
+    for r in &records {
+        if r.at_bound.iter().any(|&b| b) {
+            warnings.push(format!(
+                "`{}` ended at a bound of [{}, {}]: no standard error",
+                r.name, r.min, r.max
+            ));
+        }
+    }
+    let names = &errors.names;
+    let correlations = errors
+        .cov
+        .correlations
+        .iter()
+        .map(|&(a, b, r)| (names[a].clone(), names[b].clone(), r))
+        .collect();
+    let minima = named_minima(minima);
+    let mut quality = quality::assess(&quality::Inputs {
+        samples: &full.samples,
+        scale: full.scale(),
+        residuals: r.as_slice(),
+        channels: ch,
+        free_parameters: p,
+        sigmas_given: sigmas,
+        psi: set.shape_value(Param::Azimuth).to_radians(),
+        minima: &minima,
+    });
+    quality.degeneracies = errors.degeneracies;
+    // a PNG capture read with the wrong transfer curve (src/fit/encoding_check.rs)
+    quality
+        .warnings
+        .extend(super::encoding_check::check(samples, &fitted));
+    warnings.extend(quality.warnings.iter().cloned());
+    Ok(FitOutcome {
+        quality,
+        set,
+        records,
+        correlations,
+        statistics,
+        warnings,
+        iterations: 0,
+        evaluations: full.evaluations.load(std::sync::atomic::Ordering::Relaxed),
+        starts: vec![],
+        minima,
+        channels: ch,
+        elapsed_seconds: 0.0,
+        fitted,
+        map: None,
+    })
+}
+
+/// Per free column of the full parameter vector (shapes, then albedos): on a bound?
+fn free_at_bound(full: &FitProblem, set: &ParamSet) -> Vec<bool> {
     let mut at_bound: Vec<bool> = full
         .free_shapes()
         .iter()
-        .map(|&i| shape_at_bound(&set, i))
+        .map(|&i| shape_at_bound(set, i))
         .collect();
     for &(i, c) in full.free_albedos() {
         let a = &set.albedos[i];
         at_bound
             .push(near(a.value[c], a.min, a.min, a.max) || near(a.value[c], a.max, a.min, a.max));
     }
-    let jac = full.full_jacobian(&set, &cols)?;
-    // pairs the data do not separate, from the covariance with every column free (one at a
-    // bound too: its partner took its role); one of each is held, the others' errors conditional
-    // the Jacobian reduced to its p x p triangle once (QR, in place): both covariances from it
-    let jac = uncertainty::reduce(jac);
-    let cov_free = uncertainty::covariance_of_r(&jac, &names, &vec![false; names.len()], chi2, n);
-    let ranges: Vec<f64> = full
-        .free_shapes()
+    at_bound
+}
+
+/// The standard errors of the free columns: the pairs the data do not separate (one of each
+/// held), and the covariance with those and the columns at a bound excluded.
+struct Errors {
+    /// The full-Jacobian columns' names.
+    names: Vec<String>,
+    degeneracies: Vec<quality::Degeneracy>,
+    cov: uncertainty::Covariance,
+}
+
+impl Errors {
+    fn of(
+        full: &FitProblem,
+        set: &ParamSet,
+        cols: &[[f64; 4]],
+        at_bound: &[bool],
+        chi2: f64,
+        n: usize,
+    ) -> Result<Self> {
+        let names = full.full_names();
+        let jac = full.full_jacobian(set, cols)?;
+        // pairs the data do not separate, from the covariance with every column free (one at a
+        // bound too: its partner took its role); one of each is held, the others' errors
+        // conditional; the Jacobian reduced to its p x p triangle once (QR, in place): both
+        // covariances from it
+        let jac = uncertainty::reduce(jac);
+        let cov_free =
+            uncertainty::covariance_of_r(&jac, &names, &vec![false; names.len()], chi2, n);
+        let ranges = free_ranges(full, set);
+        let relative_se: Vec<Option<f64>> = cov_free
+            .std_error
+            .iter()
+            .zip(&ranges)
+            .map(|(e, r)| e.map(|e| e / r.max(f64::MIN_POSITIVE)))
+            .collect();
+        let (degeneracies, held_cols) =
+            quality::degeneracies(&names, &cov_free.correlations, at_bound, &relative_se);
+        let mut excluded = at_bound.to_vec();
+        for &k in &held_cols {
+            excluded[k] = true;
+        }
+        let cov = uncertainty::covariance_of_r(&jac, &names, &excluded, chi2, n);
+        Ok(Self {
+            names,
+            degeneracies,
+            cov,
+        })
+    }
+
+    /// The note of the pair whose held parameter is full-Jacobian column `k`.
+    fn held_note(&self, k: usize) -> Option<String> {
+        self.degeneracies
+            .iter()
+            .find(|d| d.held == self.names[k])
+            .map(|d| d.note.clone())
+    }
+}
+
+/// The width of each free column's range in the fit's coordinate (180 for an unbounded one).
+fn free_ranges(full: &FitProblem, set: &ParamSet) -> Vec<f64> {
+    full.free_shapes()
         .iter()
         .map(|&i| {
             let s = &set.shapes[i];
@@ -85,39 +197,25 @@ pub fn finish(
                 .iter()
                 .map(|&(i, _)| set.albedos[i].max - set.albedos[i].min),
         )
-        .collect();
-    let relative_se: Vec<Option<f64>> = cov_free
-        .std_error
-        .iter()
-        .zip(&ranges)
-        .map(|(e, r)| e.map(|e| e / r.max(f64::MIN_POSITIVE)))
-        .collect();
-    let (degeneracies, held_cols) =
-        quality::degeneracies(&names, &cov_free.correlations, &at_bound, &relative_se);
-    let mut excluded = at_bound.clone();
-    for &k in &held_cols {
-        excluded[k] = true;
-    }
-    let cov = uncertainty::covariance_of_r(&jac, &names, &excluded, chi2, n);
-    let mut warnings = notes;
-    warnings.extend(cov.warnings.iter().cloned());
-    warnings.extend(degeneracies.iter().map(|d| d.note.clone()));
-    // the held parameters' notes, per full-Jacobian column
-    let held_note = |k: usize| -> Option<String> {
-        degeneracies
-            .iter()
-            .find(|d| d.held == names[k])
-            .map(|d| d.note.clone())
-    };
+        .collect()
+}
 
-    // per-parameter records in external units
+/// Per-parameter records in external units: the shapes, then the albedos per channel.
+fn records(
+    full: &FitProblem,
+    set: &ParamSet,
+    errors: &Errors,
+    at_bound: &[bool],
+    ch: usize,
+) -> Vec<ParamRecord> {
+    let cov = &errors.cov;
     let mut records = Vec::new();
     let mut col = 0;
     for s in set.shapes.iter() {
         let (se, ab, held) = if s.vary {
             let se = cov.std_error[col].map(|e| if s.kind.log_space() { e * s.value } else { e });
             let ab = at_bound[col];
-            let held = held_note(col);
+            let held = errors.held_note(col);
             col += 1;
             (se, ab, held)
         } else {
@@ -158,7 +256,7 @@ pub fn finish(
                 let colk = full.free_shapes().len() + k;
                 se[c] = cov.std_error[colk];
                 ab[c] = at_bound[colk];
-                if let Some(h) = held_note(colk).filter(|h| !held.contains(h)) {
+                if let Some(h) = errors.held_note(colk).filter(|h| !held.contains(h)) {
                     held.push(h);
                 }
             }
@@ -177,20 +275,12 @@ pub fn finish(
             held: (!held.is_empty()).then(|| held.join("; ")),
         });
     }
-    for r in &records {
-        if r.at_bound.iter().any(|&b| b) {
-            warnings.push(format!(
-                "`{}` ended at a bound of [{}, {}]: no standard error",
-                r.name, r.min, r.max
-            ));
-        }
-    }
-    let correlations = cov
-        .correlations
-        .iter()
-        .map(|&(a, b, r)| (names[a].clone(), names[b].clone(), r))
-        .collect();
-    let minima: Vec<(Vec<(String, f64)>, f64)> = minima
+    records
+}
+
+/// The minima with their free shapes named, for the quality checks and the outcome.
+fn named_minima(minima: &[(ParamSet, f64)]) -> Vec<(Vec<(String, f64)>, f64)> {
+    minima
         .iter()
         .map(|(s, c)| {
             (
@@ -202,37 +292,5 @@ pub fn finish(
                 *c,
             )
         })
-        .collect();
-    let mut quality = quality::assess(&quality::Inputs {
-        samples: &full.samples,
-        scale: full.scale(),
-        residuals: r.as_slice(),
-        channels: ch,
-        free_parameters: p,
-        sigmas_given: sigmas,
-        psi: set.shape_value(Param::Azimuth).to_radians(),
-        minima: &minima,
-    });
-    quality.degeneracies = degeneracies;
-    // a PNG capture read with the wrong transfer curve (src/fit/encoding_check.rs)
-    quality
-        .warnings
-        .extend(super::encoding_check::check(samples, &fitted));
-    warnings.extend(quality.warnings.iter().cloned());
-    Ok(FitOutcome {
-        quality,
-        set,
-        records,
-        correlations,
-        statistics,
-        warnings,
-        iterations: 0,
-        evaluations: full.evaluations.load(std::sync::atomic::Ordering::Relaxed),
-        starts: vec![],
-        minima,
-        channels: ch,
-        elapsed_seconds: 0.0,
-        fitted,
-        map: None,
-    })
+        .collect()
 }

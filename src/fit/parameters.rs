@@ -48,161 +48,38 @@ pub struct ParamSet {
 }
 
 impl ParamSet {
+    /// The parameters of `cfg`'s rung for data with `channels` channels: each listed one as
+    /// `[parameters]` gives it (after the `[components]` switches), the others at the table's
+    /// start, fit range and default freedom.
     pub fn from_config(cfg: &FitConfig, channels: usize) -> Result<Self> {
         let rung = cfg.model_id()?;
         // components switch parameters on and off on top of [parameters]
-        let mut listed_params = cfg.parameters.clone();
-        let comp = &cfg.components;
-        let (ks, exponent, spacing, substrate) = (
-            Param::Ks.name(),
-            Param::Exponent.name(),
-            Param::Spacing.name(),
-            Param::SubstrateAlbedo.name(),
-        );
-        if !comp.specular && rung.reads(Param::Ks) {
-            listed_params.insert(
-                ks.into(),
-                ParamEntry {
-                    value: Some(Albedo::Grey(0.0)),
-                    vary: Some(false),
-                    ..Default::default()
-                },
-            );
-            // without a lobe the exponent means nothing: fixed (at its start), not fitted
-            listed_params.entry(exponent.into()).or_default().vary = Some(false);
-        }
-        if comp.spacing_free == Some(false) && rung.reads(Param::Spacing) {
-            listed_params.insert(
-                spacing.into(),
-                ParamEntry {
-                    value: Some(Albedo::Grey(2.0)),
-                    vary: Some(false),
-                    ..Default::default()
-                },
-            );
-        }
-        if comp.spacing_free == Some(true) && rung.reads(Param::Spacing) {
-            listed_params.entry(spacing.into()).or_default().vary = Some(true);
-        }
-        match comp.substrate.as_deref() {
-            Some("off") if rung.reads(Param::SubstrateAlbedo) => {
-                listed_params.insert(
-                    substrate.into(),
-                    ParamEntry {
-                        value: Some(Albedo::Grey(0.0)),
-                        vary: Some(false),
-                        ..Default::default()
-                    },
-                );
-            }
-            Some("free") if rung.reads(Param::SubstrateAlbedo) => {
-                listed_params.entry(substrate.into()).or_default();
-            }
-            Some("tied") => {
-                listed_params.remove(substrate);
-            }
-            _ => {}
-        }
         let cfg = &FitConfig {
-            parameters: listed_params,
+            parameters: with_components(cfg, rung),
             ..cfg.clone()
         };
-        let empty = ParamEntry::default();
-        let entry = |name: &str| cfg.parameters.get(name).unwrap_or(&empty);
-        let spacing_entry = entry(spacing);
-        let spacing0 = spacing_entry.value.map(|v| v.channels()[0]).unwrap_or(2.0);
-        let spacing_max = if rung.is_cross_section() {
-            if spacing_entry
-                .vary
-                .unwrap_or(cfg.parameters.contains_key(spacing))
-            {
-                spacing_entry.max.unwrap_or(20.0)
-            } else {
-                spacing0
-            }
-        } else {
-            2.0
-        };
+        let (spacing0, spacing_max) = spacing_levels(cfg, rung);
         let mut shapes = Vec::new();
         let mut albedos = Vec::new();
         let fuzz_layer = crate::model::parameter::fuzz_parameters()
             .any(|p| cfg.parameters.contains_key(p.name()));
         for param in rung.parameters() {
-            let info = param.info();
-            let name = info.name;
-            let listed = cfg.parameters.contains_key(name);
-            let e = entry(name);
-            let level = |l: crate::model::parameter::Level| l.at(spacing_max, spacing0);
-            let (hard_lo, hard_hi) = (level(info.limits.0), level(info.limits.1));
-            let min = e.min.unwrap_or(level(info.fit_range.0));
-            let max = e.max.unwrap_or(level(info.fit_range.1));
-            if min < hard_lo - 1e-12 || max > hard_hi + 1e-12 {
-                bail!("parameters.{name}: bounds [{min}, {max}] exceed the model's range [{hard_lo}, {hard_hi}]");
-            }
-            let vary = e.vary.unwrap_or(listed || info.free);
-            let value = e
-                .value
-                .unwrap_or(Albedo::Grey(level(info.start).clamp(min, max)));
-            let albedo_component = param.component();
+            let r = Resolved::of(cfg, param, spacing0, spacing_max)?;
             if param.is_fuzz() && !fuzz_layer {
                 continue; // an optional component, on when any of its parameters is listed
             }
-            match albedo_component {
+            match param.component() {
                 Some(component) => {
-                    if component == Component::Substrate && !listed {
+                    if component == Component::Substrate && !r.listed {
                         continue;
                     }
-                    if value.is_rgb() && channels == 1 {
-                        bail!("parameters.{name}: an RGB value for grey data");
-                    }
-                    let v = value.channels();
-                    for x in v {
-                        if x < min || x > max {
-                            bail!("parameters.{name}.value = {x} is outside its bounds [{min}, {max}]");
-                        }
-                    }
-                    // the specular weight of dielectric fibres is colourless: one value for all
-                    // channels unless the config asks for colour (FitConfig::validate refuses an
-                    // RGB start for it)
-                    let grey = channels > 1
-                        && vary
-                        && param == super::config::COLOUR_CHOICE
-                        && e.colour != Some(true);
-                    if grey && value.is_rgb() {
-                        bail!("parameters.{name}: an RGB start for a grey `{name}`; give one number or `colour = true`");
-                    }
-                    albedos.push(AlbedoParam {
-                        component,
-                        name,
-                        value: v,
-                        init: v,
-                        min,
-                        max,
-                        vary,
-                        grey,
-                    });
+                    albedos.push(r.albedo(param, component, channels)?);
                 }
-                None => {
-                    if value.is_rgb() {
-                        bail!("parameters.{name}: takes one number, not three");
-                    }
-                    let v = value.channels()[0];
-                    let kind = param;
-                    if v < min || v > max {
-                        bail!("parameters.{name}.value = {v} is outside its bounds [{min}, {max}]");
-                    }
-                    shapes.push(ShapeParam {
-                        kind,
-                        value: v,
-                        init: v,
-                        min,
-                        max,
-                        vary: vary && min < max,
-                    });
-                }
+                None => shapes.push(r.shape(param)?),
             }
         }
-        let substrate_tied = rung.is_cross_section() && !cfg.parameters.contains_key(substrate);
+        let substrate_tied =
+            rung.is_cross_section() && !cfg.parameters.contains_key(Param::SubstrateAlbedo.name());
         Ok(ParamSet {
             rung,
             shapes,
@@ -305,5 +182,187 @@ pub fn explain_fixed(
             "held fixed".to_string()
         };
         r.fixed_reason = Some(why);
+    }
+}
+
+/// `cfg`'s `[parameters]` with its `[components]` switches applied: no specular lobe (ks 0,
+/// the exponent fixed), a fixed or free spacing, the substrate off, free or tied.
+fn with_components(
+    cfg: &FitConfig,
+    rung: ModelId,
+) -> std::collections::BTreeMap<String, ParamEntry> {
+    let mut listed_params = cfg.parameters.clone();
+    let comp = &cfg.components;
+    let (ks, exponent, spacing, substrate) = (
+        Param::Ks.name(),
+        Param::Exponent.name(),
+        Param::Spacing.name(),
+        Param::SubstrateAlbedo.name(),
+    );
+    let fixed_at = |v: f64| ParamEntry {
+        value: Some(Albedo::Grey(v)),
+        vary: Some(false),
+        ..Default::default()
+    };
+    if !comp.specular && rung.reads(Param::Ks) {
+        listed_params.insert(ks.into(), fixed_at(0.0));
+        // without a lobe the exponent means nothing: fixed (at its start), not fitted
+        listed_params.entry(exponent.into()).or_default().vary = Some(false);
+    }
+    if comp.spacing_free == Some(false) && rung.reads(Param::Spacing) {
+        listed_params.insert(spacing.into(), fixed_at(2.0));
+    }
+    if comp.spacing_free == Some(true) && rung.reads(Param::Spacing) {
+        listed_params.entry(spacing.into()).or_default().vary = Some(true);
+    }
+    match comp.substrate.as_deref() {
+        Some("off") if rung.reads(Param::SubstrateAlbedo) => {
+            listed_params.insert(substrate.into(), fixed_at(0.0));
+        }
+        Some("free") if rung.reads(Param::SubstrateAlbedo) => {
+            listed_params.entry(substrate.into()).or_default();
+        }
+        Some("tied") => {
+            listed_params.remove(substrate);
+        }
+        _ => {}
+    }
+    listed_params
+}
+
+/// The spacing's start and the largest spacing the fit may reach (what levels relative to
+/// the spacing are taken at): its bound when free, its value when fixed, 2 for a rung
+/// without a cross-section.
+fn spacing_levels(cfg: &FitConfig, rung: ModelId) -> (f64, f64) {
+    let spacing = Param::Spacing.name();
+    let empty = ParamEntry::default();
+    let spacing_entry = cfg.parameters.get(spacing).unwrap_or(&empty);
+    let spacing0 = spacing_entry.value.map(|v| v.channels()[0]).unwrap_or(2.0);
+    let spacing_max = if rung.is_cross_section() {
+        if spacing_entry
+            .vary
+            .unwrap_or(cfg.parameters.contains_key(spacing))
+        {
+            spacing_entry.max.unwrap_or(20.0)
+        } else {
+            spacing0
+        }
+    } else {
+        2.0
+    };
+    (spacing0, spacing_max)
+}
+
+/// One parameter as the config gives it (or the table's defaults): bounds checked against
+/// the model's limits.
+struct Resolved<'a> {
+    name: &'static str,
+    entry: &'a ParamEntry,
+    listed: bool,
+    min: f64,
+    max: f64,
+    vary: bool,
+    value: Albedo,
+}
+
+impl<'a> Resolved<'a> {
+    fn of(cfg: &'a FitConfig, param: Param, spacing0: f64, spacing_max: f64) -> Result<Self> {
+        static EMPTY: std::sync::OnceLock<ParamEntry> = std::sync::OnceLock::new();
+        let info = param.info();
+        let name = info.name;
+        let listed = cfg.parameters.contains_key(name);
+        let e = cfg
+            .parameters
+            .get(name)
+            .unwrap_or_else(|| EMPTY.get_or_init(ParamEntry::default));
+        let level = |l: crate::model::parameter::Level| l.at(spacing_max, spacing0);
+        let (hard_lo, hard_hi) = (level(info.limits.0), level(info.limits.1));
+        let min = e.min.unwrap_or(level(info.fit_range.0));
+        let max = e.max.unwrap_or(level(info.fit_range.1));
+        if min < hard_lo - 1e-12 || max > hard_hi + 1e-12 {
+            bail!("parameters.{name}: bounds [{min}, {max}] exceed the model's range [{hard_lo}, {hard_hi}]");
+        }
+        let vary = e.vary.unwrap_or(listed || info.free);
+        let value = e
+            .value
+            .unwrap_or(Albedo::Grey(level(info.start).clamp(min, max)));
+        Ok(Self {
+            name,
+            entry: e,
+            listed,
+            min,
+            max,
+            vary,
+            value,
+        })
+    }
+
+    /// The albedo of `component`, its start within bounds; grey (one value for every
+    /// channel) for the colourless specular weight unless the config asks for colour.
+    fn albedo(&self, param: Param, component: Component, channels: usize) -> Result<AlbedoParam> {
+        let Self {
+            name,
+            min,
+            max,
+            vary,
+            value,
+            ..
+        } = *self;
+        if value.is_rgb() && channels == 1 {
+            bail!("parameters.{name}: an RGB value for grey data");
+        }
+        let v = value.channels();
+        for x in v {
+            if x < min || x > max {
+                bail!("parameters.{name}.value = {x} is outside its bounds [{min}, {max}]");
+            }
+        }
+        // the specular weight of dielectric fibres is colourless: one value for all
+        // channels unless the config asks for colour (FitConfig::validate refuses an
+        // RGB start for it)
+        let grey = channels > 1
+            && vary
+            && param == super::config::COLOUR_CHOICE
+            && self.entry.colour != Some(true);
+        if grey && value.is_rgb() {
+            bail!("parameters.{name}: an RGB start for a grey `{name}`; give one number or `colour = true`");
+        }
+        Ok(AlbedoParam {
+            component,
+            name,
+            value: v,
+            init: v,
+            min,
+            max,
+            vary,
+            grey,
+        })
+    }
+
+    /// The shape parameter, one number within its bounds (fixed when its bounds meet).
+    fn shape(&self, param: Param) -> Result<ShapeParam> {
+        let Self {
+            name,
+            min,
+            max,
+            vary,
+            value,
+            ..
+        } = *self;
+        if value.is_rgb() {
+            bail!("parameters.{name}: takes one number, not three");
+        }
+        let v = value.channels()[0];
+        if v < min || v > max {
+            bail!("parameters.{name}.value = {v} is outside its bounds [{min}, {max}]");
+        }
+        Ok(ShapeParam {
+            kind: param,
+            value: v,
+            init: v,
+            min,
+            max,
+            vary: vary && min < max,
+        })
     }
 }

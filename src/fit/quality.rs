@@ -459,123 +459,10 @@ pub fn assess_sums(
     let cost = sums.cost;
     let s2 = cost / dof as f64;
     let mut warnings = Vec::new();
-
-    // noise
-    let spread = |k: usize| (2.0 / k as f64).sqrt();
-    let noise = if sigmas_given {
-        NoiseCheck {
-            source: "sigmas".into(),
-            ratio: Some(s2),
-            expected_spread: Some(spread(dof)),
-            noise_estimate: None,
-            estimate_dof: None,
-            note: format!(
-                "reduced chi-square {s2:.4}; a model that fits gives 1 +/- {:.4}",
-                spread(dof)
-            ),
-        }
-    } else {
-        // repeated directions only when the pixels give no estimate (their grouping is costly)
-        match sums
-            .pixel_estimate()
-            .map(|e| ("neighbouring pixels", e))
-            .or_else(|| repeats().map(|e| ("repeated directions", e)))
-        {
-            Some((source, (var, k))) if var > 0.0 => {
-                // the ratio of two variance estimates: spread from both
-                let spr = (2.0 / dof as f64 + 2.0 / k as f64).sqrt();
-                NoiseCheck {
-                    source: source.into(),
-                    ratio: Some(s2 / var),
-                    expected_spread: Some(spr),
-                    noise_estimate: Some(var.sqrt()),
-                    estimate_dof: Some(k),
-                    note: format!(
-                        "residual variance / noise variance estimated from {source} = {:.4}; a model that fits gives 1 +/- {spr:.4}",
-                        s2 / var
-                    ),
-                }
-            }
-            _ => NoiseCheck {
-                source: "none".into(),
-                ratio: None,
-                expected_spread: None,
-                noise_estimate: None,
-                estimate_dof: None,
-                note: "no sigmas, no repeated directions and no neighbouring pixels: the noise \
-                       cannot be estimated, so whether the model fits within it is unknown"
-                    .into(),
-            },
-        }
-    };
-    let verdict = match (noise.ratio, noise.expected_spread) {
-        (Some(r), Some(sp)) if (r - 1.0) > CHI2_Z_LIMIT * sp => {
-            warnings.push(format!(
-                "the model does not fit within the noise: {} (more than {CHI2_Z_LIMIT} spreads above)",
-                noise.note
-            ));
-            "does not fit within the noise"
-        }
-        (Some(r), Some(sp)) if (1.0 - r) > CHI2_Z_LIMIT * sp => {
-            warnings.push(format!(
-                "the residuals are smaller than the noise: {}; the sigmas may be overestimated, or \
-                 the model fits the noise",
-                noise.note
-            ));
-            "fits within the noise"
-        }
-        (Some(_), Some(_)) => "fits within the noise",
-        _ => {
-            warnings.push(noise.note.clone());
-            "noise unknown"
-        }
-    };
-
-    // distinct minima
-    let best = minima.first().map_or(cost, |m| m.1);
-    let all: Vec<MinimumOut> = minima
-        .iter()
-        .map(|(ps, c)| MinimumOut {
-            parameters: ps.iter().cloned().collect(),
-            cost: *c,
-            delta: (c - best) / s2.max(f64::MIN_POSITIVE),
-        })
-        .collect();
-    // only the minima the data do not decide against are listed (the best first)
-    let found = all.len();
-    let minima: Vec<MinimumOut> = all
-        .into_iter()
-        .enumerate()
-        .filter(|(k, m)| *k == 0 || m.delta < AMBIGUOUS_DELTA)
-        .map(|x| x.1)
-        .collect();
-    let minima_beyond = found - minima.len();
-    let close: Vec<&MinimumOut> = minima.iter().skip(1).collect();
-    let ambiguous = !close.is_empty();
-    if ambiguous {
-        let list: Vec<String> = std::iter::once(&minima[0])
-            .chain(close.iter().copied())
-            .map(|m| {
-                let ps: Vec<String> = m
-                    .parameters
-                    .iter()
-                    .map(|(k, v)| format!("{k} {v:.4}"))
-                    .collect();
-                format!(
-                    "[{}] cost {:.6e} (+{:.2} residual variances)",
-                    ps.join(", "),
-                    m.cost,
-                    m.delta
-                )
-            })
-            .collect();
-        warnings.push(format!(
-            "the data do not decide between {} distinct minima: {}",
-            close.len() + 1,
-            list.join("; ")
-        ));
-    }
-
+    let noise = noise_check(sums, s2, dof, sigmas_given, repeats);
+    let verdict = verdict(&noise, &mut warnings);
+    let (minima, minima_beyond) = distinct_minima(minima, cost, s2, &mut warnings);
+    let ambiguous = minima.len() > 1;
     // residual structure
     let s_all = s2.sqrt().max(f64::MIN_POSITIVE);
     let residual_bins = sums.bins.bins(s_all);
@@ -606,6 +493,145 @@ pub fn assess_sums(
         degeneracies: Vec::new(),
         warnings,
     }
+}
+
+/// The residual variance `s2` (on `dof` degrees of freedom) against the noise: the sigmas'
+/// reduced chi-square, or the ratio to a noise variance estimated from neighbouring pixels or
+/// repeated directions, or unknown.
+fn noise_check(
+    sums: &Sums,
+    s2: f64,
+    dof: usize,
+    sigmas_given: bool,
+    repeats: impl FnOnce() -> Option<(f64, usize)>,
+) -> NoiseCheck {
+    let spread = |k: usize| (2.0 / k as f64).sqrt();
+    if sigmas_given {
+        return NoiseCheck {
+            source: "sigmas".into(),
+            ratio: Some(s2),
+            expected_spread: Some(spread(dof)),
+            noise_estimate: None,
+            estimate_dof: None,
+            note: format!(
+                "reduced chi-square {s2:.4}; a model that fits gives 1 +/- {:.4}",
+                spread(dof)
+            ),
+        };
+    }
+    // repeated directions only when the pixels give no estimate (their grouping is costly)
+    match sums
+        .pixel_estimate()
+        .map(|e| ("neighbouring pixels", e))
+        .or_else(|| repeats().map(|e| ("repeated directions", e)))
+    {
+        Some((source, (var, k))) if var > 0.0 => {
+            // the ratio of two variance estimates: spread from both
+            let spr = (2.0 / dof as f64 + 2.0 / k as f64).sqrt();
+            NoiseCheck {
+                source: source.into(),
+                ratio: Some(s2 / var),
+                expected_spread: Some(spr),
+                noise_estimate: Some(var.sqrt()),
+                estimate_dof: Some(k),
+                note: format!(
+                    "residual variance / noise variance estimated from {source} = {:.4}; a model that fits gives 1 +/- {spr:.4}",
+                    s2 / var
+                ),
+            }
+        }
+        _ => NoiseCheck {
+            source: "none".into(),
+            ratio: None,
+            expected_spread: None,
+            noise_estimate: None,
+            estimate_dof: None,
+            note: "no sigmas, no repeated directions and no neighbouring pixels: the noise \
+                   cannot be estimated, so whether the model fits within it is unknown"
+                .into(),
+        },
+    }
+}
+
+/// Does the model fit within the noise? A warning when it does not, when the residuals are
+/// smaller than the noise, or when the noise is unknown.
+fn verdict(noise: &NoiseCheck, warnings: &mut Vec<String>) -> &'static str {
+    match (noise.ratio, noise.expected_spread) {
+        (Some(r), Some(sp)) if (r - 1.0) > CHI2_Z_LIMIT * sp => {
+            warnings.push(format!(
+                "the model does not fit within the noise: {} (more than {CHI2_Z_LIMIT} spreads above)",
+                noise.note
+            ));
+            "does not fit within the noise"
+        }
+        (Some(r), Some(sp)) if (1.0 - r) > CHI2_Z_LIMIT * sp => {
+            warnings.push(format!(
+                "the residuals are smaller than the noise: {}; the sigmas may be overestimated, or \
+                 the model fits the noise",
+                noise.note
+            ));
+            "fits within the noise"
+        }
+        (Some(_), Some(_)) => "fits within the noise",
+        _ => {
+            warnings.push(noise.note.clone());
+            "noise unknown"
+        }
+    }
+}
+
+/// The distinct minima the data do not decide against (the best first; their cost above the
+/// best in residual variances `s2`) and how many others were found; a warning when more than
+/// one is left.
+fn distinct_minima(
+    minima: &[(Vec<(String, f64)>, f64)],
+    cost: f64,
+    s2: f64,
+    warnings: &mut Vec<String>,
+) -> (Vec<MinimumOut>, usize) {
+    let best = minima.first().map_or(cost, |m| m.1);
+    let all: Vec<MinimumOut> = minima
+        .iter()
+        .map(|(ps, c)| MinimumOut {
+            parameters: ps.iter().cloned().collect(),
+            cost: *c,
+            delta: (c - best) / s2.max(f64::MIN_POSITIVE),
+        })
+        .collect();
+    // only the minima the data do not decide against are listed (the best first)
+    let found = all.len();
+    let minima: Vec<MinimumOut> = all
+        .into_iter()
+        .enumerate()
+        .filter(|(k, m)| *k == 0 || m.delta < AMBIGUOUS_DELTA)
+        .map(|x| x.1)
+        .collect();
+    let minima_beyond = found - minima.len();
+    let close: Vec<&MinimumOut> = minima.iter().skip(1).collect();
+    if !close.is_empty() {
+        let list: Vec<String> = std::iter::once(&minima[0])
+            .chain(close.iter().copied())
+            .map(|m| {
+                let ps: Vec<String> = m
+                    .parameters
+                    .iter()
+                    .map(|(k, v)| format!("{k} {v:.4}"))
+                    .collect();
+                format!(
+                    "[{}] cost {:.6e} (+{:.2} residual variances)",
+                    ps.join(", "),
+                    m.cost,
+                    m.delta
+                )
+            })
+            .collect();
+        warnings.push(format!(
+            "the data do not decide between {} distinct minima: {}",
+            close.len() + 1,
+            list.join("; ")
+        ));
+    }
+    (minima, minima_beyond)
 }
 
 /// The residual bins as indented text lines, with a heading.
