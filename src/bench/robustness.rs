@@ -276,11 +276,11 @@ fn truth_chi2(case: &Case, map: Option<&Path>, data: &Samples, cfg: &FitConfig) 
     let p = FitProblem::new(
         data.samples.iter().collect(),
         set.clone(),
-        cfg.metric,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
+        crate::fit::problem::Settings {
+            separable: false,
+            ..crate::fit::problem::Settings::of(&cfg)
+        },
         map,
-        false,
     );
     let cols = p.columns(&set)?;
     Ok(p.residuals(&cols, &set).norm_squared())

@@ -124,11 +124,8 @@ pub fn fit_with_hints(
         FitProblem::new(
             subset,
             template.clone(),
-            cfg.metric,
-            cfg.knobs.quadrature_order,
-            cfg.knobs.histogram_bins,
+            problem::Settings::of(cfg),
             map.clone(),
-            opt.separable,
         )
         .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
     };

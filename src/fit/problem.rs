@@ -63,16 +63,43 @@ pub fn component_index(c: Component) -> usize {
     }
 }
 
+/// How a problem evaluates its model and residuals: the metric, the knobs, and whether the
+/// albedos are solved for each shape (separable; never with the log metric).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Settings {
+    pub metric: Metric,
+    pub quadrature_order: usize,
+    pub histogram_bins: usize,
+    pub separable: bool,
+}
+
+impl Settings {
+    /// The settings a fit configuration asks for.
+    pub fn of(cfg: &super::config::FitConfig) -> Self {
+        Self {
+            metric: cfg.metric,
+            quadrature_order: cfg.knobs.quadrature_order,
+            histogram_bins: cfg.knobs.histogram_bins,
+            separable: cfg.optimizer.separable,
+        }
+    }
+}
+
 impl<'a> FitProblem<'a> {
+    /// The problem of `samples` with the parameters of `template` (their free ones fitted),
+    /// evaluated as `settings` say, on the topology map `map` if any.
     pub fn new(
         samples: Vec<&'a Sample>,
         template: ParamSet,
-        metric: Metric,
-        quadrature_order: usize,
-        histogram_bins: usize,
+        settings: Settings,
         map: Option<Arc<TopologyMap>>,
-        separable: bool,
     ) -> Self {
+        let Settings {
+            metric,
+            quadrature_order,
+            histogram_bins,
+            separable,
+        } = settings;
         let separable = separable && metric != Metric::Log;
         let scale = samples
             .iter()
@@ -1343,7 +1370,17 @@ mod nan_tests {
         )
         .unwrap();
         let set = ParamSet::from_config(&cfg, 1).unwrap();
-        let p = FitProblem::new(vec![&s], set.clone(), Metric::Linear, 16, 16, None, false);
+        let p = FitProblem::new(
+            vec![&s],
+            set.clone(),
+            Settings {
+                metric: Metric::Linear,
+                quadrature_order: 16,
+                histogram_bins: 16,
+                separable: false,
+            },
+            None,
+        );
         let theta = p.theta_of(&set);
         let err = p.evaluate(&theta, &set).unwrap_err().to_string();
         assert!(

@@ -141,11 +141,13 @@ fn problem_for<'a>(
     let problem = FitProblem::new(
         samples,
         result.set.clone(),
-        result.metric,
-        result.knobs.quadrature_order,
-        result.knobs.histogram_bins,
+        super::problem::Settings {
+            metric: result.metric,
+            quadrature_order: result.knobs.quadrature_order,
+            histogram_bins: result.knobs.histogram_bins,
+            separable: false,
+        },
         map.clone(),
-        false,
     )
     .with_azimuth_nodes(result.knobs.azimuth_nodes);
     match result.metric {

@@ -206,11 +206,8 @@ pub(super) fn problem_on<'a>(
     FitProblem::new(
         subset.iter().collect(),
         set.clone(),
-        cfg.metric,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
+        problem::Settings::of(cfg),
         None,
-        cfg.optimizer.separable,
     )
     .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
     .with_sample_maps(Arc::new(maps))

@@ -16,11 +16,8 @@ pub fn problem_at<'a>(o: &FitOutcome, cfg: &FitConfig, samples: &'a Samples) -> 
     FitProblem::new(
         samples.samples.iter().collect(),
         o.set.clone(),
-        cfg.metric,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
+        crate::fit::problem::Settings::of(cfg),
         o.map.clone(),
-        cfg.optimizer.separable,
     )
     .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
 }
@@ -181,11 +178,8 @@ pub(super) fn refit_and_predict(
         FitProblem::new(
             s.samples.iter().collect(),
             template.clone(),
-            rc.metric,
-            rc.knobs.quadrature_order,
-            rc.knobs.histogram_bins,
+            crate::fit::problem::Settings::of(rc),
             st.map.clone(),
-            rc.optimizer.separable,
         )
         .with_azimuth_nodes(rc.knobs.azimuth_nodes)
     }
