@@ -63,17 +63,25 @@ pub fn latin_hypercube(
         .collect()
 }
 
-/// Run the global stage on the subsample problem `sub`. `starts` are points that are always
-/// polished (the user's start, hints); the design adds the rest.
+/// What the global stage works on: the subsample problem, its parameter template, and the
+/// bar its LM iterations advance.
+#[derive(Clone, Copy)]
+pub struct Stage<'p, 'a> {
+    pub sub: &'p FitProblem<'a>,
+    pub template: &'p ParamSet,
+    pub bar: &'p ProgressBar,
+}
+
+/// Run the global stage on the subsample problem `stage.sub`. `starts` are points that are
+/// always polished (the user's start, hints); the design adds the rest.
 pub fn search(
-    sub: &FitProblem,
-    template: &ParamSet,
+    stage: Stage,
     starts: Vec<DVector<f64>>,
     opt: &Optimizer,
     polish_count: usize,
     rng: &mut impl Rng,
-    bar: &ProgressBar,
 ) -> Result<Vec<Basin>> {
+    let Stage { sub, template, bar } = stage;
     let (lo, hi) = sub.design_box();
     let periods = sub.periods();
     let count = opt
@@ -83,7 +91,7 @@ pub fn search(
     let forced = starts.len();
     let mut candidates = starts;
     candidates.extend(latin_hypercube(&lo, &hi, count, rng));
-    let mut found = screen_and_polish(sub, template, candidates, forced, polish_count, tol, bar)?;
+    let mut found = screen_and_polish(stage, candidates, forced, polish_count, tol)?;
     // Round 2, the geometry scan: the fibre geometry (spacing, height, map scale) is where the
     // distinct minima are (a flat layer at d = 2 looks like raised fibres touching at any d);
     // the azimuth and the lobe are well determined once the geometry is roughly right. So the
@@ -111,13 +119,11 @@ pub fn search(
             })
             .collect();
         found.extend(screen_and_polish(
-            sub,
-            template,
+            stage,
             second,
             0,
             polish_count.div_ceil(2),
             tol,
-            bar,
         )?);
     }
     let basins = competitive(cluster(found, &lo, &hi, &periods), sub);
@@ -136,14 +142,13 @@ pub fn search(
 /// Cost every candidate, pick the first `forced` and the best others that lie apart (up to
 /// `polish_count` in all), and give each a short polish.
 fn screen_and_polish(
-    sub: &FitProblem,
-    template: &ParamSet,
+    stage: Stage,
     candidates: Vec<DVector<f64>>,
     forced: usize,
     polish_count: usize,
     tol: f64,
-    bar: &ProgressBar,
 ) -> Result<Vec<Basin>> {
+    let Stage { sub, template, bar } = stage;
     let (lo, hi) = sub.design_box();
     let periods = sub.periods();
     let costs: Vec<f64> = candidates

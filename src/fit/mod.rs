@@ -166,7 +166,17 @@ pub fn fit_with_hints(
             idx.len(),
             all.len()
         ));
-        let basins = global::search(&sub, &template, forced, opt, cfg.starts, &mut rng, &bar)?;
+        let basins = global::search(
+            global::Stage {
+                sub: &sub,
+                template: &template,
+                bar: &bar,
+            },
+            forced,
+            opt,
+            cfg.starts,
+            &mut rng,
+        )?;
         stage(format!(
             "polishing {} basin{} on all {} samples",
             basins.len(),
