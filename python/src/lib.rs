@@ -5,12 +5,9 @@
 
 use fibrefit::api::fit::{self as fit_api, FitRequest, FitRun, FitTargets, Maps};
 use fibrefit::api::material::{Material as MaterialCore, Sampled};
-use fibrefit::export::atomic::Outputs;
-use fibrefit::load::capture::Subsample;
-use fibrefit::load::gonio::GonioOptions;
-use fibrefit::load::rgl::MeasuredOptions;
-use fibrefit::load::samples::{DataKind, Origin};
-use fibrefit::load::LoadOptions;
+use fibrefit::api::{
+    DataKind, GonioOptions, LoadOptions, MeasuredOptions, Origin, Outputs, Subsample,
+};
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
@@ -325,13 +322,13 @@ fn load_data<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let opts = load_options(&options)?;
     let s = py
-        .detach(|| fibrefit::load::load_data(&path, &opts))
+        .detach(|| fibrefit::api::data::load(&path, &opts))
         .map_err(err)?;
     let c = s.channels;
     let d = PyDict::new(py);
     let deg = |x: f64| x.to_degrees();
-    let theta = |w: &fibrefit::model::Vec3| deg(w.z.clamp(-1.0, 1.0).acos());
-    let phi = |w: &fibrefit::model::Vec3| {
+    let theta = |w: &fibrefit::api::Vec3| deg(w.z.clamp(-1.0, 1.0).acos());
+    let phi = |w: &fibrefit::api::Vec3| {
         let p = deg(w.y.atan2(w.x));
         if p < 0.0 {
             p + 360.0
@@ -339,7 +336,7 @@ fn load_data<'py>(
             p
         }
     };
-    let col = |f: &dyn Fn(&fibrefit::load::samples::Sample) -> f64| -> Vec<f64> {
+    let col = |f: &dyn Fn(&fibrefit::api::Sample) -> f64| -> Vec<f64> {
         s.samples.iter().map(f).collect()
     };
     let l: Vec<[f64; 3]> = s.samples.iter().map(|x| [x.l.x, x.l.y, x.l.z]).collect();
@@ -549,7 +546,7 @@ fn fit(
             Some(d) => Maps::Into(d),
             None => Maps::None,
         },
-        progress: fibrefit::progress::Progress::new(!progress),
+        progress: fibrefit::Progress::new(!progress),
     };
     fit_api::check(&request).map_err(err)?;
     let req = request.clone();
@@ -573,10 +570,10 @@ fn path_str(p: &Path) -> String {
 }
 
 /// The geometry of an image capture TOML as plain data (for `fibrefit.mitsuba.capture_scene`):
-/// a JSON string (see `fibrefit::load::capture::CaptureFile::geometry_json`).
+/// a JSON string (see `fibrefit::api::data::capture_geometry_json`).
 #[pyfunction]
 fn capture_geometry(py: Python<'_>, capture: PathBuf) -> PyResult<String> {
-    py.detach(|| fibrefit::load::capture::geometry_json(&capture))
+    py.detach(|| fibrefit::api::data::capture_geometry_json(&capture))
         .map_err(|e| err(e.context(path_str(&capture))))
 }
 
@@ -590,7 +587,7 @@ fn capture_image<'py>(
     index: usize,
 ) -> PyResult<(Bound<'py, numpy::PyArray3<f32>>, Bound<'py, PyArray2<bool>>)> {
     let img = py
-        .detach(|| fibrefit::load::capture_store::radiance_image(&capture, index))
+        .detach(|| fibrefit::api::data::capture_image(&capture, index))
         .map_err(err)?;
     let (w, h, c) = (img.width, img.height, img.channels);
     let data = img
@@ -608,7 +605,7 @@ fn capture_image<'py>(
 
 #[pymodule]
 fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
-    fibrefit::load::input::set_interrupt_check(check_interrupt);
+    fibrefit::api::data::set_interrupt_check(check_interrupt);
     m.add("FibrefitError", m.py().get_type::<FibrefitError>())?;
     m.add_class::<Material>()?;
     m.add_class::<FitResult>()?;

@@ -2,6 +2,7 @@
 //! other front end (the Python package) call these; they hold the orchestration of the stages
 //! (load -> model -> fit -> export) and no argument parsing or printing of results.
 
+pub mod data;
 pub mod eval;
 pub mod export;
 pub mod fit;
@@ -9,3 +10,19 @@ pub mod material;
 pub mod render;
 pub mod score;
 pub mod tiles;
+
+pub use crate::export::atomic::Outputs;
+pub use crate::export::result_json::ResultFile;
+pub use crate::fit::config::{FitConfig, Metric, ModelChoice};
+pub use crate::fit::maps::TexelMaps;
+pub use crate::fit::selection::{Candidate, SelectionOutcome};
+pub use crate::fit::{FitOutcome, ParamRecord};
+pub use crate::load::capture::Subsample;
+pub use crate::load::gonio::GonioOptions;
+pub use crate::load::image_io::LinearImage;
+pub use crate::load::rgl::MeasuredOptions;
+pub use crate::load::samples::{DataKind, Origin, Sample, Samples};
+pub use crate::load::LoadOptions;
+pub use crate::model::frame::Vec3;
+pub use crate::model::ModelId;
+pub use crate::progress::Progress;

@@ -16,6 +16,7 @@ pub mod samples;
 pub mod summary;
 pub mod texel_maps;
 
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use input::{read_input, sha256_read, InputBytes, MAX_INPUT_BYTES};
 
 use crate::model::frame::Vec3;

@@ -19,7 +19,9 @@ pub mod topology;
 
 pub use frame::{DirectionPair, FibreFrame, Local, Vec3};
 pub use parameter::{Ability, Param};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use params::{Albedo, ModelParams};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use rungs::{
     hast_diffuse, lambert, max_normal, poulin_fournier, reference, varying_topology, ward,
     AlignedInputs, ModelId, Rung,

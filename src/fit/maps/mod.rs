@@ -57,6 +57,7 @@ mod uncertainty;
 
 use column_table::*;
 use direction_lattice::*;
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use direction_lattice::{
     blend_error, lattice_nodes, BlendError, LATTICE_MIN_CELL, LATTICE_STEP_DEG,
 };
