@@ -1,8 +1,41 @@
 //! fibrefit: fit fibre reflectance models to goniometric and image measurements.
 //!
-//! Data flows one way: [`load`] -> [`model`] -> fit -> [`export`] (and [`render`] beside it);
-//! [`api`] holds the entry points (a request in, an outcome out) that [`cli`] and other front
-//! ends call.
+//! The library's API is [`api`]: one entry point per command (`fit`, `eval`, `score`,
+//! `render`, `export`, map `tiles`), a request in and an outcome out, and
+//! [`api::material::Material`] (a fitted material as a renderer sees it). The command line
+//! ([`command_line`]) and the Python package call it. Inside, data flows one way: load ->
+//! model -> fit -> export (ARCHITECTURE.md); the stages are internal (public with the
+//! `internals` feature, for the crate's own tests and benchmarks).
+//!
+//! Units: directions are unit vectors in the swatch frame (z the macro normal), angles in
+//! degrees at the boundary, BRDFs in 1/sr, lengths in fibre radii.
+//!
+//! Fit a goniometric table and evaluate the fitted material:
+//!
+//! ```
+//! use fibrefit::api::{self, fit::FitRequest, fit::Maps, material::Material, LoadOptions, Vec3};
+//! use std::path::Path;
+//! # fn main() -> anyhow::Result<()> {
+//! let data = Path::new("data_synthetic/silk/gonio.csv");
+//! // a rung's defaults (or a config file such as configs/fit_silk.toml)
+//! let config = api::fit::configure(None, Some("hast-diffuse"), None, None, data)?;
+//! let run = api::fit::fit(&FitRequest {
+//!     data: data.into(),
+//!     config,
+//!     load: LoadOptions::default(),
+//!     maps: Maps::None,
+//!     progress: fibrefit::Progress::quiet(),
+//! })?;
+//! println!("{}", run.report_text); // statistics, parameters with standard errors, quality
+//! let result = serde_json::to_value(&run.result)?; // what `fibrefit fit --out` writes
+//! let (material, _warnings) = Material::from_result(&result, data, None)?;
+//! let l = Vec3::new(0.0, 0.5, 0.8).normalize(); // towards the light
+//! let v = Vec3::new(0.3, -0.4, 0.8).normalize(); // towards the viewer
+//! let brdf = material.eval(&l, &v, None); // 1/sr, per channel
+//! assert!(brdf[0] > 0.0);
+//! # Ok(())
+//! # }
+//! ```
 
 // `!(x > 0.0)` is used on purpose: it is also true for NaN, which must take the safe branch.
 #![allow(clippy::neg_cmp_op_on_partial_ord)]

@@ -31,17 +31,25 @@ pub fn load_params(
 
 /// Parameters and queries, loaded and checked against each other.
 pub struct Evaluation {
+    /// The parameter file read (TOML, JSON or a fitted result).
     pub params_file: PathBuf,
+    /// The queries file read (CSV of directions, angles in degrees).
     pub queries_file: PathBuf,
+    /// The parameter file's values as written (columns of the queries may replace some).
     pub raw: RawParams,
+    /// The rung evaluated.
     pub model: ModelId,
+    /// The validated parameters of the rung.
     pub params: ModelParams,
+    /// The queries, one row per direction pair.
     pub queries: Queries,
 }
 
 /// The evaluated queries: per row (BRDF in 1/sr, intensity f cos theta_i) per channel.
 pub struct EvalOutcome {
+    /// The queries evaluated, in their order.
     pub queries: Queries,
+    /// Per query: the BRDF f (1/sr) and the intensity f cos(theta_i) (1/sr), per channel.
     pub values: Vec<([f64; 3], [f64; 3])>,
     /// Channels of the table: 3 when the parameters or any albedo column are RGB, else 1.
     pub channels: usize,

@@ -117,9 +117,11 @@ pub enum Maps {
 pub struct FitRequest {
     /// Goniometric CSV, capture TOML or measured BRDF file.
     pub data: PathBuf,
+    /// The fit's configuration ([`configure`]: a config file, or a rung's defaults).
     pub config: FitConfig,
     /// Loading options (`LoadArgs::options_with` the config's stride and fraction).
     pub load: LoadOptions,
+    /// What is recovered besides the global parameters.
     pub maps: Maps,
     /// Where progress lines, bars and the model-selection table go.
     pub progress: crate::progress::Progress,
@@ -129,15 +131,19 @@ pub struct FitRequest {
 pub struct FitRun {
     /// The result file (schema fibrefit-result/1) as it will be written.
     pub result: rj::ResultFile,
+    /// The fit itself: parameter set, records with standard errors, statistics, quality.
     pub outcome: FitOutcome,
     /// The samples the global fit used.
     pub samples: Samples,
     /// The configuration of the fitted rung (auto's choice applied).
     pub config: FitConfig,
+    /// The rung fitted (auto's choice for `--model auto`).
     pub model: ModelId,
+    /// `--model auto`: the candidates compared and the choice.
     pub selection: Option<SelectionOutcome>,
     /// The fit report (lmfit's layout), the model-selection table appended for auto.
     pub report_text: String,
+    /// The per-texel maps (`Maps::Into`).
     pub maps: Option<TexelMaps>,
     /// Warnings beside the quality checks' own (those are in `outcome.quality`).
     pub warnings: Vec<String>,
@@ -184,12 +190,15 @@ pub struct AutoProgress {
     pub candidates: Vec<crate::fit::selection::Candidate>,
     /// The training fit's parameters of every rung fitted, as a result states them.
     pub fits: Vec<(String, serde_json::Value)>,
+    /// Samples the candidates were fitted on (the training split, or all but one fold).
     pub train_samples: usize,
+    /// Samples held out to measure each candidate's error.
     pub heldout_samples: usize,
     /// Set once every rung is done: the rung being refitted on all samples.
     pub chosen: Option<String>,
     /// The data file's name (no directory) and sample count.
     pub data_file: String,
+    /// Samples in the data.
     pub samples: usize,
 }
 

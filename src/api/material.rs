@@ -28,12 +28,15 @@ pub const UNIT_TOLERANCE: f64 = 1e-3;
 
 /// A loaded material (see the module docs).
 pub struct Material {
+    /// The rung of the result.
     pub model: ModelId,
+    /// Its parameters (albedos linear, angles in radians, lengths in fibre radii).
     pub params: ModelParams,
     /// 3 for RGB results, 1 for grey.
     pub channels: usize,
     /// The result (or parameter) file it came from, and the maps directory used.
     pub source: PathBuf,
+    /// The per-texel maps directory used, if any.
     pub maps_dir: Option<PathBuf>,
     shading: Box<dyn ShadingModel>,
     sampler: Sampler,
@@ -45,8 +48,11 @@ pub struct Material {
 /// horizon) is `l` = 0, weight 0, pdf 0.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Sampled {
+    /// The sampled light direction (unit, swatch frame), or 0 when the sample failed.
     pub l: [f64; 3],
+    /// f cos(theta_l) / pdf per channel (dimensionless).
     pub weight: [f64; 3],
+    /// The sample's density, 1/sr.
     pub pdf: f64,
 }
 

@@ -26,7 +26,9 @@ pub struct FlagScene {
     pub lights: Vec<Vec3>,
     /// Direction towards the camera.
     pub camera: Vec3,
+    /// Picture size [width, height] in pixels.
     pub size: [usize; 2],
+    /// Rays per pixel along each axis (supersample^2 rays per pixel).
     pub supersample: usize,
     /// Irradiance of a fill light from the camera's direction (0: none).
     pub fill: f64,
@@ -37,6 +39,7 @@ pub struct FlagScene {
 pub enum SceneSource {
     /// A scene file (docs/guide/render.md; format in src/render/scene.rs).
     File(PathBuf),
+    /// An object, lights and camera from command-line flags.
     Flags(FlagScene),
 }
 
@@ -47,6 +50,7 @@ pub struct RenderRequest {
     pub params: PathBuf,
     /// The rung, overriding the file's.
     pub model: Option<String>,
+    /// The scene: a scene file or flags.
     pub scene: SceneSource,
     /// Per-texel maps [default: those a fitted result names, found beside it].
     pub maps: Option<PathBuf>,
@@ -58,8 +62,11 @@ pub struct RenderRequest {
 
 /// A render with everything loaded.
 pub struct Render {
+    /// The rung rendered.
     pub model: ModelId,
+    /// Its parameters (albedos linear, angles in radians, lengths in fibre radii).
     pub params: ModelParams,
+    /// The objects, lights and camera.
     pub scene: Scene,
     texel_maps: Option<TexelMapsIn>,
     ward_curvature_alpha: Option<f64>,
@@ -274,9 +281,13 @@ fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
 /// as one picture of `tile` x `tile` renders seen from `camera` with `supersample`^2 rays per
 /// pixel, with the rows' and columns' labels.
 pub struct PaperFigures {
+    /// The grid of tiles: one row per rung, one column per lighting (linear radiance).
     pub grid: Picture,
+    /// The side of one tile, pixels.
     pub tile: usize,
+    /// The rows' labels (rungs).
     pub rows: Vec<String>,
+    /// The columns' labels (lightings).
     pub columns: Vec<String>,
 }
 

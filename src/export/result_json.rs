@@ -269,20 +269,34 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
     serde_json::from_value(serde_json::Value::Object(flat)).map_err(|e| anyhow!("{e}"))
 }
 
+/// A result file (schema `fibrefit-result/1`, docs/formats.md): what a fit writes and `score`,
+/// `eval`, `render` and `export` read.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ResultFile {
+    /// The schema name, [`SCHEMA`].
     pub schema: String,
+    /// The program that wrote it, `fibrefit VERSION`.
     pub tool: String,
+    /// The rung fitted (its id, as `--model` takes it).
     pub model: String,
+    /// Frames, angles, units and conventions in words.
     pub conventions: Conventions,
+    /// Every parameter by name: value, standard error, bounds, why fixed or held.
     pub parameters: BTreeMap<String, ParamOut>,
+    /// Correlations between free parameters above 0.1 in size.
     pub correlations: Vec<Correlation>,
+    /// Fit statistics (samples, free parameters, chi-square, RMSE in 1/sr, AIC, BIC...).
     pub statistics: serde_json::Value,
+    /// The knobs and settings the fit used.
     pub knobs: Knobs,
+    /// The data fitted: file name, SHA-256 of the bytes read, kind, samples, channels.
     pub data: Provenance,
+    /// The fitted BRDF (1/sr) at fixed direction pairs, for checking a renderer's port.
     pub check_values: Vec<CheckValue>,
+    /// Ward's lobe fitted to the model, for renderers without the fibre model.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ward_fallback: Option<WardFallback>,
+    /// `--model auto`: every candidate compared (errors, free parameters, time).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub model_selection: Vec<serde_json::Value>,
     /// `--model auto`: how the candidates were compared (validation, folds, rule, metric) and
@@ -296,6 +310,7 @@ pub struct ResultFile {
     /// `fit --maps`: the recovered per-texel maps (files, units, grid) and how they were found.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub maps: Option<serde_json::Value>,
+    /// Every warning of the fit (quality checks, fallback, notes).
     pub warnings: Vec<String>,
 }
 

@@ -42,14 +42,21 @@ use std::time::Instant;
 /// One parameter after the fit, in external units.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct ParamRecord {
+    /// The parameter's name (as the config and result name it).
     pub name: String,
     /// One value (shapes, grey albedos) or three (RGB albedos).
     pub value: Vec<f64>,
+    /// Standard error per value (`None`: fixed, held, at a bound, or undetermined).
     pub std_error: Vec<Option<f64>>,
+    /// The start value(s).
     pub init: Vec<f64>,
+    /// Lower bound of the fit.
     pub min: f64,
+    /// Upper bound of the fit.
     pub max: f64,
+    /// Fixed (not fitted).
     pub fixed: bool,
+    /// Per value: ended on a bound (no standard error).
     pub at_bound: Vec<bool>,
     /// Why a fixed parameter is fixed (the config, the data, a component, per texel), for the
     /// report and the result ([`parameters::explain_fixed`]).
@@ -69,10 +76,15 @@ pub struct ParamRecord {
 /// Everything a fit produced.
 #[derive(Clone, Debug)]
 pub struct FitOutcome {
+    /// The fitted parameter set (internal form).
     pub set: ParamSet,
+    /// Every parameter in external units.
     pub records: Vec<ParamRecord>,
+    /// Correlations above 0.1 between free parameters (names, r).
     pub correlations: Vec<(String, String, f64)>,
+    /// Fit statistics (chi-square, RMSE in 1/sr, AIC, BIC ...).
     pub statistics: uncertainty::Statistics,
+    /// Every warning of the fit.
     pub warnings: Vec<String>,
     /// LM iterations of the final (all-sample) run.
     pub iterations: u64,
@@ -87,9 +99,11 @@ pub struct FitOutcome {
     pub channels: usize,
     /// Does the fit fit within the noise, is it the only minimum, are residuals structured?
     pub quality: quality::Quality,
+    /// Wall time of the fit, seconds.
     pub elapsed_seconds: f64,
     /// Model value per sample and channel at the solution.
     pub fitted: Vec<[f64; 3]>,
+    /// The topology map fitted with, if any.
     pub map: Option<Arc<TopologyMap>>,
 }
 

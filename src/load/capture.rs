@@ -155,8 +155,11 @@ pub enum Camera {
 /// fraction.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Subsample {
+    /// Keep every `stride`-th pixel in x and y (1: all).
     pub stride: usize,
+    /// Then keep this seeded fraction of them, in (0, 1].
     pub fraction: f64,
+    /// Seed of the fraction's choice.
     pub seed: u64,
 }
 

@@ -270,9 +270,13 @@ pub enum Encoding {
 /// A linear image, channels interleaved (1 = grey, 3 = RGB), row 0 at the top.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LinearImage {
+    /// Width, pixels.
     pub width: usize,
+    /// Height, pixels.
     pub height: usize,
+    /// Channels: 1 (grey) or 3 (RGB).
     pub channels: usize,
+    /// Values, linear, row by row from the top, channels interleaved.
     pub data: Vec<f32>,
     /// Per pixel: a channel hit the sensor's top code (PNG) or the given saturation level (EXR).
     pub saturated: Vec<bool>,
@@ -282,6 +286,7 @@ pub struct LinearImage {
 }
 
 impl LinearImage {
+    /// The channels of pixel (`x`, `y`), `y` from the top.
     pub fn pixel(&self, x: usize, y: usize) -> &[f32] {
         let i = (y * self.width + x) * self.channels;
         &self.data[i..i + self.channels]

@@ -26,8 +26,11 @@ use std::path::Path;
 /// Everything a user can set about loading.
 #[derive(Clone, Debug, Default)]
 pub struct LoadOptions {
+    /// Options of goniometric tables (delimiter, columns, units).
     pub gonio: gonio::GonioOptions,
+    /// Subsampling of capture pixels.
     pub subsample: capture::Subsample,
+    /// Sampling of measured-BRDF files.
     pub measured: rgl::MeasuredOptions,
 }
 

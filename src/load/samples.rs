@@ -29,15 +29,28 @@ pub struct Sample {
     pub origin: Origin,
 }
 
+/// Where a sample came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Origin {
+    /// Line of a table (1 = the first line).
     Line(u64),
-    Pixel { image: u32, x: u32, y: u32 },
+    /// A pixel of a capture: image index, column `x`, row `y` (from the top).
+    Pixel {
+        /// Index of the image in the capture.
+        image: u32,
+        /// Column, pixels from the left.
+        x: u32,
+        /// Row, pixels from the top.
+        y: u32,
+    },
 }
 
+/// What kind of data the samples came from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DataKind {
+    /// A goniometric table.
     Gonio,
+    /// An image capture.
     Capture,
     /// A measured-BRDF file (RGL `.bsdf`) sampled at seeded directions.
     Measured,
@@ -71,13 +84,18 @@ impl Dropped {
     }
 }
 
+/// A measurement as samples: direction pairs with their values.
 #[derive(Clone, Debug)]
 pub struct Samples {
+    /// The samples.
     pub samples: Vec<Sample>,
     /// 1 (grey) or 3 (RGB).
     pub channels: usize,
+    /// The kind of data.
     pub kind: DataKind,
+    /// The file they were loaded from.
     pub source: PathBuf,
+    /// What loading dropped, and why.
     pub dropped: Dropped,
     /// First problem of each kind met when rows were skipped (for the report).
     pub skipped_examples: Vec<String>,

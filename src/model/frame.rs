@@ -5,6 +5,7 @@
 
 use nalgebra::Vector3;
 
+/// A 3-vector of f64 (directions: unit, swatch frame, z the macro normal).
 pub type Vec3 = Vector3<f64>;
 
 /// Unit direction from polar angle `theta` (from N) and azimuth `phi` (from x towards y), radians.

@@ -17,6 +17,7 @@ pub use sections::*;
 use sections::{default_metric, default_starts};
 pub use work::*;
 
+/// The residual a fit minimises the squares of.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Metric {
@@ -49,11 +50,14 @@ pub struct ParamEntry {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Deserialize, Serialize)]
 #[serde(try_from = "String", into = "String")]
 pub enum ModelChoice {
+    /// Every candidate rung, chosen by held-out error.
     Auto,
+    /// One rung.
     Rung(ModelId),
 }
 
 impl ModelChoice {
+    /// Whether this is `auto`.
     pub fn is_auto(self) -> bool {
         self == ModelChoice::Auto
     }
@@ -91,22 +95,29 @@ impl std::fmt::Display for ModelChoice {
     }
 }
 
+/// A fit configuration (TOML, `configs/`): the rung, parameters, metric, knobs, optimizer,
+/// starts, seed, maps, components and model selection.
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct FitConfig {
     /// A rung, or `auto` (model selection).
     pub model: ModelChoice,
+    /// The residual metric.
     #[serde(default = "default_metric")]
     pub metric: Metric,
     /// Local polishing runs started from the best candidates of the global stage.
     #[serde(default = "default_starts")]
     pub starts: usize,
+    /// Seed of every random choice (starts, subsamples, folds): a fit is repeatable.
     #[serde(default)]
     pub seed: u64,
+    /// Evaluation knobs (quadrature, histogram, subsampling).
     #[serde(default)]
     pub knobs: Knobs,
+    /// Optimizer settings (LM iterations and tolerance, global search).
     #[serde(default)]
     pub optimizer: Optimizer,
+    /// Listed parameters by name: start, bounds, free or fixed.
     #[serde(default)]
     pub parameters: BTreeMap<String, ParamEntry>,
     /// Switch model components on and off, so a scene pays only for what it needs.
@@ -206,6 +217,7 @@ impl FitConfig {
             .or_default();
     }
 
+    /// Read and validate a config file (errors name the file and key).
     pub fn load(path: &Path) -> Result<Self> {
         let text = crate::load::input::read_text_as(path, "fit config")?;
         let mut cfg: FitConfig = toml::from_str(&text)
@@ -252,6 +264,7 @@ impl FitConfig {
         Ok(cfg)
     }
 
+    /// The rung (an error for `auto`, which has none until chosen).
     pub fn model_id(&self) -> Result<ModelId> {
         match self.model {
             ModelChoice::Rung(id) => Ok(id),

@@ -31,13 +31,17 @@ use rand::SeedableRng;
 use rayon::prelude::*;
 use std::time::Instant;
 
+/// One candidate of `--model auto`: a rung, with or without the fuzz layer, and its held-out
+/// errors.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct Candidate {
     /// The candidate as the table names it: the rung, `+ fuzz` with the fuzz layer.
     pub name: String,
+    /// The rung's id.
     pub rung: String,
     /// With the fuzz layer (`fuzz`, `fuzz_depth`, `fuzz_asymmetry` free).
     pub fuzz: bool,
+    /// Free parameters of its fit.
     pub free_parameters: usize,
     /// RMS of the held-out residuals in the fit's metric (`metric`), every held-out sample.
     pub cv_error: f64,
@@ -49,16 +53,20 @@ pub struct Candidate {
     pub fold_standard_errors: Vec<f64>,
     /// Unweighted RMSE of model - data on the held-out samples, 1/sr.
     pub heldout_rmse: f64,
+    /// `heldout_rmse` over the RMS of the held-out data.
     pub heldout_relative_rmse: f64,
     /// RMS of ln(m + eps) - ln(y + eps) on the held-out samples (eps: the `log` metric's floor).
     pub heldout_log_error: f64,
     /// Cost of one model evaluation (one sample, all heights), single thread, ns.
     pub ns_per_eval: f64,
+    /// Wall time of its fits and measurements, seconds.
     pub fit_seconds: f64,
     /// The knobs the errors were measured with: "coarse" (ranking) or "config" (refined, or a
     /// model the knobs do not change).
     pub knobs: String,
+    /// Chosen by the rule.
     pub chosen: bool,
+    /// Why it could not be fitted, if it failed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
 }
@@ -74,20 +82,28 @@ impl Candidate {
     }
 }
 
+/// How `--model auto` chose: the candidates, the rule and the choice.
 #[derive(Clone, Debug, serde::Serialize)]
 pub struct SelectionOutcome {
+    /// Every candidate, in the order tried.
     pub candidates: Vec<Candidate>,
     /// The chosen candidate's name.
     pub chosen: String,
+    /// The chosen candidate's rung.
     pub chosen_rung: String,
+    /// The chosen candidate has the fuzz layer.
     pub chosen_fuzz: bool,
+    /// The rule, in words (with the best's figures).
     pub rule: String,
     /// "5-fold cross-validation" or "one split (20 % held out)".
     pub validation: String,
+    /// Folds of cross-validation (1 for one split).
     pub folds: usize,
     /// The metric the errors are in (the fit's).
     pub metric: String,
+    /// Samples each candidate was fitted on.
     pub train_samples: usize,
+    /// Samples held out.
     pub heldout_samples: usize,
     /// Shape values of the chosen candidate's fit: an extra start for the final fit.
     #[serde(skip)]

@@ -24,12 +24,19 @@ use std::str::FromStr;
 /// The rungs of the ladder, by the ids the CLI and JSON use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, PartialOrd, Ord)]
 pub enum ModelId {
+    /// Lambert's diffuse (`lambert`).
     Lambert,
+    /// The max-normal diffuse (`max-normal`).
     MaxNormal,
+    /// Hast et al.'s improved diffuse (`hast-diffuse`).
     HastDiffuse,
+    /// Poulin and Fournier's cylinders (`poulin-fournier`).
     PoulinFournier,
+    /// Fibres climbing on their neighbours (`varying-topology`).
     VaryingTopology,
+    /// The exact reference (`reference`).
     Reference,
+    /// Ward's lobe with curvature-aligned tangents (`ward`).
     Ward,
 }
 
