@@ -22,7 +22,7 @@ fn shown(quiet: bool) -> bool {
 }
 
 /// The one place a run speaks: progress lines and bars (shown on a terminal, or when
-/// [`FORCE_ENV`] says), notes and warnings (on stderr unless quiet). The library takes one
+/// `FORCE_ENV` says), notes and warnings (on stderr unless quiet). The library takes one
 /// of these instead of printing; `Progress::quiet()` says nothing at all.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Progress {
@@ -50,7 +50,7 @@ impl Progress {
         self.quiet
     }
 
-    /// Whether progress lines are shown: not quiet, and stderr a terminal unless [`FORCE_ENV`]
+    /// Whether progress lines are shown: not quiet, and stderr a terminal unless `FORCE_ENV`
     /// says otherwise.
     pub fn shown(&self) -> bool {
         shown(self.quiet)

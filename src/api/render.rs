@@ -1,7 +1,7 @@
 //! `render`: a material on an object (or a scene), as a picture and its AOVs.
 //! [`Render::prepare`] loads the parameters, the scene and the maps (so the caller can reserve
 //! its outputs knowing every input), [`Render::run`] renders; [`paper_figures`] renders the topology-map paper's
-//! figures 6 and 7 as one grid. Files are written by [`crate::export::picture`].
+//! figures 6 and 7 as one grid. Files are written by `picture`.
 
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{direction_from_angles, Vec3};

@@ -273,7 +273,7 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
 /// `eval`, `render` and `export` read.
 #[derive(Clone, Debug, Serialize, Deserialize)]
 pub struct ResultFile {
-    /// The schema name, [`SCHEMA`].
+    /// The schema name, `SCHEMA`.
     pub schema: String,
     /// The program that wrote it, `fibrefit VERSION`.
     pub tool: String,

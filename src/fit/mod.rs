@@ -59,7 +59,7 @@ pub struct ParamRecord {
     /// Per value: ended on a bound (no standard error).
     pub at_bound: Vec<bool>,
     /// Why a fixed parameter is fixed (the config, the data, a component, per texel), for the
-    /// report and the result ([`parameters::explain_fixed`]).
+    /// report and the result (`explain_fixed`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub fixed_reason: Option<String>,
     /// One value fitted for all channels of RGB data (`value` repeats it per channel): `ks`
@@ -68,7 +68,7 @@ pub struct ParamRecord {
     pub grey: bool,
     /// Why a free parameter is held at its value for the standard errors: the data do not
     /// separate it from another one (correlation near +-1, or at a bound where a free one
-    /// would take its role); see [`quality::Degeneracy`].
+    /// would take its role); see `Degeneracy`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub held: Option<String>,
 }

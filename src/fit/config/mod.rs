@@ -137,7 +137,7 @@ pub struct FitConfig {
     #[serde(skip)]
     pub notes: Vec<String>,
     /// Neither the file nor `--metric` named the metric: the fit takes the one the data ask for
-    /// ([`metric_for_data`], applied by `api::fit`). Not a key of the file.
+    /// (`metric_for_data`, applied by `api::fit`). Not a key of the file.
     #[serde(skip)]
     pub metric_follows_data: bool,
     /// Why the fit uses its metric (said in the report and the result). Not a key of the file.

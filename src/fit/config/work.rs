@@ -141,8 +141,8 @@ impl FitConfig {
 
     /// The scratch memory one worker thread's model evaluations take at most, in bytes, for a
     /// fit of `samples` samples: a rung that integrates over a height histogram (the varying
-    /// topology) solves, per batch of up to [`EVALUATION_BATCH`] samples, every fibre of every
-    /// bin at once, [`SCRATCH_PER_BIN`] bytes per sample and bin; other rungs take little.
+    /// topology) solves, per batch of up to `EVALUATION_BATCH` samples, every fibre of every
+    /// bin at once, `SCRATCH_PER_BIN` bytes per sample and bin; other rungs take little.
     pub fn planned_scratch_bytes(&self, samples: usize) -> f64 {
         if !self.histogram_rungs() {
             return 0.0;
@@ -151,7 +151,7 @@ impl FitConfig {
     }
 
     /// Refuse, before the fit (and before any allocation), a plan beyond
-    /// [`MAX_PLANNED_EVALUATIONS`] or [`MAX_SCRATCH_BYTES`], with the estimate; for a named
+    /// `MAX_PLANNED_EVALUATIONS` or `MAX_SCRATCH_BYTES`, with the estimate; for a named
     /// rung and for `auto` (every rung it tries) alike.
     pub fn check_work(&self, samples: usize) -> Result<()> {
         let planned = self.planned_evaluations(samples);
