@@ -133,8 +133,8 @@
 //! in `tests/sampling.rs` by chi-square goodness-of-fit tests of the directions against `pdf`.
 //! Directions with N.l <= [`HORIZON_COS`] count as at the horizon in both.
 //!
-//! Here: the sampler and its mixture (weights, draw, density); the cone table in `cone.rs`, the
-//! closed-form draws and densities of the components in `directions.rs`.
+//! Here: the sampler and its mixture (weights, draw, density); the fibre lobe and its cone table
+//! in `lobe.rs`, the other components' closed-form draws and densities in `directions.rs`.
 
 use super::azimuth_spread::spread_nodes;
 use super::frame::Local;
@@ -144,14 +144,14 @@ use super::rung::{LobeAlbedo, LobeSampling};
 use super::{Ability, Albedos, DirectionPair, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
 
-mod cone;
 mod directions;
+mod lobe;
 
-use cone::ConeTable;
 use directions::{
-    cosine_direction, fibre_lobe_direction, fibre_lobe_pdf, rescale, tube_direction, tube_pdf,
-    turn, unturn, wallis, ward_direction, ward_pdf, ONE_BELOW,
+    cosine_direction, rescale, tube_direction, tube_pdf, turn, unturn, wallis, ward_direction,
+    ward_pdf, ONE_BELOW,
 };
+use lobe::{fibre_lobe_direction, fibre_lobe_pdf, ConeTable};
 
 /// Width c of the fibre lobe's Cauchy law in units of 1/sqrt(exponent).
 pub const LOBE_WIDTH: f64 = std::f64::consts::FRAC_1_SQRT_2;

@@ -1,10 +1,9 @@
 //! The closed-form draws and densities the mixture is made of: the cosine and tube techniques,
-//! the fibre lobe (Cauchy in latitude, uniform or tabulated in longitude), Ward's half vector,
-//! and the turns into a spread node's frame.
+//! Ward's half vector, and the turns into a spread node's frame (the fibre lobe's are in
+//! `lobe.rs`).
 
-use super::cone::ConeTable;
 use crate::model::frame::Local;
-use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI, TAU};
+use std::f64::consts::{FRAC_1_PI, PI, TAU};
 
 /// The Wallis integral int_{-pi/2}^{pi/2} cos^e(x) dx, approximately (2 % at e = 1, exact as
 /// e grows): the lobe's width in latitude, for the weights only.
@@ -109,55 +108,6 @@ pub(super) fn tube_direction(u: [f64; 2]) -> Local {
 /// Density of [`tube_direction`] at l (above the horizon, in the fibres' frame).
 pub(super) fn tube_pdf(l: &Local) -> f64 {
     2.0 * l.projected_len() * FRAC_1_PI * FRAC_1_PI
-}
-
-/// The mirror latitude th_r = -asin(v.t) and the Cauchy law's truncation (A, B - A).
-fn fibre_lobe_law(gamma: f64, v: &Local) -> (f64, f64, f64) {
-    let th_r = -v.t.atan2(v.projected_len());
-    let a = ((-FRAC_PI_2 - th_r) / gamma).atan();
-    let b = ((FRAC_PI_2 - th_r) / gamma).atan();
-    (th_r, a, b - a)
-}
-
-/// The fibre lobe technique for the view v (fibre frame of the node): the latitude from the
-/// Cauchy law, the longitude uniform or from the cone table's row `row`.
-pub(super) fn fibre_lobe_direction(
-    gamma: f64,
-    cone: Option<&ConeTable>,
-    v: &Local,
-    u: [f64; 2],
-) -> Local {
-    let (th_r, a, width) = fibre_lobe_law(gamma, v);
-    let delta = gamma * (a + u[0] * width).tan();
-    let th = (th_r + delta).clamp(-FRAC_PI_2, FRAC_PI_2);
-    let (s, c) = th.sin_cos();
-    // alpha_l = pi/2 - phi, the longitude's angle in the cross-section plane from N
-    // alpha_l = pi/2 - phi, the longitude's angle in the cross-section plane from N
-    let alpha = match cone {
-        None => FRAC_PI_2 - PI * u[1],
-        Some(table) => table.sample(v.b.atan2(v.n), u[1]),
-    };
-    let (sa, ca) = alpha.sin_cos();
-    Local {
-        t: s,
-        b: c * sa,
-        n: c * ca,
-    }
-}
-
-/// Density of [`fibre_lobe_direction`] at l (above the horizon).
-pub(super) fn fibre_lobe_pdf(gamma: f64, cone: Option<&ConeTable>, v: &Local, l: &Local) -> f64 {
-    let (th_r, _, width) = fibre_lobe_law(gamma, v);
-    let lp = l.projected_len();
-    let th = l.t.atan2(lp);
-    let x = (th - th_r) / gamma;
-    let g = 1.0 / (width * gamma * (1.0 + x * x));
-    // the longitude's density per radian
-    let longitude = match cone {
-        None => FRAC_1_PI,
-        Some(table) => table.density(v.b.atan2(v.n), l.b.atan2(l.n)),
-    };
-    g * longitude / lp
 }
 
 /// Walter's half vector for Ward, reflected: l (may be below the horizon).

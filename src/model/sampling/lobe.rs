@@ -1,4 +1,5 @@
-//! The longitude law along the highlight cone of a cross-section rung ([`ConeTable`]):
+//! The fibre lobe technique: the latitude from a truncated Cauchy law about the mirror latitude,
+//! the longitude uniform or, for a cross-section rung, from the cone table ([`ConeTable`]):
 //! tabulated from the rung itself when the sampler is made, then blended, evaluated and drawn
 //! per view.
 
@@ -9,6 +10,55 @@ use crate::model::params::ModelParams;
 use crate::model::rung::Rung;
 use crate::model::{Basis, DirectionPair, ModelId};
 use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI};
+
+/// The mirror latitude th_r = -asin(v.t) and the Cauchy law's truncation (A, B - A).
+fn fibre_lobe_law(gamma: f64, v: &Local) -> (f64, f64, f64) {
+    let th_r = -v.t.atan2(v.projected_len());
+    let a = ((-FRAC_PI_2 - th_r) / gamma).atan();
+    let b = ((FRAC_PI_2 - th_r) / gamma).atan();
+    (th_r, a, b - a)
+}
+
+/// The fibre lobe technique for the view v (fibre frame of the node): the latitude from the
+/// Cauchy law, the longitude uniform or from the cone table's row `row`.
+pub(super) fn fibre_lobe_direction(
+    gamma: f64,
+    cone: Option<&ConeTable>,
+    v: &Local,
+    u: [f64; 2],
+) -> Local {
+    let (th_r, a, width) = fibre_lobe_law(gamma, v);
+    let delta = gamma * (a + u[0] * width).tan();
+    let th = (th_r + delta).clamp(-FRAC_PI_2, FRAC_PI_2);
+    let (s, c) = th.sin_cos();
+    // alpha_l = pi/2 - phi, the longitude's angle in the cross-section plane from N
+    // alpha_l = pi/2 - phi, the longitude's angle in the cross-section plane from N
+    let alpha = match cone {
+        None => FRAC_PI_2 - PI * u[1],
+        Some(table) => table.sample(v.b.atan2(v.n), u[1]),
+    };
+    let (sa, ca) = alpha.sin_cos();
+    Local {
+        t: s,
+        b: c * sa,
+        n: c * ca,
+    }
+}
+
+/// Density of [`fibre_lobe_direction`] at l (above the horizon).
+pub(super) fn fibre_lobe_pdf(gamma: f64, cone: Option<&ConeTable>, v: &Local, l: &Local) -> f64 {
+    let (th_r, _, width) = fibre_lobe_law(gamma, v);
+    let lp = l.projected_len();
+    let th = l.t.atan2(lp);
+    let x = (th - th_r) / gamma;
+    let g = 1.0 / (width * gamma * (1.0 + x * x));
+    // the longitude's density per radian
+    let longitude = match cone {
+        None => FRAC_1_PI,
+        Some(table) => table.density(v.b.atan2(v.n), l.b.atan2(l.n)),
+    };
+    g * longitude / lp
+}
 
 /// The longitude law along the highlight cone of a cross-section rung: per row of alpha_v (the
 /// view's angle in the cross-section plane), a piecewise-constant law of alpha_l, tabulated from
