@@ -277,24 +277,93 @@ pub fn run(
     super::maps::write_blind(&d)?;
     std::fs::write(scratch.join("global.toml"), FIT_GLOBAL)?;
     std::fs::write(scratch.join("maps.toml"), FIT_MAPS)?;
-    let store = CaptureStore::load(&d.join("capture.toml"), Default::default())?;
-    let (texels, values) = (store.texels().len(), store.sample_count());
-    let store_bytes_per_value = store.bytes() as f64 / values as f64;
-    drop(store);
+    let counted = Counted::of(&d.join("capture.toml"))?;
     let mut rows = Vec::new();
 
     bar.set_message("camera: global fit");
+    rows.push(global_row(exe, scratch, &counted)?);
+    bar.inc(1);
+
+    bar.set_message("camera: maps + globals");
+    let cmd = fit_command(
+        exe,
+        &d.join("blind.toml"),
+        (&scratch.join("maps.toml"), &scratch.join("maps.json")),
+        Some(&scratch.join("maps")),
+    );
+    let cost = measure(cmd, &scratch.join("maps.log"))?;
+    rows.push(row(
+        "maps (H, psi) + globals: directional lights, orthographic cameras",
+        &counted,
+        &cost,
+        (180.0, 1536.0),
+        map_accuracy(&d, &scratch.join("maps"))?,
+    ));
+    bar.inc(1);
+    let fit_peak = rows
+        .iter()
+        .find(|r| r.job == "global fit given the maps")
+        .map_or(f64::INFINITY, |r| r.peak_mb);
+    rows.extend(memory_rows(exe, scratch, size, fit_peak, bar)?);
+    // the orthographic capture's files are not needed any more (8 x 1 Mpx: 100 MB of EXRs)
+    std::fs::remove_dir_all(&d)?;
+    let (pinhole_row, pinhole) = pinhole_rows(exe, scratch, size, bar)?;
+    rows.push(pinhole_row);
+    Ok(CameraRun {
+        size,
+        rows,
+        store_bytes_per_value: counted.store_bytes,
+        synth_seconds,
+        pinhole: Some(pinhole),
+    })
+}
+
+/// `fibrefit fit CAPTURE --config CONFIG --out OUT [--maps MAPS] -q`.
+fn fit_command(
+    exe: &Path,
+    capture: &Path,
+    (config, out): (&Path, &Path),
+    maps: Option<&Path>,
+) -> Command {
     let mut cmd = Command::new(exe);
     cmd.arg("fit")
-        .arg(d.join("capture.toml"))
+        .arg(capture)
         .arg("--config")
-        .arg(scratch.join("global.toml"))
+        .arg(config)
         .arg("--out")
-        .arg(scratch.join("global.json"))
-        .arg("-q");
+        .arg(out);
+    if let Some(maps) = maps {
+        cmd.arg("--maps").arg(maps);
+    }
+    cmd.arg("-q");
+    cmd
+}
+
+/// The global fit given the maps of `scratch/d`'s capture, judged against issue 13's goal
+/// (30 s, 1 GB), with its parameters against the truth.
+fn global_row(exe: &Path, scratch: &Path, counted: &Counted) -> Result<CameraRow> {
+    let d = scratch.join("d");
+    let cmd = fit_command(
+        exe,
+        &d.join("capture.toml"),
+        (&scratch.join("global.toml"), &scratch.join("global.json")),
+        None,
+    );
     let cost = measure(cmd, &scratch.join("global.log"))?;
     let g: serde_json::Value =
         serde_json::from_slice(&std::fs::read(scratch.join("global.json"))?)?;
+    Ok(row(
+        "global fit given the maps",
+        counted,
+        &cost,
+        (30.0, 1024.0),
+        global_accuracy(&g),
+    ))
+}
+
+/// The global fit's result `g` against the truth: each parameter's value, standard error and
+/// z per channel, and the fit over every pixel.
+fn global_accuracy(g: &serde_json::Value) -> String {
     let mut acc = Vec::new();
     // per channel where the result has channels (kd here; ks is fitted per channel too)
     use crate::model::Param;
@@ -342,55 +411,7 @@ pub fn run(
             .as_f64()
             .unwrap_or(f64::NAN)
     ));
-    rows.push(row(
-        "global fit given the maps",
-        texels,
-        values,
-        &cost,
-        store_bytes_per_value,
-        (30.0, 1024.0),
-        acc.join("; "),
-    ));
-    bar.inc(1);
-
-    bar.set_message("camera: maps + globals");
-    let mut cmd = Command::new(exe);
-    cmd.arg("fit")
-        .arg(d.join("blind.toml"))
-        .arg("--config")
-        .arg(scratch.join("maps.toml"))
-        .arg("--out")
-        .arg(scratch.join("maps.json"))
-        .arg("--maps")
-        .arg(scratch.join("maps"))
-        .arg("-q");
-    let cost = measure(cmd, &scratch.join("maps.log"))?;
-    rows.push(row(
-        "maps (H, psi) + globals: directional lights, orthographic cameras",
-        texels,
-        values,
-        &cost,
-        store_bytes_per_value,
-        (180.0, 1536.0),
-        map_accuracy(&d, &scratch.join("maps"))?,
-    ));
-    bar.inc(1);
-    let fit_peak = rows
-        .iter()
-        .find(|r| r.job == "global fit given the maps")
-        .map_or(f64::INFINITY, |r| r.peak_mb);
-    rows.extend(memory_rows(exe, scratch, size, fit_peak, bar)?);
-    // the orthographic capture's files are not needed any more (8 x 1 Mpx: 100 MB of EXRs)
-    std::fs::remove_dir_all(&d)?;
-    let (pinhole_row, pinhole) = pinhole_rows(exe, scratch, size, bar)?;
-    rows.push(pinhole_row);
-    Ok(CameraRun {
-        size,
-        rows,
-        store_bytes_per_value,
-        synth_seconds,
-        pinhole: Some(pinhole),
-    })
+    acc.join("; ")
 }
 
 /// Map recovery of the near rig's capture ([`Rig::Near`]: point lights and pinhole cameras,
@@ -413,24 +434,19 @@ pub fn pinhole_rows(
     let blind = super::maps::write_blind(&d)?;
     std::fs::write(dir.join("maps.toml"), FIT_MAPS)?;
     let store = CaptureStore::load(&blind, Default::default())?;
-    let (texels, values) = (store.texels().len(), store.sample_count());
-    let bytes = store.bytes() as f64 / values as f64;
+    let counted = Counted::from_store(&store);
     // the blend at the truth's exponent (a sharper lobe than the fit's start)
     let cfg: crate::fit::config::FitConfig =
         toml::from_str(&FIT_MAPS.replace("exponent = { value = 20,", "exponent = { value = 40,"))?;
     let blend = crate::fit::maps::blend_error(&store, &cfg, 256, 8, 11)?;
     drop(store);
     bar.set_message("camera: pinhole maps + globals");
-    let mut cmd = Command::new(exe);
-    cmd.arg("fit")
-        .arg(&blind)
-        .arg("--config")
-        .arg(dir.join("maps.toml"))
-        .arg("--out")
-        .arg(dir.join("maps.json"))
-        .arg("--maps")
-        .arg(dir.join("maps"))
-        .arg("-q");
+    let cmd = fit_command(
+        exe,
+        &blind,
+        (&dir.join("maps.toml"), &dir.join("maps.json")),
+        Some(&dir.join("maps")),
+    );
     let cost = measure(cmd, &dir.join("maps.log"))?;
     let (flash, _) = flash_direction();
     let row = row(
@@ -438,10 +454,8 @@ pub fn pinhole_rows(
             "maps (H, psi) + globals: point lights, pinhole cameras {RIG_DISTANCE_MM:.0} mm away (image 0 lit by a flash {:.0} mm beside its lens)",
             flash[0]
         ),
-        texels,
-        values,
+        &counted,
         &cost,
-        bytes,
         (180.0, 1536.0),
         map_accuracy(&d, &dir.join("maps"))?,
     );
@@ -455,23 +469,52 @@ pub fn pinhole_rows(
     ))
 }
 
-fn row(
-    job: &str,
+/// What a capture holds: its texels, its pixel values and the bytes its compact store holds
+/// per pixel value.
+#[derive(Clone, Copy, Debug)]
+struct Counted {
     texels: usize,
     values: usize,
+    store_bytes: f64,
+}
+
+impl Counted {
+    /// The capture at `capture`, loaded into its store to be counted.
+    fn of(capture: &Path) -> Result<Self> {
+        Ok(Self::from_store(&CaptureStore::load(
+            capture,
+            Default::default(),
+        )?))
+    }
+
+    fn from_store(store: &CaptureStore) -> Self {
+        let values = store.sample_count();
+        Self {
+            texels: store.texels().len(),
+            values,
+            store_bytes: store.bytes() as f64 / values as f64,
+        }
+    }
+}
+
+/// The row of `job` on a capture `counted`, which cost `cost`, against its goal in wall time
+/// and peak memory (seconds, MB).
+fn row(
+    job: &str,
+    counted: &Counted,
     cost: &Cost,
-    bytes: f64,
     (goal_seconds, goal_mb): (f64, f64),
     accuracy: String,
 ) -> CameraRow {
+    let values = counted.values;
     CameraRow {
         job: job.into(),
-        texels,
+        texels: counted.texels,
         pixel_values: values,
         wall_seconds: cost.wall_seconds,
         cpu_seconds: cost.cpu_seconds,
         peak_mb: cost.peak_mb,
-        bytes_per_pixel_value: bytes,
+        bytes_per_pixel_value: counted.store_bytes,
         peak_bytes_per_pixel_value: peak_bytes_per_value(cost, values),
         goal_seconds,
         goal_mb,
@@ -491,53 +534,50 @@ fn peak_bytes_per_value(cost: &Cost, values: usize) -> f64 {
 pub const MEMORY_SIZE: usize = 512;
 pub const MEMORY_GOAL_BYTES: f64 = 150.0;
 
-/// A row of a job judged by its peak memory alone: at most `goal_mb`, and at most
-/// `goal_bytes` per pixel value where given.
+/// A goal on peak memory alone: at most `mb`, and at most `bytes_per_value` per pixel value
+/// where given.
+#[derive(Clone, Copy, Debug)]
+struct MemoryGoal {
+    mb: f64,
+    bytes_per_value: Option<f64>,
+}
+
+/// A row of a job judged by its peak memory alone, against `goal`.
 fn memory_row(
     job: &str,
-    (texels, values): (usize, usize),
+    counted: &Counted,
     cost: &Cost,
-    store_bytes: f64,
-    goal_mb: f64,
-    goal_bytes: Option<f64>,
+    goal: MemoryGoal,
     accuracy: String,
 ) -> CameraRow {
-    let mut r = row(
-        job,
-        texels,
-        values,
-        cost,
-        store_bytes,
-        (f64::INFINITY, goal_mb),
-        accuracy,
-    );
-    r.goal_bytes_per_pixel_value = goal_bytes;
-    r.met = cost.peak_mb <= goal_mb && goal_bytes.is_none_or(|b| r.peak_bytes_per_pixel_value <= b);
+    let mut r = row(job, counted, cost, (f64::INFINITY, goal.mb), accuracy);
+    r.goal_bytes_per_pixel_value = goal.bytes_per_value;
+    r.met = cost.peak_mb <= goal.mb
+        && goal
+            .bytes_per_value
+            .is_none_or(|b| r.peak_bytes_per_pixel_value <= b);
     r
 }
 
 /// `fibrefit score RESULT CAPTURE` and `fibrefit inspect CAPTURE` as child processes, each
-/// judged against `goal_mb` (and `goal_bytes` per pixel value); `label` names the capture.
+/// judged against `goal`; `label` names the capture.
 fn score_and_inspect(
     exe: &Path,
     scratch: &Path,
     (capture, result): (&Path, &Path),
     label: &str,
-    size: (usize, usize, f64),
-    (goal_mb, goal_bytes): (f64, Option<f64>),
+    counted: &Counted,
+    goal: MemoryGoal,
 ) -> Result<Vec<CameraRow>> {
-    let (texels, values, store_bytes) = size;
     let mut rows = Vec::new();
     let mut cmd = Command::new(exe);
     cmd.arg("score").arg(result).arg(capture).arg("--json");
     let cost = measure(cmd, &scratch.join("score.log"))?;
     rows.push(memory_row(
         &format!("score of the global fit{label}"),
-        (texels, values),
+        counted,
         &cost,
-        store_bytes,
-        goal_mb,
-        goal_bytes,
+        goal,
         "every pixel, a piece of whole image rows at a time".into(),
     ));
     let mut cmd = Command::new(exe);
@@ -545,11 +585,9 @@ fn score_and_inspect(
     let cost = measure(cmd, &scratch.join("inspect.log"))?;
     rows.push(memory_row(
         &format!("inspect{label}"),
-        (texels, values),
+        counted,
         &cost,
-        store_bytes,
-        goal_mb,
-        goal_bytes,
+        goal,
         "every pixel counted from the store".into(),
     ));
     Ok(rows)
@@ -568,16 +606,7 @@ pub fn memory_rows(
 ) -> Result<Vec<CameraRow>> {
     let d = scratch.join("d");
     let capture = d.join("capture.toml");
-    let counted = |capture: &Path| -> Result<(usize, usize, f64)> {
-        let store = CaptureStore::load(capture, Default::default())?;
-        let values = store.sample_count();
-        Ok((
-            store.texels().len(),
-            values,
-            store.bytes() as f64 / values as f64,
-        ))
-    };
-    let here = counted(&capture)?;
+    let here = Counted::of(&capture)?;
     let goal_bytes = (size == MEMORY_SIZE).then_some(MEMORY_GOAL_BYTES);
     bar.set_message("camera: score and inspect");
     let mut rows = score_and_inspect(
@@ -585,8 +614,11 @@ pub fn memory_rows(
         scratch,
         (&capture, &scratch.join("global.json")),
         "",
-        here,
-        (fit_peak_mb, goal_bytes),
+        &here,
+        MemoryGoal {
+            mb: fit_peak_mb,
+            bytes_per_value: goal_bytes,
+        },
     )?;
     if size == MEMORY_SIZE {
         return Ok(rows);
@@ -601,25 +633,24 @@ pub fn memory_rows(
     )?;
     crate::synth::run(&m.join("synth.toml"), &m.join("d"), true)?;
     let capture = m.join("d/capture.toml");
-    let there = counted(&capture)?;
-    let goal_mb = MEMORY_GOAL_BYTES * there.1 as f64 / (1024.0 * 1024.0);
+    let there = Counted::of(&capture)?;
+    let goal = MemoryGoal {
+        mb: MEMORY_GOAL_BYTES * there.values as f64 / (1024.0 * 1024.0),
+        bytes_per_value: Some(MEMORY_GOAL_BYTES),
+    };
     let label = format!(", 8 x {MEMORY_SIZE} x {MEMORY_SIZE}");
-    let mut cmd = Command::new(exe);
-    cmd.arg("fit")
-        .arg(&capture)
-        .arg("--config")
-        .arg(scratch.join("global.toml"))
-        .arg("--out")
-        .arg(m.join("global.json"))
-        .arg("-q");
+    let cmd = fit_command(
+        exe,
+        &capture,
+        (&scratch.join("global.toml"), &m.join("global.json")),
+        None,
+    );
     let cost = measure(cmd, &m.join("global.log"))?;
     rows.push(memory_row(
         &format!("global fit given the maps{label}"),
-        (there.0, there.1),
+        &there,
         &cost,
-        there.2,
-        goal_mb,
-        Some(MEMORY_GOAL_BYTES),
+        goal,
         format!(
             "sample of {} texels",
             crate::fit::config::Knobs::default().fit_texels
@@ -630,8 +661,8 @@ pub fn memory_rows(
         &m,
         (&capture, &m.join("global.json")),
         &label,
-        there,
-        (goal_mb, Some(MEMORY_GOAL_BYTES)),
+        &there,
+        goal,
     )?);
     Ok(rows)
 }

@@ -245,32 +245,57 @@ fn speed_row(id: ModelId, variant: &str, p: &ModelParams, budget: f64) -> Result
 /// The whole study. `quick`: a tenth of the samples and shorter timings.
 pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
     let e = 1000.0;
-    // the variance table: every rung x every view, in parallel, one seed per row
-    let jobs: Vec<(ModelId, (f64, f64), u64)> = ModelId::ALL
+    let jobs = variance_jobs(e);
+    bar.set_length((jobs.len() + 2 * 5 * 3 + 2 * 4 * 3 + 11) as u64);
+    let variance = run_jobs(&jobs, quick, bar)?;
+    let (width_jobs, exponent_jobs) = sweep_jobs(e);
+    let widths = run_jobs(&width_jobs, quick, bar)?;
+    let exponents = run_jobs(&exponent_jobs, quick, bar)?;
+    let speed = speed_rows(e, quick, bar)?;
+    Ok(SamplingRun {
+        variance,
+        widths,
+        exponents,
+        speed,
+        quick,
+    })
+}
+
+/// One row of a variance study: a rung at an exponent, a lobe width and a view, with its seed.
+#[derive(Clone, Copy)]
+struct Job {
+    id: ModelId,
+    exponent: f64,
+    lobe_width: f64,
+    view: (f64, f64),
+    seed: u64,
+}
+
+/// The variance table's rows: every rung x every view at exponent `e` and the default lobe
+/// width, one seed per row.
+fn variance_jobs(e: f64) -> Vec<Job> {
+    ModelId::ALL
         .iter()
         .enumerate()
         .flat_map(|(i, &id)| {
-            VIEWS
-                .iter()
-                .enumerate()
-                .map(move |(j, &v)| (id, v, 1000 + 100 * i as u64 + j as u64))
+            VIEWS.iter().enumerate().map(move |(j, &v)| Job {
+                id,
+                exponent: e,
+                lobe_width: LOBE_WIDTH,
+                view: v,
+                seed: 1000 + 100 * i as u64 + j as u64,
+            })
         })
         // the reference's values cost ~10 ms each, too many for a cosine estimate that must
         // hit a 1/sqrt(1000) lobe often enough; its sampler is varying-topology's (same table,
         // same lobe) and its model is varying-topology's to the quadrature error
-        .filter(|(id, _, _)| id.rung().cost != Cost::Adaptive)
-        .collect();
-    bar.set_length((jobs.len() + 2 * 5 * 3 + 2 * 4 * 3 + 11) as u64);
-    let variance = jobs
-        .par_iter()
-        .map(|&(id, v, seed)| {
-            let p = params(id, &params_text(id, e))?;
-            let row = variance_row(id, &p, LOBE_WIDTH, v, samples_for(id, quick), seed);
-            bar.inc(1);
-            row
-        })
-        .collect::<Result<Vec<_>>>()?;
-    // the lobe width around its default
+        .filter(|job| job.id.rung().cost != Cost::Adaptive)
+        .collect()
+}
+
+/// The sweeps of max-normal and poulin-fournier at three views: the lobe width around its
+/// default (at exponent `e`), and the exponent at the default width.
+fn sweep_jobs(e: f64) -> (Vec<Job>, Vec<Job>) {
     let width_views = [(30.0, 0.0), (60.0, 45.0), (80.0, 0.0)];
     let mut width_jobs = Vec::new();
     let mut exponent_jobs = Vec::new();
@@ -280,40 +305,53 @@ pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
     {
         for (k, c) in [0.25, 0.5, LOBE_WIDTH, 1.0, 2.0].into_iter().enumerate() {
             for (j, &v) in width_views.iter().enumerate() {
-                width_jobs.push((
+                width_jobs.push(Job {
                     id,
-                    e,
-                    c,
-                    v,
-                    5000 + 100 * i as u64 + 10 * k as u64 + j as u64,
-                ));
+                    exponent: e,
+                    lobe_width: c,
+                    view: v,
+                    seed: 5000 + 100 * i as u64 + 10 * k as u64 + j as u64,
+                });
             }
         }
         for (k, ex) in [10.0, 100.0, 1000.0, 10000.0].into_iter().enumerate() {
             for (j, &v) in width_views.iter().enumerate() {
-                exponent_jobs.push((
+                exponent_jobs.push(Job {
                     id,
-                    ex,
-                    LOBE_WIDTH,
-                    v,
-                    7000 + 100 * i as u64 + 10 * k as u64 + j as u64,
-                ));
+                    exponent: ex,
+                    lobe_width: LOBE_WIDTH,
+                    view: v,
+                    seed: 7000 + 100 * i as u64 + 10 * k as u64 + j as u64,
+                });
             }
         }
     }
-    let run_jobs = |jobs: &[(ModelId, f64, f64, (f64, f64), u64)]| {
-        jobs.par_iter()
-            .map(|&(id, ex, c, v, seed)| {
-                let p = params(id, &params_text(id, ex))?;
-                let row = variance_row(id, &p, c, v, samples_for(id, quick), seed);
-                bar.inc(1);
-                row
-            })
-            .collect::<Result<Vec<_>>>()
-    };
-    let widths = run_jobs(&width_jobs)?;
-    let exponents = run_jobs(&exponent_jobs)?;
-    // speed: one thread, one rung after another
+    (width_jobs, exponent_jobs)
+}
+
+/// The variance rows of `jobs`, in parallel.
+fn run_jobs(jobs: &[Job], quick: bool, bar: &ProgressBar) -> Result<Vec<VarianceRow>> {
+    jobs.par_iter()
+        .map(|job| {
+            let id = job.id;
+            let p = params(id, &params_text(id, job.exponent))?;
+            let row = variance_row(
+                id,
+                &p,
+                job.lobe_width,
+                job.view,
+                samples_for(id, quick),
+                job.seed,
+            );
+            bar.inc(1);
+            row
+        })
+        .collect::<Result<Vec<_>>>()
+}
+
+/// Samples per second of every rung at exponent `e`, then of variants with the optional
+/// components: one thread, one rung after another.
+fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
     let budget = if quick { 0.05 } else { 0.5 };
     let mut speed = Vec::new();
     for id in ModelId::ALL {
@@ -356,13 +394,7 @@ pub fn run(quick: bool, bar: &ProgressBar) -> Result<SamplingRun> {
         speed.push(speed_row(id, variant, &params(id, &text)?, budget)?);
         bar.inc(1);
     }
-    Ok(SamplingRun {
-        variance,
-        widths,
-        exponents,
-        speed,
-        quick,
-    })
+    Ok(speed)
 }
 
 /// Whether the sampler's weight is constant in `r` (zero variance up to rounding).

@@ -75,81 +75,15 @@ impl CaptureStore {
         if let Ok((w0, h0, c0)) = image_io::header(&resolve(&base, desc.images[0].frames()[0].0)) {
             check_capture_memory(&name, &desc, (w0, h0), c0)?;
         }
-        let ReadImage {
-            image: first,
-            noise: first_noise,
-            rows: first_rows,
-        } = read_image(&base, &desc.images[0])?;
-        let (w, h, channels) = (first.width, first.height, first.channels);
-        let load_map = |p: &Option<PathBuf>, what: &str| -> Result<Option<TopologyMap>> {
-            match p {
-                Some(p) => {
-                    let full = resolve(&base, p);
-                    let m = TopologyMap::load_as(&full, what)?;
-                    check_size(what, &full, (m.width, m.height), (w, h))?;
-                    Ok(Some(m))
-                }
-                None => Ok(None),
-            }
-        };
-        let topology = load_map(&desc.swatch.topology_map, "topology map")?;
-        let height_map = load_unit_map(
-            &base,
-            &desc.swatch.height_map,
-            "height map (fibre radii)",
-            (0.0, 20.0),
-            (w, h),
-        )?;
-        let azimuth_map = load_unit_map(
-            &base,
-            &desc.swatch.fibre_azimuth_map,
-            "fibre azimuth map (degrees)",
-            (-90.0, 90.0),
-            (w, h),
-        )?;
-        let tangent = load_map(&desc.swatch.tangent_map, "tangent map")?;
-        let mask = load_map(&desc.swatch.mask, "mask")?;
-        let view_maps: Vec<Option<LinearImage>> = desc
-            .images
-            .iter()
-            .map(|spec| match &spec.camera {
-                Camera::ViewMap { file } => {
-                    let full = resolve(&base, file);
-                    let m = image_io::read(&full, None, None)?;
-                    check_size("view map", &full, (m.width, m.height), (w, h))?;
-                    if m.channels != 3 {
-                        bail!(
-                            "{}: a view map needs R, G, B channels holding x, y, z",
-                            full.display()
-                        );
-                    }
-                    Ok(Some(m))
-                }
-                _ => Ok(None),
-            })
-            .collect::<Result<_>>()?;
-        let roi = desc.swatch.roi.unwrap_or([0, 0, w, h]);
-        if roi[0] >= roi[2] || roi[1] >= roi[3] || roi[2] > w || roi[3] > h {
-            bail!("{name}: swatch.roi = {roi:?} is not a rectangle inside the {w}x{h} image");
-        }
+        let first = read_image(&base, &desc.images[0])?;
+        let (w, h, channels) = (first.image.width, first.image.height, first.image.channels);
+        let maps = SwatchMaps::load(&base, &desc, (w, h))?;
+        let (index, texels) = candidate_texels(&name, desc.swatch.roi, maps.mask.as_ref(), (w, h))?;
         let images = desc.images.len();
-        // the candidate texels: inside the ROI and the mask
-        let mut index = vec![NO_TEXEL; w * h];
-        let mut texels = Vec::new();
-        for y in roi[1]..roi[3] {
-            for x in roi[0]..roi[2] {
-                if mask.as_ref().is_some_and(|m| m.texel(x, y) == 0.0) {
-                    continue;
-                }
-                index[y * w + x] = texels.len() as u32;
-                texels.push((x as u32, y as u32));
-            }
-        }
         let mut dropped = Dropped {
             masked: ((w * h - texels.len()) * images) as u64,
             ..Dropped::default()
         };
-        let mut values = vec![f32::NAN; texels.len() * images * channels];
         let mut store = Self {
             source: path.to_path_buf(),
             width: w,
@@ -160,24 +94,39 @@ impl CaptureStore {
             texels,
             index,
             values: vec![],
-            topology,
-            tangent,
-            height_map,
-            azimuth_map,
-            view_maps,
+            topology: maps.topology,
+            tangent: maps.tangent,
+            height_map: maps.height_map,
+            azimuth_map: maps.azimuth_map,
+            view_maps: maps.view_maps,
             noise: vec![],
         };
-        let mut img = Some(ReadImage {
-            image: first,
-            noise: first_noise,
-            rows: first_rows,
-        });
+        let read = store.read_values(&base, first, subsample, &mut dropped)?;
+        store.keep_sampled_texels(&name, read.values, &dropped)?;
+        store.dropped = dropped;
+        store.noise = capture_noise(&name, read.noise, &read.noise_rows)?;
+        Ok(store)
+    }
+
+    /// Read every image in turn (the first is read already) and keep, of each, the raw value of
+    /// every candidate texel's pixel that is usable; the others are counted in `dropped`.
+    fn read_values(
+        &self,
+        base: &Path,
+        first: ReadImage,
+        subsample: Subsample,
+        dropped: &mut Dropped,
+    ) -> Result<ReadValues> {
+        let (w, h, channels) = (self.width, self.height, self.channels);
+        let images = self.desc.images.len();
+        let mut values = vec![f32::NAN; self.texels.len() * images * channels];
+        let mut img = Some(first);
         let mut noise = Vec::with_capacity(images);
         let mut noise_rows: Vec<Vec<[f64; 9]>> = vec![vec![]; channels];
         for k in 0..images {
             let read = match img.take() {
                 Some(i) => i,
-                None => read_image(&base, &store.desc.images[k])?,
+                None => read_image(base, &self.desc.images[k])?,
             };
             let img_k = read.image;
             if let Some(r) = read.rows {
@@ -186,8 +135,8 @@ impl CaptureStore {
                 }
             }
             noise.push((read.noise, img_k.clip));
-            let spec = &store.desc.images[k];
-            let file = resolve(&base, spec.frames()[0].0);
+            let spec = &self.desc.images[k];
+            let file = resolve(base, spec.frames()[0].0);
             check_size("image", &file, (img_k.width, img_k.height), (w, h))?;
             if img_k.channels != channels {
                 bail!(
@@ -196,46 +145,77 @@ impl CaptureStore {
                     img_k.channels
                 );
             }
-            for (t, &(x, y)) in store.texels.iter().enumerate() {
-                let (x, y) = (x as usize, y as usize);
-                if !subsample.keeps(k, x, y) {
-                    dropped.subsampled += 1;
-                    continue;
+            self.keep_pixels(k, &img_k, subsample, &mut values, dropped);
+        }
+        Ok(ReadValues {
+            values,
+            noise,
+            noise_rows,
+        })
+    }
+
+    /// Copy into `values` the pixel of image `k` at every candidate texel that subsampling
+    /// keeps, that is not saturated, finite (and its maps too) and lit and seen from above the
+    /// horizon; count the others in `dropped`.
+    fn keep_pixels(
+        &self,
+        k: usize,
+        img_k: &LinearImage,
+        subsample: Subsample,
+        values: &mut [f32],
+        dropped: &mut Dropped,
+    ) {
+        let (w, channels) = (self.width, self.channels);
+        let images = self.desc.images.len();
+        for (t, &(x, y)) in self.texels.iter().enumerate() {
+            let (x, y) = (x as usize, y as usize);
+            if !subsample.keeps(k, x, y) {
+                dropped.subsampled += 1;
+                continue;
+            }
+            if img_k.saturated[y * w + x] {
+                dropped.saturated += 1;
+                continue;
+            }
+            let px = img_k.pixel(x, y);
+            let map_nan =
+                |m: &Option<LinearImage>| m.as_ref().is_some_and(|m| m.pixel(x, y)[0].is_nan());
+            if px.iter().any(|v| !v.is_finite())
+                || map_nan(&self.height_map)
+                || map_nan(&self.azimuth_map)
+            {
+                dropped.invalid += 1;
+                continue;
+            }
+            match self.geometry(k, x, y) {
+                None => dropped.invalid += 1,
+                Some((l, v, e)) if l.z <= 0.0 || v.z <= 0.0 || !(e > 0.0) => {
+                    dropped.below_horizon += 1
                 }
-                if img_k.saturated[y * w + x] {
-                    dropped.saturated += 1;
-                    continue;
-                }
-                let px = img_k.pixel(x, y);
-                let map_nan =
-                    |m: &Option<LinearImage>| m.as_ref().is_some_and(|m| m.pixel(x, y)[0].is_nan());
-                if px.iter().any(|v| !v.is_finite())
-                    || map_nan(&store.height_map)
-                    || map_nan(&store.azimuth_map)
-                {
-                    dropped.invalid += 1;
-                    continue;
-                }
-                match store.geometry(k, x, y) {
-                    None => dropped.invalid += 1,
-                    Some((l, v, e)) if l.z <= 0.0 || v.z <= 0.0 || !(e > 0.0) => {
-                        dropped.below_horizon += 1
-                    }
-                    Some(_) => {
-                        let i = (t * images + k) * channels;
-                        values[i..i + channels].copy_from_slice(px);
-                    }
+                Some(_) => {
+                    let i = (t * images + k) * channels;
+                    values[i..i + channels].copy_from_slice(px);
                 }
             }
         }
-        // keep the texels with a sample
-        let per_texel = images * channels;
+    }
+
+    /// Keep the texels with a sample (and their `values`), renumbering the texel index;
+    /// refused when no texel has one.
+    fn keep_sampled_texels(
+        &mut self,
+        name: &str,
+        mut values: Vec<f32>,
+        dropped: &Dropped,
+    ) -> Result<()> {
+        let w = self.width;
+        let per_texel = self.desc.images.len() * self.channels;
         let keep: Vec<bool> = values
             .chunks(per_texel)
             .map(|c| c.iter().any(|v| !v.is_nan()))
             .collect();
         if !keep.iter().any(|&k| k) {
-            let d = &dropped;
+            let d = dropped;
             bail!(
                 "{name}: no usable pixels: {} masked or outside the ROI, {} saturated, {} with light or view at or below the horizon, {} non-finite, {} subsampled away",
                 d.masked, d.saturated, d.below_horizon, d.invalid, d.subsampled
@@ -244,24 +224,22 @@ impl CaptureStore {
         if keep.iter().any(|&k| !k) {
             let mut kept_values = Vec::with_capacity(values.len());
             let mut kept_texels = Vec::new();
-            store.index.fill(NO_TEXEL);
+            self.index.fill(NO_TEXEL);
             for (t, chunk) in values.chunks(per_texel).enumerate() {
                 if keep[t] {
-                    let (x, y) = store.texels[t];
-                    store.index[y as usize * w + x as usize] = kept_texels.len() as u32;
+                    let (x, y) = self.texels[t];
+                    self.index[y as usize * w + x as usize] = kept_texels.len() as u32;
                     kept_texels.push((x, y));
                     kept_values.extend_from_slice(chunk);
                 }
             }
-            store.texels = kept_texels;
+            self.texels = kept_texels;
             values = kept_values;
         }
         values.shrink_to_fit();
-        store.texels.shrink_to_fit();
-        store.values = values;
-        store.dropped = dropped;
-        store.noise = capture_noise(&name, noise, &noise_rows)?;
-        Ok(store)
+        self.texels.shrink_to_fit();
+        self.values = values;
+        Ok(())
     }
 
     /// Light direction, view direction and perpendicular irradiance of image `k` at pixel
@@ -479,6 +457,119 @@ impl CaptureStore {
     pub fn noise(&self) -> &[ImageNoise] {
         &self.noise
     }
+}
+
+/// The raw values of a capture's images as [`CaptureStore::read_values`] keeps them, with
+/// every image's noise and clip level and the brackets' pixel pairs per channel.
+struct ReadValues {
+    values: Vec<f32>,
+    noise: Vec<(Option<ImageNoise>, f32)>,
+    noise_rows: Vec<Vec<[f64; 9]>>,
+}
+
+/// The maps a capture's description names, read and checked against the images' size.
+struct SwatchMaps {
+    topology: Option<TopologyMap>,
+    height_map: Option<LinearImage>,
+    azimuth_map: Option<LinearImage>,
+    tangent: Option<TopologyMap>,
+    mask: Option<TopologyMap>,
+    view_maps: Vec<Option<LinearImage>>,
+}
+
+impl SwatchMaps {
+    /// The swatch's maps and the images' view maps, for images of `w` x `h` pixels.
+    fn load(base: &Path, desc: &CaptureFile, (w, h): (usize, usize)) -> Result<Self> {
+        let load_map = |p: &Option<PathBuf>, what: &str| -> Result<Option<TopologyMap>> {
+            match p {
+                Some(p) => {
+                    let full = resolve(base, p);
+                    let m = TopologyMap::load_as(&full, what)?;
+                    check_size(what, &full, (m.width, m.height), (w, h))?;
+                    Ok(Some(m))
+                }
+                None => Ok(None),
+            }
+        };
+        let topology = load_map(&desc.swatch.topology_map, "topology map")?;
+        let height_map = load_unit_map(
+            base,
+            &desc.swatch.height_map,
+            "height map (fibre radii)",
+            (0.0, 20.0),
+            (w, h),
+        )?;
+        let azimuth_map = load_unit_map(
+            base,
+            &desc.swatch.fibre_azimuth_map,
+            "fibre azimuth map (degrees)",
+            (-90.0, 90.0),
+            (w, h),
+        )?;
+        let tangent = load_map(&desc.swatch.tangent_map, "tangent map")?;
+        let mask = load_map(&desc.swatch.mask, "mask")?;
+        let view_maps = view_maps(base, desc, (w, h))?;
+        Ok(Self {
+            topology,
+            height_map,
+            azimuth_map,
+            tangent,
+            mask,
+            view_maps,
+        })
+    }
+}
+
+/// Per image, its view map where its camera is one (R, G, B holding x, y, z).
+fn view_maps(
+    base: &Path,
+    desc: &CaptureFile,
+    (w, h): (usize, usize),
+) -> Result<Vec<Option<LinearImage>>> {
+    desc.images
+        .iter()
+        .map(|spec| match &spec.camera {
+            Camera::ViewMap { file } => {
+                let full = resolve(base, file);
+                let m = image_io::read(&full, None, None)?;
+                check_size("view map", &full, (m.width, m.height), (w, h))?;
+                if m.channels != 3 {
+                    bail!(
+                        "{}: a view map needs R, G, B channels holding x, y, z",
+                        full.display()
+                    );
+                }
+                Ok(Some(m))
+            }
+            _ => Ok(None),
+        })
+        .collect::<Result<_>>()
+}
+
+/// The candidate texels: the pixels inside the ROI and the mask, row-major, with the texel
+/// index of every pixel ([`NO_TEXEL`] elsewhere); refused when the ROI is not inside the image.
+fn candidate_texels(
+    name: &str,
+    roi: Option<[usize; 4]>,
+    mask: Option<&TopologyMap>,
+    (w, h): (usize, usize),
+) -> Result<(Vec<u32>, Vec<(u32, u32)>)> {
+    let roi = roi.unwrap_or([0, 0, w, h]);
+    if roi[0] >= roi[2] || roi[1] >= roi[3] || roi[2] > w || roi[3] > h {
+        bail!("{name}: swatch.roi = {roi:?} is not a rectangle inside the {w}x{h} image");
+    }
+    let mut index = vec![NO_TEXEL; w * h];
+    let mut texels = Vec::new();
+    for y in roi[1]..roi[3] {
+        for x in roi[0]..roi[2] {
+            if mask.is_some_and(|m| m.texel(x, y) == 0.0) {
+                continue;
+            }
+            index[y * w + x] = texels.len() as u32;
+            texels.push((x as u32, y as u32));
+        }
+    }
+    Ok((index, texels))
 }
 
 /// An image as read: its linear values, and for a bracket the noise model its frames gave

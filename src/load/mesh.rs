@@ -139,260 +139,373 @@ fn polygon_triangles(n: usize) -> impl Iterator<Item = [usize; 3]> {
 /// beyond the vertices, faces of fewer than 3 vertices, more than [`MAX_MESH_VERTICES`] or
 /// [`MAX_MESH_TRIANGLES`], lines longer than [`MAX_OBJ_LINE`].
 pub fn load_obj(path: &Path) -> Result<Mesh> {
-    use std::io::BufRead;
     let name = path.display().to_string();
     let input = super::input::open(path, super::input::MAX_INPUT_BYTES)?;
-    let mut reader = std::io::BufReader::with_capacity(1 << 16, input);
-    let mut positions: Vec<Vec3> = Vec::new();
-    let mut texcoords: Vec<[f64; 2]> = Vec::new();
-    let mut triangles: Vec<[usize; 3]> = Vec::new();
-    let mut corner_uv: Vec<Option<usize>> = Vec::new();
-    // the largest positive vertex and texture indices, and their lines (forward references are
-    // resolved at the end, as other readers do)
-    let mut max_v: (usize, u64) = (0, 0);
-    let mut max_t: (usize, u64) = (0, 0);
-    let mut any_uv = false;
-    let mut repeated = 0usize;
-    let mut line_no = 0u64;
-    let mut raw: Vec<u8> = Vec::new();
-    let mut logical = String::new();
-    let mut corners: Vec<(usize, Option<usize>)> = Vec::new();
-    loop {
-        raw.clear();
-        let n = (&mut reader)
-            .take(MAX_OBJ_LINE as u64 + 1)
-            .read_until(b'\n', &mut raw)
-            .map_err(|e| super::input::io_error(path, e))?;
-        if n == 0 {
-            break;
-        }
-        line_no += 1;
-        if raw.len() > MAX_OBJ_LINE {
-            bail!(
-                "{name}:{line_no}: a line longer than {} (the longest an OBJ line may be)",
-                super::input::bytes_text(MAX_OBJ_LINE as u64)
-            );
-        }
-        let text = String::from_utf8_lossy(&raw);
-        let text = text.trim_end_matches(['\n', '\r']);
-        // a trailing backslash continues the line
-        if let Some(head) = text.strip_suffix('\\') {
-            logical.push_str(head);
-            logical.push(' ');
-            if logical.len() > MAX_OBJ_LINE {
+    let mut lines = ObjLines {
+        reader: std::io::BufReader::with_capacity(1 << 16, input),
+        path,
+        name: &name,
+        line_no: 0,
+        raw: Vec::new(),
+        logical: String::new(),
+    };
+    let mut obj = ObjStatements::default();
+    while let Some(line) = lines.next_line()? {
+        let at = At {
+            name: &name,
+            line: lines.line_no,
+        };
+        obj.statement(&line, at)?;
+    }
+    lines.reader.into_inner().finish()?;
+    obj.check_references(&name)?;
+    obj.into_mesh(path)
+}
+
+/// Where an error is: the file's name and the line (the last of a continued line).
+#[derive(Clone, Copy)]
+struct At<'a> {
+    name: &'a str,
+    line: u64,
+}
+
+impl At<'_> {
+    /// `what`, prefixed with the file and line.
+    fn err(self, what: String) -> anyhow::Error {
+        anyhow!("{}:{}: {what}", self.name, self.line)
+    }
+}
+
+/// The logical lines of an OBJ file: physical lines of at most [`MAX_OBJ_LINE`] bytes, joined
+/// where a trailing backslash continues them.
+struct ObjLines<'a> {
+    reader: std::io::BufReader<super::input::Input>,
+    path: &'a Path,
+    name: &'a str,
+    /// The physical lines read so far.
+    line_no: u64,
+    raw: Vec<u8>,
+    logical: String,
+}
+
+impl ObjLines<'_> {
+    /// The next logical line, or `None` at the end of the file (a continuation that the file
+    /// ends in is dropped).
+    fn next_line(&mut self) -> Result<Option<String>> {
+        use std::io::BufRead;
+        let name = self.name;
+        loop {
+            self.raw.clear();
+            let n = (&mut self.reader)
+                .take(MAX_OBJ_LINE as u64 + 1)
+                .read_until(b'\n', &mut self.raw)
+                .map_err(|e| super::input::io_error(self.path, e))?;
+            if n == 0 {
+                return Ok(None);
+            }
+            self.line_no += 1;
+            let line_no = self.line_no;
+            if self.raw.len() > MAX_OBJ_LINE {
                 bail!(
-                    "{name}:{line_no}: a continued line longer than {} bytes",
-                    MAX_OBJ_LINE
+                    "{name}:{line_no}: a line longer than {} (the longest an OBJ line may be)",
+                    super::input::bytes_text(MAX_OBJ_LINE as u64)
                 );
             }
-            continue;
+            let text = String::from_utf8_lossy(&self.raw);
+            let text = text.trim_end_matches(['\n', '\r']);
+            // a trailing backslash continues the line
+            if let Some(head) = text.strip_suffix('\\') {
+                self.logical.push_str(head);
+                self.logical.push(' ');
+                if self.logical.len() > MAX_OBJ_LINE {
+                    bail!(
+                        "{name}:{line_no}: a continued line longer than {} bytes",
+                        MAX_OBJ_LINE
+                    );
+                }
+                continue;
+            }
+            self.logical.push_str(text);
+            return Ok(Some(std::mem::take(&mut self.logical)));
         }
-        logical.push_str(text);
-        let line = std::mem::take(&mut logical);
+    }
+}
+
+/// What the statements of an OBJ file have given so far.
+#[derive(Default)]
+struct ObjStatements {
+    positions: Vec<Vec3>,
+    texcoords: Vec<[f64; 2]>,
+    triangles: Vec<[usize; 3]>,
+    /// The texture index of each triangle's corners, three per triangle.
+    corner_uv: Vec<Option<usize>>,
+    // the largest positive vertex and texture indices, and their lines (forward references are
+    // resolved at the end, as other readers do)
+    max_v: (usize, u64),
+    max_t: (usize, u64),
+    any_uv: bool,
+    /// Triangles left out for a repeated vertex.
+    repeated: usize,
+    /// The current face's corners (vertex, texture), kept to reuse its allocation.
+    corners: Vec<(usize, Option<usize>)>,
+}
+
+impl ObjStatements {
+    /// Read one logical line: `v`, `vt` and `f` are kept, other statements ignored, anything
+    /// that is not an OBJ statement refused.
+    fn statement(&mut self, line: &str, at: At) -> Result<()> {
         let body = line.split('#').next().unwrap_or("");
         let mut tok = body.split_ascii_whitespace();
-        let Some(key) = tok.next() else { continue };
-        let at = |what: String| anyhow!("{name}:{line_no}: {what}");
+        let Some(key) = tok.next() else {
+            return Ok(());
+        };
         // OBJ statements are lower-case words (v, vt, f, usemtl, c_interp, ...): anything else
         // is not an OBJ file (a binary file or a device is refused at its first line)
         if !key.bytes().all(|b| b.is_ascii_alphanumeric() || b == b'_') {
             let shown: String = key.chars().take(20).collect();
-            return Err(at(format!(
+            return Err(at.err(format!(
                 "'{shown}' is not an OBJ statement (expected v, vt, vn, f, o, g, ...)"
             )));
         }
         match key {
-            "v" => {
-                let mut c = [0.0f64; 3];
-                for (k, x) in c.iter_mut().enumerate() {
-                    let t = tok.next().ok_or_else(|| {
-                        at(format!(
-                            "a vertex needs x, y and z; coordinate {} is missing",
-                            k + 1
-                        ))
-                    })?;
+            "v" => self.vertex(tok, at),
+            "vt" => self.texcoord(tok, at),
+            "f" => self.face(tok, at),
+            _ => Ok(()), // vn, l, p, o, g, s, usemtl, mtllib, curves: not needed
+        }
+    }
+
+    /// A `v` line: x, y and z as finite 32-bit floats.
+    fn vertex<'t>(&mut self, mut tok: impl Iterator<Item = &'t str>, at: At) -> Result<()> {
+        let mut c = [0.0f64; 3];
+        for (k, x) in c.iter_mut().enumerate() {
+            let t = tok.next().ok_or_else(|| {
+                at.err(format!(
+                    "a vertex needs x, y and z; coordinate {} is missing",
+                    k + 1
+                ))
+            })?;
+            let v: f32 = t
+                .parse()
+                .map_err(|_| at.err(format!("vertex coordinate '{t}' is not a number")))?;
+            if !v.is_finite() {
+                return Err(at.err(format!(
+                    "vertex coordinate '{t}' is not finite (as a 32-bit float)"
+                )));
+            }
+            *x = v as f64;
+        }
+        if self.positions.len() >= MAX_MESH_VERTICES {
+            return Err(at.err(format!(
+                "more than {MAX_MESH_VERTICES} vertices, the most a mesh may have"
+            )));
+        }
+        self.positions.push(Vec3::new(c[0], c[1], c[2]));
+        Ok(())
+    }
+
+    /// A `vt` line: u and an optional v as finite 32-bit floats.
+    fn texcoord<'t>(&mut self, mut tok: impl Iterator<Item = &'t str>, at: At) -> Result<()> {
+        let mut c = [0.0f64; 2];
+        for (k, x) in c.iter_mut().enumerate() {
+            match tok.next() {
+                Some(t) => {
                     let v: f32 = t
                         .parse()
-                        .map_err(|_| at(format!("vertex coordinate '{t}' is not a number")))?;
+                        .map_err(|_| at.err(format!("texture coordinate '{t}' is not a number")))?;
                     if !v.is_finite() {
-                        return Err(at(format!(
-                            "vertex coordinate '{t}' is not finite (as a 32-bit float)"
-                        )));
+                        return Err(at.err(format!("texture coordinate '{t}' is not finite")));
                     }
                     *x = v as f64;
                 }
-                if positions.len() >= MAX_MESH_VERTICES {
-                    return Err(at(format!(
-                        "more than {MAX_MESH_VERTICES} vertices, the most a mesh may have"
-                    )));
-                }
-                positions.push(Vec3::new(c[0], c[1], c[2]));
-            }
-            "vt" => {
-                let mut c = [0.0f64; 2];
-                for (k, x) in c.iter_mut().enumerate() {
-                    match tok.next() {
-                        Some(t) => {
-                            let v: f32 = t.parse().map_err(|_| {
-                                at(format!("texture coordinate '{t}' is not a number"))
-                            })?;
-                            if !v.is_finite() {
-                                return Err(at(format!("texture coordinate '{t}' is not finite")));
-                            }
-                            *x = v as f64;
-                        }
-                        None if k == 0 => {
-                            return Err(at("a texture coordinate needs u (and v)".into()))
-                        }
-                        None => {}
-                    }
-                }
-                if texcoords.len() >= MAX_MESH_VERTICES {
-                    return Err(at(format!(
-                        "more than {MAX_MESH_VERTICES} texture coordinates"
-                    )));
-                }
-                texcoords.push(c);
-            }
-            "f" => {
-                corners.clear();
-                for t in tok {
-                    let mut parts = t.split('/');
-                    let index = |s: Option<&str>,
-                                 count: usize,
-                                 what: &str|
-                     -> Result<Option<usize>> {
-                        let Some(s) = s.filter(|s| !s.is_empty()) else {
-                            return Ok(None);
-                        };
-                        let i: i64 = s.parse().map_err(|_| {
-                            at(format!(
-                                "face corner '{t}': {what} index '{s}' is not an integer"
-                            ))
-                        })?;
-                        match i {
-                            0 => Err(at(format!(
-                                "face corner '{t}': {what} index 0 (OBJ indices start at 1)"
-                            ))),
-                            i if i > 0 => Ok(Some(i as usize - 1)),
-                            i => {
-                                let back = i.unsigned_abs();
-                                if back > count as u64 {
-                                    Err(at(format!(
-                                        "face corner '{t}': {what} index {i} reaches before the first of the {count} so far"
-                                    )))
-                                } else {
-                                    Ok(Some(count - back as usize))
-                                }
-                            }
-                        }
-                    };
-                    let v = index(parts.next(), positions.len(), "vertex")?
-                        .ok_or_else(|| at(format!("face corner '{t}' has no vertex index")))?;
-                    let uv = index(parts.next(), texcoords.len(), "texture")?;
-                    if v >= max_v.0 {
-                        max_v = (v, line_no);
-                    }
-                    if let Some(u) = uv {
-                        if u >= max_t.0 {
-                            max_t = (u, line_no);
-                        }
-                    }
-                    corners.push((v, uv));
-                }
-                if corners.len() < 3 {
-                    return Err(at(format!(
-                        "a face needs at least 3 vertices, this one has {}",
-                        corners.len()
-                    )));
-                }
-                if triangles.len() + corners.len() - 2 > MAX_MESH_TRIANGLES {
-                    return Err(at(format!(
-                        "more than {MAX_MESH_TRIANGLES} triangles, the most a mesh may have"
-                    )));
-                }
-                for c in polygon_triangles(corners.len()) {
-                    let c = c.map(|k| corners[k]);
-                    let tri = c.map(|x| x.0);
-                    if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
-                        repeated += 1;
-                        continue;
-                    }
-                    triangles.push(tri);
-                    for x in c {
-                        any_uv |= x.1.is_some();
-                        corner_uv.push(x.1);
-                    }
-                }
-            }
-            _ => {} // vn, l, p, o, g, s, usemtl, mtllib, curves: not needed
-        }
-    }
-    let input = reader.into_inner();
-    input.finish()?;
-    let n = positions.len();
-    if !triangles.is_empty() && max_v.0 >= n {
-        bail!(
-            "{name}:{}: a face refers to vertex {} but the file has {n}",
-            max_v.1,
-            max_v.0 + 1
-        );
-    }
-    if any_uv && max_t.0 >= texcoords.len() {
-        bail!(
-            "{name}:{}: a face refers to texture coordinate {} but the file has {}",
-            max_t.1,
-            max_t.0 + 1,
-            texcoords.len()
-        );
-    }
-    // zero-area triangles (collinear or coincident corners) have no normal: left out
-    let mut zero_area = 0usize;
-    let mut kept_uv = Vec::with_capacity(corner_uv.len());
-    let mut kept = Vec::with_capacity(triangles.len());
-    for (k, t) in triangles.iter().enumerate() {
-        let p = t.map(|i| positions[i]);
-        let area = (p[1] - p[0]).cross(&(p[2] - p[0])).norm();
-        if !(area > 0.0 && area.is_finite()) {
-            zero_area += 1;
-            continue;
-        }
-        kept.push(*t);
-        kept_uv.extend_from_slice(&corner_uv[3 * k..3 * k + 3]);
-    }
-    drop(triangles);
-    let uvs = if any_uv {
-        let mut uv: Vec<Option<[f64; 2]>> = vec![None; n];
-        for (t, c) in kept.iter().zip(kept_uv.chunks_exact(3)) {
-            for k in 0..3 {
-                if let Some(i) = c[k] {
-                    uv[t[k]] = Some(texcoords[i]);
-                }
+                None if k == 0 => return Err(at.err("a texture coordinate needs u (and v)".into())),
+                None => {}
             }
         }
-        let mut used = vec![false; n];
-        kept.iter().flatten().for_each(|&i| used[i] = true);
-        (0..n)
-            .all(|i| !used[i] || uv[i].is_some())
-            .then(|| uv.into_iter().map(|x| x.unwrap_or([0.0, 0.0])).collect())
-    } else {
-        None
+        if self.texcoords.len() >= MAX_MESH_VERTICES {
+            return Err(at.err(format!("more than {MAX_MESH_VERTICES} texture coordinates")));
+        }
+        self.texcoords.push(c);
+        Ok(())
+    }
+
+    /// An `f` line: its corners, triangulated by [`polygon_triangles`]; triangles with a
+    /// repeated vertex are counted and left out.
+    fn face<'t>(&mut self, tok: impl Iterator<Item = &'t str>, at: At) -> Result<()> {
+        self.corners.clear();
+        for t in tok {
+            let mut parts = t.split('/');
+            let v = corner_index(parts.next(), self.positions.len(), "vertex", t, at)?
+                .ok_or_else(|| at.err(format!("face corner '{t}' has no vertex index")))?;
+            let uv = corner_index(parts.next(), self.texcoords.len(), "texture", t, at)?;
+            if v >= self.max_v.0 {
+                self.max_v = (v, at.line);
+            }
+            if let Some(u) = uv {
+                if u >= self.max_t.0 {
+                    self.max_t = (u, at.line);
+                }
+            }
+            self.corners.push((v, uv));
+        }
+        let corners = &self.corners;
+        if corners.len() < 3 {
+            return Err(at.err(format!(
+                "a face needs at least 3 vertices, this one has {}",
+                corners.len()
+            )));
+        }
+        if self.triangles.len() + corners.len() - 2 > MAX_MESH_TRIANGLES {
+            return Err(at.err(format!(
+                "more than {MAX_MESH_TRIANGLES} triangles, the most a mesh may have"
+            )));
+        }
+        for c in polygon_triangles(corners.len()) {
+            let c = c.map(|k| corners[k]);
+            let tri = c.map(|x| x.0);
+            if tri[0] == tri[1] || tri[1] == tri[2] || tri[0] == tri[2] {
+                self.repeated += 1;
+                continue;
+            }
+            self.triangles.push(tri);
+            for x in c {
+                self.any_uv |= x.1.is_some();
+                self.corner_uv.push(x.1);
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuse faces that referred to vertices or texture coordinates the file never gave
+    /// (forward references are allowed until the end).
+    fn check_references(&self, name: &str) -> Result<()> {
+        let n = self.positions.len();
+        let (max_v, max_t) = (self.max_v, self.max_t);
+        if !self.triangles.is_empty() && max_v.0 >= n {
+            bail!(
+                "{name}:{}: a face refers to vertex {} but the file has {n}",
+                max_v.1,
+                max_v.0 + 1
+            );
+        }
+        if self.any_uv && max_t.0 >= self.texcoords.len() {
+            bail!(
+                "{name}:{}: a face refers to texture coordinate {} but the file has {}",
+                max_t.1,
+                max_t.0 + 1,
+                self.texcoords.len()
+            );
+        }
+        Ok(())
+    }
+
+    /// The mesh: zero-area triangles left out, texture coordinates per vertex; refused when no
+    /// triangle is left.
+    fn into_mesh(mut self, path: &Path) -> Result<Mesh> {
+        let name = path.display();
+        let n = self.positions.len();
+        let (kept, kept_uv, zero_area) = self.without_zero_area();
+        let uvs = if self.any_uv {
+            per_vertex_uvs(n, &kept, &kept_uv, &self.texcoords)
+        } else {
+            None
+        };
+        let m = Mesh {
+            positions: self.positions,
+            triangles: kept,
+            uvs,
+            source: path.to_path_buf(),
+            degenerate: self.repeated + zero_area,
+        };
+        if m.triangles.is_empty() && m.degenerate > 0 {
+            bail!(
+                "{name}: no triangles: all {} are degenerate (a repeated vertex or zero area)",
+                m.degenerate
+            );
+        }
+        m.check()?;
+        Ok(m)
+    }
+
+    /// The triangles of nonzero area with their corners' texture indices, and how many had
+    /// zero area; the full list is dropped.
+    fn without_zero_area(&mut self) -> (Vec<[usize; 3]>, Vec<Option<usize>>, usize) {
+        // zero-area triangles (collinear or coincident corners) have no normal: left out
+        let triangles = std::mem::take(&mut self.triangles);
+        let mut zero_area = 0usize;
+        let mut kept_uv = Vec::with_capacity(self.corner_uv.len());
+        let mut kept = Vec::with_capacity(triangles.len());
+        for (k, t) in triangles.iter().enumerate() {
+            let p = t.map(|i| self.positions[i]);
+            let area = (p[1] - p[0]).cross(&(p[2] - p[0])).norm();
+            if !(area > 0.0 && area.is_finite()) {
+                zero_area += 1;
+                continue;
+            }
+            kept.push(*t);
+            kept_uv.extend_from_slice(&self.corner_uv[3 * k..3 * k + 3]);
+        }
+        drop(triangles);
+        (kept, kept_uv, zero_area)
+    }
+}
+
+/// A face corner's vertex or texture index (`what`) from its text `s` in corner `t`: 1-based,
+/// or negative counting back from the `count` so far; `None` when absent or empty.
+fn corner_index(
+    s: Option<&str>,
+    count: usize,
+    what: &str,
+    t: &str,
+    at: At,
+) -> Result<Option<usize>> {
+    let Some(s) = s.filter(|s| !s.is_empty()) else {
+        return Ok(None);
     };
-    let m = Mesh {
-        positions,
-        triangles: kept,
-        uvs,
-        source: path.to_path_buf(),
-        degenerate: repeated + zero_area,
-    };
-    if m.triangles.is_empty() && m.degenerate > 0 {
-        bail!(
-            "{name}: no triangles: all {} are degenerate (a repeated vertex or zero area)",
-            m.degenerate
-        );
+    let i: i64 = s.parse().map_err(|_| {
+        at.err(format!(
+            "face corner '{t}': {what} index '{s}' is not an integer"
+        ))
+    })?;
+    match i {
+        0 => Err(at.err(format!(
+            "face corner '{t}': {what} index 0 (OBJ indices start at 1)"
+        ))),
+        i if i > 0 => Ok(Some(i as usize - 1)),
+        i => {
+            let back = i.unsigned_abs();
+            if back > count as u64 {
+                Err(at.err(format!(
+                    "face corner '{t}': {what} index {i} reaches before the first of the {count} so far"
+                )))
+            } else {
+                Ok(Some(count - back as usize))
+            }
+        }
     }
-    m.check()?;
-    Ok(m)
+}
+
+/// Texture coordinates per vertex from the kept triangles' corners (the last corner naming a
+/// vertex wins), or `None` unless every vertex a triangle uses has one.
+fn per_vertex_uvs(
+    n: usize,
+    kept: &[[usize; 3]],
+    kept_uv: &[Option<usize>],
+    texcoords: &[[f64; 2]],
+) -> Option<Vec<[f64; 2]>> {
+    let mut uv: Vec<Option<[f64; 2]>> = vec![None; n];
+    for (t, c) in kept.iter().zip(kept_uv.chunks_exact(3)) {
+        for k in 0..3 {
+            if let Some(i) = c[k] {
+                uv[t[k]] = Some(texcoords[i]);
+            }
+        }
+    }
+    let mut used = vec![false; n];
+    kept.iter().flatten().for_each(|&i| used[i] = true);
+    (0..n)
+        .all(|i| !used[i] || uv[i].is_some())
+        .then(|| uv.into_iter().map(|x| x.unwrap_or([0.0, 0.0])).collect())
 }
 
 #[cfg(test)]

@@ -76,6 +76,35 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
         .iter()
         .map(str::to_owned)
         .collect();
+    let index = column_slots(name, &header)?;
+    let mut rows = Vec::new();
+    for record in reader.records() {
+        let record = record.map_err(|e| {
+            let line = e.position().map(|p| p.line()).unwrap_or(0);
+            anyhow!("{name}:{line}: malformed row: {e}")
+        })?;
+        let line = record.position().map(|p| p.line()).unwrap_or(0);
+        if rows.len() >= MAX_QUERIES {
+            bail!("{name}:{line}: more than {MAX_QUERIES} queries; split the file");
+        }
+        let row = Row {
+            name,
+            line,
+            record: &record,
+            index: &index,
+        };
+        rows.push(row.query()?);
+    }
+    if rows.is_empty() {
+        bail!("{name}: no query rows after the header");
+    }
+    Ok(Queries { header, rows })
+}
+
+/// For every column of [`COLUMNS`], its position in `header` (`usize::MAX`: absent); refused
+/// when a column is unknown, repeated or missing, or an albedo is given both grey and RGB or in
+/// part.
+fn column_slots(name: &str, header: &[String]) -> Result<[usize; COLUMNS.len()]> {
     let mut index = [usize::MAX; COLUMNS.len()];
     for (i, col) in header.iter().enumerate() {
         let slot = COLUMNS.iter().position(|c| c == col).ok_or_else(|| {
@@ -112,30 +141,26 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             );
         }
     }
-    let mut rows = Vec::new();
-    for record in reader.records() {
-        let record = record.map_err(|e| {
-            let line = e.position().map(|p| p.line()).unwrap_or(0);
-            anyhow!("{name}:{line}: malformed row: {e}")
-        })?;
-        let line = record.position().map(|p| p.line()).unwrap_or(0);
-        if rows.len() >= MAX_QUERIES {
-            bail!("{name}:{line}: more than {MAX_QUERIES} queries; split the file");
-        }
-        let number = |slot: usize| -> Result<f64> {
-            let col = COLUMNS[slot];
-            let text = record.get(index[slot]).unwrap_or("");
-            let v: f64 = text
-                .parse()
-                .map_err(|_| anyhow!("{name}:{line}: column `{col}`: '{text}' is not a number"))?;
-            if !v.is_finite() {
-                bail!("{name}:{line}: column `{col}` is {v}; values must be finite");
-            }
-            Ok(v)
-        };
+    Ok(index)
+}
+
+/// One record of a query file, with what its errors name.
+struct Row<'a> {
+    name: &'a str,
+    line: u64,
+    record: &'a csv::StringRecord,
+    /// [`column_slots`].
+    index: &'a [usize; COLUMNS.len()],
+}
+
+impl Row<'_> {
+    /// The query this row holds, its values checked.
+    fn query(&self) -> Result<Query> {
+        let (name, line) = (self.name, self.line);
+        let index = self.index;
         let mut angles = [0.0; 4];
         for (slot, a) in angles.iter_mut().enumerate() {
-            *a = number(slot)?;
+            *a = self.number(slot)?;
         }
         for slot in [0, 2] {
             if !(0.0..=180.0).contains(&angles[slot]) {
@@ -147,7 +172,7 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             }
         }
         let height = if index[4] != usize::MAX {
-            let h = number(4)?;
+            let h = self.number(4)?;
             if h < 0.0 {
                 bail!("{name}:{line}: column `height` = {h} is negative");
             }
@@ -156,7 +181,7 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             None
         };
         let fibre_azimuth = if index[5] != usize::MAX {
-            let psi = number(5)?;
+            let psi = self.number(5)?;
             if !(-90.0..=90.0).contains(&psi) {
                 bail!("{name}:{line}: column `fibre_azimuth_deg` = {psi} is outside [-90, 90] degrees");
             }
@@ -164,24 +189,8 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
         } else {
             None
         };
-        let albedo = |grey: usize, first: usize| -> Result<Option<[f64; 3]>> {
-            let v = if index[grey] != usize::MAX {
-                [number(grey)?; 3]
-            } else if index[first] != usize::MAX {
-                [number(first)?, number(first + 1)?, number(first + 2)?]
-            } else {
-                return Ok(None);
-            };
-            if let Some(x) = v.iter().find(|x| !(0.0..=1.0).contains(*x)) {
-                bail!(
-                    "{name}:{line}: albedo column `{}` = {x} is outside [0, 1]",
-                    COLUMNS[grey]
-                );
-            }
-            Ok(Some(v))
-        };
-        let (kd, ks) = (albedo(6, 7)?, albedo(10, 11)?);
-        rows.push(Query {
+        let (kd, ks) = (self.albedo(6, 7)?, self.albedo(10, 11)?);
+        Ok(Query {
             theta_i: angles[0].to_radians(),
             phi_i: angles[1].to_radians(),
             theta_o: angles[2].to_radians(),
@@ -190,14 +199,48 @@ pub fn read(input: impl std::io::Read, name: &str) -> Result<Queries> {
             fibre_azimuth,
             kd,
             ks,
-            fields: record.iter().map(str::to_owned).collect(),
+            fields: self.record.iter().map(str::to_owned).collect(),
             line,
-        });
+        })
     }
-    if rows.is_empty() {
-        bail!("{name}: no query rows after the header");
+
+    /// The finite number in column `slot` of [`COLUMNS`].
+    fn number(&self, slot: usize) -> Result<f64> {
+        let (name, line) = (self.name, self.line);
+        let col = COLUMNS[slot];
+        let text = self.record.get(self.index[slot]).unwrap_or("");
+        let v: f64 = text
+            .parse()
+            .map_err(|_| anyhow!("{name}:{line}: column `{col}`: '{text}' is not a number"))?;
+        if !v.is_finite() {
+            bail!("{name}:{line}: column `{col}` is {v}; values must be finite");
+        }
+        Ok(v)
     }
-    Ok(Queries { header, rows })
+
+    /// The albedo in column `grey` or the three from `first`, each in [0, 1]; `None` where the
+    /// file has neither.
+    fn albedo(&self, grey: usize, first: usize) -> Result<Option<[f64; 3]>> {
+        let (name, line) = (self.name, self.line);
+        let v = if self.index[grey] != usize::MAX {
+            [self.number(grey)?; 3]
+        } else if self.index[first] != usize::MAX {
+            [
+                self.number(first)?,
+                self.number(first + 1)?,
+                self.number(first + 2)?,
+            ]
+        } else {
+            return Ok(None);
+        };
+        if let Some(x) = v.iter().find(|x| !(0.0..=1.0).contains(*x)) {
+            bail!(
+                "{name}:{line}: albedo column `{}` = {x} is outside [0, 1]",
+                COLUMNS[grey]
+            );
+        }
+        Ok(Some(v))
+    }
 }
 
 #[cfg(test)]

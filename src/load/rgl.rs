@@ -352,10 +352,19 @@ fn phi_to_u(phi: f64) -> f64 {
     (phi + PI) / (2.0 * PI)
 }
 
-impl RglBsdf {
-    pub fn load(path: &Path) -> Result<Self> {
-        let mut f = read_tensor_file(path)?;
-        let name = path.display();
+/// The fields of a tensor file that a measured BRDF is made of.
+struct RglFields {
+    theta_i: Field,
+    phi_i: Field,
+    ndf: Field,
+    sigma: Field,
+    vndf: Field,
+    rgb: Field,
+}
+
+impl RglFields {
+    /// Take the BRDF's fields out of the file's, each of its rank and with float data.
+    fn take(f: &mut HashMap<String, Field>, name: &str) -> Result<Self> {
         let mut take = |k: &str, rank: usize| -> Result<Field> {
             let field = f
                 .remove(k)
@@ -376,7 +385,20 @@ impl RglBsdf {
         let rgb = take("rgb", 5).map_err(|e| {
             anyhow!("{e:#} (only RGB files are read: the `_rgb.bsdf` variant of a material)")
         })?;
-        let (np, nt) = (phi_i.values.len(), theta_i.values.len());
+        Ok(Self {
+            theta_i,
+            phi_i,
+            ndf,
+            sigma,
+            vndf,
+            rgb,
+        })
+    }
+
+    /// The tables agree with the incidence grid, and each is at least 2 x 2.
+    fn check_shapes(&self, name: &str) -> Result<()> {
+        let (vndf, rgb) = (&self.vndf, &self.rgb);
+        let (np, nt) = (self.phi_i.values.len(), self.theta_i.values.len());
         if vndf.shape[..2] != [np, nt] || rgb.shape[..3] != [np, nt, 3] || nt < 2 {
             bail!(
                 "{name}: inconsistent shapes: theta_i {nt}, phi_i {np}, vndf {:?}, rgb {:?}",
@@ -386,10 +408,10 @@ impl RglBsdf {
         }
         // every table at least 2 x 2 (bilinear interpolation needs two nodes each way)
         for (k, field) in [
-            ("ndf", &ndf),
-            ("sigma", &sigma),
-            ("vndf", &vndf),
-            ("rgb", &rgb),
+            ("ndf", &self.ndf),
+            ("sigma", &self.sigma),
+            ("vndf", vndf),
+            ("rgb", rgb),
         ] {
             let r = field.shape.len();
             if field.shape[r - 2] < 2 || field.shape[r - 1] < 2 {
@@ -399,7 +421,12 @@ impl RglBsdf {
                 );
             }
         }
-        // values: finite, within the magnitude the fit can square, and of the right sign
+        Ok(())
+    }
+
+    /// The tables' values: finite, within the magnitude the fit can square, and of the right
+    /// sign.
+    fn check_values(&self, name: &str) -> Result<()> {
         let check = |k: &str, field: &Field, min: f64, strict: bool| -> Result<()> {
             let bad = field.values.iter().position(|&v| {
                 !(v.is_finite() && v.abs() <= MAX_MAGNITUDE && (v > min || (!strict && v == min)))
@@ -418,12 +445,15 @@ impl RglBsdf {
             }
             Ok(())
         };
-        check("ndf", &ndf, 0.0, false)?;
-        check("sigma", &sigma, 0.0, true)?;
-        check("vndf", &vndf, 0.0, false)?;
-        check("rgb", &rgb, 0.0, false)?;
-        // the incidence grid: finite angles, increasing, theta in [0, 90] and phi in [-180, 180]
-        // degrees
+        check("ndf", &self.ndf, 0.0, false)?;
+        check("sigma", &self.sigma, 0.0, true)?;
+        check("vndf", &self.vndf, 0.0, false)?;
+        check("rgb", &self.rgb, 0.0, false)
+    }
+
+    /// The incidence grid: finite angles, increasing, theta in [0, 90] and phi in [-180, 180]
+    /// degrees; an anisotropic file covers the whole circle of phi.
+    fn check_incidence(&self, name: &str) -> Result<()> {
         let grid = |k: &str, g: &[f64], lo: f64, hi: f64| -> Result<()> {
             const SLACK: f64 = 1e-4;
             if let Some(i) = g
@@ -445,18 +475,23 @@ impl RglBsdf {
             }
             Ok(())
         };
-        grid("theta_i", &theta_i.values, 0.0, FRAC_PI_2)?;
-        grid("phi_i", &phi_i.values, -PI, PI)?;
+        grid("theta_i", &self.theta_i.values, 0.0, FRAC_PI_2)?;
+        grid("phi_i", &self.phi_i.values, -PI, PI)?;
+        let np = self.phi_i.values.len();
         if np > 2 {
-            let span = phi_i.values[np - 1] - phi_i.values[0];
+            let span = self.phi_i.values[np - 1] - self.phi_i.values[0];
             if ((2.0 * PI / span).round() as i64) != 1 {
                 bail!("{name}: anisotropic files with a reduced phi_i range are not supported");
             }
         }
-        let description = f
-            .remove("description")
-            .map(|d| d.values.iter().map(|&b| b as u8 as char).collect())
-            .unwrap_or_default();
+        Ok(())
+    }
+
+    /// The BRDF's tables, interpolated over the incidence grid.
+    fn into_bsdf(self, description: String) -> RglBsdf {
+        let (theta_i, phi_i) = (self.theta_i, self.phi_i);
+        let (ndf, sigma, vndf, rgb) = (self.ndf, self.sigma, self.vndf, self.rgb);
+        let np = phi_i.values.len();
         let incidence = vec![phi_i.values.clone(), theta_i.values.clone()];
         // incidences measured: the grid below the horizon (the last node at 90 deg is padding)
         let max_theta_i = theta_i
@@ -465,7 +500,7 @@ impl RglBsdf {
             .copied()
             .filter(|&t| t < FRAC_PI_2 - 1e-6)
             .fold(0.0, f64::max);
-        Ok(Self {
+        RglBsdf {
             description,
             isotropic: np <= 2,
             ndf: Table2D::new(&ndf.shape, &ndf.values, vec![], false),
@@ -482,7 +517,23 @@ impl RglBsdf {
                 false,
             ),
             max_theta_i,
-        })
+        }
+    }
+}
+
+impl RglBsdf {
+    pub fn load(path: &Path) -> Result<Self> {
+        let mut f = read_tensor_file(path)?;
+        let name = path.display().to_string();
+        let fields = RglFields::take(&mut f, &name)?;
+        fields.check_shapes(&name)?;
+        fields.check_values(&name)?;
+        fields.check_incidence(&name)?;
+        let description = f
+            .remove("description")
+            .map(|d| d.values.iter().map(|&b| b as u8 as char).collect())
+            .unwrap_or_default();
+        Ok(fields.into_bsdf(description))
     }
 
     /// f(l, v) per channel in 1/sr (the file's value divided by cos theta_o); 0 at or below the

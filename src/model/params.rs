@@ -189,43 +189,8 @@ impl ModelParams {
     /// Check `raw` for model `id`. Returns the parameters and warnings about parameters the model
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {
-        let mut warnings = Vec::new();
-        // in the order users have always been warned in: the optional components first
-        use Param::*;
-        let order = [
-            Fuzz,
-            FuzzDepth,
-            FuzzAsymmetry,
-            FresnelIor,
-            AzimuthSpread,
-            AzimuthNodes,
-            Kd,
-            Ks,
-            Exponent,
-            Spacing,
-            Height,
-            ElevationDeg,
-            MapScale,
-            Azimuth,
-            SubstrateAlbedo,
-            AlphaX,
-            AlphaY,
-            RhoD,
-            RhoS,
-            TopologyMap,
-            QuadratureOrder,
-            HistogramBins,
-            TwoSided,
-            Ambient,
-        ];
-        for p in order {
-            if raw.gives(p) && !id.reads(p) {
-                warnings.push(format!("parameter `{p}` is not used by model `{id}`"));
-            }
-        }
-
+        let warnings = unused_warnings(raw, id);
         let spacing = check_range(Param::Spacing, raw.spacing.unwrap_or(2.0), 2.0, 20.0)?;
-        let h_max = max_height(spacing);
         let psi_deg = check_range(
             Param::Azimuth,
             raw.fibre_azimuth_deg.unwrap_or(0.0),
@@ -233,6 +198,99 @@ impl ModelParams {
             90.0,
         )?;
         let exponent = check_range(Param::Exponent, raw.exponent.unwrap_or(1.0), 1.0, 1e4)?;
+        let components = Components::from_raw(raw)?;
+        let (quadrature_order, histogram_bins) = quadrature_knobs(raw)?;
+        let topology = checked_topology(raw, id, spacing)?;
+        let (mut albedos, alpha_x, alpha_y) = if id.has(Ability::WardLobe) {
+            ward_albedos(raw)?
+        } else {
+            (fibre_albedos(raw, id)?, 1.0, 1.0)
+        };
+        if components.fuzz_depth > 0.0 {
+            albedos.fuzz = components.fuzz.channels();
+            albedos.rgb |= components.fuzz.is_rgb();
+        }
+        let ambient = check_range(Param::Ambient, raw.ambient.unwrap_or(0.0), 0.0, 1.0)?;
+
+        Ok((
+            Self {
+                albedos,
+                exponent,
+                spacing,
+                fibre_azimuth: psi_deg.to_radians(),
+                topology,
+                alpha_x,
+                alpha_y,
+                quadrature_order,
+                histogram_bins,
+                azimuth_spread_deg: components.azimuth_spread_deg,
+                azimuth_nodes: components.azimuth_nodes,
+                fresnel_ior: components.fresnel_ior,
+                fuzz_depth: components.fuzz_depth,
+                fuzz_asymmetry: components.fuzz_asymmetry,
+                preview: Preview {
+                    two_sided: raw.two_sided.unwrap_or(false),
+                    ambient,
+                },
+            },
+            warnings,
+        ))
+    }
+}
+
+/// A warning for every parameter `raw` gives that model `id` does not read.
+fn unused_warnings(raw: &RawParams, id: ModelId) -> Vec<String> {
+    let mut warnings = Vec::new();
+    // in the order users have always been warned in: the optional components first
+    use Param::*;
+    let order = [
+        Fuzz,
+        FuzzDepth,
+        FuzzAsymmetry,
+        FresnelIor,
+        AzimuthSpread,
+        AzimuthNodes,
+        Kd,
+        Ks,
+        Exponent,
+        Spacing,
+        Height,
+        ElevationDeg,
+        MapScale,
+        Azimuth,
+        SubstrateAlbedo,
+        AlphaX,
+        AlphaY,
+        RhoD,
+        RhoS,
+        TopologyMap,
+        QuadratureOrder,
+        HistogramBins,
+        TwoSided,
+        Ambient,
+    ];
+    for p in order {
+        if raw.gives(p) && !id.reads(p) {
+            warnings.push(format!("parameter `{p}` is not used by model `{id}`"));
+        }
+    }
+    warnings
+}
+
+/// The values of the optional components (azimuth spread, Fresnel factor, fuzz layer), checked.
+struct Components {
+    azimuth_spread_deg: f64,
+    fresnel_ior: f64,
+    fuzz_depth: f64,
+    fuzz_asymmetry: f64,
+    /// The fuzz layer's weight (used when `fuzz_depth` > 0).
+    fuzz: Albedo,
+    azimuth_nodes: usize,
+}
+
+impl Components {
+    /// The components' values in `raw` (defaults: off), each in its range.
+    fn from_raw(raw: &RawParams) -> Result<Self> {
         let azimuth_spread_deg = check_range(
             Param::AzimuthSpread,
             raw.azimuth_spread_deg.unwrap_or(0.0),
@@ -274,121 +332,113 @@ impl ModelParams {
                 super::azimuth_spread::MAX_AZIMUTH_NODES
             );
         }
-        let quadrature_order = raw.quadrature_order.unwrap_or(DEFAULT_QUADRATURE_ORDER);
-        if !(1..=MAX_QUADRATURE_ORDER).contains(&quadrature_order) {
-            bail!("parameter `quadrature_order` = {quadrature_order} is out of range [1, {MAX_QUADRATURE_ORDER}]");
-        }
-        let histogram_bins = raw.histogram_bins.unwrap_or(DEFAULT_HISTOGRAM_BINS);
-        if !(1..=MAX_HISTOGRAM_BINS).contains(&histogram_bins) {
-            bail!("parameter `histogram_bins` = {histogram_bins} is out of range [1, {MAX_HISTOGRAM_BINS}]");
-        }
-
-        let height = match (raw.height, raw.elevation_deg) {
-            (Some(_), Some(_)) => bail!("give either `height` or `elevation_deg`, not both"),
-            (Some(h), None) => check_range(Param::Height, h, 0.0, h_max * (1.0 + 1e-9))?.min(h_max),
-            (None, Some(e)) => {
-                let e_max = max_elevation(spacing).to_degrees();
-                let e = check_range(Param::ElevationDeg, e, 0.0, e_max * (1.0 + 1e-9))?.min(e_max);
-                spacing * e.to_radians().sin()
-            }
-            (None, None) => 0.0,
-        };
-        let map_scale = check_range(Param::MapScale, raw.map_scale.unwrap_or(0.0), 0.0, h_max)?;
-        let map = match &raw.topology_map {
-            Some(path) if id.reads(Param::TopologyMap) => {
-                Some(Arc::new(super::topology::TopologyMap::load(path)?))
-            }
-            _ => None,
-        };
-
-        let (albedos, alpha_x, alpha_y) = if id.has(Ability::WardLobe) {
-            let ax = raw
-                .alpha_x
-                .ok_or_else(|| anyhow!("model `ward` needs `alpha_x`"))?;
-            let ay = raw
-                .alpha_y
-                .ok_or_else(|| anyhow!("model `ward` needs `alpha_y`"))?;
-            check_range(Param::AlphaX, ax, 1e-3, 1.0)?;
-            check_range(Param::AlphaY, ay, 1e-3, 1.0)?;
-            if ax <= 1e-3 || ay <= 1e-3 {
-                bail!("parameters `alpha_x`, `alpha_y` must lie in (0.001, 1]");
-            }
-            let rho_d = raw.rho_d.unwrap_or(Albedo::Grey(0.0));
-            let rho_s = raw
-                .rho_s
-                .ok_or_else(|| anyhow!("model `ward` needs `rho_s`"))?;
-            check_albedo(Param::RhoD, &rho_d)?;
-            check_albedo(Param::RhoS, &rho_s)?;
-            let a = Albedos {
-                diffuse: rho_d.channels(),
-                specular: rho_s.channels(),
-                substrate: [0.0; 3],
-                fuzz: [0.0; 3],
-                rgb: rho_d.is_rgb() || rho_s.is_rgb(),
-            };
-            (a, ax, ay)
-        } else {
-            let kd = raw
-                .kd
-                .ok_or_else(|| anyhow!("model `{id}` needs `kd` (fibre diffuse albedo)"))?;
-            check_albedo(Param::Kd, &kd)?;
-            let ks = raw.ks.unwrap_or(Albedo::Grey(0.0));
-            check_albedo(Param::Ks, &ks)?;
-            let sub = raw.substrate_albedo.unwrap_or(kd);
-            check_albedo(Param::SubstrateAlbedo, &sub)?;
-            let uses_spec = id.reads(Param::Ks);
-            let ks_c = if uses_spec { ks.channels() } else { [0.0; 3] };
-            let sub_c = if id.reads(Param::SubstrateAlbedo) {
-                sub.channels()
-            } else {
-                [0.0; 3]
-            };
-            let a = Albedos {
-                diffuse: kd.channels(),
-                specular: ks_c,
-                substrate: sub_c,
-                fuzz: [0.0; 3],
-                rgb: kd.is_rgb()
-                    || (uses_spec && ks.is_rgb())
-                    || (id.reads(Param::SubstrateAlbedo) && sub.is_rgb()),
-            };
-            (a, 1.0, 1.0)
-        };
-        let mut albedos = albedos;
-        if fuzz_depth > 0.0 {
-            albedos.fuzz = fuzz.channels();
-            albedos.rgb |= fuzz.is_rgb();
-        }
-        let ambient = check_range(Param::Ambient, raw.ambient.unwrap_or(0.0), 0.0, 1.0)?;
-
-        Ok((
-            Self {
-                albedos,
-                exponent,
-                spacing,
-                fibre_azimuth: psi_deg.to_radians(),
-                topology: Topology {
-                    height,
-                    map_scale,
-                    map,
-                },
-                alpha_x,
-                alpha_y,
-                quadrature_order,
-                histogram_bins,
-                azimuth_spread_deg,
-                azimuth_nodes,
-                fresnel_ior,
-                fuzz_depth,
-                fuzz_asymmetry,
-                preview: Preview {
-                    two_sided: raw.two_sided.unwrap_or(false),
-                    ambient,
-                },
-            },
-            warnings,
-        ))
+        Ok(Self {
+            azimuth_spread_deg,
+            fresnel_ior,
+            fuzz_depth,
+            fuzz_asymmetry,
+            fuzz,
+            azimuth_nodes,
+        })
     }
+}
+
+/// The specular quadrature order N and the height histogram's bins K, each in its range.
+fn quadrature_knobs(raw: &RawParams) -> Result<(usize, usize)> {
+    let quadrature_order = raw.quadrature_order.unwrap_or(DEFAULT_QUADRATURE_ORDER);
+    if !(1..=MAX_QUADRATURE_ORDER).contains(&quadrature_order) {
+        bail!("parameter `quadrature_order` = {quadrature_order} is out of range [1, {MAX_QUADRATURE_ORDER}]");
+    }
+    let histogram_bins = raw.histogram_bins.unwrap_or(DEFAULT_HISTOGRAM_BINS);
+    if !(1..=MAX_HISTOGRAM_BINS).contains(&histogram_bins) {
+        bail!("parameter `histogram_bins` = {histogram_bins} is out of range [1, {MAX_HISTOGRAM_BINS}]");
+    }
+    Ok((quadrature_order, histogram_bins))
+}
+
+/// The topology: the height (given as `height` or `elevation_deg`, at most the largest the
+/// `spacing` allows), the map's scale and the map itself when model `id` reads one.
+fn checked_topology(raw: &RawParams, id: ModelId, spacing: f64) -> Result<Topology> {
+    let h_max = max_height(spacing);
+    let height = match (raw.height, raw.elevation_deg) {
+        (Some(_), Some(_)) => bail!("give either `height` or `elevation_deg`, not both"),
+        (Some(h), None) => check_range(Param::Height, h, 0.0, h_max * (1.0 + 1e-9))?.min(h_max),
+        (None, Some(e)) => {
+            let e_max = max_elevation(spacing).to_degrees();
+            let e = check_range(Param::ElevationDeg, e, 0.0, e_max * (1.0 + 1e-9))?.min(e_max);
+            spacing * e.to_radians().sin()
+        }
+        (None, None) => 0.0,
+    };
+    let map_scale = check_range(Param::MapScale, raw.map_scale.unwrap_or(0.0), 0.0, h_max)?;
+    let map = match &raw.topology_map {
+        Some(path) if id.reads(Param::TopologyMap) => {
+            Some(Arc::new(super::topology::TopologyMap::load(path)?))
+        }
+        _ => None,
+    };
+    Ok(Topology {
+        height,
+        map_scale,
+        map,
+    })
+}
+
+/// The Ward rung's albedos (rho_d, rho_s) and roughnesses (alpha_x, alpha_y).
+fn ward_albedos(raw: &RawParams) -> Result<(Albedos, f64, f64)> {
+    let ax = raw
+        .alpha_x
+        .ok_or_else(|| anyhow!("model `ward` needs `alpha_x`"))?;
+    let ay = raw
+        .alpha_y
+        .ok_or_else(|| anyhow!("model `ward` needs `alpha_y`"))?;
+    check_range(Param::AlphaX, ax, 1e-3, 1.0)?;
+    check_range(Param::AlphaY, ay, 1e-3, 1.0)?;
+    if ax <= 1e-3 || ay <= 1e-3 {
+        bail!("parameters `alpha_x`, `alpha_y` must lie in (0.001, 1]");
+    }
+    let rho_d = raw.rho_d.unwrap_or(Albedo::Grey(0.0));
+    let rho_s = raw
+        .rho_s
+        .ok_or_else(|| anyhow!("model `ward` needs `rho_s`"))?;
+    check_albedo(Param::RhoD, &rho_d)?;
+    check_albedo(Param::RhoS, &rho_s)?;
+    let a = Albedos {
+        diffuse: rho_d.channels(),
+        specular: rho_s.channels(),
+        substrate: [0.0; 3],
+        fuzz: [0.0; 3],
+        rgb: rho_d.is_rgb() || rho_s.is_rgb(),
+    };
+    Ok((a, ax, ay))
+}
+
+/// A fibre rung's albedos (kd, ks, substrate), those model `id` does not read zero.
+fn fibre_albedos(raw: &RawParams, id: ModelId) -> Result<Albedos> {
+    let kd = raw
+        .kd
+        .ok_or_else(|| anyhow!("model `{id}` needs `kd` (fibre diffuse albedo)"))?;
+    check_albedo(Param::Kd, &kd)?;
+    let ks = raw.ks.unwrap_or(Albedo::Grey(0.0));
+    check_albedo(Param::Ks, &ks)?;
+    let sub = raw.substrate_albedo.unwrap_or(kd);
+    check_albedo(Param::SubstrateAlbedo, &sub)?;
+    let uses_spec = id.reads(Param::Ks);
+    let ks_c = if uses_spec { ks.channels() } else { [0.0; 3] };
+    let sub_c = if id.reads(Param::SubstrateAlbedo) {
+        sub.channels()
+    } else {
+        [0.0; 3]
+    };
+    Ok(Albedos {
+        diffuse: kd.channels(),
+        specular: ks_c,
+        substrate: sub_c,
+        fuzz: [0.0; 3],
+        rgb: kd.is_rgb()
+            || (uses_spec && ks.is_rgb())
+            || (id.reads(Param::SubstrateAlbedo) && sub.is_rgb()),
+    })
 }
 
 #[cfg(test)]

@@ -151,78 +151,139 @@ impl SceneFile {
         let mut objects = Vec::new();
         for (k, o) in self.objects.iter().enumerate() {
             let at = format!("{at}: [[objects]] {}", k + 1);
-            finite(&o.offset, "offset", &at)?;
-            if !(o.scale.is_finite() && o.scale > 0.0) {
-                bail!("{at}: scale = {} must be finite and positive", o.scale);
-            }
-            let shape = match o.kind.as_str() {
-                "torus" => Object::Torus { spacing },
-                "sphere" => Object::Sphere { psi_deg },
-                "swatch" => Object::Swatch { psi_deg },
-                "mesh" => {
-                    let file = o
-                        .file
-                        .as_ref()
-                        .ok_or_else(|| anyhow!("{at}: a mesh needs `file`"))?;
-                    let file = base.join(file);
-                    inputs.push(file.clone());
-                    let source = match o.tangents.as_deref().unwrap_or("curvature") {
-                        "curvature" => TangentSource::Curvature,
-                        "uv" => TangentSource::Uv,
-                        "constant" => TangentSource::Constant { psi_deg },
-                        t => bail!("{at}: tangents = {t:?}: expected curvature, uv or constant"),
-                    };
-                    let mesh = crate::load::mesh::load_obj(&file)?;
-                    Object::Mesh(std::sync::Arc::new(MeshObject::new(mesh, source, psi_deg)?))
-                }
-                t => bail!("{at}: type = {t:?}: expected torus, sphere, swatch or mesh"),
-            };
-            objects.push(Object::Placed {
-                inner: Box::new(shape),
-                offset: Vec3::from(o.offset),
-                scale: o.scale,
-            });
+            let material = ObjectMaterial { psi_deg, spacing };
+            objects.push(o.build(&at, base, material, &mut inputs)?);
         }
         let mut lights = Vec::new();
         for (k, l) in self.lights.iter().enumerate() {
             let at = format!("{at}: [[lights]] {}", k + 1);
-            lights.push(match *l {
-                LightSpec::Directional {
-                    theta_deg,
-                    phi_deg,
-                    irradiance,
-                } => {
-                    finite(
-                        &[theta_deg, phi_deg, irradiance],
-                        "theta_deg, phi_deg, irradiance",
-                        &at,
-                    )?;
-                    if irradiance < 0.0 {
-                        bail!("{at}: irradiance = {irradiance} must not be negative");
-                    }
-                    Light::Directional {
-                        direction: direction_from_angles(
-                            theta_deg.to_radians(),
-                            phi_deg.to_radians(),
-                        ),
-                        irradiance,
-                    }
-                }
-                LightSpec::Point {
-                    position,
-                    intensity,
-                } => {
-                    finite(&position, "position", &at)?;
-                    if !(intensity.is_finite() && intensity >= 0.0) {
-                        bail!("{at}: intensity = {intensity} must be finite and not negative");
-                    }
-                    Light::Point {
-                        position: Vec3::from(position),
-                        intensity,
-                    }
-                }
-            });
+            lights.push(l.build(&at)?);
         }
+        let camera = self.camera.build(&at, (w, h), &objects)?;
+        lights.extend(super::fill_light(
+            camera.direction,
+            self.fill,
+            &format!("{at}: fill ="),
+        )?);
+        let exposure = self.exposure(&at)?;
+        Ok(Scene {
+            objects,
+            lights,
+            camera,
+            supersample: self.supersample,
+            exposure,
+            inputs,
+        })
+    }
+
+    /// The exposure as the renderer reads it: "auto" or a number, as text.
+    fn exposure(&self, at: &str) -> Result<Option<String>> {
+        Ok(match &self.exposure {
+            None => None,
+            Some(toml::Value::String(s)) => Some(s.clone()),
+            Some(toml::Value::Float(f)) => Some(f.to_string()),
+            Some(toml::Value::Integer(i)) => Some(i.to_string()),
+            Some(v) => bail!("{at}: exposure = {v}: expected a number or \"auto\""),
+        })
+    }
+}
+
+/// What a scene's objects take from the material: its fibre azimuth (degrees) and spacing.
+#[derive(Clone, Copy)]
+struct ObjectMaterial {
+    psi_deg: f64,
+    spacing: f64,
+}
+
+impl ObjectSpec {
+    /// The object, placed (moved and scaled); a mesh's file (relative to `base`) is added to
+    /// `inputs`. `at` names the object in errors.
+    fn build(
+        &self,
+        at: &str,
+        base: &Path,
+        material: ObjectMaterial,
+        inputs: &mut Vec<PathBuf>,
+    ) -> Result<Object> {
+        let o = self;
+        let ObjectMaterial { psi_deg, spacing } = material;
+        finite(&o.offset, "offset", at)?;
+        if !(o.scale.is_finite() && o.scale > 0.0) {
+            bail!("{at}: scale = {} must be finite and positive", o.scale);
+        }
+        let shape = match o.kind.as_str() {
+            "torus" => Object::Torus { spacing },
+            "sphere" => Object::Sphere { psi_deg },
+            "swatch" => Object::Swatch { psi_deg },
+            "mesh" => {
+                let file = o
+                    .file
+                    .as_ref()
+                    .ok_or_else(|| anyhow!("{at}: a mesh needs `file`"))?;
+                let file = base.join(file);
+                inputs.push(file.clone());
+                let source = match o.tangents.as_deref().unwrap_or("curvature") {
+                    "curvature" => TangentSource::Curvature,
+                    "uv" => TangentSource::Uv,
+                    "constant" => TangentSource::Constant { psi_deg },
+                    t => bail!("{at}: tangents = {t:?}: expected curvature, uv or constant"),
+                };
+                let mesh = crate::load::mesh::load_obj(&file)?;
+                Object::Mesh(std::sync::Arc::new(MeshObject::new(mesh, source, psi_deg)?))
+            }
+            t => bail!("{at}: type = {t:?}: expected torus, sphere, swatch or mesh"),
+        };
+        Ok(Object::Placed {
+            inner: Box::new(shape),
+            offset: Vec3::from(o.offset),
+            scale: o.scale,
+        })
+    }
+}
+
+impl LightSpec {
+    /// The light, its values checked; `at` names it in errors.
+    fn build(&self, at: &str) -> Result<Light> {
+        Ok(match *self {
+            LightSpec::Directional {
+                theta_deg,
+                phi_deg,
+                irradiance,
+            } => {
+                finite(
+                    &[theta_deg, phi_deg, irradiance],
+                    "theta_deg, phi_deg, irradiance",
+                    at,
+                )?;
+                if irradiance < 0.0 {
+                    bail!("{at}: irradiance = {irradiance} must not be negative");
+                }
+                Light::Directional {
+                    direction: direction_from_angles(theta_deg.to_radians(), phi_deg.to_radians()),
+                    irradiance,
+                }
+            }
+            LightSpec::Point {
+                position,
+                intensity,
+            } => {
+                finite(&position, "position", at)?;
+                if !(intensity.is_finite() && intensity >= 0.0) {
+                    bail!("{at}: intensity = {intensity} must be finite and not negative");
+                }
+                Light::Point {
+                    position: Vec3::from(position),
+                    intensity,
+                }
+            }
+        })
+    }
+}
+
+impl CameraSpec {
+    /// The camera for an image of `w` x `h` pixels; an orthographic one without a half width
+    /// frames the `objects`' bounding sphere. `at` names the scene file in errors.
+    fn build(&self, at: &str, (w, h): (usize, usize), objects: &[Object]) -> Result<Camera> {
         // the objects' bounding sphere
         let centre = objects
             .iter()
@@ -234,7 +295,7 @@ impl SceneFile {
             .map(|o| (o.centre() - centre).norm() + o.bound())
             .fold(0.0, f64::max);
         let aspect = (w as f64 / h as f64).max(1.0);
-        let camera = match self.camera {
+        Ok(match *self {
             CameraSpec::Orthographic {
                 theta_deg,
                 phi_deg,
@@ -277,26 +338,6 @@ impl SceneFile {
                     pinhole: Some((p, fov_deg)),
                 }
             }
-        };
-        lights.extend(super::fill_light(
-            camera.direction,
-            self.fill,
-            &format!("{at}: fill ="),
-        )?);
-        let exposure = match &self.exposure {
-            None => None,
-            Some(toml::Value::String(s)) => Some(s.clone()),
-            Some(toml::Value::Float(f)) => Some(f.to_string()),
-            Some(toml::Value::Integer(i)) => Some(i.to_string()),
-            Some(v) => bail!("{at}: exposure = {v}: expected a number or \"auto\""),
-        };
-        Ok(Scene {
-            objects,
-            lights,
-            camera,
-            supersample: self.supersample,
-            exposure,
-            inputs,
         })
     }
 }

@@ -17,23 +17,25 @@
 //!   capture as its height and fibre azimuth maps), and `[[capture.images]]` with a `light` and a
 //!   `camera` as in capture files;
 //! - `[noise]`: `relative` (Gaussian, times the value), `floor` (additive Gaussian, 1/sr), `seed`.
+//!
+//! Here: the config, the noise, and writing the set into its folder all or nothing; the
+//! goniometric CSV is rendered in `gonio.rs`, the capture in `capture.rs`.
 
 use crate::export::atomic::AtomicFile;
 use crate::export::images;
-use crate::load::capture::{self, Camera, CaptureFile, ImageSpec, Light, Swatch};
+use crate::load::capture::{Camera, Light};
 use crate::load::image_io::Encoding;
-use crate::load::texel_maps::TexelMapsIn as UnitMaps;
-use crate::model::frame::{direction_from_angles, FibreFrame};
 use crate::model::params::{ModelParams, RawParams};
-use crate::model::topology::TopologyMap;
-use crate::model::{self, DirectionPair, ModelId, ShadingModel};
+use crate::model::{self, ModelId};
 use anyhow::{anyhow, bail, Context, Result};
 use rand::{Rng, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
-use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
 use std::path::{Path, PathBuf};
+
+mod capture;
+mod gonio;
 
 #[derive(Clone, Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -378,7 +380,78 @@ fn lock_folder(dir: &Path, shown: &Path) -> Result<std::fs::File> {
     }
 }
 
+/// Render the set `config_path` describes into `out_dir` (the staging folder): the topology
+/// map, the goniometric CSV and the capture it asks for, the truth and `synth_info.json`.
 fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
+    let (cfg, id) = load_checked(config_path)?;
+    std::fs::create_dir_all(out_dir)
+        .with_context(|| format!("{}: cannot create output directory", out_dir.display()))?;
+    let mut raw = cfg.params.clone();
+    raw.model = Some(id.to_string());
+    let mut files = Vec::new();
+    topology_into(&cfg, config_path, out_dir, &mut raw, &mut files)?;
+    let (params, warnings) =
+        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", config_path.display()))?;
+    if !quiet {
+        for w in warnings {
+            eprintln!("warning: {}: {w}", config_path.display());
+        }
+    }
+    let shading = model::build(id, &params)?;
+    let noise = Noise {
+        spec: cfg.noise.clone(),
+    };
+
+    let mut gonio_rows = 0;
+    if let Some(g) = &cfg.gonio {
+        let text = gonio::render_gonio(g, shading.as_ref(), &params, &noise)?;
+        gonio_rows = text.lines().count() - 1;
+        write_file(&out_dir.join("gonio.csv"), text.as_bytes())?;
+        files.push("gonio.csv".into());
+    }
+    let mut n_images = 0;
+    if let Some(c) = &cfg.capture {
+        let written = capture::render_capture(&capture::CaptureRequest {
+            spec: c,
+            substrate_tied: raw.substrate_albedo.is_none(),
+            shading: shading.as_ref(),
+            params: &params,
+            noise: &noise,
+            out_dir,
+            quiet,
+        })?;
+        n_images = c.images.len();
+        files.extend(written);
+    }
+
+    // The truth, usable as `fibrefit eval --params truth.json`.
+    let mut truth = raw.clone();
+    if let Some(map) = &truth.topology_map {
+        truth.topology_map = Some(relative_to(map, out_dir));
+    }
+    write_file(
+        &out_dir.join("truth.json"),
+        serde_json::to_string_pretty(&truth)?.as_bytes(),
+    )?;
+    files.push("truth.json".into());
+    let info = SynthInfo {
+        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
+        model: id.to_string(),
+        noise: cfg.noise.clone(),
+        gonio_rows,
+        images: n_images,
+        files: files.clone(),
+    };
+    write_file(
+        &out_dir.join("synth_info.json"),
+        serde_json::to_string_pretty(&info)?.as_bytes(),
+    )?;
+    Ok(info)
+}
+
+/// The config at `config_path` and its rung, refused when it renders nothing, has negative
+/// noise or asks for more than synth's budget.
+fn load_checked(config_path: &Path) -> Result<(SynthConfig, ModelId)> {
     let cfg = SynthConfig::load(config_path)?;
     let id: ModelId = cfg
         .model
@@ -394,11 +467,18 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
         bail!("{}: noise levels must be >= 0", config_path.display());
     }
     check_budget(&cfg).map_err(|e| anyhow!("{}: {e}", config_path.display()))?;
-    std::fs::create_dir_all(out_dir)
-        .with_context(|| format!("{}: cannot create output directory", out_dir.display()))?;
-    let mut raw = cfg.params.clone();
-    raw.model = Some(id.to_string());
-    let mut files = Vec::new();
+    Ok((cfg, id))
+}
+
+/// The set's topology map into `out_dir`: the parameters' own map copied (the capture stays
+/// self-contained), or `[topology_map]` generated; `raw` then names the copy.
+fn topology_into(
+    cfg: &SynthConfig,
+    config_path: &Path,
+    out_dir: &Path,
+    raw: &mut RawParams,
+    files: &mut Vec<String>,
+) -> Result<()> {
     if let Some(src) = raw.topology_map.clone() {
         if cfg.topology_map.is_some() {
             bail!(
@@ -449,56 +529,7 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
         files.push("topology.png".into());
         raw.topology_map = Some(path);
     }
-    let (params, warnings) =
-        ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", config_path.display()))?;
-    if !quiet {
-        for w in warnings {
-            eprintln!("warning: {}: {w}", config_path.display());
-        }
-    }
-    let shading = model::build(id, &params)?;
-    let noise = Noise {
-        spec: cfg.noise.clone(),
-    };
-
-    let mut gonio_rows = 0;
-    if let Some(g) = &cfg.gonio {
-        let text = render_gonio(g, shading.as_ref(), &params, &noise)?;
-        gonio_rows = text.lines().count() - 1;
-        write_file(&out_dir.join("gonio.csv"), text.as_bytes())?;
-        files.push("gonio.csv".into());
-    }
-    let mut n_images = 0;
-    if let Some(c) = &cfg.capture {
-        let tied = raw.substrate_albedo.is_none();
-        let written = render_capture(c, tied, shading.as_ref(), &params, &noise, out_dir, quiet)?;
-        n_images = c.images.len();
-        files.extend(written);
-    }
-
-    // The truth, usable as `fibrefit eval --params truth.json`.
-    let mut truth = raw.clone();
-    if let Some(map) = &truth.topology_map {
-        truth.topology_map = Some(relative_to(map, out_dir));
-    }
-    write_file(
-        &out_dir.join("truth.json"),
-        serde_json::to_string_pretty(&truth)?.as_bytes(),
-    )?;
-    files.push("truth.json".into());
-    let info = SynthInfo {
-        tool: format!("fibrefit {}", env!("CARGO_PKG_VERSION")),
-        model: id.to_string(),
-        noise: cfg.noise.clone(),
-        gonio_rows,
-        images: n_images,
-        files: files.clone(),
-    };
-    write_file(
-        &out_dir.join("synth_info.json"),
-        serde_json::to_string_pretty(&info)?.as_bytes(),
-    )?;
-    Ok(info)
+    Ok(())
 }
 
 fn relative_to(path: &Path, dir: &Path) -> PathBuf {
@@ -555,362 +586,4 @@ fn check_budget(cfg: &SynthConfig) -> Result<()> {
         pixels("[topology_map]", m.width, m.height)?;
     }
     Ok(())
-}
-
-/// Directions as (theta_i, phi_i, theta_o, phi_o) in degrees.
-fn gonio_directions(g: &GonioSpec) -> Result<Vec<[f64; 4]>> {
-    match (&g.grid, &g.random) {
-        (Some(grid), None) => {
-            let mut out = Vec::new();
-            for &ti in &grid.theta_i {
-                for &pi in &grid.phi_i {
-                    for &to in &grid.theta_o {
-                        for &po in &grid.phi_o {
-                            if ti < 90.0 && to < 90.0 && ti >= 0.0 && to >= 0.0 {
-                                out.push([ti, pi, to, po]);
-                            }
-                        }
-                    }
-                }
-            }
-            Ok(out)
-        }
-        (None, Some(r)) => {
-            if !(r.max_theta_deg > 0.0 && r.max_theta_deg < 90.0) {
-                bail!("gonio.random.max_theta_deg must lie in (0, 90)");
-            }
-            let mut rng = rand::rngs::StdRng::seed_from_u64(r.seed);
-            let cos_max = r.max_theta_deg.to_radians().cos();
-            let mut dir = || {
-                // uniform in solid angle above theta_max, rounded to 1e-6 degrees so the CSV
-                // holds exactly the rendered directions
-                let z: f64 = cos_max + (1.0 - cos_max) * rng.random::<f64>();
-                let round = |x: f64| (x * 1e6).round() / 1e6;
-                (
-                    round(z.acos().to_degrees()),
-                    round(rng.random::<f64>() * 360.0),
-                )
-            };
-            Ok((0..r.count)
-                .map(|_| {
-                    let (a, b) = dir();
-                    let (c, d) = dir();
-                    [a, b, c, d]
-                })
-                .collect())
-        }
-        _ => bail!("[gonio] needs exactly one of `grid` or `random`"),
-    }
-}
-
-fn render_gonio(
-    g: &GonioSpec,
-    shading: &dyn ShadingModel,
-    p: &ModelParams,
-    noise: &Noise,
-) -> Result<String> {
-    let radiance = match g.values.as_str() {
-        "brdf" => false,
-        "radiance" => true,
-        other => bail!("gonio.values = '{other}': expected \"brdf\" or \"radiance\""),
-    };
-    if radiance && !(g.irradiance > 0.0) {
-        bail!("gonio.irradiance must be positive");
-    }
-    let dirs = gonio_directions(g)?;
-    if dirs.is_empty() {
-        bail!("[gonio] gives no directions above the horizon");
-    }
-    let frame = FibreFrame::from_azimuth(p.fibre_azimuth);
-    let channels = p.albedos.channels();
-    let values: Vec<[f64; 3]> = dirs
-        .par_iter()
-        .map(|d| {
-            let l = direction_from_angles(d[0].to_radians(), d[1].to_radians());
-            let v = direction_from_angles(d[2].to_radians(), d[3].to_radians());
-            let b = shading.basis(&DirectionPair::new(&frame, &l, &v));
-            [
-                b.brdf(&p.albedos, 0),
-                b.brdf(&p.albedos, 1),
-                b.brdf(&p.albedos, 2),
-            ]
-        })
-        .collect();
-    let mut rng = rand::rngs::StdRng::seed_from_u64(noise.spec.seed);
-    let base = if radiance { "radiance" } else { "brdf" };
-    let names = |b: &str| -> Vec<String> {
-        if channels == 1 {
-            vec![b.to_string()]
-        } else {
-            ["r", "g", "b"].iter().map(|c| format!("{b}_{c}")).collect()
-        }
-    };
-    let mut header = vec![
-        "theta_i".to_string(),
-        "phi_i".into(),
-        "theta_o".into(),
-        "phi_o".into(),
-    ];
-    header.extend(names(base));
-    if radiance {
-        header.push("irradiance".into());
-    }
-    if noise.active() {
-        header.extend(names("sigma"));
-    }
-    let mut out = header.join(",") + "\n";
-    for (d, f) in dirs.iter().zip(&values) {
-        let to_file = if radiance {
-            g.irradiance * d[0].to_radians().cos()
-        } else {
-            1.0
-        };
-        let mut row: Vec<String> = d.iter().map(|x| x.to_string()).collect();
-        for &fc in &f[..channels] {
-            row.push((noise.apply(fc, &mut rng) * to_file).to_string());
-        }
-        if radiance {
-            row.push(g.irradiance.to_string());
-        }
-        if noise.active() {
-            for &fc in &f[..channels] {
-                row.push((noise.sigma(fc) * to_file).to_string());
-            }
-        }
-        out += &row.join(",");
-        out.push('\n');
-    }
-    Ok(out)
-}
-
-#[allow(clippy::too_many_arguments)]
-fn render_capture(
-    c: &CaptureSpec,
-    substrate_tied: bool,
-    shading: &dyn ShadingModel,
-    p: &ModelParams,
-    noise: &Noise,
-    out_dir: &Path,
-    quiet: bool,
-) -> Result<Vec<String>> {
-    let (w, h) = (c.width, c.height);
-    if w == 0 || h == 0 || c.images.is_empty() {
-        bail!("[capture] needs width, height > 0 and at least one [[capture.images]]");
-    }
-    let png = match c.format.as_str() {
-        "exr" => false,
-        "png" => true,
-        other => bail!("capture.format = '{other}': expected \"exr\" or \"png\""),
-    };
-    let encoding = if png {
-        Some(c.encoding.unwrap_or(Encoding::Srgb))
-    } else {
-        None
-    };
-    let mut files = Vec::new();
-    let psi_of = |x: usize| -> f64 {
-        match &c.tangent {
-            Some(t) => {
-                // quantised exactly as the tangent map stores it
-                let m = ((x as f64 + 0.5) / w as f64 * 65535.0).round() / 65535.0;
-                let deg = t.from_deg + (t.to_deg - t.from_deg) * m;
-                deg.to_radians()
-            }
-            None => p.fibre_azimuth,
-        }
-    };
-    let tangent_file = if let Some(t) = &c.tangent {
-        if !(-90.0..=90.0).contains(&t.from_deg) || !(-90.0..=90.0).contains(&t.to_deg) {
-            bail!("capture.tangent: angles must lie in [-90, 90] degrees");
-        }
-        // stored as m with psi = -90 + 180 m
-        let values: Vec<f32> = (0..h)
-            .flat_map(|_| (0..w).map(|x| ((psi_of(x).to_degrees() + 90.0) / 180.0) as f32))
-            .collect();
-        images::write_gray16(&out_dir.join("tangent.png"), w, h, &values)?;
-        files.push("tangent.png".to_string());
-        Some(PathBuf::from("tangent.png"))
-    } else {
-        None
-    };
-    // Re-read the tangent map so pixels use exactly the stored angle.
-    let tangent_map = match &tangent_file {
-        Some(f) => Some(TopologyMap::load(&out_dir.join(f))?),
-        None => None,
-    };
-    let topo_map = p.topology.map.clone();
-    if let Some(m) = &topo_map {
-        if (m.width, m.height) != (w, h) {
-            bail!(
-                "the topology map is {}x{} but the capture is {w}x{h}; they must be registered",
-                m.width,
-                m.height
-            );
-        }
-    }
-    let unit_maps = match &c.maps {
-        Some(dir) => Some(
-            UnitMaps::load(dir, Some((w, h)))
-                .map_err(|e| anyhow!("capture.maps = {}: {e:#}", dir.display()))?,
-        ),
-        None => None,
-    };
-    if let Some(m) = &unit_maps {
-        if m.psi.is_some() && c.tangent.is_some() {
-            bail!("give capture.tangent or a fibre_azimuth.exr in capture.maps, not both");
-        }
-    }
-    let mut channels = p.albedos.channels();
-    if unit_maps.as_ref().is_some_and(|m| {
-        [&m.kd, &m.ks]
-            .iter()
-            .any(|x| x.as_ref().is_some_and(|i| i.channels == 3))
-    }) {
-        channels = 3;
-    }
-    let bar = crate::progress::bar((c.images.len() * h) as u64, "rendering", quiet);
-    let mut specs = Vec::new();
-    for (k, img) in c.images.iter().enumerate() {
-        if matches!(img.camera, Camera::ViewMap { .. }) {
-            bail!("[[capture.images]] {k}: synth renders orthographic or pinhole cameras, not view maps");
-        }
-        // Per pixel: the BRDF per channel and E cos(theta_i), radiance = BRDF x that.
-        let pixels: Vec<([f64; 3], f64)> = (0..h)
-            .into_par_iter()
-            .flat_map_iter(|y| {
-                let row: Vec<([f64; 3], f64)> = (0..w)
-                    .map(|x| {
-                        let pos = capture::pixel_position(c.size_mm, w, h, x, y);
-                        let (l, e) = capture::light_at(&img.light, &pos);
-                        let v =
-                            capture::view_at(&img.camera, &pos).expect("checked: not a view map");
-                        let um = unit_maps.as_ref();
-                        let psi =
-                            match (&tangent_map, um.and_then(|m| UnitMaps::at(&m.psi, x, y, 0))) {
-                                (_, Some(deg)) => deg.to_radians(),
-                                (Some(t), None) => (-90.0 + 180.0 * t.texel(x, y)).to_radians(),
-                                (None, None) => psi_of(x),
-                            };
-                        let pair = DirectionPair::new(&FibreFrame::from_azimuth(psi), &l, &v);
-                        let height = um
-                            .and_then(|m| UnitMaps::at(&m.height, x, y, 0))
-                            .or(topo_map
-                                .as_ref()
-                                .map(|m| p.topology.texel_height(m.texel(x, y), p.spacing)));
-                        let basis = match height {
-                            Some(hh) if shading.rung().has(crate::model::Ability::Topology) => {
-                                shading.basis_at_height(&pair, hh).unwrap_or_default()
-                            }
-                            _ => shading.basis(&pair),
-                        };
-                        let mut albedos = p.albedos;
-                        for ch in 0..3 {
-                            if let Some(k) = um.and_then(|m| UnitMaps::at(&m.kd, x, y, ch)) {
-                                albedos.diffuse[ch] = k;
-                                if substrate_tied {
-                                    albedos.substrate[ch] = k;
-                                }
-                            }
-                            if let Some(k) = um.and_then(|m| UnitMaps::at(&m.ks, x, y, ch)) {
-                                albedos.specular[ch] = k;
-                            }
-                        }
-                        (
-                            [0, 1, 2].map(|ch| basis.brdf(&albedos, ch)),
-                            e * l.z.max(0.0),
-                        )
-                    })
-                    .collect();
-                bar.inc(1);
-                row
-            })
-            .collect();
-        // noise in BRDF units, per pixel and channel, from one seeded stream per image
-        let mut rng =
-            rand::rngs::StdRng::seed_from_u64(noise.spec.seed.wrapping_add(k as u64 * 7919));
-        let mut data: Vec<f32> = Vec::with_capacity(w * h * channels);
-        for (brdf, scale) in &pixels {
-            for &f in &brdf[..channels] {
-                data.push((noise.apply(f, &mut rng) * scale) as f32);
-            }
-        }
-        let exposure = if png {
-            let max = data.iter().copied().fold(0.0f32, f32::max).max(1e-30);
-            let exposure = (max / 0.8) as f64;
-            for v in data.iter_mut() {
-                *v = (*v as f64 / exposure) as f32;
-            }
-            exposure
-        } else {
-            1.0
-        };
-        let file = format!("img_{k:03}.{}", if png { "png" } else { "exr" });
-        let path = out_dir.join(&file);
-        if png {
-            images::write_png16(
-                &path,
-                w,
-                h,
-                channels,
-                &data,
-                encoding.expect("png has encoding"),
-            )?;
-        } else {
-            images::write_exr(&path, w, h, channels, &data)?;
-        }
-        files.push(file.clone());
-        specs.push(ImageSpec {
-            file: Some(file.into()),
-            bracket: vec![],
-            encoding,
-            exposure,
-            saturation: None,
-            light: img.light.clone(),
-            camera: img.camera.clone(),
-        });
-    }
-    bar.finish_and_clear();
-    // recovered maps travel with the capture, as its height and fibre azimuth maps
-    let mut copy_map = |name: &str| -> Result<Option<PathBuf>> {
-        let Some(dir) = &c.maps else { return Ok(None) };
-        let src = dir.join(name);
-        if !src.exists() {
-            return Ok(None);
-        }
-        let bytes = crate::load::read_input(&src, crate::load::input::MAX_INPUT_BYTES)?.bytes;
-        write_file(&out_dir.join(name), &bytes)?;
-        files.push(name.to_string());
-        Ok(Some(PathBuf::from(name)))
-    };
-    let height_map = copy_map("height.exr")?;
-    let fibre_azimuth_map = copy_map("fibre_azimuth.exr")?;
-    let capture_file = CaptureFile {
-        swatch: Swatch {
-            size_mm: c.size_mm,
-            roi: None,
-            mask: None,
-            fibre_azimuth_deg: if tangent_file.is_none() && fibre_azimuth_map.is_none() {
-                Some(p.fibre_azimuth.to_degrees())
-            } else {
-                None
-            },
-            tangent_map: tangent_file,
-            topology_map: if height_map.is_none() {
-                topo_map.as_ref().map(|m| relative_to(&m.source, out_dir))
-            } else {
-                None
-            },
-            height_map,
-            fibre_azimuth_map,
-        },
-        images: specs,
-    };
-    let text = format!(
-        "# Image capture rendered by fibrefit synth ({}). Format: fibrefit docs/formats.md, \"Image captures\".\n{}",
-        shading.id(),
-        toml::to_string(&capture_file)?
-    );
-    write_file(&out_dir.join("capture.toml"), text.as_bytes())?;
-    files.push("capture.toml".into());
-    Ok(files)
 }

@@ -202,13 +202,16 @@ impl GaussSection {
                 let (pattern, weight) = &patterns[visit.pattern];
                 let counts = &gap_counts[problem..problem + 2 * fibres(pattern).len()];
                 problem += counts.len();
-                at += self.visit_arcs(
+                let one = OneVisit {
                     pattern,
                     sp,
                     lobe,
-                    *weight,
-                    counts,
-                    &ends[at..],
+                    weight: *weight,
+                    gap_counts: counts,
+                    ends: &ends[at..],
+                };
+                at += self.visit_arcs(
+                    &one,
                     &mut |arc, count| {
                         diffuse_arcs.push(arc);
                         diffuse_dest.push((v, count));
@@ -358,19 +361,21 @@ impl GaussSection {
     /// its fibre's count, and its part inside the lobe window to `specular` with the factor that
     /// turns its lobe integral into its share of `Basis::specular`. Returns how many ends it
     /// used.
-    #[allow(clippy::too_many_arguments)]
     #[inline]
     fn visit_arcs(
         &self,
-        pattern: &Pattern,
-        sp: &SectionPair,
-        lobe: &Lobe,
-        weight: f64,
-        gap_counts: &[u8],
-        ends: &[f64],
+        visit: &OneVisit,
         diffuse: &mut impl FnMut(DiffuseArc, f64),
         specular: &mut impl FnMut(LobeArc, f64),
     ) -> usize {
+        let OneVisit {
+            pattern,
+            sp,
+            lobe,
+            weight,
+            gap_counts,
+            ends,
+        } = *visit;
         let denom = pattern.period * sp.cos_alpha_product();
         let (al, av) = (sp.l.alpha, sp.v.alpha);
         let Lobe {
@@ -424,6 +429,19 @@ fn fibres(pattern: &Pattern) -> &'static [(Fibre, f64)] {
     } else {
         &[(Fibre::Even, 1.0), (Fibre::Odd, 1.0)]
     }
+}
+
+/// What [`GaussSection::visit_arcs`] reads of one visit: its pattern and the pattern's weight,
+/// its pair's section geometry and lobe, and its fibres' gap counts (seen, then lit, per fibre)
+/// with the gap ends' asin from this visit's on.
+#[derive(Clone, Copy)]
+struct OneVisit<'a> {
+    pattern: &'a Pattern,
+    sp: &'a SectionPair,
+    lobe: &'a Lobe,
+    weight: f64,
+    gap_counts: &'a [u8],
+    ends: &'a [f64],
 }
 
 /// One (pair, pattern) of a batch that contributes (pair above the horizon, non-zero
