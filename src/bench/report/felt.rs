@@ -55,12 +55,14 @@ pub fn write(
     }
     plots::xy(
         crate::export::atomic::Sink::File(&dir.join("felt.png")),
-        "Real felt: held-out log error vs cost per rung",
-        "cost per evaluation [ns] (single thread)",
-        "held-out log error (RMS of ln(model) - ln(data))",
-        &series,
-        true,
-        false,
+        &plots::XyPlot {
+            title: "Real felt: held-out log error vs cost per rung",
+            x_label: "cost per evaluation [ns] (single thread)",
+            y_label: "held-out log error (RMS of ln(model) - ln(data))",
+            series: &series,
+            log_x: true,
+            log_y: false,
+        },
     )?;
     let ward = |metric: &str| {
         rows.iter()
