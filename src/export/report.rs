@@ -238,12 +238,14 @@ pub fn write_dir(
     });
     let points = brdf_plots::slices(
         Sink::Staged(outs, files.slices),
-        "Slices at fixed incidence: fitted curves and measured samples",
-        psi_deg,
-        ch,
-        &curves,
-        &samples.samples,
-        log_y,
+        &brdf_plots::SlicePlot {
+            title: "Slices at fixed incidence: fitted curves and measured samples",
+            psi_deg,
+            channels: ch,
+            curves: &curves,
+            samples: &samples.samples,
+            log_y,
+        },
     )?;
     let (points, per) = (points.points, points.note);
     md += &format!(
@@ -263,12 +265,14 @@ pub fn write_dir(
     );
     let near = brdf_plots::hemispheres(
         Sink::Staged(outs, files.hemispheres),
-        "Hemisphere maps: measured, fitted, residual",
-        psi_deg,
-        ch,
-        fitted,
-        measured,
-        &samples.samples,
+        &brdf_plots::HemispherePlot {
+            title: "Hemisphere maps: measured, fitted, residual",
+            psi_deg,
+            channels: ch,
+            fitted,
+            measured,
+            samples: &samples.samples,
+        },
     )?;
     md += &format!(
         "## Hemisphere maps\n\nEvery view direction for a light (orthographic, seen from above). {} \

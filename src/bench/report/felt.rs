@@ -153,12 +153,14 @@ pub fn write(
         let psi = 0.0; // the felt is isotropic
         let points = brdf_plots::slices(
             crate::export::atomic::Sink::File(&dir.join("felt_slices.png")),
-            "Real felt (log metric fits): slices at fixed incidence",
-            psi,
-            3,
-            &curves,
-            &run.test.samples,
-            true,
+            &brdf_plots::SlicePlot {
+                title: "Real felt (log metric fits): slices at fixed incidence",
+                psi_deg: psi,
+                channels: 3,
+                curves: &curves,
+                samples: &run.test.samples,
+                log_y: true,
+            },
         )?
         .points;
         md += &format!(
@@ -176,12 +178,14 @@ pub fn write(
             let file = format!("felt_hemispheres_{}.png", k + 1);
             brdf_plots::hemispheres(
                 crate::export::atomic::Sink::File(&dir.join(&file)),
-                &format!("Real felt: measured vs {} (log metric)", label(&rows[i])),
-                0.0,
-                3,
-                fitted[k].as_ref(),
-                measured,
-                &run.test.samples,
+                &brdf_plots::HemispherePlot {
+                    title: &format!("Real felt: measured vs {} (log metric)", label(&rows[i])),
+                    psi_deg: 0.0,
+                    channels: 3,
+                    fitted: fitted[k].as_ref(),
+                    measured,
+                    samples: &run.test.samples,
+                },
             )?;
             md += &format!(
                 "### {}\n\n![{}]({file})\n\n",
