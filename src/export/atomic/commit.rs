@@ -16,92 +16,111 @@ impl Outputs {
     pub fn commit(mut self) -> Result<()> {
         let _commit = lock(&COMMIT);
         let mut entries: Vec<Entry> = self.entries.iter_mut().filter_map(Option::take).collect();
-        // 1. every staged file complete on disk (a full disk shows here, before any change)
-        for i in 0..entries.len() {
-            let e = &mut entries[i];
-            if let Err(err) = e.file.flush().and_then(|_| e.file.sync_all()) {
-                let msg = format!(
-                    "{}: cannot write output: {err}; no output was changed",
-                    flagged(&e.flag, &e.shown)
-                );
-                give_up(&mut entries);
-                bail!(msg);
-            }
-        }
-        // 2. space for the in-place rewrites reserved before anything changes
-        for i in 0..entries.len() {
-            if entries[i].kind == Kind::InPlace {
-                if let Err(err) = reserve(&entries[i]) {
-                    let e = &entries[i];
-                    let msg = format!(
-                        "{}: cannot write output: {err}; no output was changed",
-                        flagged(&e.flag, &e.shown)
-                    );
-                    give_up(&mut entries);
-                    bail!(msg);
-                }
-            }
-        }
-        // 3. streams, then renames, then the in-place rewrites
-        entries.sort_by_key(|e| match e.kind {
-            Kind::Stream => 0,
-            Kind::Replace => 1,
-            Kind::InPlace => 2,
-        });
-        let mut written: Vec<PathBuf> = vec![];
-        for i in 0..entries.len() {
-            let e = &mut entries[i];
-            let result = match e.kind {
-                Kind::Stream => stream(e),
-                Kind::Replace => replace(e),
-                Kind::InPlace => rewrite_in_place(e),
-            };
-            match result {
-                Ok(()) => {
-                    let _ = std::fs::remove_file(&e.temp);
-                    forget(&e.temp);
-                    written.push(e.shown.clone());
-                    // a file put into a staging directory is not yet an output
-                    if !lock(&LIVE_DIRS).iter().any(|d| e.target.starts_with(d)) {
-                        lock(&COMMITTED).push(e.shown.clone());
-                    }
-                }
-                Err(err) => {
-                    let what = flagged(&e.flag, &e.shown);
-                    let kept: Vec<String> = entries[i + 1..]
-                        .iter()
-                        .map(|e| e.shown.display().to_string())
-                        .collect();
-                    give_up(&mut entries);
-                    bail!(
-                        "{what}: cannot write output: {err}; {}{}",
-                        if written.is_empty() {
-                            "no other output was written".to_string()
-                        } else {
-                            format!(
-                                "written: {}",
-                                written
-                                    .iter()
-                                    .map(|p| p.display().to_string())
-                                    .collect::<Vec<_>>()
-                                    .join(", ")
-                            )
-                        },
-                        if kept.is_empty() {
-                            String::new()
-                        } else {
-                            format!("; kept as they were: {}", kept.join(", "))
-                        }
-                    );
-                }
-            }
-        }
+        sync_staged(&mut entries)?;
+        reserve_in_place(&mut entries)?;
+        place(entries)?;
         // the directories made for the outputs are theirs now
         let mut made = lock(&MADE_DIRS);
         made.retain(|d| !self.made_dirs.contains(d));
         self.made_dirs.clear();
         Ok(())
     }
+}
+
+/// Step 1 of a commit: every staged file complete on disk (a full disk shows here, before any
+/// change). On failure the staged files are removed.
+fn sync_staged(entries: &mut Vec<Entry>) -> Result<()> {
+    for i in 0..entries.len() {
+        let e = &mut entries[i];
+        if let Err(err) = e.file.flush().and_then(|_| e.file.sync_all()) {
+            let msg = format!(
+                "{}: cannot write output: {err}; no output was changed",
+                flagged(&e.flag, &e.shown)
+            );
+            give_up(entries);
+            bail!(msg);
+        }
+    }
+    Ok(())
+}
+
+/// Step 2 of a commit: space for the in-place rewrites reserved before anything changes. On
+/// failure the staged files are removed.
+fn reserve_in_place(entries: &mut Vec<Entry>) -> Result<()> {
+    for i in 0..entries.len() {
+        if entries[i].kind == Kind::InPlace {
+            if let Err(err) = reserve(&entries[i]) {
+                let e = &entries[i];
+                let msg = format!(
+                    "{}: cannot write output: {err}; no output was changed",
+                    flagged(&e.flag, &e.shown)
+                );
+                give_up(entries);
+                bail!(msg);
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Step 3 of a commit: streams, then renames, then the in-place rewrites, each output noted as
+/// committed (for the signal handler) once in place. On failure the staged files left are
+/// removed, and the message says which outputs were written and which were kept.
+fn place(mut entries: Vec<Entry>) -> Result<()> {
+    entries.sort_by_key(|e| match e.kind {
+        Kind::Stream => 0,
+        Kind::Replace => 1,
+        Kind::InPlace => 2,
+    });
+    let mut written: Vec<PathBuf> = vec![];
+    for i in 0..entries.len() {
+        let e = &mut entries[i];
+        let result = match e.kind {
+            Kind::Stream => stream(e),
+            Kind::Replace => replace(e),
+            Kind::InPlace => rewrite_in_place(e),
+        };
+        match result {
+            Ok(()) => {
+                let _ = std::fs::remove_file(&e.temp);
+                forget(&e.temp);
+                written.push(e.shown.clone());
+                // a file put into a staging directory is not yet an output
+                if !lock(&LIVE_DIRS).iter().any(|d| e.target.starts_with(d)) {
+                    lock(&COMMITTED).push(e.shown.clone());
+                }
+            }
+            Err(err) => {
+                let what = flagged(&e.flag, &e.shown);
+                let kept: Vec<String> = entries[i + 1..]
+                    .iter()
+                    .map(|e| e.shown.display().to_string())
+                    .collect();
+                give_up(&mut entries);
+                bail!(
+                    "{what}: cannot write output: {err}; {}{}",
+                    if written.is_empty() {
+                        "no other output was written".to_string()
+                    } else {
+                        format!(
+                            "written: {}",
+                            written
+                                .iter()
+                                .map(|p| p.display().to_string())
+                                .collect::<Vec<_>>()
+                                .join(", ")
+                        )
+                    },
+                    if kept.is_empty() {
+                        String::new()
+                    } else {
+                        format!("; kept as they were: {}", kept.join(", "))
+                    }
+                );
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Remove the staged files of `entries` (after a failed commit).

@@ -46,6 +46,44 @@ pub(super) fn open_stream(target: &Path) -> std::io::Result<File> {
         .open(target)
 }
 
+/// Open the FIFO or character device `target` of the output `what` at its reservation, without
+/// blocking: a FIFO with no reader is refused.
+fn open_reserved_stream(target: &Path, what: &str) -> Result<File> {
+    open_stream(target).map_err(|e| {
+        if e.raw_os_error() == Some(libc::ENXIO) {
+            anyhow!(
+                "{what}: is a FIFO with no reader; start the program that reads it first (fibrefit does not wait for one)"
+            )
+        } else {
+            anyhow!("{what}: cannot open for writing: {e}")
+        }
+    })
+}
+
+/// The temporary file that stages the output `what` of `kind`: in its directory `dir` (which
+/// must exist; old leftovers there are swept), a stream's in the system's temporary directory.
+fn stage(what: &str, kind: Kind, dir: PathBuf) -> Result<(PathBuf, File)> {
+    let stage_dir = match kind {
+        Kind::Stream => std::env::temp_dir(),
+        _ => dir,
+    };
+    if kind != Kind::Stream {
+        if !stage_dir.is_dir() {
+            bail!(
+                "{what}: cannot create output: directory {} does not exist",
+                stage_dir.display()
+            );
+        }
+        sweep_stale(&stage_dir);
+    }
+    new_temp(&stage_dir).map_err(|e| {
+        anyhow!(
+            "{what}: cannot create output (directory {} not writable or missing): {e}",
+            stage_dir.display()
+        )
+    })
+}
+
 /// The same I/O error with the file's name in front (its kind kept: a closed pipe stays one).
 pub fn named(name: &Path, e: std::io::Error) -> std::io::Error {
     std::io::Error::new(e.kind(), format!("{}: {e}", name.display()))
@@ -81,6 +119,32 @@ pub(super) enum Kind {
     InPlace,
     /// A FIFO or character device: the content is streamed into it.
     Stream,
+}
+
+impl Kind {
+    /// How an output reaches the existing file `m` (`what`: the output, for messages): refused
+    /// for a directory, a block device or a socket.
+    fn of(m: &std::fs::Metadata, what: &str) -> Result<Self> {
+        let t = m.file_type();
+        Ok(if m.is_dir() {
+            bail!("{what}: is a directory, expected a file path")
+        } else if t.is_fifo() || t.is_char_device() {
+            Kind::Stream
+        } else if t.is_block_device() || t.is_socket() {
+            bail!(
+                "{what}: is a {}; refusing to write an output there",
+                if t.is_socket() {
+                    "socket"
+                } else {
+                    "block device"
+                }
+            )
+        } else if m.nlink() > 1 {
+            Kind::InPlace
+        } else {
+            Kind::Replace
+        })
+    }
 }
 
 /// One reserved output: where it goes, how, and the temporary file that stages it.
@@ -204,106 +268,29 @@ impl Outputs {
     /// its directory must exist and be writable. Returns the handle to write it through.
     pub fn file(&mut self, path: &Path, flag: &str) -> Result<OutputId> {
         let shown = path.to_path_buf();
+        let what = flagged(flag, path);
         use std::os::unix::ffi::OsStrExt;
         let bytes = path.as_os_str().as_bytes();
         if bytes.is_empty() || bytes.ends_with(b"/") || path.file_name().is_none() {
-            bail!(
-                "{}: names a directory, expected a file path",
-                flagged(flag, path)
-            );
+            bail!("{what}: names a directory, expected a file path");
         }
         let target = resolve(path)?;
-        let meta = std::fs::metadata(&target).ok();
-        let (kind, identity) = match &meta {
-            None => (Kind::Replace, None),
-            Some(m) => {
-                let t = m.file_type();
-                let kind = if m.is_dir() {
-                    bail!(
-                        "{}: is a directory, expected a file path",
-                        flagged(flag, path)
-                    )
-                } else if t.is_fifo() || t.is_char_device() {
-                    Kind::Stream
-                } else if t.is_block_device() || t.is_socket() {
-                    bail!(
-                        "{}: is a {}; refusing to write an output there",
-                        flagged(flag, path),
-                        if t.is_socket() {
-                            "socket"
-                        } else {
-                            "block device"
-                        }
-                    )
-                } else if m.nlink() > 1 {
-                    Kind::InPlace
-                } else {
-                    Kind::Replace
-                };
-                (kind, Some((m.dev(), m.ino())))
-            }
+        let (kind, identity) = match std::fs::metadata(&target) {
+            Err(_) => (Kind::Replace, None),
+            Ok(m) => (Kind::of(&m, &what)?, Some((m.dev(), m.ino()))),
         };
         let dir = parent_of(&target);
         let key = std::fs::canonicalize(&dir)
             .unwrap_or_else(|_| dir.clone())
             .join(target.file_name().unwrap_or_default());
-        if let Some(id) = identity {
-            if let Some((_, input)) = self.inputs.iter().find(|(i, _)| *i == id) {
-                bail!(
-                    "{}: is an input of this run ({}); refusing to overwrite it",
-                    flagged(flag, path),
-                    input.display()
-                );
-            }
-        }
-        if kind != Kind::Stream {
-            for other in self.entries.iter().flatten() {
-                let same = other.key == key || (identity.is_some() && other.identity == identity);
-                if same {
-                    bail!(
-                        "{}: is also the output {} of this run; give the outputs different files",
-                        flagged(flag, path),
-                        flagged(&other.flag, &other.shown)
-                    );
-                }
-            }
-        }
+        self.refuse_clash(&what, kind, &key, identity)?;
         // a FIFO or device is opened now, without blocking: a FIFO with no reader is refused
         // before the work (a run never waits for one, nor hangs in its commit)
         let stream = match kind {
-            Kind::Stream => Some(open_stream(&target).map_err(|e| {
-                if e.raw_os_error() == Some(libc::ENXIO) {
-                    anyhow!(
-                        "{}: is a FIFO with no reader; start the program that reads it first (fibrefit does not wait for one)",
-                        flagged(flag, path)
-                    )
-                } else {
-                    anyhow!("{}: cannot open for writing: {e}", flagged(flag, path))
-                }
-            })?),
+            Kind::Stream => Some(open_reserved_stream(&target, &what)?),
             _ => None,
         };
-        let stage_dir = match kind {
-            Kind::Stream => std::env::temp_dir(),
-            _ => dir.clone(),
-        };
-        if kind != Kind::Stream {
-            if !stage_dir.is_dir() {
-                bail!(
-                    "{}: cannot create output: directory {} does not exist",
-                    flagged(flag, path),
-                    stage_dir.display()
-                );
-            }
-            sweep_stale(&stage_dir);
-        }
-        let (temp, file) = new_temp(&stage_dir).map_err(|e| {
-            anyhow!(
-                "{}: cannot create output (directory {} not writable or missing): {e}",
-                flagged(flag, path),
-                stage_dir.display()
-            )
-        })?;
+        let (temp, file) = stage(&what, kind, dir)?;
         self.entries.push(Some(Entry {
             shown,
             target,
@@ -316,6 +303,37 @@ impl Outputs {
             stream,
         }));
         Ok(OutputId(self.entries.len() - 1))
+    }
+
+    /// Refuse an output (`what`, of `kind`, at `key`, with `identity` if it exists) that is an
+    /// input of the run or, unless a stream, another of its outputs.
+    fn refuse_clash(
+        &self,
+        what: &str,
+        kind: Kind,
+        key: &Path,
+        identity: Option<(u64, u64)>,
+    ) -> Result<()> {
+        if let Some(id) = identity {
+            if let Some((_, input)) = self.inputs.iter().find(|(i, _)| *i == id) {
+                bail!(
+                    "{what}: is an input of this run ({}); refusing to overwrite it",
+                    input.display()
+                );
+            }
+        }
+        if kind != Kind::Stream {
+            for other in self.entries.iter().flatten() {
+                let same = other.key == key || (identity.is_some() && other.identity == identity);
+                if same {
+                    bail!(
+                        "{what}: is also the output {} of this run; give the outputs different files",
+                        flagged(&other.flag, &other.shown)
+                    );
+                }
+            }
+        }
+        Ok(())
     }
 
     fn entry(&mut self, id: OutputId) -> &mut Entry {
