@@ -199,7 +199,18 @@ fn ticks_are_nice_and_short_and_a_narrow_log_axis_has_several() {
         points: vec![(0.1, 1.0), (0.2, 1.1), (0.30000000000000004, 1.25)],
         line: true,
     }];
-    let d = plots::xy(Sink::File(&p), "t", "x [s]", "ratio", &series, true, true).unwrap();
+    let d = plots::xy(
+        Sink::File(&p),
+        &plots::XyPlot {
+            title: "t",
+            x_label: "x [s]",
+            y_label: "ratio",
+            series: &series,
+            log_x: true,
+            log_y: true,
+        },
+    )
+    .unwrap();
     assert!(d.x_ticks.len() >= 3 && d.y_ticks.len() >= 3, "{d:?}");
     for t in d.x_ticks.iter().chain(&d.y_ticks) {
         assert!(t.len() <= 6, "{t}");

@@ -702,11 +702,13 @@ impl FitRun {
             if let Err(e) = report::write_dir(
                 outs,
                 files,
-                &self.outcome,
-                &self.samples,
-                &self.report_text,
-                fitted.as_ref(),
-                measured.as_deref(),
+                &report::ReportContent {
+                    outcome: &self.outcome,
+                    samples: &self.samples,
+                    text: &self.report_text,
+                    fitted: fitted.as_ref(),
+                    measured: measured.as_deref(),
+                },
             ) {
                 let w = format!("{}: the report could not be written: {e:#}", dir.display());
                 progress.warn(&w);

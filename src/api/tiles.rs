@@ -184,9 +184,58 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
 /// (`req.out`): exactly what a single `fit --maps` run writes.
 pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     let args = req;
+    let tiles = read_tiles(&args.tiles)?;
+    let (g_text, g_sha) = crate::load::input::read_text_hashed(&args.globals, "globals")?;
+    let n = check_one_run(&tiles, args, &g_sha)?;
+    let first = &tiles[0].1;
+    let req = maps_config(first);
+    let inputs: Vec<PathBuf> = std::iter::once(args.globals.clone())
+        .chain(tiles.iter().map(|t| t.0.clone()))
+        .collect();
+    let mut outs = Outputs::new(&inputs);
+    let json_out = outs.file(&args.out, "--out")?;
+    let map_files = MapFiles::reserve(&mut outs, &args.maps, &req.requested())?;
+    let mut g: serde_json::Value =
+        serde_json::from_str(&g_text).map_err(|e| anyhow!("{}: {e}", args.globals.display()))?;
+    let (width, height, channels, global_free) =
+        (first.width, first.height, first.channels, first.global_free);
+    let set = crate::export::result_json::result_from_value(
+        &g,
+        &args.globals.display().to_string(),
+        channels,
+    )?
+    .set;
+    let h_max =
+        crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Param::Spacing));
+    let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
+    let (maps, variance, warns) =
+        maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;
+    let method = g["maps"]["method"].clone();
+    crate::export::maps_out::write(&mut outs, &map_files, &req.requested(), &maps)?;
+    let mut desc = crate::export::maps_out::describe(&args.maps, &req.requested(), &maps);
+    desc["method"] = method;
+    desc["method"]["residual_variance"] = serde_json::json!(variance);
+    desc["method"]["tiles"] = serde_json::json!(n);
+    desc["summary"] = serde_json::to_value(maps::summary(&maps, &req, h_max))?;
+    g["maps"] = desc;
+    if let Some(w) = g["warnings"].as_array_mut() {
+        w.extend(warns.iter().map(|x| serde_json::json!(x)));
+    }
+    relocate_paths(&mut g, args);
+    serde_json::to_writer_pretty(outs.writer(json_out), &g)?;
+    outs.commit()?;
+    Ok(MergeOutcome {
+        tiles: n,
+        warnings: warns,
+    })
+}
+
+/// The tile files `tile_*.json` in `dir`, each of schema [`TILE_SCHEMA`], by tile index; at
+/// least one.
+fn read_tiles(dir: &Path) -> Result<Vec<(PathBuf, TileFile)>> {
     let mut tiles: Vec<(PathBuf, TileFile)> = Vec::new();
-    let entries = std::fs::read_dir(&args.tiles)
-        .with_context(|| format!("{}: cannot read the tile directory", args.tiles.display()))?;
+    let entries = std::fs::read_dir(dir)
+        .with_context(|| format!("{}: cannot read the tile directory", dir.display()))?;
     for e in entries {
         let p = e?.path();
         let name = p.file_name().and_then(|n| n.to_str()).unwrap_or("");
@@ -205,14 +254,24 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
         tiles.push((p, t));
     }
     if tiles.is_empty() {
-        bail!("{}: no tile_I_of_N.json files", args.tiles.display());
+        bail!("{}: no tile_I_of_N.json files", dir.display());
     }
     tiles.sort_by_key(|t| t.1.tile[0]);
-    let (g_text, g_sha) = crate::load::input::read_text_hashed(&args.globals, "globals")?;
+    Ok(tiles)
+}
+
+/// Check that `tiles` (sorted, at least one) are the whole of one run: fitted with the globals
+/// whose SHA-256 is `globals_sha`, the same tile count, capture, maps and settings, each tile
+/// once and none missing. Returns the tile count.
+fn check_one_run(
+    tiles: &[(PathBuf, TileFile)],
+    args: &MergeRequest,
+    globals_sha: &str,
+) -> Result<u32> {
     let first = &tiles[0].1;
     let n = first.tile[1];
-    for (p, t) in &tiles {
-        if t.globals_sha256 != g_sha {
+    for (p, t) in tiles {
+        if t.globals_sha256 != globals_sha {
             bail!(
                 "{}: fitted with other globals than {} (sha256 differs)",
                 p.display(),
@@ -248,47 +307,24 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
             missing.join(", ")
         );
     }
-    let req = crate::fit::config::MapsConfig {
-        height: first.maps.iter().any(|m| m == "height"),
-        fibre_azimuth: first.maps.iter().any(|m| m == "fibre_azimuth"),
-        kd: first.maps.iter().any(|m| m == "kd"),
-        ks: first.maps.iter().any(|m| m == "ks"),
-        smoothness: first.smoothness,
+    Ok(n)
+}
+
+/// The maps request the tiles were fitted with (their maps and smoothness).
+fn maps_config(tile: &TileFile) -> crate::fit::config::MapsConfig {
+    crate::fit::config::MapsConfig {
+        height: tile.maps.iter().any(|m| m == "height"),
+        fibre_azimuth: tile.maps.iter().any(|m| m == "fibre_azimuth"),
+        kd: tile.maps.iter().any(|m| m == "kd"),
+        ks: tile.maps.iter().any(|m| m == "ks"),
+        smoothness: tile.smoothness,
         ..Default::default()
-    };
-    let inputs: Vec<PathBuf> = std::iter::once(args.globals.clone())
-        .chain(tiles.iter().map(|t| t.0.clone()))
-        .collect();
-    let mut outs = Outputs::new(&inputs);
-    let json_out = outs.file(&args.out, "--out")?;
-    let map_files = MapFiles::reserve(&mut outs, &args.maps, &req.requested())?;
-    let mut g: serde_json::Value =
-        serde_json::from_str(&g_text).map_err(|e| anyhow!("{}: {e}", args.globals.display()))?;
-    let (width, height, channels, global_free) =
-        (first.width, first.height, first.channels, first.global_free);
-    let set = crate::export::result_json::result_from_value(
-        &g,
-        &args.globals.display().to_string(),
-        channels,
-    )?
-    .set;
-    let h_max =
-        crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Param::Spacing));
-    let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
-    let (maps, variance, warns) =
-        maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;
-    let method = g["maps"]["method"].clone();
-    crate::export::maps_out::write(&mut outs, &map_files, &req.requested(), &maps)?;
-    let mut desc = crate::export::maps_out::describe(&args.maps, &req.requested(), &maps);
-    desc["method"] = method;
-    desc["method"]["residual_variance"] = serde_json::json!(variance);
-    desc["method"]["tiles"] = serde_json::json!(n);
-    desc["summary"] = serde_json::to_value(maps::summary(&maps, &req, h_max))?;
-    g["maps"] = desc;
-    if let Some(w) = g["warnings"].as_array_mut() {
-        w.extend(warns.iter().map(|x| serde_json::json!(x)));
     }
-    // paths in the result are relative to its folder: from the globals' folder to --out's
+}
+
+/// Name the paths in the result `g` relative to its folder (`args.out`'s): the topology map
+/// (named relative to the globals' folder in `g`) and the maps directory.
+fn relocate_paths(g: &mut serde_json::Value, args: &MergeRequest) {
     let folder = |p: &Path| match p.parent() {
         Some(d) if !d.as_os_str().is_empty() => d.to_path_buf(),
         _ => PathBuf::from("."),
@@ -306,10 +342,4 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     if let Some(rel) = crate::api::fit::relative_to(&args.maps, &out_folder) {
         g["maps"]["directory"] = serde_json::json!(rel.display().to_string());
     }
-    serde_json::to_writer_pretty(outs.writer(json_out), &g)?;
-    outs.commit()?;
-    Ok(MergeOutcome {
-        tiles: n,
-        warnings: warns,
-    })
 }

@@ -508,25 +508,30 @@ fn save(path: Sink, buf: Vec<u8>) -> Result<()> {
     path.png(&img)
 }
 
+/// An x-y plot (the request of [`xy`]): several series, each axis linear or logarithmic.
+pub struct XyPlot<'a> {
+    pub title: &'a str,
+    pub x_label: &'a str,
+    pub y_label: &'a str,
+    pub series: &'a [Series],
+    /// A logarithmic x axis (points at x <= 0 are left out).
+    pub log_x: bool,
+    /// A logarithmic y axis (points at y <= 0 are left out).
+    pub log_y: bool,
+}
+
 /// An x-y plot of several series, each axis linear or logarithmic, with nice ticks (see
 /// [`nice_ticks`], [`tick_label`]); returns what it drew.
-pub fn xy(
-    path: Sink,
-    title: &str,
-    x_label: &str,
-    y_label: &str,
-    series: &[Series],
-    log_x: bool,
-    log_y: bool,
-) -> Result<Drawn> {
+pub fn xy(path: Sink, plot: &XyPlot) -> Result<Drawn> {
     font();
+    let (log_x, log_y) = (plot.log_x, plot.log_y);
     let mut buf = vec![0u8; (W * H * 3) as usize];
-    let xt = std::cell::RefCell::new(Vec::new());
-    let yt = std::cell::RefCell::new(Vec::new());
-    let mut points = 0;
+    let ticks = DrawnTicks::default();
+    let points;
     {
         let root = BitMapBackend::with_buffer(&mut buf, (W, H)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
+        let series = plot.series;
         let xs = series.iter().flat_map(|s| s.points.iter().map(|p| p.0));
         let ys = series.iter().flat_map(|s| s.points.iter().map(|p| p.1));
         let (x0, x1) = range(xs.collect::<Vec<_>>().into_iter(), log_x);
@@ -534,105 +539,153 @@ pub fn xy(
         let (kx, ky) = (nice_ticks(x0, x1, log_x), nice_ticks(y0, y1, log_y));
         let mut builder = ChartBuilder::on(&root);
         builder
-            .caption(title, ("sans-serif", 22))
+            .caption(plot.title, ("sans-serif", 22))
             .margin(15)
             .x_label_area_size(50)
             .y_label_area_size(80);
-        macro_rules! draw {
-            ($chart:expr) => {{
-                let mut chart = $chart;
-                chart
-                    .configure_mesh()
-                    .x_desc(x_label)
-                    .y_desc(y_label)
-                    .x_label_formatter(&|v| {
-                        let t = tick_label(*v);
-                        xt.borrow_mut().push(t.clone());
-                        t
-                    })
-                    .y_label_formatter(&|v| {
-                        let t = tick_label(*v);
-                        yt.borrow_mut().push(t.clone());
-                        t
-                    })
-                    .label_style(("sans-serif", 14))
-                    .axis_desc_style(("sans-serif", 15))
-                    .draw()
-                    .map_err(err)?;
-                for (i, s) in series.iter().enumerate() {
-                    let color = palette(i);
-                    let pts: Vec<(f64, f64)> = s
-                        .points
-                        .iter()
-                        .copied()
-                        .filter(|p| {
-                            p.0.is_finite()
-                                && p.1.is_finite()
-                                && (!log_x || p.0 > 0.0)
-                                && (!log_y || p.1 > 0.0)
-                        })
-                        .collect();
-                    points += pts.len();
-                    if s.line {
-                        chart
-                            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
-                            .map_err(err)?
-                            .label(s.name.clone())
-                            .legend(move |(x, y)| {
-                                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
-                            });
-                        chart
-                            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
-                            .map_err(err)?;
-                    } else {
-                        chart
-                            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
-                            .map_err(err)?
-                            .label(s.name.clone())
-                            .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
-                    }
-                }
-                chart
-                    .configure_series_labels()
-                    .label_font(("sans-serif", 13))
-                    .background_style(WHITE.mix(0.85))
-                    .border_style(BLACK)
-                    .position(SeriesLabelPosition::LowerLeft)
-                    .draw()
-                    .map_err(err)?;
-            }};
-        }
-        match (log_x, log_y) {
-            (true, true) => draw!(builder
-                .build_cartesian_2d(
-                    ticked((x0..x1).log_scale(), kx),
-                    ticked((y0..y1).log_scale(), ky)
-                )
-                .map_err(err)?),
-            (true, false) => draw!(builder
-                .build_cartesian_2d(ticked((x0..x1).log_scale(), kx), ticked(y0..y1, ky))
-                .map_err(err)?),
-            (false, true) => draw!(builder
-                .build_cartesian_2d(ticked(x0..x1, kx), ticked((y0..y1).log_scale(), ky))
-                .map_err(err)?),
-            (false, false) => draw!(builder
-                .build_cartesian_2d(ticked(x0..x1, kx), ticked(y0..y1, ky))
-                .map_err(err)?),
-        }
+        points = match (log_x, log_y) {
+            (true, true) => draw_xy(
+                &mut builder
+                    .build_cartesian_2d(
+                        ticked((x0..x1).log_scale(), kx),
+                        ticked((y0..y1).log_scale(), ky),
+                    )
+                    .map_err(err)?,
+                plot,
+                &ticks,
+            )?,
+            (true, false) => draw_xy(
+                &mut builder
+                    .build_cartesian_2d(ticked((x0..x1).log_scale(), kx), ticked(y0..y1, ky))
+                    .map_err(err)?,
+                plot,
+                &ticks,
+            )?,
+            (false, true) => draw_xy(
+                &mut builder
+                    .build_cartesian_2d(ticked(x0..x1, kx), ticked((y0..y1).log_scale(), ky))
+                    .map_err(err)?,
+                plot,
+                &ticks,
+            )?,
+            (false, false) => draw_xy(
+                &mut builder
+                    .build_cartesian_2d(ticked(x0..x1, kx), ticked(y0..y1, ky))
+                    .map_err(err)?,
+                plot,
+                &ticks,
+            )?,
+        };
         root.present().map_err(err)?;
     }
     save(path, buf)?;
-    let (mut x_ticks, mut y_ticks) = (xt.into_inner(), yt.into_inner());
+    let (mut x_ticks, mut y_ticks) = (ticks.x.into_inner(), ticks.y.into_inner());
     x_ticks.dedup();
     y_ticks.dedup();
     Ok(Drawn {
-        x_label: x_label.into(),
-        y_label: y_label.into(),
+        x_label: plot.x_label.into(),
+        y_label: plot.y_label.into(),
         x_ticks,
         y_ticks,
         points,
         ..Default::default()
     })
+}
+
+/// The tick labels an x-y chart drew, in the order it drew them.
+#[derive(Default)]
+struct DrawnTicks {
+    x: std::cell::RefCell<Vec<String>>,
+    y: std::cell::RefCell<Vec<String>>,
+}
+
+/// An x-y chart whose axes (linear or log) have given ticks.
+type XyChart<'a, 'b, X, Y> = ChartContext<'a, BitMapBackend<'b>, Cartesian2d<Ticked<X>, Ticked<Y>>>;
+
+/// Draw `plot` into its built `chart`: the axes (their tick labels noted in `ticks`), each
+/// series, and the legend. Returns the number of points drawn.
+fn draw_xy<'a, 'b: 'a, X, Y>(
+    chart: &mut XyChart<'a, 'b, X, Y>,
+    plot: &XyPlot,
+    ticks: &DrawnTicks,
+) -> Result<usize>
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    chart
+        .configure_mesh()
+        .x_desc(plot.x_label)
+        .y_desc(plot.y_label)
+        .x_label_formatter(&|v| {
+            let t = tick_label(*v);
+            ticks.x.borrow_mut().push(t.clone());
+            t
+        })
+        .y_label_formatter(&|v| {
+            let t = tick_label(*v);
+            ticks.y.borrow_mut().push(t.clone());
+            t
+        })
+        .label_style(("sans-serif", 14))
+        .axis_desc_style(("sans-serif", 15))
+        .draw()
+        .map_err(err)?;
+    let mut points = 0;
+    for (i, s) in plot.series.iter().enumerate() {
+        points += draw_series(chart, s, palette(i), (plot.log_x, plot.log_y))?;
+    }
+    chart
+        .configure_series_labels()
+        .label_font(("sans-serif", 13))
+        .background_style(WHITE.mix(0.85))
+        .border_style(BLACK)
+        .position(SeriesLabelPosition::LowerLeft)
+        .draw()
+        .map_err(err)?;
+    Ok(points)
+}
+
+/// Draw one series in `color` with its legend entry: a line with dots, or markers only; the
+/// points that a log axis (`log`: x, y) cannot show are left out. Returns the points drawn.
+fn draw_series<'a, 'b: 'a, X, Y>(
+    chart: &mut XyChart<'a, 'b, X, Y>,
+    s: &Series,
+    color: RGBColor,
+    log: (bool, bool),
+) -> Result<usize>
+where
+    X: Ranged<ValueType = f64>,
+    Y: Ranged<ValueType = f64>,
+{
+    let (log_x, log_y) = log;
+    let pts: Vec<(f64, f64)> = s
+        .points
+        .iter()
+        .copied()
+        .filter(|p| {
+            p.0.is_finite() && p.1.is_finite() && (!log_x || p.0 > 0.0) && (!log_y || p.1 > 0.0)
+        })
+        .collect();
+    if s.line {
+        chart
+            .draw_series(LineSeries::new(pts.clone(), color.stroke_width(2)))
+            .map_err(err)?
+            .label(s.name.clone())
+            .legend(move |(x, y)| {
+                PathElement::new(vec![(x, y), (x + 20, y)], color.stroke_width(2))
+            });
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 3, color.filled())))
+            .map_err(err)?;
+    } else {
+        chart
+            .draw_series(pts.iter().map(|&p| Circle::new(p, 4, color.filled())))
+            .map_err(err)?
+            .label(s.name.clone())
+            .legend(move |(x, y)| Circle::new((x + 10, y), 4, color.filled()));
+    }
+    Ok(pts.len())
 }
 
 /// A histogram of `values` in `bins` equal bins.

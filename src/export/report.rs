@@ -2,6 +2,8 @@
 //! parameter as `value +/- stderr (pct) (init)`, and correlations above 0.1 sorted by size.
 
 use super::atomic::{OutputId, Outputs, Sink};
+use super::brdf_plots::{self, Brdf, Curve, HemispherePlot, SlicePlot};
+use super::plots;
 use crate::fit::parameters::PER_TEXEL;
 use crate::fit::FitOutcome;
 use std::fmt::Write;
@@ -197,6 +199,19 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
     t
 }
 
+/// What a fit report shows: the fit, the data it was fitted to, the report's text and the BRDFs
+/// its pictures draw.
+pub struct ReportContent<'a> {
+    pub outcome: &'a FitOutcome,
+    pub samples: &'a crate::load::samples::Samples,
+    /// The fit report ([`text`]), the report's first section.
+    pub text: &'a str,
+    /// The fitted model.
+    pub fitted: Brdf<'a>,
+    /// The measured file evaluated at any directions, when the data is one.
+    pub measured: Option<Brdf<'a>>,
+}
+
 /// Write `dir/report.md` with the fit report and its pictures: the fitted model as curves along
 /// slices at fixed incidence (along and across the fibres) with the measured samples near each
 /// slice, hemisphere maps of measured / fitted / residual for a few incidences (dense when the
@@ -205,19 +220,29 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
 pub fn write_dir(
     outs: &mut Outputs,
     files: &ReportFiles,
-    outcome: &FitOutcome,
-    samples: &crate::load::samples::Samples,
-    report_text: &str,
-    fitted: super::brdf_plots::Brdf,
-    measured: Option<super::brdf_plots::Brdf>,
+    report: &ReportContent,
 ) -> anyhow::Result<()> {
-    use super::brdf_plots::{self, Curve};
-    use super::plots;
-    let mut md = format!("# fibrefit fit report\n\n```text\n{report_text}```\n\n");
-    let ch = samples.channels;
-    let psi_deg = outcome
+    let mut md = format!("# fibrefit fit report\n\n```text\n{}```\n\n", report.text);
+    let psi_deg = report
+        .outcome
         .set
         .shape_value(crate::fit::parameters::Param::Azimuth);
+    md += &slices_section(outs, files.slices, report, psi_deg)?;
+    md += &hemispheres_section(outs, files.hemispheres, report, psi_deg)?;
+    md += &residuals_section(outs, files, report)?;
+    outs.put(files.md, md.as_bytes())
+}
+
+/// The slices picture (`id`) and its section: the fitted curves (and the measured file's,
+/// dashed), on a log axis when the data spans decades, with the samples near each slice.
+fn slices_section(
+    outs: &mut Outputs,
+    id: OutputId,
+    report: &ReportContent,
+    psi_deg: f64,
+) -> anyhow::Result<String> {
+    let samples = report.samples;
+    let ch = samples.channels;
     // measured data spanning decades reads best on a log axis
     let positive: Vec<f64> = samples
         .samples
@@ -229,7 +254,7 @@ pub fn write_dir(
     let hi = positive.iter().copied().fold(0.0f64, f64::max);
     let log_y = positive.len() == samples.samples.len() && hi > 30.0 * lo;
     let mut curves = Vec::new();
-    if let Some(m) = measured {
+    if let Some(m) = report.measured {
         curves.push(Curve {
             name: "measured file".into(),
             brdf: m,
@@ -237,51 +262,76 @@ pub fn write_dir(
         });
     }
     curves.push(Curve {
-        name: format!("fitted {}", outcome.set.rung),
-        brdf: fitted,
+        name: format!("fitted {}", report.outcome.set.rung),
+        brdf: report.fitted,
         dashed: false,
     });
     let points = brdf_plots::slices(
-        Sink::Staged(outs, files.slices),
-        "Slices at fixed incidence: fitted curves and measured samples",
-        psi_deg,
-        ch,
-        &curves,
-        &samples.samples,
-        log_y,
+        Sink::Staged(outs, id),
+        &SlicePlot {
+            title: "Slices at fixed incidence: fitted curves and measured samples",
+            psi_deg,
+            channels: ch,
+            curves: &curves,
+            samples: &samples.samples,
+            log_y,
+        },
     )?;
     let (points, per) = (points.points, points.note);
-    md += &format!(
+    Ok(format!(
         "## Slices\n\nThe fitted BRDF (1/sr, {per}{}) along the plane of the fibres (T-N, fibres at \
          {psi_deg:.1} deg) and across it (B-N) at incidence {} deg: the light on the negative side, the \
          view at a signed angle (+: the far side){}; dots: the {points} samples near a slice (theta_i \
          within {:.0} deg, both directions within {:.0} deg of the plane), their mean +-1 sd per 2 deg bin of theta_o.\n\n![slices](slices.png)\n\n",
         if log_y { ", log axis" } else { "" },
         brdf_plots::SLICE_THETAS.map(|t| format!("{t:.0}")).join(", "),
-        if measured.is_some() {
+        if report.measured.is_some() {
             "; dashed: the measured file on the same directions"
         } else {
             ""
         },
         brdf_plots::NEAR_THETA_DEG,
         brdf_plots::NEAR_PLANE_COSINE.asin().to_degrees(),
-    );
+    ))
+}
+
+/// The hemisphere maps picture (`id`) and its section.
+fn hemispheres_section(
+    outs: &mut Outputs,
+    id: OutputId,
+    report: &ReportContent,
+    psi_deg: f64,
+) -> anyhow::Result<String> {
     let near = brdf_plots::hemispheres(
-        Sink::Staged(outs, files.hemispheres),
-        "Hemisphere maps: measured, fitted, residual",
-        psi_deg,
-        ch,
-        fitted,
-        measured,
-        &samples.samples,
+        Sink::Staged(outs, id),
+        &HemispherePlot {
+            title: "Hemisphere maps: measured, fitted, residual",
+            psi_deg,
+            channels: report.samples.channels,
+            fitted: report.fitted,
+            measured: report.measured,
+            samples: &report.samples.samples,
+        },
     )?;
-    md += &format!(
+    Ok(format!(
         "## Hemisphere maps\n\nEvery view direction for a light (orthographic, seen from above). {} \
          {} samples drawn; residual colour bar +/-{:.2} %.\n\n![hemisphere maps](hemispheres.png)\n\n",
         near.note,
         near.points,
         near.colour_bars.last().map_or(0.0, |b| b.hi),
-    );
+    ))
+}
+
+/// The residual histogram and, for image captures, a residual map per image (the image's size,
+/// per channel, a colour bar in percent), with their sections; the reserved maps of images
+/// without samples are given up.
+fn residuals_section(
+    outs: &mut Outputs,
+    files: &ReportFiles,
+    report: &ReportContent,
+) -> anyhow::Result<String> {
+    let (samples, outcome) = (report.samples, report.outcome);
+    let ch = samples.channels;
     let rel: Vec<f64> = samples
         .samples
         .iter()
@@ -295,7 +345,7 @@ pub fn write_dir(
         &rel,
         60,
     )?;
-    md += "## Residuals\n\n![residual histogram](residuals.png)\n\n";
+    let mut md = String::from("## Residuals\n\n![residual histogram](residuals.png)\n\n");
     // residual maps for captures: the image's size, per channel, a colour bar in percent
     let images = plots::image_residuals(samples, &outcome.fitted);
     // reserved maps of images without samples are not written
@@ -315,7 +365,7 @@ pub fn write_dir(
         )?;
         md += &format!("### Image {k}: relative residual per pixel ({} x {} px, {}; red: fitted above measured, blue: below, grey: no sample; colour bar +/-{:.2} %, the {:.0}th percentile of |residual|)\n\n![residual map {k}](residual_map_{k:03}.png)\n\n", r.width, r.height, d.panels.join(", "), d.colour_bars[0].hi, plots::RESIDUAL_PERCENTILE);
     }
-    outs.put(files.md, md.as_bytes())
+    Ok(md)
 }
 
 /// The files of a fit report (`report.md`, its plots, a residual map per capture image),

@@ -72,12 +72,14 @@ fn cost_plot(dir: &Path, rows: &[FeltRow]) -> Result<()> {
     }
     plots::xy(
         crate::export::atomic::Sink::File(&dir.join("felt.png")),
-        "Real felt: held-out log error vs cost per rung",
-        "cost per evaluation [ns] (single thread)",
-        "held-out log error (RMS of ln(model) - ln(data))",
-        &series,
-        true,
-        false,
+        &plots::XyPlot {
+            title: "Real felt: held-out log error vs cost per rung",
+            x_label: "cost per evaluation [ns] (single thread)",
+            y_label: "held-out log error (RMS of ln(model) - ln(data))",
+            series: &series,
+            log_x: true,
+            log_y: false,
+        },
     )?;
     Ok(())
 }
@@ -191,12 +193,14 @@ fn figures(
     let psi = 0.0; // the felt is isotropic
     let points = brdf_plots::slices(
         crate::export::atomic::Sink::File(&dir.join("felt_slices.png")),
-        "Real felt (log metric fits): slices at fixed incidence",
-        psi,
-        3,
-        &curves,
-        &run.test.samples,
-        true,
+        &brdf_plots::SlicePlot {
+            title: "Real felt (log metric fits): slices at fixed incidence",
+            psi_deg: psi,
+            channels: 3,
+            curves: &curves,
+            samples: &run.test.samples,
+            log_y: true,
+        },
     )?
     .points;
     let mut md = format!(
@@ -214,12 +218,14 @@ fn figures(
         let file = format!("felt_hemispheres_{}.png", k + 1);
         brdf_plots::hemispheres(
             crate::export::atomic::Sink::File(&dir.join(&file)),
-            &format!("Real felt: measured vs {} (log metric)", label(&rows[i])),
-            0.0,
-            3,
-            fitted[k].as_ref(),
-            measured,
-            &run.test.samples,
+            &brdf_plots::HemispherePlot {
+                title: &format!("Real felt: measured vs {} (log metric)", label(&rows[i])),
+                psi_deg: 0.0,
+                channels: 3,
+                fitted: fitted[k].as_ref(),
+                measured,
+                samples: &run.test.samples,
+            },
         )?;
         md += &format!(
             "### {}\n\n![{}]({file})\n\n",

@@ -25,12 +25,14 @@ pub fn write(dir: &Path, runs: &[Run], size: StudySize, command: &str, seconds: 
         .collect();
     plots::xy(
         crate::export::atomic::Sink::File(&dir.join("fit_robustness.png")),
-        "Default fit from random starts: final chi-square / truth's",
-        "fit wall time [s]",
-        "chi2 fit / chi2 truth (1 = global minimum)",
-        &series,
-        false,
-        true,
+        &plots::XyPlot {
+            title: "Default fit from random starts: final chi-square / truth's",
+            x_label: "fit wall time [s]",
+            y_label: "chi2 fit / chi2 truth (1 = global minimum)",
+            series: &series,
+            log_x: false,
+            log_y: true,
+        },
     )?;
     let mut md =
         String::from("# Fit robustness: does the default fit find the global minimum?\n\n");

@@ -62,12 +62,14 @@ pub fn write(
         .collect();
     plots::xy(
         crate::export::atomic::Sink::File(&dir.join("pareto.png")),
-        "Error vs cost per rung (climbing set)",
-        "cost per evaluation [ns] (single thread)",
-        "RMS relative error vs reference (1 = 100 %)",
-        &series,
-        true,
-        true,
+        &plots::XyPlot {
+            title: "Error vs cost per rung (climbing set)",
+            x_label: "cost per evaluation [ns] (single thread)",
+            y_label: "RMS relative error vs reference (1 = 100 %)",
+            series: &series,
+            log_x: true,
+            log_y: true,
+        },
     )?;
 
     let mut by_n: BTreeMap<usize, Vec<(f64, f64)>> = BTreeMap::new();
@@ -86,12 +88,14 @@ pub fn write(
         .collect();
     plots::xy(
         crate::export::atomic::Sink::File(&dir.join("fit_time_vs_error.png")),
-        "Fit time vs parameter error (silk capture, by subsampling)",
-        "fit wall time [s]",
-        "largest relative parameter error (1 = 100 %)",
-        &series,
-        true,
-        true,
+        &plots::XyPlot {
+            title: "Fit time vs parameter error (silk capture, by subsampling)",
+            x_label: "fit wall time [s]",
+            y_label: "largest relative parameter error (1 = 100 %)",
+            series: &series,
+            log_x: true,
+            log_y: true,
+        },
     )?;
 
     let mut md = String::new();
