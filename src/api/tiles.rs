@@ -147,13 +147,15 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
         ),
     };
     let part = maps::texel_stage(
-        &store,
-        cfg,
-        &cfg.maps,
-        &set,
-        rows,
-        hint,
-        schur.as_ref(),
+        &maps::TexelStageRequest {
+            store: &store,
+            cfg,
+            req: &cfg.maps,
+            set: &set,
+            rows,
+            variance_hint: hint,
+            schur: schur.as_ref(),
+        },
         &req.progress,
     )?;
     let global_free = g["statistics"]["free_parameters"].as_u64().unwrap_or(0) as usize;

@@ -10,7 +10,7 @@ pub struct GlobalStage {
     /// Cost over the sampled texels: the plain global fit's, then after each round.
     pub costs: Vec<f64>,
     /// Residual variance per pixel value over the sampled texels, every unknown counted: what
-    /// the texel stage expects of the whole capture ([`texel_stage`]'s `variance_hint`).
+    /// the texel stage expects of the whole capture ([`TexelStageRequest::variance_hint`]).
     pub texel_variance: f64,
     pub warnings: Vec<String>,
     /// Levenberg–Marquardt iterations of the stage: the plain global fit's final run plus the

@@ -16,13 +16,15 @@ pub fn recover(
     let stage = global_stage(store, cfg, req, progress)?;
     let (w, h) = (store.width, store.height);
     let part = texel_stage(
-        store,
-        cfg,
-        req,
-        &stage.outcome.set,
-        (0, h as u32),
-        stage.texel_variance,
-        Some(&stage.schur),
+        &TexelStageRequest {
+            store,
+            cfg,
+            req,
+            set: &stage.outcome.set,
+            rows: (0, h as u32),
+            variance_hint: stage.texel_variance,
+            schur: Some(&stage.schur),
+        },
         progress,
     )?;
     let global_free = stage.outcome.statistics.free_parameters;
@@ -311,13 +313,15 @@ pub fn texel_run(
     progress.line(&format!("maps: texel stage ({w}x{h} texels)"));
     let t0 = std::time::Instant::now();
     let part = texel_stage(
-        store,
-        cfg,
-        &cfg.maps,
-        globals,
-        (0, h as u32),
-        work.texel_variance,
-        Some(&work.schur),
+        &TexelStageRequest {
+            store,
+            cfg,
+            req: &cfg.maps,
+            set: globals,
+            rows: (0, h as u32),
+            variance_hint: work.texel_variance,
+            schur: Some(&work.schur),
+        },
         progress,
     )?;
     progress.line("maps: standard errors and flags");
@@ -333,10 +337,7 @@ pub fn texel_run(
     )?;
     let seconds = t0.elapsed().as_secs_f64();
     let summaries = summary(&maps, &cfg.maps, h_max);
-    let sweeps = match cfg.maps.smoothness > 0.0 {
-        true => 1 + PRIOR_SWEEPS,
-        false => 1,
-    };
+    let sweeps = sweeps_of(&cfg.maps);
     Ok(TexelRun {
         maps,
         variance,
