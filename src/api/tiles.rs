@@ -277,8 +277,17 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     let h_max =
         crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Param::Spacing));
     let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
-    let (maps, variance, warns) =
-        maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;
+    let (maps, variance, warns) = maps::finish_maps(
+        parts,
+        &maps::Assembly {
+            width,
+            height,
+            channels,
+            req: &req,
+            global_free,
+            h_max,
+        },
+    )?;
     let method = g["maps"]["method"].clone();
     crate::export::maps_out::write(&mut outs, &map_files, &req.requested(), &maps)?;
     let mut desc = crate::export::maps_out::describe(&args.maps, &req.requested(), &maps);

@@ -29,8 +29,15 @@ pub fn recover(
     )?;
     let global_free = stage.outcome.statistics.free_parameters;
     let h_max = max_height(stage.outcome.set.shape_value(Param::Spacing));
-    let (maps, variance, mut warnings) =
-        finish_maps(vec![part], w, h, store.channels, req, global_free, h_max)?;
+    let assembly = Assembly {
+        width: w,
+        height: h,
+        channels: store.channels,
+        req,
+        global_free,
+        h_max,
+    };
+    let (maps, variance, mut warnings) = finish_maps(vec![part], &assembly)?;
     warnings.splice(0..0, stage.warnings.iter().cloned());
     let global = stage.outcome;
     Ok(MapOutcome {
@@ -326,15 +333,15 @@ pub fn texel_run(
     )?;
     progress.line("maps: standard errors and flags");
     let h_max = max_height(globals.shape_value(Param::Spacing));
-    let (maps, variance, warnings) = finish_maps(
-        vec![part],
-        w,
-        h,
-        store.channels,
-        &cfg.maps,
+    let assembly = Assembly {
+        width: w,
+        height: h,
+        channels: store.channels,
+        req: &cfg.maps,
         global_free,
         h_max,
-    )?;
+    };
+    let (maps, variance, warnings) = finish_maps(vec![part], &assembly)?;
     let seconds = t0.elapsed().as_secs_f64();
     let summaries = summary(&maps, &cfg.maps, h_max);
     let sweeps = sweeps_of(&cfg.maps);

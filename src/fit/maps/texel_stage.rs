@@ -358,23 +358,42 @@ pub(super) fn prune_minima(
     kept
 }
 
+/// The capture whose parts [`finish_maps`] assembles, and what its residual variance counts.
+#[derive(Clone, Copy)]
+pub struct Assembly<'a> {
+    /// Texels across the capture.
+    pub width: usize,
+    /// Rows of the capture: the parts must cover them exactly.
+    pub height: usize,
+    pub channels: usize,
+    /// The maps asked for.
+    pub req: &'a MapsConfig,
+    /// Globals the global stage fitted: unknowns of the residual variance besides the texels'.
+    pub global_free: usize,
+    /// H_max at the globals: a height error at or above half of it leaves the height
+    /// undetermined.
+    pub h_max: f64,
+}
+
 /// Assemble parts covering every row into the maps: the residual variance over all pixel values
-/// less every unknown (each texel's and `global_free` globals'), the standard errors scaled by
-/// it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
-pub fn finish_maps(
-    parts: Vec<TexelPart>,
-    width: usize,
-    height: usize,
-    channels: usize,
-    req: &MapsConfig,
-    global_free: usize,
-    h_max: f64,
-) -> Result<(TexelMaps, f64, Vec<String>)> {
-    let free = free_of(req);
+/// less every unknown (each texel's and the globals' `a.global_free`), the standard errors scaled
+/// by it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
+pub fn finish_maps(parts: Vec<TexelPart>, a: &Assembly) -> Result<(TexelMaps, f64, Vec<String>)> {
+    let free = free_of(a.req);
     let mut parts = parts;
     parts.sort_by_key(|p| p.rows[0]);
+    check_cover(&parts, a.height)?;
+    let texels: usize = parts.iter().map(|p| p.texels.len()).sum();
+    let variance = residual_variance(&parts, texels, free, a)?;
+    let (maps, flags) = scaled_maps(parts, texels, variance, free, a);
+    let warnings = finish_warnings(&maps, &flags, variance, free, a.h_max);
+    Ok((maps, variance, warnings))
+}
+
+/// Refuse parts (sorted by their first row) that do not cover rows 0..`height` exactly.
+fn check_cover(parts: &[TexelPart], height: usize) -> Result<()> {
     let mut next = 0u32;
-    for p in &parts {
+    for p in parts {
         if p.rows[0] != next {
             bail!(
                 "the map parts do not cover rows {next}..{} exactly (a part starts at row {})",
@@ -387,60 +406,75 @@ pub fn finish_maps(
     if next as usize != height {
         bail!("the map parts end at row {next}, the capture has {height} rows");
     }
+    Ok(())
+}
+
+/// The residual variance over every pixel value of `parts` (holding `texels` texels), less
+/// every unknown; refused when the pixel values cannot determine them.
+fn residual_variance(parts: &[TexelPart], texels: usize, free: Free, a: &Assembly) -> Result<f64> {
     // sums in row order: the same bits however the rows were split
     let (mut cost, mut n) = (0.0, 0usize);
-    for p in &parts {
+    for p in parts {
         for &(c, k) in &p.row_costs {
             cost += c;
             n += k;
         }
     }
-    let texels: usize = parts.iter().map(|p| p.texels.len()).sum();
-    let params = per_texel_unknowns(free, channels) * texels + global_free;
+    let params = per_texel_unknowns(free, a.channels) * texels + a.global_free;
     if n <= params {
         bail!("--maps: {n} pixel values cannot determine {params} unknowns; use more images");
     }
-    let variance = cost / (n - params) as f64;
+    Ok(cost / (n - params) as f64)
+}
+
+/// What the assembled maps warn of.
+#[derive(Default)]
+struct Flags {
+    /// Some part's errors leave out the globals' uncertainty.
+    conditional: bool,
+    /// Some part kept fewer other minima than the ambiguity margin needs.
+    minima_cut: bool,
+    /// Texels with another minimum within the ambiguity margin.
+    ambiguous: usize,
+}
+
+/// The maps of `parts` (`texels` texels) with their standard errors scaled by the residual
+/// `variance` and widened by their other minima; each part moved into the maps and dropped, so
+/// the maps never exist twice.
+fn scaled_maps(
+    parts: Vec<TexelPart>,
+    texels: usize,
+    variance: f64,
+    free: Free,
+    a: &Assembly,
+) -> (TexelMaps, Flags) {
     let scale = variance.sqrt();
     let mut maps = TexelMaps {
-        width,
-        height,
+        width: a.width,
+        height: a.height,
         texels: Vec::with_capacity(texels),
         values: Vec::with_capacity(texels),
         std_errors: Vec::with_capacity(texels),
         residual: Vec::with_capacity(texels),
         ambiguous: Vec::with_capacity(texels),
-        channels,
+        channels: a.channels,
     };
-    let mut ambiguous = 0;
-    let mut minima_cut = false;
-    let conditional = parts.iter().any(|p| !p.globals_in_errors);
-    // each part moved into the maps and dropped, so the maps never exist twice
+    let mut flags = Flags {
+        conditional: parts.iter().any(|p| !p.globals_in_errors),
+        ..Flags::default()
+    };
     for mut p in parts {
-        minima_cut |= p
+        flags.minima_cut |= p
             .minima_below
             .is_some_and(|b| b < AMBIGUITY_DELTA * variance);
         for k in 0..p.texels.len() {
-            let u = &p.unscaled_std_errors[k];
-            let mut se = TexelValues {
-                height: u.height * scale,
-                psi: u.psi * scale,
-                kd: u.kd.map(|x| x * scale),
-                ks: u.ks.map(|x| x * scale),
-            };
-            let mut amb = false;
-            for &[dc, dh, dp] in &p.other_minima[k] {
-                if dc <= AMBIGUITY_DELTA * variance {
-                    amb = true;
-                    if free.height {
-                        se.height = se.height.max(dh);
-                    }
-                    if free.psi {
-                        se.psi = se.psi.max(dp);
-                    }
-                }
-            }
-            ambiguous += usize::from(amb);
+            let (se, amb) = widened(
+                &p.unscaled_std_errors[k],
+                &p.other_minima[k],
+                (scale, variance),
+                free,
+            );
+            flags.ambiguous += usize::from(amb);
             maps.ambiguous.push(amb);
             maps.std_errors.push(se);
         }
@@ -448,13 +482,57 @@ pub fn finish_maps(
         maps.values.append(&mut p.values);
         maps.residual.append(&mut p.residual);
     }
+    (maps, flags)
+}
+
+/// A texel's standard errors: `unscaled` times `scale` (the residual variance's square root),
+/// H and psi widened to the farthest of its other minima (as [`prune_minima`] keeps them)
+/// within [`AMBIGUITY_DELTA`] x `variance` of the best; and whether there was one.
+fn widened(
+    unscaled: &TexelValues,
+    others: &[[f64; 3]],
+    (scale, variance): (f64, f64),
+    free: Free,
+) -> (TexelValues, bool) {
+    let u = unscaled;
+    let mut se = TexelValues {
+        height: u.height * scale,
+        psi: u.psi * scale,
+        kd: u.kd.map(|x| x * scale),
+        ks: u.ks.map(|x| x * scale),
+    };
+    let mut amb = false;
+    for &[dc, dh, dp] in others {
+        if dc <= AMBIGUITY_DELTA * variance {
+            amb = true;
+            if free.height {
+                se.height = se.height.max(dh);
+            }
+            if free.psi {
+                se.psi = se.psi.max(dp);
+            }
+        }
+    }
+    (se, amb)
+}
+
+/// The warnings of the assembled `maps`: errors without the globals' uncertainty, other minima
+/// cut, values the images leave undetermined, ambiguous texels.
+fn finish_warnings(
+    maps: &TexelMaps,
+    flags: &Flags,
+    variance: f64,
+    free: Free,
+    h_max: f64,
+) -> Vec<String> {
+    let texels = maps.texels.len();
     let mut warnings = Vec::new();
-    if conditional {
+    if flags.conditional {
         warnings.push(
             "per-texel standard errors leave out the globals' uncertainty (the globals came without their Schur complement, maps.method.global_schur: a `--map-globals` result of an older fibrefit), so they are too small where the globals trade off with the maps: refit the globals with `--map-globals`".to_string(),
         );
     }
-    if minima_cut {
+    if flags.minima_cut {
         warnings.push(format!(
             "the residual variance over every pixel ({variance:.3e}) is far above what the global stage's texels gave: other minima beyond {MINIMA_MARGIN} x {AMBIGUITY_DELTA} of that were not kept, so some ambiguous texels may not be flagged; raise [maps] global_texels"
         ));
@@ -485,12 +563,13 @@ pub fn finish_maps(
             ));
         }
     }
+    let ambiguous = flags.ambiguous;
     if ambiguous > 0 {
         warnings.push(format!(
             "{ambiguous} of {texels} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (a height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima"
         ));
     }
-    Ok((maps, variance, warnings))
+    warnings
 }
 
 /// The [`TablePlan`] of the whole capture, texel by texel in order (not of `rows` alone: a tile
