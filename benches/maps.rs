@@ -53,13 +53,15 @@ fn camera(c: &mut Criterion) {
     g.bench_function("texel-stage/H+psi (per texel)", |b| {
         b.iter(|| {
             maps::texel_stage(
-                &store,
-                &cfg,
-                &cfg.maps,
-                &globals.outcome.set,
-                (0, rows),
-                globals.texel_variance,
-                Some(&globals.schur),
+                &maps::TexelStageRequest {
+                    store: &store,
+                    cfg: &cfg,
+                    req: &cfg.maps,
+                    set: &globals.outcome.set,
+                    rows: (0, rows),
+                    variance_hint: globals.texel_variance,
+                    schur: Some(&globals.schur),
+                },
                 &fibrefit::progress::Progress::quiet(),
             )
             .unwrap()

@@ -265,14 +265,7 @@ fn map_textures(
     let h_max = max_height(params.spacing);
     let topology = model.rung().has(crate::model::Ability::Topology);
     let heights = topology.then_some(maps.height.as_ref()).flatten();
-    let range = heights.and_then(|m| {
-        let finite = m.data.iter().filter(|v| v.is_finite());
-        let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
-            let v = f64::from(v).clamp(0.0, h_max);
-            (lo.min(v), hi.max(v))
-        });
-        (lo <= hi).then_some((lo, hi))
-    });
+    let range = heights.and_then(|m| height_range(m, h_max));
     let albedo_maps = maps.kd.is_some() || maps.ks.is_some();
     let with_height = range.is_some();
     let (want_base, want_rough, want_aniso) = (
@@ -283,46 +276,15 @@ fn map_textures(
     if !(want_base || want_aniso) {
         return Ok(None);
     }
-    let table = gltf_material::TexelMaterials::new(model, &params.albedos, fitted, range, 1)?;
-    let psi_deg = params.fibre_azimuth.to_degrees();
-    let n = w
-        .checked_mul(h)
-        .and_then(|n| n.checked_mul(3))
-        .ok_or_else(|| anyhow!("maps of {w}x{h} texels: too many for textures"))?;
-    let (mut base, mut rough, mut aniso) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
-    let global = params.albedos;
-    let tied = global.substrate == global.diffuse;
-    for y in 0..h {
-        for x in 0..w {
-            let mut a = global;
-            for c in 0..3 {
-                if let Some(k) = TexelMapsIn::at(&maps.kd, x, y, c) {
-                    a.diffuse[c] = k;
-                    if tied {
-                        a.substrate[c] = k;
-                    }
-                }
-                if let Some(k) = TexelMapsIn::at(&maps.ks, x, y, c) {
-                    a.specular[c] = k;
-                }
-            }
-            let height = heights
-                .and_then(|_| TexelMapsIn::at(&maps.height, x, y, 0))
-                .map(|v| v.clamp(0.0, h_max));
-            let m = table.at(height, &a);
-            let turn = TexelMapsIn::at(&maps.psi, x, y, 0).map_or(0.0, |p| {
-                ((p - psi_deg + 90.0).rem_euclid(180.0) - 90.0).to_radians()
-            });
-            let i = 3 * (y * w + x);
-            base[i..i + 3].copy_from_slice(&m.base_color.map(gltf_out::srgb8));
-            rough[i..i + 3].copy_from_slice(&[0, gltf_out::unorm8(m.roughness), 0]);
-            aniso[i..i + 3].copy_from_slice(&[
-                gltf_out::unorm8(0.5 * (turn.cos() + 1.0)),
-                gltf_out::unorm8(0.5 * (turn.sin() + 1.0)),
-                gltf_out::unorm8(m.anisotropy_strength),
-            ]);
-        }
-    }
+    let source = TextureSource {
+        maps,
+        params,
+        table: gltf_material::TexelMaterials::new(model, &params.albedos, fitted, range, 1)?,
+        heights: heights.is_some(),
+        h_max,
+        psi_deg: params.fibre_azimuth.to_degrees(),
+    };
+    let [base, rough, aniso] = source.pixels()?;
     let mut images = Vec::new();
     let mut names = Vec::new();
     let mut add = |name: &'static str, file: &str, rgb: &[u8]| -> Result<usize> {
@@ -342,25 +304,8 @@ fn map_textures(
     let t_aniso = want_aniso
         .then(|| add("anisotropy", "anisotropy", &aniso))
         .transpose()?;
-    let nodes = table.nodes();
-    let description = serde_json::json!({
-        // the folder's name, not where it lies on this machine (no absolute paths in exports)
-        "maps": file_name(dir),
-        "size": [w, h],
-        "registration": "one texel per map pixel; image row 0 is the maps' top row (the mesh's v = 1, TEXCOORD_0 t = 0)",
-        "base_color": t_base.map(|_| "sRGB; per texel the least-squares base colour of the texel's glTF shape for its albedos (kd, ks maps; the global ones where a map has no value), as the global fit solves it"),
-        "metallic_roughness": t_rough.map(|_| "G = roughness refitted to the model at the texel's height (linear between the height nodes), B = metallic 0"),
-        "anisotropy": t_aniso.map(|_| format!(
-            "RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's fibre azimuth - fibre_azimuth_deg {psi_deg} (the TANGENT's direction), turned further by anisotropyRotation; B = strength{}",
-            if with_height { " refitted at the texel's height" } else { ", the global one" }
-        )),
-        "height_nodes": nodes.iter().map(|n| serde_json::json!({
-            "height": n.height,
-            "roughness": n.roughness,
-            "anisotropy_strength": n.anisotropy_strength,
-            "relative_rms_error": n.relative_rms_error,
-        })).collect::<Vec<_>>(),
-    });
+    let nodes = source.table.nodes();
+    let description = source.description(dir, [t_base, t_rough, t_aniso], with_height, &nodes);
     Ok(Some((
         GlbTextures {
             directory: dir.to_path_buf(),
@@ -377,6 +322,114 @@ fn map_textures(
             description,
         },
     )))
+}
+
+/// The least and largest finite height of the height map `m`, each clamped to [0, `h_max`];
+/// none without a finite one.
+fn height_range(m: &crate::load::image_io::LinearImage, h_max: f64) -> Option<(f64, f64)> {
+    let finite = m.data.iter().filter(|v| v.is_finite());
+    let (lo, hi) = finite.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &v| {
+        let v = f64::from(v).clamp(0.0, h_max);
+        (lo.min(v), hi.max(v))
+    });
+    (lo <= hi).then_some((lo, hi))
+}
+
+/// What [`map_textures`] makes its textures of: the maps, the globals they vary around and the
+/// glTF shapes per height.
+struct TextureSource<'a> {
+    maps: &'a TexelMapsIn,
+    /// The globals: albedos where a map has no value, the fibre azimuth.
+    params: &'a ModelParams,
+    /// The glTF material of a texel by its height and albedos.
+    table: gltf_material::TexelMaterials,
+    /// Whether the texels' heights are read (the rung has a topology and there is a height map).
+    heights: bool,
+    /// H_max at the globals' spacing: the texels' heights are clamped to [0, H_max].
+    h_max: f64,
+    /// The global fibre azimuth in degrees (the TANGENT's direction).
+    psi_deg: f64,
+}
+
+impl TextureSource<'_> {
+    /// The RGB8 pixels of the base colour (sRGB), metallic-roughness and anisotropy textures,
+    /// texel by texel, rows from the top.
+    fn pixels(&self) -> Result<[Vec<u8>; 3]> {
+        let (maps, h_max, psi_deg) = (self.maps, self.h_max, self.psi_deg);
+        let (w, h) = (maps.width, maps.rows);
+        let n = w
+            .checked_mul(h)
+            .and_then(|n| n.checked_mul(3))
+            .ok_or_else(|| anyhow!("maps of {w}x{h} texels: too many for textures"))?;
+        let (mut base, mut rough, mut aniso) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+        let global = self.params.albedos;
+        let tied = global.substrate == global.diffuse;
+        for y in 0..h {
+            for x in 0..w {
+                let mut a = global;
+                for c in 0..3 {
+                    if let Some(k) = TexelMapsIn::at(&maps.kd, x, y, c) {
+                        a.diffuse[c] = k;
+                        if tied {
+                            a.substrate[c] = k;
+                        }
+                    }
+                    if let Some(k) = TexelMapsIn::at(&maps.ks, x, y, c) {
+                        a.specular[c] = k;
+                    }
+                }
+                let height = self
+                    .heights
+                    .then(|| TexelMapsIn::at(&maps.height, x, y, 0))
+                    .flatten()
+                    .map(|v| v.clamp(0.0, h_max));
+                let m = self.table.at(height, &a);
+                let turn = TexelMapsIn::at(&maps.psi, x, y, 0).map_or(0.0, |p| {
+                    ((p - psi_deg + 90.0).rem_euclid(180.0) - 90.0).to_radians()
+                });
+                let i = 3 * (y * w + x);
+                base[i..i + 3].copy_from_slice(&m.base_color.map(gltf_out::srgb8));
+                rough[i..i + 3].copy_from_slice(&[0, gltf_out::unorm8(m.roughness), 0]);
+                aniso[i..i + 3].copy_from_slice(&[
+                    gltf_out::unorm8(0.5 * (turn.cos() + 1.0)),
+                    gltf_out::unorm8(0.5 * (turn.sin() + 1.0)),
+                    gltf_out::unorm8(m.anisotropy_strength),
+                ]);
+            }
+        }
+        Ok([base, rough, aniso])
+    }
+
+    /// The textures' description in the document: the maps' folder `dir`, which texture is
+    /// which (`[base colour, metallic-roughness, anisotropy]`, each where made), `with_height`
+    /// (strength refitted per height) and the height `nodes`.
+    fn description(
+        &self,
+        dir: &Path,
+        [t_base, t_rough, t_aniso]: [Option<usize>; 3],
+        with_height: bool,
+        nodes: &[gltf_material::HeightNode],
+    ) -> serde_json::Value {
+        let (w, h, psi_deg) = (self.maps.width, self.maps.rows, self.psi_deg);
+        serde_json::json!({
+            // the folder's name, not where it lies on this machine (no absolute paths in exports)
+            "maps": file_name(dir),
+            "size": [w, h],
+            "registration": "one texel per map pixel; image row 0 is the maps' top row (the mesh's v = 1, TEXCOORD_0 t = 0)",
+            "base_color": t_base.map(|_| "sRGB; per texel the least-squares base colour of the texel's glTF shape for its albedos (kd, ks maps; the global ones where a map has no value), as the global fit solves it"),
+            "metallic_roughness": t_rough.map(|_| "G = roughness refitted to the model at the texel's height (linear between the height nodes), B = metallic 0"),
+            "anisotropy": t_aniso.map(|_| format!(
+                "RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's fibre azimuth - fibre_azimuth_deg {psi_deg} (the TANGENT's direction), turned further by anisotropyRotation; B = strength{}",
+                if with_height { " refitted at the texel's height" } else { ", the global one" }
+            )),
+            "height_nodes": nodes.iter().map(|n| serde_json::json!({
+                "height": n.height,
+                "roughness": n.roughness,
+                "anisotropy_strength": n.anisotropy_strength,
+                "relative_rms_error": n.relative_rms_error,
+            })).collect::<Vec<_>>(),
+        })
+    }
 }
 
 type TexturesOut = (

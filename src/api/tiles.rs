@@ -147,13 +147,15 @@ pub fn run_tile(req: &TileRequest, inputs: &[PathBuf]) -> Result<TileOutcome> {
         ),
     };
     let part = maps::texel_stage(
-        &store,
-        cfg,
-        &cfg.maps,
-        &set,
-        rows,
-        hint,
-        schur.as_ref(),
+        &maps::TexelStageRequest {
+            store: &store,
+            cfg,
+            req: &cfg.maps,
+            set: &set,
+            rows,
+            variance_hint: hint,
+            schur: schur.as_ref(),
+        },
         &req.progress,
     )?;
     let global_free = g["statistics"]["free_parameters"].as_u64().unwrap_or(0) as usize;
@@ -208,8 +210,17 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     let h_max =
         crate::model::topology::max_height(set.shape_value(crate::fit::parameters::Param::Spacing));
     let parts: Vec<TexelPart> = tiles.into_iter().map(|t| t.1.part).collect();
-    let (maps, variance, warns) =
-        maps::finish_maps(parts, width, height, channels, &req, global_free, h_max)?;
+    let (maps, variance, warns) = maps::finish_maps(
+        parts,
+        &maps::Assembly {
+            width,
+            height,
+            channels,
+            req: &req,
+            global_free,
+            h_max,
+        },
+    )?;
     let method = g["maps"]["method"].clone();
     crate::export::maps_out::write(&mut outs, &map_files, &req.requested(), &maps)?;
     let mut desc = crate::export::maps_out::describe(&args.maps, &req.requested(), &maps);

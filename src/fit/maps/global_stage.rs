@@ -2,6 +2,7 @@
 //! the globals given the maps and the widening of their errors by the maps' uncertainty.
 
 use super::*;
+use nalgebra::{Cholesky, Dyn};
 
 /// Stage 1: the globals, from alternating fits on a seeded sample of texels.
 pub struct GlobalStage {
@@ -10,7 +11,7 @@ pub struct GlobalStage {
     /// Cost over the sampled texels: the plain global fit's, then after each round.
     pub costs: Vec<f64>,
     /// Residual variance per pixel value over the sampled texels, every unknown counted: what
-    /// the texel stage expects of the whole capture ([`texel_stage`]'s `variance_hint`).
+    /// the texel stage expects of the whole capture ([`TexelStageRequest::variance_hint`]).
     pub texel_variance: f64,
     pub warnings: Vec<String>,
     /// Levenberg–Marquardt iterations of the stage: the plain global fit's final run plus the
@@ -40,34 +41,172 @@ pub fn global_stage(
     }
     let free = free_of(req);
     // the texels of the global stage, and the plain global fit on their pixels
-    let chosen = store.sample_texels(req.global_texels, cfg.seed ^ 0x6d61_7073);
-    // texel by texel (the order the stage was measured with: reports/maps_accuracy.md)
-    let mut sub = store.samples_of(&[]);
-    sub.samples = chosen
-        .iter()
-        .flat_map(|&t| store.texel_samples(t))
-        .collect();
-    let sub_layout = Layout::new(&sub)?;
-    let first = crate::fit::fit(&sub, cfg, progress)?;
-    let mut set = fix_mapped(&first.set, req);
-    let mut values = sub_layout.start_values(&sub, &set);
-    let all: Vec<usize> = (0..sub_layout.texels.len()).collect();
-    let bar = progress.bar(req.rounds as u64, "maps: globals");
-    let mut costs = vec![first.statistics.chi_square];
-    let mut iterations = first.iterations;
-    let mut evaluations = first.evaluations;
+    let sampled = Sampled::of(store, cfg, req, free)?;
+    let first = crate::fit::fit(&sampled.sub, cfg, progress)?;
+    let run = sampled.alternate(&first, req, progress)?;
     let mut warnings = Vec::new();
-    let mut converged = false;
-    for round in 0..req.rounds {
-        // per texel given the globals
-        let model = rung_of(&set, cfg);
-        let problems = sub_layout.problems(&sub, &all, &values, free, req.smoothness);
+    if !run.converged {
+        warnings.push(format!(
+            "map recovery: the cost of the global stage was still falling after {} rounds ([maps] rounds); the globals may not be final",
+            req.rounds
+        ));
+    }
+    let (sub, layout, set, values) = (&sampled.sub, &sampled.layout, &run.set, &run.values);
+    let mut outcome = final_global(sub, cfg, set, values, &layout.members, free)?;
+    // the globals' errors with the sampled texels' maps free too
+    let (schur, inflation) = global_schur(sub, layout, cfg, set, values, free)?;
+    if let Some(w) = inflate_records(&mut outcome, set, &inflation) {
+        warnings.push(w);
+    }
+    // the stage's own work, not the last (fixed-maps) evaluation's
+    outcome.iterations = run.iterations;
+    let mut evaluations = first.evaluations;
+    evaluations += outcome.evaluations;
+    outcome.evaluations = evaluations;
+    let seconds = t0.elapsed().as_secs_f64();
+    outcome.elapsed_seconds = seconds;
+    let st = &outcome.statistics;
+    let unknowns =
+        per_texel_unknowns(free, sub.channels) * layout.texels.len() + st.free_parameters;
+    let texel_variance = st.chi_square / st.n.saturating_sub(unknowns).max(1) as f64;
+    outcome.warnings.push(format!(
+        "the global parameters come from {} sampled texels ([maps] global_texels) and their maps; their uncertainties include those texels' maps being free (joint covariance)",
+        layout.texels.len()
+    ));
+    Ok(GlobalStage {
+        outcome,
+        costs: run.costs,
+        texel_variance,
+        warnings,
+        iterations: run.iterations,
+        seconds,
+        texels: layout.texels.len(),
+        schur,
+    })
+}
+
+/// The texels the global stage samples: their pixels, grouped by texel, and how they are fitted.
+struct Sampled<'a> {
+    /// The pixels of the sampled texels, texel by texel.
+    sub: Samples,
+    layout: Layout,
+    /// Every sampled texel (their indices in `layout`).
+    all: Vec<usize>,
+    cfg: &'a FitConfig,
+    free: Free,
+}
+
+/// Where the alternation of the global stage ended.
+struct Alternated {
+    set: ParamSet,
+    values: Vec<TexelValues>,
+    /// The plain global fit's cost, then the cost after each round.
+    costs: Vec<f64>,
+    /// Levenberg–Marquardt iterations: the plain global fit's and every round's.
+    iterations: u64,
+    /// Whether the cost stopped falling within `[maps] rounds`.
+    converged: bool,
+}
+
+impl<'a> Sampled<'a> {
+    /// The `[maps] global_texels` texels of `store` seeded from `cfg`, with their pixels.
+    fn of(store: &CaptureStore, cfg: &'a FitConfig, req: &MapsConfig, free: Free) -> Result<Self> {
+        let chosen = store.sample_texels(req.global_texels, cfg.seed ^ 0x6d61_7073);
+        // texel by texel (the order the stage was measured with: reports/maps_accuracy.md)
+        let mut sub = store.samples_of(&[]);
+        sub.samples = chosen
+            .iter()
+            .flat_map(|&t| store.texel_samples(t))
+            .collect();
+        let layout = Layout::new(&sub)?;
+        let all: Vec<usize> = (0..layout.texels.len()).collect();
+        Ok(Self {
+            sub,
+            layout,
+            all,
+            cfg,
+            free,
+        })
+    }
+
+    /// Rounds from the plain global fit `first` (its mapped parameters fixed, the texels at
+    /// their starts) until the cost stops falling or `[maps] rounds` are spent.
+    fn alternate(
+        &self,
+        first: &FitOutcome,
+        req: &MapsConfig,
+        progress: &crate::progress::Progress,
+    ) -> Result<Alternated> {
+        let set = fix_mapped(&first.set, req);
+        let values = self.layout.start_values(&self.sub, &set);
+        let mut run = Alternated {
+            set,
+            values,
+            costs: vec![first.statistics.chi_square],
+            iterations: first.iterations,
+            converged: false,
+        };
+        let bar = progress.bar(req.rounds as u64, "maps: globals");
+        for round in 0..req.rounds {
+            let before = *run.costs.last().expect("non-empty");
+            let now = self.round(&mut run, req.smoothness)?;
+            run.costs.push(now);
+            bar.inc(1);
+            if round > 0 && before - now <= 1e-6 * before {
+                run.converged = true;
+                break;
+            }
+        }
+        bar.finish_and_clear();
+        Ok(run)
+    }
+
+    /// One round: (a) every texel given the globals, (b) the globals given the maps, kept if
+    /// the cost falls, then (without the smoothness prior, which couples the texels) both
+    /// together along the valleys where they trade off ([`Sampled::joint_refine`]). Returns
+    /// the cost after the round.
+    fn round(&self, run: &mut Alternated, smoothness: f64) -> Result<f64> {
+        let after_texels = self.texels_given(&run.set, &mut run.values, smoothness);
+        // the globals given the maps; kept if the cost falls
+        let (_, new_set, its) = self.global_given_maps(&run.set, &run.values)?;
+        run.iterations += its;
+        let (sub, members) = (&self.sub, &self.layout.members);
+        let total_new = if new_set != run.set {
+            total_cost(sub, self.cfg, &new_set, &run.values, members, self.free)?
+        } else {
+            f64::INFINITY
+        };
+        let mut now = if total_new < after_texels {
+            run.set = new_set;
+            total_new
+        } else {
+            after_texels
+        };
+        // then globals and maps together, along the valleys where they trade off (without the
+        // smoothness prior, which couples the texels)
+        if smoothness == 0.0 {
+            let (s2, v2, c2, taken) = self.joint_refine(&run.set, &run.values, now);
+            if taken > 0 {
+                (run.set, run.values, now) = (s2, v2, c2);
+                run.iterations += taken;
+            }
+        }
+        Ok(now)
+    }
+
+    /// (a) of a round: every texel fitted given the globals `set` from its `values`, which it
+    /// replaces; returns their summed cost.
+    fn texels_given(&self, set: &ParamSet, values: &mut Vec<TexelValues>, smoothness: f64) -> f64 {
+        let model = rung_of(set, self.cfg);
+        let problems = self
+            .layout
+            .problems(&self.sub, &self.all, values, self.free, smoothness);
         // tables decided before the texels are fitted, in their order (not the threads')
         let mut plan = TablePlan::default();
-        for (p, v) in problems.iter().zip(&values) {
+        for (p, v) in problems.iter().zip(values.iter()) {
             plan.meet(p.grid_key(v));
         }
-        let g = Globals::of(&set, model.as_ref(), sub.channels).with_tables(plan);
+        let g = Globals::of(set, model.as_ref(), self.sub.channels).with_tables(plan);
         let fitted: Vec<(TexelValues, f64)> = problems
             .par_iter()
             .zip(values.par_iter())
@@ -76,78 +215,39 @@ pub fn global_stage(
                 (r.0, r.1)
             })
             .collect();
-        values = fitted.iter().map(|x| x.0).collect();
-        let after_texels: f64 = fitted.iter().map(|x| x.1).sum();
-        // the globals given the maps; kept if the cost falls
-        let (_, new_set, its) =
-            global_given_maps(&sub, cfg, &set, &values, &sub_layout.members, &all, free)?;
-        iterations += its;
-        let total_new = if new_set != set {
-            total_cost(&sub, cfg, &new_set, &values, &sub_layout.members, free)?
-        } else {
-            f64::INFINITY
-        };
-        let before = *costs.last().expect("non-empty");
-        let mut now = if total_new < after_texels {
-            set = new_set;
-            total_new
-        } else {
-            after_texels
-        };
-        // then globals and maps together, along the valleys where they trade off (without the
-        // smoothness prior, which couples the texels)
-        if req.smoothness == 0.0 {
-            let (s2, v2, c2, taken) =
-                joint_refine(&sub, &sub_layout, cfg, &set, &values, free, now);
-            if taken > 0 {
-                (set, values, now) = (s2, v2, c2);
-                iterations += taken;
-            }
+        *values = fitted.iter().map(|x| x.0).collect();
+        fitted.iter().map(|x| x.1).sum()
+    }
+
+    /// (b) of a round: LM from the globals `set` on every sampled texel, maps fixed at
+    /// `values`: (cost, globals, LM iterations).
+    fn global_given_maps(
+        &self,
+        set: &ParamSet,
+        values: &[TexelValues],
+    ) -> Result<(f64, ParamSet, u64)> {
+        let (cfg, members) = (self.cfg, &self.layout.members);
+        let (subset, maps) = mapped_samples(&self.sub, values, members, &self.all, self.free);
+        let p = problem_on(cfg, set, &subset, maps);
+        if p.dim() == 0 {
+            return Ok((f64::NAN, set.clone(), 0));
         }
-        costs.push(now);
-        bar.inc(1);
-        if round > 0 && before - now <= 1e-6 * before {
-            converged = true;
-            break;
+        let bar = indicatif::ProgressBar::hidden();
+        let (theta, cost, iterations) = polish::run_lm(
+            &p,
+            set,
+            p.theta_of(set),
+            cfg.optimizer.max_iterations,
+            cfg.optimizer.tolerance,
+            &bar,
+        )?;
+        let mut new = p.set_at(&theta, set);
+        if p.separable {
+            let cols = p.columns(&new)?;
+            p.solve_albedos(&cols, &mut new);
         }
+        Ok((cost, new, iterations))
     }
-    bar.finish_and_clear();
-    if !converged {
-        warnings.push(format!(
-            "map recovery: the cost of the global stage was still falling after {} rounds ([maps] rounds); the globals may not be final",
-            req.rounds
-        ));
-    }
-    let mut outcome = final_global(&sub, cfg, &set, &values, &sub_layout.members, free)?;
-    // the globals' errors with the sampled texels' maps free too
-    let (schur, inflation) = global_schur(&sub, &sub_layout, cfg, &set, &values, free)?;
-    if let Some(w) = inflate_records(&mut outcome, &set, &inflation) {
-        warnings.push(w);
-    }
-    // the stage's own work, not the last (fixed-maps) evaluation's
-    outcome.iterations = iterations;
-    evaluations += outcome.evaluations;
-    outcome.evaluations = evaluations;
-    let seconds = t0.elapsed().as_secs_f64();
-    outcome.elapsed_seconds = seconds;
-    let st = &outcome.statistics;
-    let unknowns =
-        per_texel_unknowns(free, sub.channels) * sub_layout.texels.len() + st.free_parameters;
-    let texel_variance = st.chi_square / st.n.saturating_sub(unknowns).max(1) as f64;
-    outcome.warnings.push(format!(
-        "the global parameters come from {} sampled texels ([maps] global_texels) and their maps; their uncertainties include those texels' maps being free (joint covariance)",
-        sub_layout.texels.len()
-    ));
-    Ok(GlobalStage {
-        outcome,
-        costs,
-        texel_variance,
-        warnings,
-        iterations,
-        seconds,
-        texels: sub_layout.texels.len(),
-        schur,
-    })
 }
 
 /// [`mapped_samples`] of every texel.
@@ -211,39 +311,6 @@ pub(super) fn problem_on<'a>(
     )
     .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
     .with_sample_maps(Arc::new(maps))
-}
-
-/// Stage 2: LM from the current globals on the texels `order`, maps fixed: (cost, globals, LM
-/// iterations).
-pub(super) fn global_given_maps(
-    samples: &Samples,
-    cfg: &FitConfig,
-    set: &ParamSet,
-    values: &[TexelValues],
-    members: &[Vec<usize>],
-    order: &[usize],
-    free: Free,
-) -> Result<(f64, ParamSet, u64)> {
-    let (subset, maps) = mapped_samples(samples, values, members, order, free);
-    let p = problem_on(cfg, set, &subset, maps);
-    if p.dim() == 0 {
-        return Ok((f64::NAN, set.clone(), 0));
-    }
-    let bar = indicatif::ProgressBar::hidden();
-    let (theta, cost, iterations) = polish::run_lm(
-        &p,
-        set,
-        p.theta_of(set),
-        cfg.optimizer.max_iterations,
-        cfg.optimizer.tolerance,
-        &bar,
-    )?;
-    let mut new = p.set_at(&theta, set);
-    if p.separable {
-        let cols = p.columns(&new)?;
-        p.solve_albedos(&cols, &mut new);
-    }
-    Ok((cost, new, iterations))
 }
 
 /// Sum of squared weighted residuals over every pixel at `set` and the maps.
@@ -394,43 +461,33 @@ fn damped(m: &DMatrix<f64>, lambda: f64) -> DMatrix<f64> {
     d
 }
 
-/// Damped Gauss–Newton (Levenberg–Marquardt) iterations over the globals and every sampled
-/// texel's unknowns at once, from (`set`, `values`) at `cost`: the block-arrow normal equations
-/// solved through the globals' Schur complement, as bundle adjustment does (the globals' step
-/// from S dg = -J_g^T r + sum_t B_t C_t^-1 J_t^T r_t, then each texel's from its own block).
-/// Alternating fits crawl along the valleys where the globals and the maps trade off (light and
-/// view near the normal: kd, ks, the exponent and the heights); these steps go along them. The
-/// result is never worse than the start: (globals, maps, cost, iterations taken).
-pub(super) fn joint_refine(
-    sub: &Samples,
-    layout: &Layout,
-    cfg: &FitConfig,
-    set: &ParamSet,
-    values: &[TexelValues],
-    free: Free,
-    cost: f64,
-) -> (ParamSet, Vec<TexelValues>, f64, u64) {
-    let ch = sub.channels;
-    let all: Vec<usize> = (0..layout.texels.len()).collect();
-    let (mut set, mut values, mut cost) = (set.clone(), values.to_vec(), cost);
-    let mut lambda = 1e-3;
-    let mut taken = 0;
-    for _ in 0..JOINT_ITERATIONS {
-        let model = rung_of(&set, cfg);
-        let g = Globals::of(&set, model.as_ref(), ch);
-        let steps = GlobalSteps::new(&set, cfg);
-        let side = GlobalSide::new(&steps, ch, None);
-        let ng = steps.len();
-        let problems = layout.problems(sub, &all, &values, free, 0.0);
+/// The joint normal equations at the globals and the sampled texels' values: every texel's
+/// terms, and the globals' A and J_g^T r summed over them.
+struct JointSystem {
+    terms: Vec<JointTerms>,
+    a: DMatrix<f64>,
+    gg: DVector<f64>,
+}
+
+impl JointSystem {
+    /// The system of `problems` at their `values` and the globals `g` (`side`: the globals'
+    /// columns, `ng` of them).
+    fn at(
+        problems: &[Texel],
+        values: &[TexelValues],
+        g: &Globals,
+        side: &GlobalSide,
+        ng: usize,
+    ) -> Self {
         let terms: Vec<JointTerms> = problems
             .par_iter()
             .zip(values.par_iter())
             .map(|(p, v)| {
-                let jg = p.global_jacobian(&g, &side, v);
+                let jg = p.global_jacobian(g, side, v);
                 let n = jg.nrows();
-                let cols = p.columns(&g, v.height, v.psi);
-                let r = DVector::from_vec(p.residuals(&g, &cols, v)[..n].to_vec());
-                let (jcols, which) = p.jacobian(&g, v);
+                let cols = p.columns(g, v.height, v.psi);
+                let r = DVector::from_vec(p.residuals(g, &cols, v)[..n].to_vec());
+                let (jcols, which) = p.jacobian(g, v);
                 let jt = DMatrix::from_fn(n, jcols.len(), |i, k| jcols[k][i]);
                 JointTerms {
                     c: jt.transpose() * &jt,
@@ -448,77 +505,140 @@ pub(super) fn joint_refine(
             a += &t.a;
             gg += &t.gg;
         }
-        let mut improved = None;
-        for _ in 0..10 {
-            // the texels' blocks, damped and factored, then the globals' step
-            let factored: Option<Vec<_>> = terms
-                .iter()
-                .map(|t| damped(&t.c, lambda).cholesky())
-                .collect();
-            let Some(factored) = factored else {
+        Self { terms, a, gg }
+    }
+
+    /// The step damped by `lambda`: the globals' step dg from their Schur complement, and the
+    /// texels' damped blocks factored (for their own steps); none where a damped matrix is not
+    /// positive definite.
+    fn solve(&self, lambda: f64) -> Option<(DVector<f64>, Vec<Cholesky<f64, Dyn>>)> {
+        // the texels' blocks, damped and factored, then the globals' step
+        let factored: Vec<_> = self
+            .terms
+            .iter()
+            .map(|t| damped(&t.c, lambda).cholesky())
+            .collect::<Option<_>>()?;
+        let mut s = damped(&self.a, lambda);
+        let mut rhs = -&self.gg;
+        for (t, f) in self.terms.iter().zip(&factored) {
+            let cib = f.solve(&t.b.transpose());
+            s -= &t.b * &cib;
+            rhs += &t.b * f.solve(&t.gt);
+        }
+        let dg = (0.5 * (&s + s.transpose()))
+            .cholesky()
+            .map(|f| f.solve(&rhs))?;
+        Some((dg, factored))
+    }
+
+    /// Each texel's `values` moved by its step given the globals' step `dg`, within its bounds
+    /// at H_max `h_max`.
+    fn moved_values(
+        &self,
+        values: &[TexelValues],
+        dg: &DVector<f64>,
+        factored: &[Cholesky<f64, Dyn>],
+        h_max: f64,
+    ) -> Vec<TexelValues> {
+        self.terms
+            .iter()
+            .zip(factored)
+            .zip(values)
+            .map(|((t, f), v)| {
+                let dx = -f.solve(&(&t.gt + t.b.transpose() * dg));
+                moved_texel(v, &t.which, dx.as_slice(), h_max)
+            })
+            .collect()
+    }
+}
+
+impl Sampled<'_> {
+    /// Damped Gauss–Newton (Levenberg–Marquardt) iterations over the globals and every sampled
+    /// texel's unknowns at once, from (`set`, `values`) at `cost`: the block-arrow normal
+    /// equations solved through the globals' Schur complement, as bundle adjustment does (the
+    /// globals' step from S dg = -J_g^T r + sum_t B_t C_t^-1 J_t^T r_t, then each texel's from
+    /// its own block). Alternating fits crawl along the valleys where the globals and the maps
+    /// trade off (light and view near the normal: kd, ks, the exponent and the heights); these
+    /// steps go along them. The result is never worse than the start: (globals, maps, cost,
+    /// iterations taken).
+    fn joint_refine(
+        &self,
+        set: &ParamSet,
+        values: &[TexelValues],
+        cost: f64,
+    ) -> (ParamSet, Vec<TexelValues>, f64, u64) {
+        let ch = self.sub.channels;
+        let (mut set, mut values, mut cost) = (set.clone(), values.to_vec(), cost);
+        let mut lambda = 1e-3;
+        let mut taken = 0;
+        for _ in 0..JOINT_ITERATIONS {
+            let model = rung_of(&set, self.cfg);
+            let g = Globals::of(&set, model.as_ref(), ch);
+            let steps = GlobalSteps::new(&set, self.cfg);
+            let side = GlobalSide::new(&steps, ch, None);
+            let ng = steps.len();
+            let problems = self
+                .layout
+                .problems(&self.sub, &self.all, &values, self.free, 0.0);
+            let system = JointSystem::at(&problems, &values, &g, &side, ng);
+            let mut improved = None;
+            for _ in 0..10 {
+                let Some((dg, factored)) = system.solve(lambda) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let new_set = moved_globals(&set, dg.as_slice());
+                let h_max = max_height(new_set.shape_value(Param::Spacing));
+                let new_values = system.moved_values(&values, &dg, &factored, h_max);
+                let (new_values, new_cost) =
+                    self.better_of(&problems, &new_set, new_values, &values);
+                if new_cost < cost {
+                    improved = Some((new_set, new_values, new_cost));
+                    lambda = (lambda * 0.3).max(1e-9);
+                    break;
+                }
                 lambda *= 10.0;
-                continue;
-            };
-            let mut s = damped(&a, lambda);
-            let mut rhs = -&gg;
-            for (t, f) in terms.iter().zip(&factored) {
-                let cib = f.solve(&t.b.transpose());
-                s -= &t.b * &cib;
-                rhs += &t.b * f.solve(&t.gt);
             }
-            let Some(dg) = (0.5 * (&s + s.transpose()))
-                .cholesky()
-                .map(|f| f.solve(&rhs))
-            else {
-                lambda *= 10.0;
-                continue;
+            let Some((s2, v2, c2)) = improved else {
+                break;
             };
-            let new_set = moved_globals(&set, dg.as_slice());
-            let h_max = max_height(new_set.shape_value(Param::Spacing));
-            let new_values: Vec<TexelValues> = terms
-                .iter()
-                .zip(&factored)
-                .zip(&values)
-                .map(|((t, f), v)| {
-                    let dx = -f.solve(&(&t.gt + t.b.transpose() * &dg));
-                    moved_texel(v, &t.which, dx.as_slice(), h_max)
-                })
-                .collect();
-            // the cost is a sum over texels given the globals: each texel keeps its step or its
-            // old values, whichever fits better at the new globals (a texel whose cost is kinked
-            // in H, where occlusion changes, cannot spoil the step of all the others)
-            let new_model = rung_of(&new_set, cfg);
-            let new_g = Globals::of(&new_set, new_model.as_ref(), ch);
-            let each = texel_costs(&problems, &new_g, &[&new_values, &values]);
-            let mut new_cost = 0.0;
-            let new_values: Vec<TexelValues> = each
-                .iter()
-                .enumerate()
-                .map(|(t, c)| {
-                    new_cost += c[0].min(c[1]);
-                    if c[0] <= c[1] {
-                        new_values[t]
-                    } else {
-                        values[t]
-                    }
-                })
-                .collect();
-            if new_cost < cost {
-                improved = Some((new_set, new_values, new_cost));
-                lambda = (lambda * 0.3).max(1e-9);
+            let gain = (cost - c2) / cost.max(1e-300);
+            (set, values, cost) = (s2, v2, c2);
+            taken += 1;
+            if gain < 1e-9 {
                 break;
             }
-            lambda *= 10.0;
         }
-        let Some((s2, v2, c2)) = improved else {
-            break;
-        };
-        let gain = (cost - c2) / cost.max(1e-300);
-        (set, values, cost) = (s2, v2, c2);
-        taken += 1;
-        if gain < 1e-9 {
-            break;
-        }
+        (set, values, cost, taken)
     }
-    (set, values, cost, taken)
+
+    /// Per texel, its `stepped` values or its `old` ones, whichever fits better at the new
+    /// globals `new_set`, and the summed cost. The cost is a sum over texels given the globals,
+    /// so a texel whose cost is kinked in H, where occlusion changes, cannot spoil the step of
+    /// all the others.
+    fn better_of(
+        &self,
+        problems: &[Texel],
+        new_set: &ParamSet,
+        stepped: Vec<TexelValues>,
+        old: &[TexelValues],
+    ) -> (Vec<TexelValues>, f64) {
+        let new_model = rung_of(new_set, self.cfg);
+        let new_g = Globals::of(new_set, new_model.as_ref(), self.sub.channels);
+        let each = texel_costs(problems, &new_g, &[&stepped, old]);
+        let mut new_cost = 0.0;
+        let kept: Vec<TexelValues> = each
+            .iter()
+            .enumerate()
+            .map(|(t, c)| {
+                new_cost += c[0].min(c[1]);
+                if c[0] <= c[1] {
+                    stepped[t]
+                } else {
+                    old[t]
+                }
+            })
+            .collect();
+        (kept, new_cost)
+    }
 }

@@ -16,19 +16,28 @@ pub fn recover(
     let stage = global_stage(store, cfg, req, progress)?;
     let (w, h) = (store.width, store.height);
     let part = texel_stage(
-        store,
-        cfg,
-        req,
-        &stage.outcome.set,
-        (0, h as u32),
-        stage.texel_variance,
-        Some(&stage.schur),
+        &TexelStageRequest {
+            store,
+            cfg,
+            req,
+            set: &stage.outcome.set,
+            rows: (0, h as u32),
+            variance_hint: stage.texel_variance,
+            schur: Some(&stage.schur),
+        },
         progress,
     )?;
     let global_free = stage.outcome.statistics.free_parameters;
     let h_max = max_height(stage.outcome.set.shape_value(Param::Spacing));
-    let (maps, variance, mut warnings) =
-        finish_maps(vec![part], w, h, store.channels, req, global_free, h_max)?;
+    let assembly = Assembly {
+        width: w,
+        height: h,
+        channels: store.channels,
+        req,
+        global_free,
+        h_max,
+    };
+    let (maps, variance, mut warnings) = finish_maps(vec![part], &assembly)?;
     warnings.splice(0..0, stage.warnings.iter().cloned());
     let global = stage.outcome;
     Ok(MapOutcome {
@@ -311,32 +320,31 @@ pub fn texel_run(
     progress.line(&format!("maps: texel stage ({w}x{h} texels)"));
     let t0 = std::time::Instant::now();
     let part = texel_stage(
-        store,
-        cfg,
-        &cfg.maps,
-        globals,
-        (0, h as u32),
-        work.texel_variance,
-        Some(&work.schur),
+        &TexelStageRequest {
+            store,
+            cfg,
+            req: &cfg.maps,
+            set: globals,
+            rows: (0, h as u32),
+            variance_hint: work.texel_variance,
+            schur: Some(&work.schur),
+        },
         progress,
     )?;
     progress.line("maps: standard errors and flags");
     let h_max = max_height(globals.shape_value(Param::Spacing));
-    let (maps, variance, warnings) = finish_maps(
-        vec![part],
-        w,
-        h,
-        store.channels,
-        &cfg.maps,
+    let assembly = Assembly {
+        width: w,
+        height: h,
+        channels: store.channels,
+        req: &cfg.maps,
         global_free,
         h_max,
-    )?;
+    };
+    let (maps, variance, warnings) = finish_maps(vec![part], &assembly)?;
     let seconds = t0.elapsed().as_secs_f64();
     let summaries = summary(&maps, &cfg.maps, h_max);
-    let sweeps = match cfg.maps.smoothness > 0.0 {
-        true => 1 + PRIOR_SWEEPS,
-        false => 1,
-    };
+    let sweeps = sweeps_of(&cfg.maps);
     Ok(TexelRun {
         maps,
         variance,

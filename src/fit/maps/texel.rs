@@ -281,6 +281,51 @@ impl Texel {
         if u0.is_empty() {
             return (v0, c0, vec![]);
         }
+        let table = self.table(g, start);
+        let grid = self.grid(g, start, table.as_ref());
+        // the start competes with the grid minima for the polishes (so the fit is never worse
+        // than the start); each is searched to a coarse step, the best of them to the end
+        let mut candidates: Vec<(TexelValues, f64)> = grid
+            .local_minima()
+            .iter()
+            .map(|&k| (grid.points[k].1, grid.points[k].0))
+            .collect();
+        candidates.push((v0, c0));
+        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
+        candidates.truncate(TEXEL_STARTS);
+        let mut minima = self.searched(g, start, candidates, table.as_ref());
+        minima.sort_by(|a, b| a.1.total_cmp(&b.1));
+        let (best, best_cost) = minima.remove(0);
+        minima.retain(|m| !self.same(g, &m.0, &best));
+        // the grid's profiles (best over the other value at each grid height, and at each grid
+        // azimuth) count as other candidates too: a flat profile is an undetermined value even
+        // where it has no separate minimum
+        let profiles = minima.len();
+        grid.push_profiles(&mut minima);
+        // a blended table is the model only to within its blend: the profile's costs that could
+        // make the texel ambiguous are the model's own
+        if table.as_ref().is_some_and(|t| !t.exact_at_nodes()) {
+            self.exact_profiles(g, start, &mut minima[profiles..], best_cost);
+        }
+        (best, best_cost, minima)
+    }
+
+    /// Where the texel's grid and coarse searches read their columns: the lattice's blend for a
+    /// texel with directions of its own where there is a lattice; else the table shared by the
+    /// texels with its directions (none for a direction set met once).
+    fn table(&self, g: &Globals, start: &TexelValues) -> Option<Tabled> {
+        match g.lattice.as_ref().and_then(|l| l.blend(self, g)) {
+            Some(b) => Some(Tabled::Blend(b)),
+            None => g
+                .tables
+                .get(&self.grid_key(start), || ColumnTable::build(self, g, start))
+                .map(Tabled::Shared),
+        }
+    }
+
+    /// The grid of the fit: the cost and solved values at every grid point, read from `table`
+    /// where there is one, else from the model.
+    fn grid(&self, g: &Globals, start: &TexelValues, table: Option<&Tabled>) -> Grid {
         let (th, tp) = ColumnTable::dims(self.free);
         let (nh, np) = (
             if self.free.height { HEIGHT_GRID } else { 1 },
@@ -301,19 +346,10 @@ impl Texel {
             v.psi = psi;
             v
         };
-        // a texel with directions of its own reads the lattice where there is one; else the
-        // table shared by the texels with its directions (none for a direction set met once)
-        let table = match g.lattice.as_ref().and_then(|l| l.blend(self, g)) {
-            Some(b) => Some(Tabled::Blend(b)),
-            None => g
-                .tables
-                .get(&self.grid_key(start), || ColumnTable::build(self, g, start))
-                .map(Tabled::Shared),
-        };
-        let grid: Vec<(f64, TexelValues)> = (0..nh * np)
+        let points = (0..nh * np)
             .map(|k| {
                 let mut v = point(k);
-                let r = match &table {
+                let r = match table {
                     Some(t) => {
                         let (j, l) = node_of(k);
                         self.solve(g, &t.at(j, l), &mut v)
@@ -326,41 +362,30 @@ impl Texel {
                 (r.iter().map(|x| x * x).sum(), v)
             })
             .collect();
-        // grid points no 4-neighbour undercuts (the azimuth wraps)
-        let mut local: Vec<usize> = (0..nh * np)
-            .filter(|&k| {
-                let (i, j) = (k / np, k % np);
-                let mut nb = Vec::new();
-                if i > 0 {
-                    nb.push(k - np);
-                }
-                if i + 1 < nh {
-                    nb.push(k + np);
-                }
-                if np > 1 {
-                    nb.push(i * np + (j + 1) % np);
-                    nb.push(i * np + (j + np - 1) % np);
-                }
-                nb.iter().all(|&n| grid[n].0 >= grid[k].0)
-            })
-            .collect();
-        local.sort_by(|a, b| grid[*a].0.total_cmp(&grid[*b].0));
-        local.truncate(TEXEL_STARTS);
-        // the start competes with the grid minima for the polishes (so the fit is never worse
-        // than the start); each is searched to a coarse step, the best of them to the end
-        let mut candidates: Vec<(TexelValues, f64)> =
-            local.iter().map(|&k| (grid[k].1, grid[k].0)).collect();
-        candidates.push((v0, c0));
-        candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
-        candidates.truncate(TEXEL_STARTS);
-        let same = |w: &TexelValues, v: &TexelValues| {
-            (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
-                && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
-        };
+        Grid { nh, np, points }
+    }
+
+    /// Whether `w` and `v` are one minimum: H within 2% of H_max and psi within a degree (of
+    /// those mapped).
+    fn same(&self, g: &Globals, w: &TexelValues, v: &TexelValues) -> bool {
+        (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
+            && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
+    }
+
+    /// The distinct minima from `candidates`: each searched to a coarse step (on `table` where
+    /// there is one, then the model's own cost there), the best of those that could still win
+    /// searched on to the end and polished.
+    fn searched(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        candidates: Vec<(TexelValues, f64)>,
+        table: Option<&Tabled>,
+    ) -> Vec<(TexelValues, f64)> {
         let mut minima: Vec<(TexelValues, f64)> = Vec::new();
         for (v, c) in candidates {
             // on the table where there is one, then the model's own cost there
-            let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table.as_ref());
+            let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table);
             let (v, c) = match table {
                 Some(_) => {
                     let (c, v) = self.cost_at(g, start, &self.nonlinear(&v));
@@ -368,7 +393,7 @@ impl Texel {
                 }
                 None => (v, c),
             };
-            match minima.iter_mut().find(|m| same(&m.0, &v)) {
+            match minima.iter_mut().find(|m| self.same(g, &m.0, &v)) {
                 Some(m) if c < m.1 => *m = (v, c),
                 Some(_) => {}
                 None => minima.push((v, c)),
@@ -382,45 +407,26 @@ impl Texel {
             let (v, c) = self.compass(g, start, m.0, m.1, (COMPASS_COARSE, COMPASS_FINE), None);
             *m = self.gauss_newton(g, start, v, c);
         }
-        minima.sort_by(|a, b| a.1.total_cmp(&b.1));
-        let (best, best_cost) = minima.remove(0);
-        minima.retain(|m| !same(&m.0, &best));
-        // the grid's profiles (best over the other value at each grid height, and at each grid
-        // azimuth) count as other candidates too: a flat profile is an undetermined value even
-        // where it has no separate minimum
-        let profiles = minima.len();
-        for i in 0..nh {
-            if let Some(k) =
-                (0..np).min_by(|a, b| grid[i * np + a].0.total_cmp(&grid[i * np + b].0))
-            {
-                let (c, v) = grid[i * np + k];
-                minima.push((v, c));
-            }
+        minima
+    }
+
+    /// The model's own costs of the grid `profiles` (read from a blended table) that could make
+    /// the texel ambiguous: within what the texel stage keeps of other minima, in this texel's
+    /// own residual variance, of `best_cost`.
+    fn exact_profiles(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        profiles: &mut [(TexelValues, f64)],
+        best_cost: f64,
+    ) {
+        let residuals = self.obs.len() * g.channels;
+        let dof = residuals.saturating_sub(per_texel_unknowns(self.free, g.channels));
+        let margin = MINIMA_MARGIN * AMBIGUITY_DELTA * best_cost / dof.max(1) as f64;
+        for m in profiles.iter_mut().filter(|m| m.1 - best_cost <= margin) {
+            let (c, v) = self.cost_at(g, start, &self.nonlinear(&m.0));
+            *m = (v, c);
         }
-        for j in 0..np {
-            if let Some(i) =
-                (0..nh).min_by(|a, b| grid[a * np + j].0.total_cmp(&grid[b * np + j].0))
-            {
-                let (c, v) = grid[i * np + j];
-                minima.push((v, c));
-            }
-        }
-        // a blended table is the model only to within its blend: the profile's costs that could
-        // make the texel ambiguous (within what the texel stage keeps of other minima, in this
-        // texel's own residual variance) are the model's own
-        if table.as_ref().is_some_and(|t| !t.exact_at_nodes()) {
-            let residuals = self.obs.len() * g.channels;
-            let dof = residuals.saturating_sub(per_texel_unknowns(self.free, g.channels));
-            let margin = MINIMA_MARGIN * AMBIGUITY_DELTA * best_cost / dof.max(1) as f64;
-            for m in minima[profiles..]
-                .iter_mut()
-                .filter(|m| m.1 - best_cost <= margin)
-            {
-                let (c, v) = self.cost_at(g, start, &self.nonlinear(&m.0));
-                *m = (v, c);
-            }
-        }
-        (best, best_cost, minima)
     }
 
     /// A compass search on the nonlinear values from `v` (cost `c`), albedos re-solved at every
@@ -552,5 +558,63 @@ impl Texel {
             }
         }
         (s / n).sqrt()
+    }
+}
+
+/// A texel's grid: `nh` heights x `np` azimuths (1 of a value not mapped), row-major by
+/// height, with each point's cost and solved values.
+struct Grid {
+    nh: usize,
+    np: usize,
+    points: Vec<(f64, TexelValues)>,
+}
+
+impl Grid {
+    /// Grid points no 4-neighbour undercuts (the azimuth wraps), the best [`TEXEL_STARTS`] of
+    /// them, best first.
+    fn local_minima(&self) -> Vec<usize> {
+        let (nh, np, grid) = (self.nh, self.np, &self.points);
+        let mut local: Vec<usize> = (0..nh * np)
+            .filter(|&k| {
+                let (i, j) = (k / np, k % np);
+                let mut nb = Vec::new();
+                if i > 0 {
+                    nb.push(k - np);
+                }
+                if i + 1 < nh {
+                    nb.push(k + np);
+                }
+                if np > 1 {
+                    nb.push(i * np + (j + 1) % np);
+                    nb.push(i * np + (j + np - 1) % np);
+                }
+                nb.iter().all(|&n| grid[n].0 >= grid[k].0)
+            })
+            .collect();
+        local.sort_by(|a, b| grid[*a].0.total_cmp(&grid[*b].0));
+        local.truncate(TEXEL_STARTS);
+        local
+    }
+
+    /// The grid's profiles onto `minima` as (values, cost): the best point at each grid height,
+    /// then at each grid azimuth.
+    fn push_profiles(&self, minima: &mut Vec<(TexelValues, f64)>) {
+        let (nh, np, grid) = (self.nh, self.np, &self.points);
+        for i in 0..nh {
+            if let Some(k) =
+                (0..np).min_by(|a, b| grid[i * np + a].0.total_cmp(&grid[i * np + b].0))
+            {
+                let (c, v) = grid[i * np + k];
+                minima.push((v, c));
+            }
+        }
+        for j in 0..np {
+            if let Some(i) =
+                (0..nh).min_by(|a, b| grid[a * np + j].0.total_cmp(&grid[b * np + j].0))
+            {
+                let (c, v) = grid[i * np + j];
+                minima.push((v, c));
+            }
+        }
     }
 }

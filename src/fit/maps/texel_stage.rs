@@ -34,151 +34,278 @@ pub struct TexelPart {
     pub row_costs: Vec<(f64, usize)>,
 }
 
-/// Stage 2 for the texels in rows [`rows.0`, `rows.1`) given the globals `set`, texel by
-/// texel from the compact store (no texel's samples are made before it is fitted, none kept
-/// after).
-///
-/// `variance_hint` is the residual variance the global stage expects ([`GlobalStage`]): other
-/// minima costing more than [`MINIMA_MARGIN`] x [`AMBIGUITY_DELTA`] of it above the best are
-/// not kept (at camera resolution they are most of the memory); infinity keeps every one.
-/// `schur` is the global stage's Schur complement of the globals ([`GlobalStage::schur`]): with
-/// it each texel's errors include the globals' uncertainty (its cross block with the globals is
-/// made from its own pixels when its errors are, and dropped); without it they are conditional
-/// on the globals.
-#[allow(clippy::too_many_arguments)]
+/// What [`texel_stage`] fits: a band of rows of a capture given the globals, and what the
+/// global stage hands on to it.
+#[derive(Clone, Copy)]
+pub struct TexelStageRequest<'a> {
+    /// The capture, texel by texel (no texel's samples are made before it is fitted, none kept
+    /// after).
+    pub store: &'a CaptureStore,
+    pub cfg: &'a FitConfig,
+    /// The maps asked for.
+    pub req: &'a MapsConfig,
+    /// The globals.
+    pub set: &'a ParamSet,
+    /// Rows [first, last) of the capture.
+    pub rows: (u32, u32),
+    /// The residual variance the global stage expects ([`GlobalStage`]): other minima costing
+    /// more than [`MINIMA_MARGIN`] x [`AMBIGUITY_DELTA`] of it above the best are not kept (at
+    /// camera resolution they are most of the memory); infinity keeps every one.
+    pub variance_hint: f64,
+    /// The global stage's Schur complement of the globals ([`GlobalStage::schur`]): with it each
+    /// texel's errors include the globals' uncertainty (its cross block with the globals is made
+    /// from its own pixels when its errors are, and dropped); without it they are conditional
+    /// on the globals.
+    pub schur: Option<&'a GlobalSchur>,
+}
+
+/// Stage 2 for the texels in the rows of `r` given its globals, texel by texel from the compact
+/// store ([`TexelStageRequest`]).
 pub fn texel_stage(
-    store: &CaptureStore,
-    cfg: &FitConfig,
-    req: &MapsConfig,
-    set: &ParamSet,
-    rows: (u32, u32),
-    variance_hint: f64,
-    schur: Option<&GlobalSchur>,
+    r: &TexelStageRequest,
     progress: &crate::progress::Progress,
 ) -> Result<TexelPart> {
+    let TexelStageRequest {
+        store,
+        cfg,
+        req,
+        rows,
+        variance_hint,
+        schur,
+        ..
+    } = *r;
     let minima_below = (variance_hint.is_finite() && variance_hint > 0.0)
         .then_some(MINIMA_MARGIN * AMBIGUITY_DELTA * variance_hint);
     check_request(cfg, req)?;
     let free = free_of(req);
-    let set = fix_mapped(set, req);
+    let set = fix_mapped(r.set, req);
     let model = rung_of(&set, cfg);
     let g = Globals::of(&set, model.as_ref(), store.channels).with_lattice(store, free);
     // the globals free in the global stage are those its Schur complement names (a result read
     // back holds every global fixed)
     let steps = GlobalSteps::new(&freed(&set, schur), cfg);
     if let Some(s) = schur {
-        let n = s.names.len();
-        if s.names != steps.names || s.matrix.len() != n * n || s.reference.len() != n {
-            bail!(
-                "the globals' Schur complement (maps.method.global_schur) is over [{}], but these globals have [{}] to free: fit the texels with the globals and config it was made with",
-                s.names.join(", "),
-                steps.names.join(", ")
-            );
-        }
+        check_schur(s, &steps)?;
     }
-    let start_of = |t: usize| -> TexelValues {
-        let s = (0..store.images())
-            .find_map(|k| store.sample(t, k))
-            .expect("a stored texel has a sample");
-        start_value(&s, &set)
-    };
+    let sweeps = sweeps_of(req);
+    let band = Band::new(store, &set, free, rows, sweeps);
     // the texels' keys from the starts they are fitted from
-    let plan = plan_tables(store, &g, free, &start_of);
+    let plan = plan_tables(store, &g, free, &|t| band.start_of(t));
     let g = g.with_tables(plan);
     let side = GlobalSide::new(&steps, store.channels, schur);
-    let sweeps = if req.smoothness > 0.0 {
-        1 + PRIOR_SWEEPS
-    } else {
-        1
-    };
-    // a halo of one row per later sweep makes a part's texels what a single run gives
-    let halo = (sweeps - 1) as u32;
-    let lo = rows.0.saturating_sub(halo);
-    let hi = rows.1.saturating_add(halo);
-    let texels = store.texels();
-    // texels are row-major: those of rows [lo, hi) are the ids [t0, t1)
-    let t0 = texels.partition_point(|t| t.1 < lo);
-    let t1 = texels.partition_point(|t| t.1 < hi);
-    let start: Vec<TexelValues> = (t0..t1).into_par_iter().map(start_of).collect();
-    let neighbours = |t: usize| -> Vec<usize> {
-        let (x, y) = (texels[t].0 as i64, texels[t].1 as i64);
-        [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
-            .iter()
-            .filter_map(|(dx, dy)| store.texel_at(x + dx, y + dy))
-            .collect()
-    };
-    let problem = |t: usize, values: &[TexelValues], smoothness: f64| -> Texel {
-        let nbs: Vec<TexelValues> = neighbours(t)
-            .into_iter()
-            .map(|j| match j.checked_sub(t0) {
-                Some(k) if j < t1 => values[k],
-                _ => start_of(j),
-            })
-            .collect();
-        Texel::new(store.texel_samples(t), free, prior_of(&nbs, smoothness))
-    };
-    let mut values = start.clone();
-    let bar = progress.bar((sweeps * (t1 - t0)) as u64, "maps: texels");
-    let kept = |t: usize| (rows.0..rows.1).contains(&texels[t].1);
-    // per texel: best values, cost, other minima (pruned; last sweep, kept texels only)
-    let mut fits: Vec<(TexelValues, f64, Vec<[f64; 3]>)> = Vec::new();
-    for sweep in 0..sweeps {
-        let smoothness = if sweep == 0 { 0.0 } else { req.smoothness };
-        let last = sweep + 1 == sweeps;
-        fits = (t0..t1)
-            .into_par_iter()
-            .map(|t| {
-                let (v, cost, others) = problem(t, &values, smoothness).fit(&g, &start[t - t0]);
-                bar.inc(1);
-                let others = if last && kept(t) {
-                    prune_minima(&v, cost, &others, minima_below.unwrap_or(f64::INFINITY))
-                } else {
-                    vec![]
-                };
-                (v, cost, others)
-            })
-            .collect();
-        for (k, f) in fits.iter().enumerate() {
-            values[k] = f.0;
-        }
-    }
-    bar.finish_and_clear();
+    let mut swept = band.sweep(&g, req.smoothness, sweeps, minima_below, progress);
     let smoothness = req.smoothness * f64::from(u8::from(sweeps > 1));
-    let keep: Vec<usize> = (t0..t1).filter(|&t| kept(t)).collect();
-    // standard errors before scaling, relative residual, residual count
-    let details: Vec<(TexelValues, f64, usize)> = keep
-        .par_iter()
-        .map(|&t| {
-            let p = problem(t, &values, smoothness);
-            let v = &fits[t - t0].0;
-            (
-                p.std_errors(&g, v, Some(&side), 1.0),
-                p.relative_residual(&g, v),
-                p.obs.len() * store.channels,
-            )
-        })
-        .collect();
-    let n_rows = (rows.1 - rows.0) as usize;
-    let mut row_costs = vec![(0.0, 0usize); n_rows];
-    for (&t, d) in keep.iter().zip(&details) {
-        let r = &mut row_costs[(texels[t].1 - rows.0) as usize];
-        r.0 += fits[t - t0].1;
-        r.1 += d.2;
-    }
+    let keep: Vec<usize> = (band.t0..band.t1).filter(|&t| band.kept(t)).collect();
+    let details = band.details(&g, &side, &swept, &keep, smoothness);
+    let row_costs = band.row_costs(&keep, &swept, &details);
+    let (t0, texels) = (band.t0, band.texels);
     Ok(TexelPart {
         rows: [rows.0, rows.1],
         texels: keep.iter().map(|&t| texels[t]).collect(),
-        values: keep.iter().map(|&t| fits[t - t0].0).collect(),
+        values: keep.iter().map(|&t| swept.fits[t - t0].0).collect(),
         unscaled_std_errors: details.iter().map(|d| d.0).collect(),
         other_minima: keep
             .iter()
-            .map(|&t| std::mem::take(&mut fits[t - t0].2))
+            .map(|&t| std::mem::take(&mut swept.fits[t - t0].2))
             .collect(),
         residual: details.iter().map(|d| d.1).collect(),
         globals_in_errors: schur.is_some(),
         minima_below,
         row_costs,
     })
+}
+
+/// Sweeps of the texel stage for `req`: 1, or 1 + [`PRIOR_SWEEPS`] with the smoothness prior.
+pub(super) fn sweeps_of(req: &MapsConfig) -> usize {
+    if req.smoothness > 0.0 {
+        1 + PRIOR_SWEEPS
+    } else {
+        1
+    }
+}
+
+/// Refuse a Schur complement `s` that is not over the globals `steps` frees.
+fn check_schur(s: &GlobalSchur, steps: &GlobalSteps) -> Result<()> {
+    let n = s.names.len();
+    if s.names != steps.names || s.matrix.len() != n * n || s.reference.len() != n {
+        bail!(
+            "the globals' Schur complement (maps.method.global_schur) is over [{}], but these globals have [{}] to free: fit the texels with the globals and config it was made with",
+            s.names.join(", "),
+            steps.names.join(", ")
+        );
+    }
+    Ok(())
+}
+
+/// A texel's fit in the texel stage: best values, cost, other minima (pruned: [`prune_minima`]).
+type BandFit = (TexelValues, f64, Vec<[f64; 3]>);
+
+/// What the sweeps of a band leave: per texel of the band, the last sweep's values and fits.
+struct Swept {
+    values: Vec<TexelValues>,
+    fits: Vec<BandFit>,
+}
+
+/// The texels a part fits: those of its rows and, with the prior, a halo of one row per later
+/// sweep around them, so a part's texels are what a single run gives.
+struct Band<'a> {
+    store: &'a CaptureStore,
+    /// Every texel of the capture, row-major.
+    texels: &'a [(u32, u32)],
+    /// The globals with the mapped parameters fixed.
+    set: &'a ParamSet,
+    free: Free,
+    /// Rows [first, last) the part keeps.
+    rows: (u32, u32),
+    /// The texels fitted, rows and halo: ids [t0, t1).
+    t0: usize,
+    t1: usize,
+}
+
+impl<'a> Band<'a> {
+    fn new(
+        store: &'a CaptureStore,
+        set: &'a ParamSet,
+        free: Free,
+        rows: (u32, u32),
+        sweeps: usize,
+    ) -> Self {
+        // a halo of one row per later sweep makes a part's texels what a single run gives
+        let halo = (sweeps - 1) as u32;
+        let lo = rows.0.saturating_sub(halo);
+        let hi = rows.1.saturating_add(halo);
+        let texels = store.texels();
+        // texels are row-major: those of rows [lo, hi) are the ids [t0, t1)
+        let t0 = texels.partition_point(|t| t.1 < lo);
+        let t1 = texels.partition_point(|t| t.1 < hi);
+        Self {
+            store,
+            texels,
+            set,
+            free,
+            rows,
+            t0,
+            t1,
+        }
+    }
+
+    /// Texel `t`'s start, from any of its samples.
+    fn start_of(&self, t: usize) -> TexelValues {
+        let s = (0..self.store.images())
+            .find_map(|k| self.store.sample(t, k))
+            .expect("a stored texel has a sample");
+        start_value(&s, self.set)
+    }
+
+    /// Whether texel `t` lies in the part's own rows (not the halo).
+    fn kept(&self, t: usize) -> bool {
+        (self.rows.0..self.rows.1).contains(&self.texels[t].1)
+    }
+
+    /// Texel `t`'s problem with the prior of weight `smoothness` from its neighbours' `values`
+    /// (those of the band; their starts outside it).
+    fn problem(&self, t: usize, values: &[TexelValues], smoothness: f64) -> Texel {
+        let (x, y) = (self.texels[t].0 as i64, self.texels[t].1 as i64);
+        let neighbours: Vec<usize> = [(-1i64, 0i64), (1, 0), (0, -1), (0, 1)]
+            .iter()
+            .filter_map(|(dx, dy)| self.store.texel_at(x + dx, y + dy))
+            .collect();
+        let nbs: Vec<TexelValues> = neighbours
+            .into_iter()
+            .map(|j| match j.checked_sub(self.t0) {
+                Some(k) if j < self.t1 => values[k],
+                _ => self.start_of(j),
+            })
+            .collect();
+        Texel::new(
+            self.store.texel_samples(t),
+            self.free,
+            prior_of(&nbs, smoothness),
+        )
+    }
+
+    /// Every texel of the band fitted `sweeps` times from its start: the first sweep without
+    /// the prior, the later ones with it (Jacobi: the neighbours' values of the sweep before).
+    /// Other minima are kept in the last sweep for the part's own texels, those costing at most
+    /// `minima_below` above the best ([`prune_minima`]).
+    fn sweep(
+        &self,
+        g: &Globals,
+        smoothness: f64,
+        sweeps: usize,
+        minima_below: Option<f64>,
+        progress: &crate::progress::Progress,
+    ) -> Swept {
+        let (t0, t1) = (self.t0, self.t1);
+        let start: Vec<TexelValues> = (t0..t1).into_par_iter().map(|t| self.start_of(t)).collect();
+        let mut values = start.clone();
+        let bar = progress.bar((sweeps * (t1 - t0)) as u64, "maps: texels");
+        // per texel: best values, cost, other minima (pruned; last sweep, kept texels only)
+        let mut fits: Vec<BandFit> = Vec::new();
+        for sweep in 0..sweeps {
+            let smoothness = if sweep == 0 { 0.0 } else { smoothness };
+            let last = sweep + 1 == sweeps;
+            fits = (t0..t1)
+                .into_par_iter()
+                .map(|t| {
+                    let (v, cost, others) =
+                        self.problem(t, &values, smoothness).fit(g, &start[t - t0]);
+                    bar.inc(1);
+                    let others = if last && self.kept(t) {
+                        prune_minima(&v, cost, &others, minima_below.unwrap_or(f64::INFINITY))
+                    } else {
+                        vec![]
+                    };
+                    (v, cost, others)
+                })
+                .collect();
+            for (k, f) in fits.iter().enumerate() {
+                values[k] = f.0;
+            }
+        }
+        bar.finish_and_clear();
+        Swept { values, fits }
+    }
+
+    /// Per texel of `keep`: standard errors before scaling, relative residual, residual count,
+    /// at the values `swept` reached (the prior of weight `smoothness`).
+    fn details(
+        &self,
+        g: &Globals,
+        side: &GlobalSide,
+        swept: &Swept,
+        keep: &[usize],
+        smoothness: f64,
+    ) -> Vec<(TexelValues, f64, usize)> {
+        keep.par_iter()
+            .map(|&t| {
+                let p = self.problem(t, &swept.values, smoothness);
+                let v = &swept.fits[t - self.t0].0;
+                (
+                    p.std_errors(g, v, Some(side), 1.0),
+                    p.relative_residual(g, v),
+                    p.obs.len() * self.store.channels,
+                )
+            })
+            .collect()
+    }
+
+    /// Per row of the part: (sum of its texels' costs, their residual count), in texel order.
+    fn row_costs(
+        &self,
+        keep: &[usize],
+        swept: &Swept,
+        details: &[(TexelValues, f64, usize)],
+    ) -> Vec<(f64, usize)> {
+        let n_rows = (self.rows.1 - self.rows.0) as usize;
+        let mut row_costs = vec![(0.0, 0usize); n_rows];
+        for (&t, d) in keep.iter().zip(details) {
+            let r = &mut row_costs[(self.texels[t].1 - self.rows.0) as usize];
+            r.0 += swept.fits[t - self.t0].1;
+            r.1 += d.2;
+        }
+        row_costs
+    }
 }
 
 /// `set` with exactly the globals `schur` names free (unchanged without one).
@@ -231,23 +358,42 @@ pub(super) fn prune_minima(
     kept
 }
 
+/// The capture whose parts [`finish_maps`] assembles, and what its residual variance counts.
+#[derive(Clone, Copy)]
+pub struct Assembly<'a> {
+    /// Texels across the capture.
+    pub width: usize,
+    /// Rows of the capture: the parts must cover them exactly.
+    pub height: usize,
+    pub channels: usize,
+    /// The maps asked for.
+    pub req: &'a MapsConfig,
+    /// Globals the global stage fitted: unknowns of the residual variance besides the texels'.
+    pub global_free: usize,
+    /// H_max at the globals: a height error at or above half of it leaves the height
+    /// undetermined.
+    pub h_max: f64,
+}
+
 /// Assemble parts covering every row into the maps: the residual variance over all pixel values
-/// less every unknown (each texel's and `global_free` globals'), the standard errors scaled by
-/// it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
-pub fn finish_maps(
-    parts: Vec<TexelPart>,
-    width: usize,
-    height: usize,
-    channels: usize,
-    req: &MapsConfig,
-    global_free: usize,
-    h_max: f64,
-) -> Result<(TexelMaps, f64, Vec<String>)> {
-    let free = free_of(req);
+/// less every unknown (each texel's and the globals' `a.global_free`), the standard errors scaled
+/// by it and widened where another minimum is as good within [`AMBIGUITY_DELTA`] variances.
+pub fn finish_maps(parts: Vec<TexelPart>, a: &Assembly) -> Result<(TexelMaps, f64, Vec<String>)> {
+    let free = free_of(a.req);
     let mut parts = parts;
     parts.sort_by_key(|p| p.rows[0]);
+    check_cover(&parts, a.height)?;
+    let texels: usize = parts.iter().map(|p| p.texels.len()).sum();
+    let variance = residual_variance(&parts, texels, free, a)?;
+    let (maps, flags) = scaled_maps(parts, texels, variance, free, a);
+    let warnings = finish_warnings(&maps, &flags, variance, free, a.h_max);
+    Ok((maps, variance, warnings))
+}
+
+/// Refuse parts (sorted by their first row) that do not cover rows 0..`height` exactly.
+fn check_cover(parts: &[TexelPart], height: usize) -> Result<()> {
     let mut next = 0u32;
-    for p in &parts {
+    for p in parts {
         if p.rows[0] != next {
             bail!(
                 "the map parts do not cover rows {next}..{} exactly (a part starts at row {})",
@@ -260,60 +406,75 @@ pub fn finish_maps(
     if next as usize != height {
         bail!("the map parts end at row {next}, the capture has {height} rows");
     }
+    Ok(())
+}
+
+/// The residual variance over every pixel value of `parts` (holding `texels` texels), less
+/// every unknown; refused when the pixel values cannot determine them.
+fn residual_variance(parts: &[TexelPart], texels: usize, free: Free, a: &Assembly) -> Result<f64> {
     // sums in row order: the same bits however the rows were split
     let (mut cost, mut n) = (0.0, 0usize);
-    for p in &parts {
+    for p in parts {
         for &(c, k) in &p.row_costs {
             cost += c;
             n += k;
         }
     }
-    let texels: usize = parts.iter().map(|p| p.texels.len()).sum();
-    let params = per_texel_unknowns(free, channels) * texels + global_free;
+    let params = per_texel_unknowns(free, a.channels) * texels + a.global_free;
     if n <= params {
         bail!("--maps: {n} pixel values cannot determine {params} unknowns; use more images");
     }
-    let variance = cost / (n - params) as f64;
+    Ok(cost / (n - params) as f64)
+}
+
+/// What the assembled maps warn of.
+#[derive(Default)]
+struct Flags {
+    /// Some part's errors leave out the globals' uncertainty.
+    conditional: bool,
+    /// Some part kept fewer other minima than the ambiguity margin needs.
+    minima_cut: bool,
+    /// Texels with another minimum within the ambiguity margin.
+    ambiguous: usize,
+}
+
+/// The maps of `parts` (`texels` texels) with their standard errors scaled by the residual
+/// `variance` and widened by their other minima; each part moved into the maps and dropped, so
+/// the maps never exist twice.
+fn scaled_maps(
+    parts: Vec<TexelPart>,
+    texels: usize,
+    variance: f64,
+    free: Free,
+    a: &Assembly,
+) -> (TexelMaps, Flags) {
     let scale = variance.sqrt();
     let mut maps = TexelMaps {
-        width,
-        height,
+        width: a.width,
+        height: a.height,
         texels: Vec::with_capacity(texels),
         values: Vec::with_capacity(texels),
         std_errors: Vec::with_capacity(texels),
         residual: Vec::with_capacity(texels),
         ambiguous: Vec::with_capacity(texels),
-        channels,
+        channels: a.channels,
     };
-    let mut ambiguous = 0;
-    let mut minima_cut = false;
-    let conditional = parts.iter().any(|p| !p.globals_in_errors);
-    // each part moved into the maps and dropped, so the maps never exist twice
+    let mut flags = Flags {
+        conditional: parts.iter().any(|p| !p.globals_in_errors),
+        ..Flags::default()
+    };
     for mut p in parts {
-        minima_cut |= p
+        flags.minima_cut |= p
             .minima_below
             .is_some_and(|b| b < AMBIGUITY_DELTA * variance);
         for k in 0..p.texels.len() {
-            let u = &p.unscaled_std_errors[k];
-            let mut se = TexelValues {
-                height: u.height * scale,
-                psi: u.psi * scale,
-                kd: u.kd.map(|x| x * scale),
-                ks: u.ks.map(|x| x * scale),
-            };
-            let mut amb = false;
-            for &[dc, dh, dp] in &p.other_minima[k] {
-                if dc <= AMBIGUITY_DELTA * variance {
-                    amb = true;
-                    if free.height {
-                        se.height = se.height.max(dh);
-                    }
-                    if free.psi {
-                        se.psi = se.psi.max(dp);
-                    }
-                }
-            }
-            ambiguous += usize::from(amb);
+            let (se, amb) = widened(
+                &p.unscaled_std_errors[k],
+                &p.other_minima[k],
+                (scale, variance),
+                free,
+            );
+            flags.ambiguous += usize::from(amb);
             maps.ambiguous.push(amb);
             maps.std_errors.push(se);
         }
@@ -321,13 +482,57 @@ pub fn finish_maps(
         maps.values.append(&mut p.values);
         maps.residual.append(&mut p.residual);
     }
+    (maps, flags)
+}
+
+/// A texel's standard errors: `unscaled` times `scale` (the residual variance's square root),
+/// H and psi widened to the farthest of its other minima (as [`prune_minima`] keeps them)
+/// within [`AMBIGUITY_DELTA`] x `variance` of the best; and whether there was one.
+fn widened(
+    unscaled: &TexelValues,
+    others: &[[f64; 3]],
+    (scale, variance): (f64, f64),
+    free: Free,
+) -> (TexelValues, bool) {
+    let u = unscaled;
+    let mut se = TexelValues {
+        height: u.height * scale,
+        psi: u.psi * scale,
+        kd: u.kd.map(|x| x * scale),
+        ks: u.ks.map(|x| x * scale),
+    };
+    let mut amb = false;
+    for &[dc, dh, dp] in others {
+        if dc <= AMBIGUITY_DELTA * variance {
+            amb = true;
+            if free.height {
+                se.height = se.height.max(dh);
+            }
+            if free.psi {
+                se.psi = se.psi.max(dp);
+            }
+        }
+    }
+    (se, amb)
+}
+
+/// The warnings of the assembled `maps`: errors without the globals' uncertainty, other minima
+/// cut, values the images leave undetermined, ambiguous texels.
+fn finish_warnings(
+    maps: &TexelMaps,
+    flags: &Flags,
+    variance: f64,
+    free: Free,
+    h_max: f64,
+) -> Vec<String> {
+    let texels = maps.texels.len();
     let mut warnings = Vec::new();
-    if conditional {
+    if flags.conditional {
         warnings.push(
             "per-texel standard errors leave out the globals' uncertainty (the globals came without their Schur complement, maps.method.global_schur: a `--map-globals` result of an older fibrefit), so they are too small where the globals trade off with the maps: refit the globals with `--map-globals`".to_string(),
         );
     }
-    if minima_cut {
+    if flags.minima_cut {
         warnings.push(format!(
             "the residual variance over every pixel ({variance:.3e}) is far above what the global stage's texels gave: other minima beyond {MINIMA_MARGIN} x {AMBIGUITY_DELTA} of that were not kept, so some ambiguous texels may not be flagged; raise [maps] global_texels"
         ));
@@ -358,12 +563,13 @@ pub fn finish_maps(
             ));
         }
     }
+    let ambiguous = flags.ambiguous;
     if ambiguous > 0 {
         warnings.push(format!(
             "{ambiguous} of {texels} texels have another minimum within {AMBIGUITY_DELTA} residual variances of the best (a height or fibre azimuth fitting the images as well): their standard errors cover the distance between the minima"
         ));
     }
-    Ok((maps, variance, warnings))
+    warnings
 }
 
 /// The [`TablePlan`] of the whole capture, texel by texel in order (not of `rows` alone: a tile
