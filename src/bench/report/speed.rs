@@ -20,6 +20,7 @@ pub(crate) fn write_csv<T: serde::Serialize>(path: &Path, rows: &[T]) -> Result<
     f.commit()
 }
 
+/// The speed and accuracy report into `dir`: the CSVs, the two plots and the markdown.
 pub fn write(
     dir: &Path,
     forward: &[ForwardRow],
@@ -30,7 +31,16 @@ pub fn write(
     std::fs::create_dir_all(dir)?;
     write_csv(&dir.join("speed_accuracy_forward.csv"), forward)?;
     write_csv(&dir.join("speed_accuracy_fit.csv"), fit)?;
+    pareto_plot(dir, forward)?;
+    fit_plot(dir, fit)?;
+    let md = markdown(forward, fit, quick, seconds);
+    let mut f = AtomicFile::create(&dir.join("speed_accuracy.md"))?;
+    f.writer().write_all(md.as_bytes())?;
+    f.commit()
+}
 
+/// Error against cost per rung family on the climbing set (the one every knob matters for).
+fn pareto_plot(dir: &Path, forward: &[ForwardRow]) -> Result<()> {
     // Pareto plot: error vs time per rung family, on the climbing set (the one every knob matters for)
     let mut fams: BTreeMap<String, Vec<(f64, f64)>> = BTreeMap::new();
     for r in forward
@@ -71,7 +81,11 @@ pub fn write(
             log_y: true,
         },
     )?;
+    Ok(())
+}
 
+/// Fit time against the largest parameter error, one line per quadrature order.
+fn fit_plot(dir: &Path, fit: &[FitRow]) -> Result<()> {
     let mut by_n: BTreeMap<usize, Vec<(f64, f64)>> = BTreeMap::new();
     for r in fit {
         by_n.entry(r.quadrature_order)
@@ -97,7 +111,11 @@ pub fn write(
             log_y: true,
         },
     )?;
+    Ok(())
+}
 
+/// The report's text: the forward ladder's tables and the fit level's.
+fn markdown(forward: &[ForwardRow], fit: &[FitRow], quick: bool, seconds: f64) -> String {
     let mut md = String::new();
     md += "# Speed and accuracy\n\n";
     md += &format!(
@@ -140,7 +158,5 @@ pub fn write(
             r.param_rel_errors
         );
     }
-    let mut f = AtomicFile::create(&dir.join("speed_accuracy.md"))?;
-    f.writer().write_all(md.as_bytes())?;
-    f.commit()
+    md
 }
