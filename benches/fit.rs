@@ -30,7 +30,12 @@ relative = 0.01
 seed = 2
 "#;
     std::fs::write(dir.join("synth.toml"), synth).unwrap();
-    fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("data"), true).unwrap();
+    fibrefit::synth::run(
+        &dir.join("synth.toml"),
+        &dir.join("data"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
 }
 
 fn config(dir: &std::path::Path, bins: usize) -> FitConfig {

@@ -21,7 +21,12 @@ fn capture(dir: &std::path::Path) -> std::path::PathBuf {
     }
     s += "[noise]\nrelative = 0.01\nseed = 5\n";
     std::fs::write(dir.join("synth.toml"), s).unwrap();
-    fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &dir.join("synth.toml"),
+        &dir.join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     fibrefit::bench::maps::write_blind(&dir.join("d")).unwrap()
 }
 

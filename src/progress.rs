@@ -90,9 +90,8 @@ impl Progress {
     }
 }
 
-/// A bar of `len` steps labelled `what`, hidden when `quiet` or stderr is no terminal
-/// (old form of [`Progress::bar`]).
-pub fn bar(len: u64, what: &str, quiet: bool) -> ProgressBar {
+/// A bar of `len` steps labelled `what`, hidden when `quiet` or stderr is no terminal.
+fn bar(len: u64, what: &str, quiet: bool) -> ProgressBar {
     if !shown(quiet) || !std::io::stderr().is_terminal() {
         return ProgressBar::with_draw_target(Some(len), ProgressDrawTarget::hidden());
     }
@@ -104,11 +103,6 @@ pub fn bar(len: u64, what: &str, quiet: bool) -> ProgressBar {
     );
     pb.set_message(what.to_owned());
     pb
-}
-
-/// Old form of [`Progress::line`].
-pub fn line(quiet: bool, msg: &str) {
-    Progress::new(quiet).line(msg)
 }
 
 /// Seconds as `0.4 s`, `12 s`, `3 min 05 s`.

@@ -167,7 +167,12 @@ fn the_spread_is_recovered_from_noisy_data() {
          [noise]\nrelative = 0.01\nseed = 4\n",
     )
     .unwrap();
-    fibrefit::synth::run(&synth, &dir.path().join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &synth,
+        &dir.path().join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let data =
         fibrefit::load::load_data(&dir.path().join("d/gonio.csv"), &Default::default()).unwrap();
     let cfg: fibrefit::fit::config::FitConfig = toml::from_str(

@@ -31,7 +31,7 @@ seed = {seed}
     let p = dir.join(format!("s{seed}.toml"));
     std::fs::write(&p, cfg).unwrap();
     let out = dir.join(format!("d{seed}"));
-    fibrefit::synth::run(&p, &out, true).unwrap();
+    fibrefit::synth::run(&p, &out, &fibrefit::progress::Progress::quiet()).unwrap();
     out
 }
 

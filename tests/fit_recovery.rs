@@ -64,7 +64,7 @@ seed = {noise_seed}
     let path = dir.join("synth.toml");
     std::fs::write(&path, cfg).unwrap();
     let out = dir.join("data");
-    fibrefit::synth::run(&path, &out, true).unwrap();
+    fibrefit::synth::run(&path, &out, &fibrefit::progress::Progress::quiet()).unwrap();
     out
 }
 

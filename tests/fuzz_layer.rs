@@ -23,7 +23,12 @@ fn the_fuzz_layer_is_recovered_from_noisy_data() {
          [noise]\nrelative = 0.01\nseed = 5\n",
     )
     .unwrap();
-    fibrefit::synth::run(&synth, &dir.path().join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &synth,
+        &dir.path().join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let data =
         fibrefit::load::load_data(&dir.path().join("d/gonio.csv"), &Default::default()).unwrap();
     // starts away from the truth: a deep isotropic layer

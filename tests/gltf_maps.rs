@@ -52,7 +52,12 @@ fn a_maps_fit_exported_as_gltf_carries_its_maps_as_textures() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("synth.toml"), SYNTH).unwrap();
-    fibrefit::synth::run(&d.join("synth.toml"), &d.join("cap"), true).unwrap();
+    fibrefit::synth::run(
+        &d.join("synth.toml"),
+        &d.join("cap"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let blind = fibrefit::bench::maps::write_blind(&d.join("cap")).unwrap();
     // fewer rounds than tests/maps.rs: the textures are checked against the maps as fitted
     std::fs::write(d.join("fit.toml"), maps_fit(8)).unwrap();

@@ -42,7 +42,7 @@ seed = {noise_seed}
     let path = dir.join(format!("{name}.toml"));
     std::fs::write(&path, cfg).unwrap();
     let out = dir.join(name);
-    fibrefit::synth::run(&path, &out, true).unwrap();
+    fibrefit::synth::run(&path, &out, &fibrefit::progress::Progress::quiet()).unwrap();
     load_data(&out.join("gonio.csv"), &LoadOptions::default()).unwrap()
 }
 

@@ -21,7 +21,12 @@ fn capture(dir: &Path) -> std::path::PathBuf {
 /// The capture the synth config `synth` describes, without its maps.
 fn capture_of(dir: &Path, synth: &str) -> std::path::PathBuf {
     std::fs::write(dir.join("synth.toml"), synth).unwrap();
-    fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &dir.join("synth.toml"),
+        &dir.join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     fibrefit::bench::maps::write_blind(&dir.join("d")).unwrap()
 }
 
@@ -194,7 +199,7 @@ fn height_azimuth_and_albedo_maps_are_recovered_with_honest_errors() {
     fibrefit::synth::run(
         &dir.path().join("again.toml"),
         &dir.path().join("again"),
-        true,
+        &fibrefit::progress::Progress::quiet(),
     )
     .unwrap();
     let (mut chi, mut n) = (0.0, 0.0);
@@ -364,7 +369,12 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
     let d = dir.path();
     let small = SYNTH.replace("width = 24\nheight = 24", "width = 12\nheight = 12");
     std::fs::write(d.join("synth.toml"), small).unwrap();
-    fibrefit::synth::run(&d.join("synth.toml"), &d.join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &d.join("synth.toml"),
+        &d.join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let capture = d.join("d/capture.toml");
     let cfg = d.join("fit.toml");
     std::fs::write(&cfg, maps_fit(25).replace("kd = true\n", "")).unwrap();

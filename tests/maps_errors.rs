@@ -32,7 +32,12 @@ fn a_texel_seen_in_one_image_reports_an_infinite_error() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("synth.toml"), maps::synth_config(&EIGHT_IMAGES, 16)).unwrap();
-    fibrefit::synth::run(&d.join("synth.toml"), &d.join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &d.join("synth.toml"),
+        &d.join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     // texel (5, 7) keeps its pixel in the first image only: one pixel cannot give H and psi
     let (x, y) = (5usize, 7usize);
     for k in 1..EIGHT_IMAGES.len() {

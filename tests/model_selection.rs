@@ -17,7 +17,7 @@ fn synth_text(dir: &Path, name: &str, text: &str) -> PathBuf {
     let p = dir.join(format!("{name}.toml"));
     std::fs::write(&p, text).unwrap();
     let out = dir.join(name);
-    fibrefit::synth::run(&p, &out, true).unwrap();
+    fibrefit::synth::run(&p, &out, &fibrefit::progress::Progress::quiet()).unwrap();
     out
 }
 

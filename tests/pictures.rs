@@ -128,7 +128,12 @@ fn maps_are_drawn_as_pictures_with_colour_bars() {
     let dir = tempfile::tempdir().unwrap();
     let d = dir.path();
     std::fs::write(d.join("synth.toml"), common::SYNTH).unwrap();
-    fibrefit::synth::run(&d.join("synth.toml"), &d.join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &d.join("synth.toml"),
+        &d.join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let blind = fibrefit::bench::maps::write_blind(&d.join("d")).unwrap();
     std::fs::write(
         d.join("fit.toml"),

@@ -24,7 +24,12 @@ struct Accuracy {
 fn maps_of(dir: &Path, size: usize, size_mm: f64, rig: Rig) -> (Accuracy, Option<(usize, usize)>) {
     std::fs::create_dir_all(dir).unwrap();
     std::fs::write(dir.join("synth.toml"), synth_config_of(size, size_mm, rig)).unwrap();
-    fibrefit::synth::run(&dir.join("synth.toml"), &dir.join("d"), true).unwrap();
+    fibrefit::synth::run(
+        &dir.join("synth.toml"),
+        &dir.join("d"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let blind = fibrefit::bench::maps::write_blind(&dir.join("d")).unwrap();
     let store = CaptureStore::load(&blind, Default::default()).unwrap();
     let cfg: FitConfig = toml::from_str(FIT_MAPS).unwrap();

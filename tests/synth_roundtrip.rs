@@ -42,7 +42,12 @@ camera = { type = "orthographic", theta_deg = 20, phi_deg = 260 }
 fn synth(dir: &Path, format: &str) {
     let cfg = dir.join("synth.toml");
     std::fs::write(&cfg, CONFIG.replace("FORMAT", format)).unwrap();
-    fibrefit::synth::run(&cfg, &dir.join("out"), true).unwrap();
+    fibrefit::synth::run(
+        &cfg,
+        &dir.join("out"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
 }
 
 fn truth(dir: &Path) -> (ModelParams, Box<dyn model::ShadingModel>) {
@@ -144,8 +149,18 @@ fn noise_is_seeded_and_of_the_stated_size() {
     let cfg = dir.path().join("synth.toml");
     let text = CONFIG.replace("FORMAT", "exr") + "[noise]\nrelative = 0.05\nseed = 4\n";
     std::fs::write(&cfg, &text).unwrap();
-    fibrefit::synth::run(&cfg, &dir.path().join("a"), true).unwrap();
-    fibrefit::synth::run(&cfg, &dir.path().join("b"), true).unwrap();
+    fibrefit::synth::run(
+        &cfg,
+        &dir.path().join("a"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
+    fibrefit::synth::run(
+        &cfg,
+        &dir.path().join("b"),
+        &fibrefit::progress::Progress::quiet(),
+    )
+    .unwrap();
     let a = std::fs::read(dir.path().join("a/gonio.csv")).unwrap();
     assert_eq!(
         a,

@@ -35,8 +35,11 @@ pub struct ExportRequest {
 
 /// The exported files, in memory.
 pub struct ExportOutcome {
+    /// The rung of the result exported.
     pub model: ModelId,
+    /// The shader source, in the language asked for.
     pub shader: Option<String>,
+    /// The GLB preview's bytes and the glTF material fitted to the model.
     pub glb: Option<(Vec<u8>, FittedMaterial)>,
     /// The per-texel maps the GLB carries as textures (a `fit --maps` result).
     pub textures: Option<GlbTextures>,
@@ -47,7 +50,9 @@ pub struct ExportOutcome {
 pub struct GlbTextures {
     /// The maps directory the result names.
     pub directory: PathBuf,
+    /// Width of the textures, pixels (the maps' grid).
     pub width: usize,
+    /// Height of the textures, pixels.
     pub height: usize,
     /// The textures, in the document's order: "base colour", "metallic-roughness",
     /// "anisotropy".

@@ -26,7 +26,7 @@ use std::path::{Path, PathBuf};
 /// the config's (or the default: `auto` tries each rung without and with it). Without a config a measured-BRDF file
 /// (.bsdf, .binary) is fitted with the log metric; other data without a named metric (no
 /// `--metric`, no `metric` in the config) take the metric they ask for when loaded
-/// ([`crate::fit::config::metric_for_data`]). A named rung frees every shape parameter
+/// (`metric_for_data`). A named rung frees every shape parameter
 /// as `auto` does ([`FitConfig::free_unlisted_shapes`]: starts and bounds there). `--model`
 /// over a config written for another rung ignores the parameters that rung lacks, with a note
 /// ([`FitConfig::retarget`]).

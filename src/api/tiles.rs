@@ -17,6 +17,7 @@ pub const TILE_SCHEMA: &str = "fibrefit-map-tile/1";
 /// A tile file: one band of rows of the maps, before the residual variance scales its errors.
 #[derive(Debug, Serialize, Deserialize)]
 pub struct TileFile {
+    /// The schema name, `fibrefit-map-tile/1`.
     pub schema: String,
     /// [I, N]: tile I of N.
     pub tile: [u32; 2],
@@ -24,14 +25,19 @@ pub struct TileFile {
     pub globals_sha256: String,
     /// SHA-256 of the capture TOML.
     pub capture_sha256: String,
+    /// Width of the capture, pixels.
     pub width: usize,
+    /// Height of the capture, pixels.
     pub height: usize,
+    /// Channels: 1 (grey) or 3 (RGB).
     pub channels: usize,
-    /// The maps requested (the config's [maps]).
+    /// The maps requested (the config's `[maps]`).
     pub maps: Vec<String>,
+    /// Smoothness of the maps' prior (0: none).
     pub smoothness: f64,
     /// Free global parameters (they count in the residual variance's degrees of freedom).
     pub global_free: usize,
+    /// The band's fitted texels, before scaling by the residual variance.
     pub part: TexelPart,
 }
 
@@ -49,7 +55,9 @@ pub fn tile_rows(i: u32, n: u32, height: usize) -> (u32, u32) {
 pub struct TileRequest {
     /// The capture TOML.
     pub data: PathBuf,
+    /// The fit's configuration (its `[maps]` request included).
     pub config: FitConfig,
+    /// Loading options of the capture.
     pub load: LoadOptions,
     /// The result of `fit --map-globals` that the tiles share.
     pub globals: PathBuf,
@@ -57,14 +65,17 @@ pub struct TileRequest {
     pub dir: PathBuf,
     /// (I, N): tile I of N, I from 0.
     pub tile: (u32, u32),
+    /// Where progress and warnings go.
     pub progress: crate::progress::Progress,
 }
 
 /// A written tile.
 pub struct TileOutcome {
+    /// The tile file written.
     pub file: PathBuf,
     /// Rows [first, last) of the capture.
     pub rows: (u32, u32),
+    /// The tile as written.
     pub tile: TileFile,
 }
 
@@ -83,7 +94,9 @@ pub struct MergeRequest {
 
 /// Merged tiles.
 pub struct MergeOutcome {
+    /// Tiles merged.
     pub tiles: u32,
+    /// Warnings of the merge (flagged texels, widened errors).
     pub warnings: Vec<String>,
 }
 

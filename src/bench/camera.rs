@@ -272,7 +272,7 @@ pub fn run(
     std::fs::write(scratch.join("synth.toml"), synth_config(size, Rig::Distant))?;
     bar.set_message("camera: rendering the capture");
     let t = Instant::now();
-    crate::synth::run(&scratch.join("synth.toml"), &d, true)?;
+    crate::synth::run(&scratch.join("synth.toml"), &d, &crate::progress::Progress::quiet())?;
     let synth_seconds = t.elapsed().as_secs_f64();
     super::maps::write_blind(&d)?;
     std::fs::write(scratch.join("global.toml"), FIT_GLOBAL)?;
@@ -429,7 +429,7 @@ pub fn pinhole_rows(
     std::fs::write(dir.join("synth.toml"), synth_config(size, Rig::Near))?;
     bar.set_message("camera: rendering the pinhole capture");
     let t = Instant::now();
-    crate::synth::run(&dir.join("synth.toml"), &d, true)?;
+    crate::synth::run(&dir.join("synth.toml"), &d, &crate::progress::Progress::quiet())?;
     let synth_seconds = t.elapsed().as_secs_f64();
     let blind = super::maps::write_blind(&d)?;
     std::fs::write(dir.join("maps.toml"), FIT_MAPS)?;
@@ -631,7 +631,7 @@ pub fn memory_rows(
         m.join("synth.toml"),
         synth_config(MEMORY_SIZE, Rig::Distant),
     )?;
-    crate::synth::run(&m.join("synth.toml"), &m.join("d"), true)?;
+    crate::synth::run(&m.join("synth.toml"), &m.join("d"), &crate::progress::Progress::quiet())?;
     let capture = m.join("d/capture.toml");
     let there = Counted::of(&capture)?;
     let goal = MemoryGoal {

@@ -174,7 +174,7 @@ pub fn measure(case: &Case, scratch: &Path) -> Result<Measured> {
         dir.join("synth.toml"),
         synth_config(&case.images, case.size),
     )?;
-    crate::synth::run(&dir.join("synth.toml"), &dir.join("d"), true)?;
+    crate::synth::run(&dir.join("synth.toml"), &dir.join("d"), &crate::progress::Progress::quiet())?;
     let store = CaptureStore::load(&write_blind(&dir.join("d"))?, Default::default())?;
     let cfg: FitConfig = toml::from_str(FIT)?;
     let t = Instant::now();

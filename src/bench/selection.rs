@@ -92,7 +92,7 @@ pub fn verdict(truth: &str, candidates: &[Candidate]) -> Option<&'static str> {
 pub fn auto_fit(
     data: &Samples,
     slow: bool,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<(
     selection::SelectionOutcome,
     crate::fit::FitOutcome,
@@ -107,7 +107,7 @@ pub fn auto_fit(
     let s = selection::select_with(
         data,
         &cfg,
-        &crate::progress::Progress::new(quiet),
+        progress,
         &mut |_| {},
     )?;
     let selection_seconds = t.elapsed().as_secs_f64();
@@ -153,7 +153,7 @@ fn synthetic(dir: &Path, name: &str, text: &str, n: usize, seed: u64) -> Result<
         ),
     )?;
     let out = dir.join(format!("{name}_{n}"));
-    crate::synth::run(&p, &out, true)?;
+    crate::synth::run(&p, &out, &crate::progress::Progress::quiet())?;
     let mut s = load_data(&out.join("gonio.csv"), &LoadOptions::default())?;
     // as a measurement that gives no sigmas
     for x in &mut s.samples {
@@ -168,7 +168,7 @@ pub fn run(
     felt_sizes: &[usize],
     synth_sizes: &[usize],
     slow: bool,
-    quiet: bool,
+    progress: &crate::progress::Progress,
 ) -> Result<Vec<SelectionRow>> {
     let scratch = tempfile::tempdir()?;
     let mut sets: Vec<(String, String, Samples, Option<Samples>)> = Vec::new();
@@ -194,15 +194,14 @@ pub fn run(
             if slow_path && !slow {
                 continue;
             }
-            crate::progress::line(
-                quiet,
+            progress.line(
                 &format!(
                     "bench selection: {name}, {} samples{}",
                     data.samples.len(),
                     if slow_path { ", config knobs" } else { "" }
                 ),
             );
-            let (s, o, cfg, seconds, selection_seconds) = auto_fit(data, slow_path, quiet)?;
+            let (s, o, cfg, seconds, selection_seconds) = auto_fit(data, slow_path, progress)?;
             let (log, rel) = match check {
                 Some(c) => {
                     let (_, rel, log, _) = selection::heldout(&o, &cfg, c)?;

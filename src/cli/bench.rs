@@ -202,7 +202,7 @@ fn robustness(args: &BenchArgs, r: &RobustnessArgs) -> Result<()> {
         seeds: r.seeds,
     };
     let t = Instant::now();
-    let bar = crate::progress::bar(cases.len() as u64 * r.seeds, "robustness", args.quiet);
+    let bar = crate::progress::Progress::new(args.quiet).bar(cases.len() as u64 * r.seeds, "robustness");
     let scratch = tempfile::tempdir()?;
     let runs = study::run(&cases, size, scratch.path(), &bar)?;
     bar.finish_and_clear();
@@ -231,7 +231,7 @@ fn robustness(args: &BenchArgs, r: &RobustnessArgs) -> Result<()> {
 
 fn sampling(args: &BenchArgs) -> Result<()> {
     let t = Instant::now();
-    let bar = crate::progress::bar(1, "sampling", args.quiet);
+    let bar = crate::progress::Progress::new(args.quiet).bar(1, "sampling");
     let run = crate::bench::sampling::run(args.quick, &bar)?;
     bar.finish_and_clear();
     let command = if args.quick {
@@ -279,7 +279,7 @@ fn camera(args: &BenchArgs, size: usize) -> Result<()> {
         bail!("bench camera {size}: the capture needs at least 8 x 8 pixels");
     }
     let t = Instant::now();
-    let bar = crate::progress::bar(3, "camera", args.quiet);
+    let bar = crate::progress::Progress::new(args.quiet).bar(3, "camera");
     let scratch = tempfile::tempdir()?;
     let exe = std::env::current_exe()?;
     let run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;
@@ -307,11 +307,8 @@ fn camera(args: &BenchArgs, size: usize) -> Result<()> {
 
 fn shader(args: &BenchArgs) -> Result<()> {
     let t = Instant::now();
-    let bar = crate::progress::bar(
-        crate::bench::shader::RUNGS.len() as u64,
-        "shader",
-        args.quiet,
-    );
+    let bar = crate::progress::Progress::new(args.quiet).bar(crate::bench::shader::RUNGS.len() as u64,
+        "shader");
     let (pairs, min_pairs, repeats) = if args.quick {
         (4096, 256, 3)
     } else {
@@ -342,7 +339,7 @@ fn shader(args: &BenchArgs) -> Result<()> {
 
 fn maps(args: &BenchArgs) -> Result<()> {
     let t = Instant::now();
-    let bar = crate::progress::bar(crate::bench::maps::cases().len() as u64, "maps", args.quiet);
+    let bar = crate::progress::Progress::new(args.quiet).bar(crate::bench::maps::cases().len() as u64, "maps");
     let scratch = tempfile::tempdir()?;
     let (rows, pictures) = crate::bench::maps::run(scratch.path(), &bar)?;
     bar.finish_and_clear();
@@ -363,7 +360,13 @@ fn selection(args: &BenchArgs, sel: &SelectionArgs) -> Result<()> {
     let file = &sel.file;
     let t = Instant::now();
     let synth: Vec<usize> = sel.synth_sizes.iter().copied().filter(|&n| n > 0).collect();
-    let rows = crate::bench::selection::run(Some(file), &sel.sizes, &synth, sel.slow, args.quiet)?;
+    let rows = crate::bench::selection::run(
+        Some(file),
+        &sel.sizes,
+        &synth,
+        sel.slow,
+        &crate::progress::Progress::new(args.quiet),
+    )?;
     let list = |v: &[usize]| {
         v.iter()
             .map(|n| n.to_string())
@@ -396,7 +399,7 @@ fn selection(args: &BenchArgs, sel: &SelectionArgs) -> Result<()> {
 fn felt(args: &BenchArgs, f: &FeltArgs) -> Result<()> {
     let file = &f.file;
     let t = Instant::now();
-    let bar = crate::progress::bar(crate::bench::felt::fit_count(), "felt", args.quiet);
+    let bar = crate::progress::Progress::new(args.quiet).bar(crate::bench::felt::fit_count(), "felt");
     let run = crate::bench::felt::run(file, f.directions, &bar)?;
     bar.finish_and_clear();
     let command = format!(
@@ -427,11 +430,8 @@ fn speed(args: &BenchArgs) -> Result<()> {
     }
     let t = Instant::now();
     let fits = if args.quick { 4 } else { 9 };
-    let bar = crate::progress::bar(
-        (crate::bench::SETS.len() * 3 + fits) as u64,
-        "bench",
-        args.quiet,
-    );
+    let bar = crate::progress::Progress::new(args.quiet).bar((crate::bench::SETS.len() * 3 + fits) as u64,
+        "bench");
     let forward = crate::bench::forward(args.quick, &bar)?;
     let fit = crate::bench::fit_level(&args.root, args.quick, &bar)?;
     bar.finish_and_clear();

@@ -26,7 +26,12 @@ pub struct SynthArgs {
 }
 
 pub fn run(args: &SynthArgs) -> Result<()> {
-    let info = crate::synth::write_set(&args.config, &args.out, args.quiet, args.force)?;
+    let info = crate::synth::write_set(
+        &args.config,
+        &args.out,
+        &crate::progress::Progress::new(args.quiet),
+        args.force,
+    )?;
     if !args.quiet {
         eprintln!(
             "wrote {} ({} gonio rows, {} images) to {}",

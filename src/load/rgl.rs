@@ -29,6 +29,7 @@ use std::path::Path;
 pub struct MeasuredOptions {
     /// Direction pairs drawn (light and view uniform in solid angle).
     pub directions: usize,
+    /// Seed of the directions' draw.
     pub seed: u64,
     /// Largest theta of light and view, degrees (the light also stays within the file's
     /// measured incidence range).
@@ -40,7 +41,7 @@ pub struct MeasuredOptions {
 pub const MAX_DIRECTIONS: usize = 10_000_000;
 
 impl MeasuredOptions {
-    /// `--directions` in [1, [`MAX_DIRECTIONS`]] and `--max-theta` in (0, 90) degrees.
+    /// `--directions` in [1, `MAX_DIRECTIONS`] and `--max-theta` in (0, 90) degrees.
     pub fn check(&self) -> Result<()> {
         if !(1..=MAX_DIRECTIONS).contains(&self.directions) {
             bail!(

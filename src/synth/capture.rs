@@ -27,7 +27,7 @@ pub(super) struct CaptureRequest<'a> {
     pub params: &'a ModelParams,
     pub noise: &'a Noise,
     pub out_dir: &'a Path,
-    pub quiet: bool,
+    pub progress: &'a crate::progress::Progress,
 }
 
 /// Render the capture `req.spec` asks for into `req.out_dir`: the tangent map, every image,
@@ -38,7 +38,7 @@ pub(super) fn render_capture(req: &CaptureRequest) -> Result<Vec<String>> {
     let mut files = Vec::new();
     let tangent_file = write_tangent(req, &mut files)?;
     let scene = CaptureScene::new(req, format, &tangent_file)?;
-    let bar = crate::progress::bar((c.images.len() * c.height) as u64, "rendering", req.quiet);
+    let bar = req.progress.bar((c.images.len() * c.height) as u64, "rendering");
     let mut specs = Vec::new();
     for (k, img) in c.images.iter().enumerate() {
         if matches!(img.camera, Camera::ViewMap { .. }) {

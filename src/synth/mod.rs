@@ -275,15 +275,15 @@ fn write_file(path: &Path, bytes: &[u8]) -> Result<()> {
 /// set goes into its target). Files synth did not write are kept: a folder that is neither
 /// empty nor synth's own (no `synth_info.json`) is refused, and so is a new file of the set
 /// whose name a user's own file in a synth folder has; `force` writes over both.
-pub fn run(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
-    write_set(config_path, out_dir, quiet, false)
+pub fn run(config_path: &Path, out_dir: &Path, progress: &crate::progress::Progress) -> Result<SynthInfo> {
+    write_set(config_path, out_dir, progress, false)
 }
 
 /// [`run`], with `force`: write into a folder synth did not make, over files it did not write.
 pub fn write_set(
     config_path: &Path,
     out_dir: &Path,
-    quiet: bool,
+    progress: &crate::progress::Progress,
     force: bool,
 ) -> Result<SynthInfo> {
     use crate::export::atomic::Outputs;
@@ -318,7 +318,7 @@ pub fn write_set(
         );
     }
     let stage = crate::export::atomic::Staging::new(&dir, "synth")?;
-    let info = render_into(config_path, stage.path(), quiet)?;
+    let info = render_into(config_path, stage.path(), progress)?;
     let mut staged: Vec<String> = std::fs::read_dir(stage.path())
         .with_context(|| format!("{}: cannot read the staged set", stage.path().display()))?
         .flatten()
@@ -382,7 +382,7 @@ fn lock_folder(dir: &Path, shown: &Path) -> Result<std::fs::File> {
 
 /// Render the set `config_path` describes into `out_dir` (the staging folder): the topology
 /// map, the goniometric CSV and the capture it asks for, the truth and `synth_info.json`.
-fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthInfo> {
+fn render_into(config_path: &Path, out_dir: &Path, progress: &crate::progress::Progress) -> Result<SynthInfo> {
     let (cfg, id) = load_checked(config_path)?;
     std::fs::create_dir_all(out_dir)
         .with_context(|| format!("{}: cannot create output directory", out_dir.display()))?;
@@ -392,10 +392,8 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
     topology_into(&cfg, config_path, out_dir, &mut raw, &mut files)?;
     let (params, warnings) =
         ModelParams::from_raw(&raw, id).map_err(|e| anyhow!("{}: {e:#}", config_path.display()))?;
-    if !quiet {
-        for w in warnings {
-            eprintln!("warning: {}: {w}", config_path.display());
-        }
+    for w in warnings {
+        progress.warn(&format!("{}: {w}", config_path.display()));
     }
     let shading = model::build(id, &params)?;
     let noise = Noise {
@@ -418,7 +416,7 @@ fn render_into(config_path: &Path, out_dir: &Path, quiet: bool) -> Result<SynthI
             params: &params,
             noise: &noise,
             out_dir,
-            quiet,
+            progress,
         })?;
         n_images = c.images.len();
         files.extend(written);

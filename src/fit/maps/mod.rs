@@ -98,19 +98,24 @@ pub struct TexelValues {
 /// The recovered maps over the capture's pixel grid (texels without pixels are absent).
 #[derive(Clone, Debug)]
 pub struct TexelMaps {
+    /// Width of the capture's pixel grid.
     pub width: usize,
+    /// Height of the capture's pixel grid.
     pub height: usize,
     /// (x, y) of each texel with pixels, row-major order.
     pub texels: Vec<(u32, u32)>,
+    /// The recovered values of each texel (height in fibre radii, azimuth in degrees, albedos),
+    /// same layout as `texels`.
     pub values: Vec<TexelValues>,
     /// Standard errors, same layout (NaN or infinity where undetermined; 0 for values not
     /// mapped).
     pub std_errors: Vec<TexelValues>,
     /// RMS relative residual (model - data) / data over the texel's pixels and channels.
     pub residual: Vec<f64>,
-    /// Texels with another minimum within [`AMBIGUITY_DELTA`] residual variances of the best
+    /// Texels with another minimum within `AMBIGUITY_DELTA` residual variances of the best
     /// (their standard errors widened to cover it), same layout.
     pub ambiguous: Vec<bool>,
+    /// Channels of the albedo maps: 1 or 3.
     pub channels: usize,
 }
 
