@@ -32,7 +32,9 @@ mod substrate;
 mod tests;
 
 pub use arcs::{for_each_seen_and_lit, Arcs};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use diffuse::{diffuse_kernel, DiffuseArc, DiffuseArcs};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use gaps::{compact_gaps, FibreOcclusion, FibreOcclusions, GapSlots};
 pub use substrate::{substrate_fractions, SubstrateProblem};
 

@@ -36,7 +36,9 @@ mod temp;
 #[cfg(test)]
 mod tests;
 
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use outputs::{named, Named, OutputId, Outputs};
 pub use signals::{clear_interrupt_hook, install_signal_cleanup, set_interrupt_hook};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use single::{AtomicFile, Sink, WriteSeek};
 pub use temp::Staging;

@@ -16,9 +16,11 @@ mod hemispheres;
 mod slices;
 
 pub use common::{Brdf, Curve};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use hemispheres::{
     hemispheres, HemispherePlot, CELL_PX, MAP_THETAS, MAX_IMAGE_ROWS, NEAR_LIGHT_DEG,
 };
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use slices::{
     near_slice, slices, SlicePlot, BIN_DEG, NEAR_PLANE_COSINE, NEAR_THETA_DEG, SLICE_THETAS,
 };

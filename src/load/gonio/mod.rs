@@ -24,6 +24,7 @@ mod rows;
 mod tests;
 
 use header::{header_end, parse_header, Header, Layout};
+#[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use header::{Delimiter, Format};
 use rows::{parse_chunk, split_lines, Chunk};
 
