@@ -461,6 +461,13 @@ fn damped(m: &DMatrix<f64>, lambda: f64) -> DMatrix<f64> {
     d
 }
 
+/// A damped step of the joint iterations: the globals' step `dg` from their Schur complement,
+/// and the texels' damped blocks factored, for their own steps.
+struct JointStep {
+    dg: DVector<f64>,
+    factored: Vec<Cholesky<f64, Dyn>>,
+}
+
 /// The joint normal equations at the globals and the sampled texels' values: every texel's
 /// terms, and the globals' A and J_g^T r summed over them.
 struct JointSystem {
@@ -508,10 +515,8 @@ impl JointSystem {
         Self { terms, a, gg }
     }
 
-    /// The step damped by `lambda`: the globals' step dg from their Schur complement, and the
-    /// texels' damped blocks factored (for their own steps); none where a damped matrix is not
-    /// positive definite.
-    fn solve(&self, lambda: f64) -> Option<(DVector<f64>, Vec<Cholesky<f64, Dyn>>)> {
+    /// The step damped by `lambda`; none where a damped matrix is not positive definite.
+    fn solve(&self, lambda: f64) -> Option<JointStep> {
         // the texels' blocks, damped and factored, then the globals' step
         let factored: Vec<_> = self
             .terms
@@ -528,21 +533,21 @@ impl JointSystem {
         let dg = (0.5 * (&s + s.transpose()))
             .cholesky()
             .map(|f| f.solve(&rhs))?;
-        Some((dg, factored))
+        Some(JointStep { dg, factored })
     }
 
-    /// Each texel's `values` moved by its step given the globals' step `dg`, within its bounds
-    /// at H_max `h_max`.
+    /// Each texel's `values` moved by its own part of `step`, within its bounds at H_max
+    /// `h_max`.
     fn moved_values(
         &self,
         values: &[TexelValues],
-        dg: &DVector<f64>,
-        factored: &[Cholesky<f64, Dyn>],
+        step: &JointStep,
         h_max: f64,
     ) -> Vec<TexelValues> {
+        let dg = &step.dg;
         self.terms
             .iter()
-            .zip(factored)
+            .zip(&step.factored)
             .zip(values)
             .map(|((t, f), v)| {
                 let dx = -f.solve(&(&t.gt + t.b.transpose() * dg));
@@ -583,13 +588,13 @@ impl Sampled<'_> {
             let system = JointSystem::at(&problems, &values, &g, &side, ng);
             let mut improved = None;
             for _ in 0..10 {
-                let Some((dg, factored)) = system.solve(lambda) else {
+                let Some(step) = system.solve(lambda) else {
                     lambda *= 10.0;
                     continue;
                 };
-                let new_set = moved_globals(&set, dg.as_slice());
+                let new_set = moved_globals(&set, step.dg.as_slice());
                 let h_max = max_height(new_set.shape_value(Param::Spacing));
-                let new_values = system.moved_values(&values, &dg, &factored, h_max);
+                let new_values = system.moved_values(&values, &step, h_max);
                 let (new_values, new_cost) =
                     self.better_of(&problems, &new_set, new_values, &values);
                 if new_cost < cost {
