@@ -135,26 +135,6 @@ impl std::fmt::Display for UsageError {
 
 impl std::error::Error for UsageError {}
 
-#[cfg(test)]
-mod tests {
-    #[test]
-    fn clap_definition_is_consistent() {
-        super::command().debug_assert();
-    }
-
-    #[test]
-    fn fit_help_lists_every_rung_with_its_description() {
-        let help = super::command()
-            .find_subcommand_mut("fit")
-            .expect("fit")
-            .render_long_help()
-            .to_string();
-        for id in crate::model::ModelId::ALL {
-            assert!(help.contains(id.rung().description), "{id}: {help}");
-        }
-    }
-}
-
 /// The command line's `main`: signal cleanup installed, the command run, its exit code.
 pub fn main() -> std::process::ExitCode {
     use std::process::ExitCode;
@@ -186,6 +166,26 @@ pub fn main() -> std::process::ExitCode {
                 let _ = writeln!(std::io::stderr(), "error: {e:#}");
             }
             ExitCode::from(2)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    fn clap_definition_is_consistent() {
+        super::command().debug_assert();
+    }
+
+    #[test]
+    fn fit_help_lists_every_rung_with_its_description() {
+        let help = super::command()
+            .find_subcommand_mut("fit")
+            .expect("fit")
+            .render_long_help()
+            .to_string();
+        for id in crate::model::ModelId::ALL {
+            assert!(help.contains(id.rung().description), "{id}: {help}");
         }
     }
 }
