@@ -26,3 +26,4 @@ pub use crate::load::LoadOptions;
 pub use crate::model::frame::Vec3;
 pub use crate::model::ModelId;
 pub use crate::progress::Progress;
+pub use fit::{FitOptions, LoadFlags};
