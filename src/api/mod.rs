@@ -2,6 +2,7 @@
 //! other front end (the Python package) call these; they hold the orchestration of the stages
 //! (load -> model -> fit -> export) and no argument parsing or printing of results.
 
+pub mod capture;
 pub mod data;
 pub mod eval;
 pub mod export;
@@ -26,4 +27,5 @@ pub use crate::load::LoadOptions;
 pub use crate::model::frame::Vec3;
 pub use crate::model::ModelId;
 pub use crate::progress::Progress;
+pub use capture::{ImageScene, SceneCamera, SceneLight};
 pub use fit::{FitOptions, LoadFlags};
