@@ -16,6 +16,7 @@ pub use crate::export::atomic::Outputs;
 pub use crate::export::result_json::ResultFile;
 pub use crate::fit::config::{FitConfig, Metric, ModelChoice};
 pub use crate::fit::maps::TexelMaps;
+pub use crate::fit::score::text as score_text;
 pub use crate::fit::selection::{Candidate, SelectionOutcome};
 pub use crate::fit::{FitOutcome, ParamRecord};
 pub use crate::load::capture::Subsample;
