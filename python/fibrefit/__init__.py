@@ -2,20 +2,37 @@
 
 The model, the fitter and the loaders are fibrefit's Rust library (the same code as the
 ``fibrefit`` command line); this package converts numpy arrays and Python values to and from it.
+Each function is a command of the command line, its keyword arguments the command's flags:
 
-- ``load(result_json, maps=None) -> Material``: a fitted material. ``Material.eval(l, v, uv)``
-  gives the BRDF (1/sr) as an (N, C) array, ``Material.sample(v, u, uv)`` importance-samples light
-  directions ``(l, weight, pdf)``, ``Material.pdf(v, l, uv)`` their density (1/sr).
-- ``fit(data, config=None, model=None, **options) -> Result``: a fit, as ``fibrefit fit``.
-- ``load_data(path, **options) -> dict``: a measurement's samples as numpy arrays.
+- ``load(result_json, maps=None, capture=None) -> Material``: a fitted material.
+  ``Material.eval(l, v, uv)`` gives the BRDF (1/sr) as an (N, C) array, ``Material.sample(v, u,
+  uv)`` importance-samples light directions ``(l, weight, pdf)``, ``Material.pdf(v, l, uv)``
+  their density (1/sr).
+- ``fit(data, config=None, model=None, *, metric, fuzz, maps, progress, <loading flags>) ->
+  Result``: a fit, as ``fibrefit fit``.
+- ``score(result_json, data, *, <loading flags>) -> Score``: a result on other data, as
+  ``fibrefit score``.
+- ``eval(params, queries, model=None) -> (brdf, intensity)``: a parameter file's BRDF at a
+  query CSV's directions, as ``fibrefit eval``.
+- ``export(result_json, shader=None, gltf=False, object="swatch", check=False, model=None) ->
+  Exported``: shader source and a GLB preview, in memory, as ``fibrefit export``.
+- ``load_data(path, *, <loading flags>) -> dict``: a measurement's samples as numpy arrays.
 - ``fibrefit.mitsuba``: a Mitsuba 3 BSDF plugin backed by ``Material`` and the Mitsuba scene of a
   capture image.
+
+The loading flags (keyword-only, as the command line's flags of the same names; ``None`` the
+command line's default): ``stride`` and ``fraction`` (captures: every stride-th pixel, a seeded
+fraction of them; default a fit config's, else 1), ``subsample_seed`` (0), ``directions``
+(measured-BRDF files: direction pairs drawn, 3000), ``direction_seed`` (0), ``max_theta``
+(degrees, 78), ``skip_bad_rows``, ``small_angles_ok`` (goniometric CSVs) and ``columns`` (a dict
+of our column names to the file's, as ``--columns``; it extends a fit config's ``[columns]``).
 
 Frames and units: directions are unit vectors in the swatch frame (z the macro normal, x the
 swatch's x axis, as the command line's angles); ``l`` points towards the light and ``v``
 towards the viewer, both away from the surface. Texture coordinates ``uv`` in [0, 1]^2 span a
 result's per-texel maps, v up the image. Every error is a ``FibrefitError`` (a ``ValueError``)
-with the message the command line prints.
+with the message the command line prints (a keyword the function does not have is Python's
+``TypeError``).
 """
 
 from __future__ import annotations
@@ -23,6 +40,7 @@ from __future__ import annotations
 import json as _json
 import operator as _operator
 import os as _os
+import re as _re
 from dataclasses import dataclass as _dataclass, field as _field
 from typing import Any, Dict, List, Optional, Tuple, Union
 
@@ -32,13 +50,18 @@ from . import _native
 from ._native import FibrefitError
 
 __all__ = [
+    "Exported",
     "FibrefitError",
     "Material",
     "Parameter",
     "Result",
+    "Score",
+    "eval",
+    "export",
     "fit",
     "load",
     "load_data",
+    "score",
     "__version__",
 ]
 
@@ -172,41 +195,60 @@ def load(result_json: PathLike, maps: Optional[PathLike] = None, capture: Option
     )
 
 
-_LOAD_OPTIONS = (
-    "stride",
-    "fraction",
-    "subsample_seed",
-    "directions",
-    "direction_seed",
-    "max_theta",
-    "skip_bad_rows",
-    "small_angles_ok",
-    "columns",
-)
+def _native_call(f: Any, *args: Any, **kwargs: Any) -> Any:
+    """A call of the native layer; an argument of the wrong type or range (the TypeError or
+    OverflowError of the conversion, naming the argument) is a FibrefitError, as every other
+    bad input."""
+    try:
+        return f(*args, **kwargs)
+    except (TypeError, OverflowError) as e:
+        # the conversion names the argument in a note: "while processing 'stride'"
+        names = [m.group(1) for n in getattr(e, "__notes__", []) for m in [_re.search(r"processing '(\w+)'", n)] if m]
+        if names and names[0] in kwargs:
+            raise FibrefitError(f"{names[0]} = {kwargs[names[0]]!r}: {e}") from None
+        raise FibrefitError(f"{', '.join(names) + ': ' if names else ''}{e}") from None
 
 
-def _load_options(options: Dict[str, Any]) -> Dict[str, Any]:
-    unknown = sorted(set(options) - set(_LOAD_OPTIONS))
-    if unknown:
-        raise FibrefitError(
-            f"unknown option(s) {', '.join(unknown)}; expected one of: {', '.join(_LOAD_OPTIONS)}"
-        )
-    return dict(options)
+def _path(p: Optional[PathLike]) -> Optional[str]:
+    return None if p is None else _os.fspath(p)
 
 
-def load_data(path: PathLike, **options: Any) -> Dict[str, Any]:
+def load_data(
+    path: PathLike,
+    *,
+    stride: Optional[int] = None,
+    fraction: Optional[float] = None,
+    subsample_seed: Optional[int] = None,
+    directions: Optional[int] = None,
+    direction_seed: Optional[int] = None,
+    max_theta: Optional[float] = None,
+    skip_bad_rows: bool = False,
+    small_angles_ok: bool = False,
+    columns: Optional[Dict[str, str]] = None,
+) -> Dict[str, Any]:
     """The samples of a goniometric CSV, capture TOML or measured-BRDF file as numpy arrays.
 
     Keys: ``l``, ``v`` ((N, 3) unit vectors), ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
     (degrees), ``value`` ((N, C) BRDF, 1/sr), ``sigma`` ((N, C) or None), ``weight``,
     ``fibre_azimuth_deg`` (NaN where the file gives none), ``origin`` (CSV line, or
     (image, x, y) per pixel), ``channels``, ``kind``, ``source``, ``image_size``.
-    Options: ``stride``, ``fraction``, ``subsample_seed`` (captures), ``directions``,
-    ``direction_seed``, ``max_theta`` (measured files), ``skip_bad_rows``, ``small_angles_ok``,
-    ``columns`` (CSV: a dict of our column names to the file's, as ``--columns``), as the
-    command line's flags.
+    The loading flags as the command line's (see the module docs): ``stride``, ``fraction``,
+    ``subsample_seed`` (captures), ``directions``, ``direction_seed``, ``max_theta`` (measured
+    files), ``skip_bad_rows``, ``small_angles_ok``, ``columns`` (goniometric CSVs).
     """
-    return _native.load_data(_os.fspath(path), _load_options(options))
+    return _native_call(
+        _native.load_data,
+        _os.fspath(path),
+        stride=stride,
+        fraction=fraction,
+        subsample_seed=subsample_seed,
+        directions=directions,
+        direction_seed=direction_seed,
+        max_theta=max_theta,
+        skip_bad_rows=skip_bad_rows,
+        small_angles_ok=small_angles_ok,
+        columns=columns,
+    )
 
 
 @_dataclass
@@ -307,7 +349,15 @@ def fit(
     fuzz: Optional[bool] = None,
     maps: Optional[PathLike] = None,
     progress: bool = False,
-    **options: Any,
+    stride: Optional[int] = None,
+    fraction: Optional[float] = None,
+    subsample_seed: Optional[int] = None,
+    directions: Optional[int] = None,
+    direction_seed: Optional[int] = None,
+    max_theta: Optional[float] = None,
+    skip_bad_rows: bool = False,
+    small_angles_ok: bool = False,
+    columns: Optional[Dict[str, str]] = None,
 ) -> Result:
     """Fit ``data`` (goniometric CSV, capture TOML, RGL ``.bsdf`` or MERL ``.binary``), as
     ``fibrefit fit`` does.
@@ -317,18 +367,154 @@ def fit(
     ``"cosine"``; ``fuzz``: ``True`` adds the fuzz layer (to the rung, or to every candidate of
     ``"auto"``), ``False`` leaves it out (``--no-fuzz``), ``None`` the config's or the default
     (``"auto"`` tries each rung without and with it); ``maps``: a directory for per-texel maps
-    (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr.
-    Further keyword options are loading options (see :func:`load_data`).
+    (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr. The
+    loading flags as :func:`load_data`'s; ``stride``, ``fraction`` and ``columns`` merged with
+    the config's as the command line merges them (the library does it, once for both).
     """
     return Result(
-        _native.fit(
+        _native_call(
+            _native.fit,
             _os.fspath(data),
-            None if config is None else _os.fspath(config),
+            _path(config),
             model,
-            metric,
-            fuzz,
-            None if maps is None else _os.fspath(maps),
-            progress,
-            _load_options(options),
+            metric=metric,
+            fuzz=fuzz,
+            maps=_path(maps),
+            progress=progress,
+            stride=stride,
+            fraction=fraction,
+            subsample_seed=subsample_seed,
+            directions=directions,
+            direction_seed=direction_seed,
+            max_theta=max_theta,
+            skip_bad_rows=skip_bad_rows,
+            small_angles_ok=small_angles_ok,
+            columns=columns,
         )
     )
+
+
+class Score:
+    """A result scored on data (:func:`score`): ``result`` is the score as ``fibrefit score
+    --json`` prints it (a dict: ``model``, ``samples``, ``statistics``, ``channels``,
+    ``residual_bins``, ``verdict``, ``noise``), ``report()`` the text ``fibrefit score``
+    prints."""
+
+    def __init__(self, json_text: str, text: str):
+        self.result: Dict[str, Any] = _json.loads(json_text)
+        self._text = text
+
+    @property
+    def statistics(self) -> Dict[str, Any]:
+        """RMSE, relative RMSE, chi-square, ... of the result on these data."""
+        return self.result["statistics"]
+
+    @property
+    def verdict(self) -> str:
+        """"fits within the noise", "does not fit within the noise" or "noise unknown"."""
+        return self.result["verdict"]
+
+    def report(self) -> str:
+        """The score as ``fibrefit score`` prints it."""
+        return self._text
+
+    def __repr__(self) -> str:
+        return f"Score(model={self.result['model']!r}, samples={self.result['samples']}, verdict={self.verdict!r})"
+
+
+def score(
+    result_json: PathLike,
+    data: PathLike,
+    *,
+    stride: Optional[int] = None,
+    fraction: Optional[float] = None,
+    subsample_seed: Optional[int] = None,
+    directions: Optional[int] = None,
+    direction_seed: Optional[int] = None,
+    max_theta: Optional[float] = None,
+    skip_bad_rows: bool = False,
+    small_angles_ok: bool = False,
+    columns: Optional[Dict[str, str]] = None,
+) -> Score:
+    """A fitted result evaluated exactly as the fit did (rung, knobs, topology map, residual
+    metric) on ``data`` (goniometric CSV or capture TOML), as ``fibrefit score``. The loading
+    flags as :func:`load_data`'s."""
+    return Score(
+        *_native_call(
+            _native.score,
+            _os.fspath(result_json),
+            _os.fspath(data),
+            stride=stride,
+            fraction=fraction,
+            subsample_seed=subsample_seed,
+            directions=directions,
+            direction_seed=direction_seed,
+            max_theta=max_theta,
+            skip_bad_rows=skip_bad_rows,
+            small_angles_ok=small_angles_ok,
+            columns=columns,
+        )
+    )
+
+
+def eval(
+    params: PathLike, queries: PathLike, model: Optional[str] = None, *, progress: bool = False
+) -> Tuple[np.ndarray, np.ndarray]:
+    """A model's BRDF and intensity at the directions of a query CSV, as ``fibrefit eval``.
+
+    ``params``: a parameter file (TOML or JSON) or a result JSON; ``queries``: a CSV of
+    ``theta_i,phi_i,theta_o,phi_o`` (degrees) with optional per-texel columns (``height``,
+    ``fibre_azimuth_deg``, ``kd``, ``ks``; see ``fibrefit eval --help``); ``model``: a rung id
+    overriding the file's; ``progress``: the bar and the parameter file's warnings on stderr.
+    Returns ``(brdf, intensity)``: (N, C) arrays in 1/sr, intensity = f cos(theta_i) (C = 3 for
+    RGB parameters or albedo columns, else 1), the values of ``fibrefit eval``'s table.
+    """
+    return _native_call(_native.eval, _os.fspath(params), _os.fspath(queries), model, progress=progress)
+
+
+@_dataclass
+class Exported:
+    """What :func:`export` built: ``model`` (the rung's id), ``shader`` (the source, or None),
+    ``glb`` (the GLB file's bytes, or None), ``gltf_material`` (the fitted glTF material:
+    ``base_color``, ``roughness``, ``anisotropy_strength``, ``anisotropy_rotation_rad``, ``ior``,
+    ``sheen`` and its errors against the model; or None) and ``textures`` (the maps the GLB's
+    textures were made from: ``directory``, ``width``, ``height``, ``names``; or None)."""
+
+    model: str
+    shader: Optional[str]
+    glb: Optional[bytes]
+    gltf_material: Optional[Dict[str, Any]]
+    textures: Optional[Dict[str, Any]]
+
+
+def export(
+    result_json: PathLike,
+    shader: Optional[str] = None,
+    gltf: bool = False,
+    object: str = "swatch",
+    check: bool = False,
+    model: Optional[str] = None,
+    *,
+    progress: bool = False,
+) -> Exported:
+    """The fitted model as shader source and as a glTF material on a preview mesh, built in
+    memory as ``fibrefit export`` builds them (write ``Exported.shader`` and ``Exported.glb``
+    where you like).
+
+    ``shader``: ``"wgsl"``, ``"glsl"``, ``"hlsl"`` or ``"msl"`` (None: no shader); ``gltf``: a
+    GLB preview; ``object``: its mesh (``"swatch"``, ``"sphere"``, ``"torus"`` or an ``.obj``
+    path); ``check``: run the shader on the GPU driver against the Rust model first (refused:
+    this package is built without a GPU driver; the command line has it); ``model``: a rung id
+    overriding the file's; ``progress``: notes and warnings on stderr.
+    """
+    d = _native_call(
+        _native.export,
+        _os.fspath(result_json),
+        shader,
+        gltf,
+        _os.fspath(object),
+        check,
+        model,
+        progress=progress,
+    )
+    return Exported(**d)

@@ -44,17 +44,66 @@ class FitResult:
     def material(self) -> Material: ...
 
 def load(result: str, maps: Optional[str] = None, capture: Optional[str] = None) -> Material: ...
-def load_data(path: str, options: Dict[str, Any]) -> Dict[str, Any]: ...
+def load_data(
+    path: str,
+    *,
+    stride: Optional[int] = None,
+    fraction: Optional[float] = None,
+    subsample_seed: Optional[int] = None,
+    directions: Optional[int] = None,
+    direction_seed: Optional[int] = None,
+    max_theta: Optional[float] = None,
+    skip_bad_rows: bool = False,
+    small_angles_ok: bool = False,
+    columns: Optional[Dict[str, str]] = None,
+) -> Dict[str, Any]: ...
 def fit(
     data: str,
     config: Optional[str] = None,
     model: Optional[str] = None,
+    *,
     metric: Optional[str] = None,
     fuzz: Optional[bool] = None,
     maps: Optional[str] = None,
     progress: bool = False,
-    options: Optional[Dict[str, Any]] = None,
+    stride: Optional[int] = None,
+    fraction: Optional[float] = None,
+    subsample_seed: Optional[int] = None,
+    directions: Optional[int] = None,
+    direction_seed: Optional[int] = None,
+    max_theta: Optional[float] = None,
+    skip_bad_rows: bool = False,
+    small_angles_ok: bool = False,
+    columns: Optional[Dict[str, str]] = None,
 ) -> FitResult: ...
+def score(
+    result: str,
+    data: str,
+    *,
+    stride: Optional[int] = None,
+    fraction: Optional[float] = None,
+    subsample_seed: Optional[int] = None,
+    directions: Optional[int] = None,
+    direction_seed: Optional[int] = None,
+    max_theta: Optional[float] = None,
+    skip_bad_rows: bool = False,
+    small_angles_ok: bool = False,
+    columns: Optional[Dict[str, str]] = None,
+) -> Tuple[str, str]: ...
+def eval(
+    params: str, queries: str, model: Optional[str] = None, *, progress: bool = False
+) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
+def export(
+    result: str,
+    shader: Optional[str] = None,
+    gltf: bool = False,
+    object: str = "swatch",
+    check: bool = False,
+    model: Optional[str] = None,
+    *,
+    progress: bool = False,
+) -> Dict[str, Any]: ...
 def version() -> str: ...
 def capture_geometry(capture: str) -> str: ...
+def image_scene(capture: str, index: int) -> str: ...
 def capture_image(capture: str, index: int) -> Tuple[npt.NDArray[np.float32], npt.NDArray[np.bool_]]: ...

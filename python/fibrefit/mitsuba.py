@@ -29,19 +29,26 @@ of the captured file.
 
 from __future__ import annotations
 
-import glob as _glob
 import json as _json
-import math as _math
 import os as _os
 from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
 
-from . import FibrefitError, Material, _native
-from . import _image_index
+from . import FibrefitError, Material, PathLike, _native
+from . import _image_index, _native_call
 from . import load as _load
 
-__all__ = ["register", "capture_scene", "captured_image", "LLVM_CANDIDATES"]
+__all__ = [
+    "FibrefitBSDF",
+    "LLVM_CANDIDATES",
+    "bsdf_class",
+    "capture_geometry",
+    "capture_scene",
+    "captured_image",
+    "image_scene",
+    "register",
+]
 
 #: Where libLLVM 16+ is looked for when ``DRJIT_LIBLLVM_PATH`` is unset (Debian's libllvm19..16).
 LLVM_CANDIDATES = [
@@ -86,9 +93,145 @@ def _width(*xs: Any) -> int:
     return max(dr.width(x) for x in xs)
 
 
+def _spectrum(rgb: np.ndarray, scalar: bool):
+    import mitsuba as mi
+
+    if rgb.shape[1] == 1:
+        rgb = np.repeat(rgb, 3, axis=1)
+    if scalar:
+        return mi.Color3f(*[float(x) for x in rgb[0]])
+    return mi.Color3f(*[mi.Float(np.ascontiguousarray(rgb[:, c], dtype=np.float32)) for c in range(3)])
+
+
+def _floats(x: np.ndarray, scalar: bool):
+    import mitsuba as mi
+
+    return mi.Float(float(x[0])) if scalar else mi.Float(np.ascontiguousarray(x, dtype=np.float32))
+
+
+def _vectors(x: np.ndarray, scalar: bool):
+    import mitsuba as mi
+
+    if scalar:
+        return mi.Vector3f(*[float(c) for c in x[0]])
+    return mi.Vector3f(*[mi.Float(np.ascontiguousarray(x[:, c], dtype=np.float32)) for c in range(3)])
+
+
+class FibrefitBSDF:
+    """fibrefit's fitted fibre BSDF as a Mitsuba 3 plugin (see the module docs).
+
+    Mitsuba's ``mi.BSDF`` exists only once a variant is set, and is another class in each
+    variant; so this class holds the plugin (its methods), and :func:`bsdf_class` makes the
+    current variant's subclass of ``mi.BSDF`` with them, which :func:`register` registers as
+    the BSDF type ``fibrefit``. Instances are made by Mitsuba (``mi.load_dict``), not directly.
+    """
+
+    #: set in the variant's class by :func:`bsdf_class`: that variant's ``mi.BSDF`` and whether
+    #: it is a scalar variant
+    _base: Any = None
+    _scalar: bool = False
+
+    def __init__(self, props):
+        import mitsuba as mi
+
+        self._base.__init__(self, props)
+        if "filename" not in props:
+            raise FibrefitError("the fibrefit BSDF needs a `filename` property (a fibrefit result JSON)")
+        self.filename = str(props["filename"])
+        maps = str(props["maps"]) if "maps" in props else None
+        capture = str(props["capture"]) if "capture" in props else None
+        self.material: Material = _load(self.filename, maps, capture)
+        flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
+        if self.material.has_maps:
+            flags = flags | mi.BSDFFlags.SpatiallyVarying
+        self.m_flags = flags
+        self.m_components = [flags]
+
+    def _inputs(self, si, *xs):
+        n = _width(si.wi, si.uv, *xs)
+        v = _rows(si.wi, n, 3)
+        uv = _rows(si.uv, n, 2)
+        return n, v, uv
+
+    def eval(self, ctx, si, wo, active=True):
+        import drjit as dr
+
+        n, v, uv = self._inputs(si, wo)
+        l = _rows(wo, n, 3)
+        f = self.material.eval(_unit(l), _unit(v), uv)
+        cos = np.clip(l[:, 2], 0.0, None)[:, None]
+        return dr.select(active, _spectrum(f * cos, self._scalar), 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        import drjit as dr
+
+        n, v, uv = self._inputs(si, wo)
+        l = _rows(wo, n, 3)
+        p = self.material.pdf(_unit(v), _unit(l), uv)
+        return dr.select(active, _floats(p, self._scalar), 0.0)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        import drjit as dr
+
+        n, v, uv = self._inputs(si, wo)
+        l = _rows(wo, n, 3)
+        lu, vu = _unit(l), _unit(v)
+        f = self.material.eval(lu, vu, uv)
+        cos = np.clip(l[:, 2], 0.0, None)[:, None]
+        p = self.material.pdf(vu, lu, uv)
+        return (
+            dr.select(active, _spectrum(f * cos, self._scalar), 0.0),
+            dr.select(active, _floats(p, self._scalar), 0.0),
+        )
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        import drjit as dr
+        import mitsuba as mi
+
+        n, v, uv = self._inputs(si, sample1, sample2)
+        u = np.clip(_rows(sample2, n, 2), 0.0, np.nextafter(1.0, 0.0))
+        l, w, p = self.material.sample(_unit(v), u, uv)
+        bs = dr.zeros(mi.BSDFSample3f, n) if not self._scalar else mi.BSDFSample3f()
+        bs.wo = _vectors(l, self._scalar)
+        bs.pdf = dr.select(active, _floats(p, self._scalar), 0.0)
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+        bs.sampled_component = mi.UInt32(0)
+        return bs, dr.select(active & (bs.pdf > 0), _spectrum(w, self._scalar), 0.0)
+
+    def traverse(self, callback):
+        pass
+
+    def parameters_changed(self, keys):
+        pass
+
+    def to_string(self):
+        return f"FibrefitBSDF[filename={self.filename!r}, model={self.material.model!r}, maps={self.material.has_maps}]"
+
+
+_CLASSES: Dict[str, type] = {}
+
+
+def bsdf_class() -> type:
+    """The plugin's class in the current Mitsuba variant: that variant's subclass of ``mi.BSDF``
+    with :class:`FibrefitBSDF`'s methods (made once per variant)."""
+    import mitsuba as mi
+
+    v = mi.variant()
+    if v is None:
+        raise FibrefitError("fibrefit.mitsuba: set a Mitsuba variant first (mi.set_variant('llvm_ad_rgb'))")
+    cls = _CLASSES.get(v)
+    if cls is None:
+        body = {k: x for k, x in vars(FibrefitBSDF).items() if k not in ("__dict__", "__weakref__")}
+        body.update(_base=mi.BSDF, _scalar=v.startswith("scalar"))
+        cls = type(mi.BSDF)("FibrefitBSDF", (mi.BSDF,), body)
+        _CLASSES[v] = cls
+    return cls
+
+
 def register(variant: Optional[str] = None) -> None:
-    """Register the BSDF type ``fibrefit`` with Mitsuba 3 (for the current variant, or
-    ``variant`` after setting it).
+    """Register the BSDF type ``fibrefit`` (:class:`FibrefitBSDF`) with Mitsuba 3 (for the
+    current variant, or ``variant`` after setting it).
 
     Switches ``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off in the JIT
     variants (the plugin converts arrays to numpy, which needs evaluated loops and calls).
@@ -109,90 +252,8 @@ def register(variant: Optional[str] = None) -> None:
     if not v.startswith("scalar"):
         dr.set_flag(dr.JitFlag.SymbolicLoops, False)
         dr.set_flag(dr.JitFlag.SymbolicCalls, False)
-    scalar = v.startswith("scalar")
-
-    def spectrum(rgb: np.ndarray):
-        if rgb.shape[1] == 1:
-            rgb = np.repeat(rgb, 3, axis=1)
-        if scalar:
-            return mi.Color3f(*[float(x) for x in rgb[0]])
-        return mi.Color3f(*[mi.Float(np.ascontiguousarray(rgb[:, c], dtype=np.float32)) for c in range(3)])
-
-    def floats(x: np.ndarray):
-        return mi.Float(float(x[0])) if scalar else mi.Float(np.ascontiguousarray(x, dtype=np.float32))
-
-    def vectors(x: np.ndarray):
-        if scalar:
-            return mi.Vector3f(*[float(c) for c in x[0]])
-        return mi.Vector3f(*[mi.Float(np.ascontiguousarray(x[:, c], dtype=np.float32)) for c in range(3)])
-
-    class FibrefitBSDF(mi.BSDF):
-        """fibrefit's fitted fibre BSDF (see the module docs of fibrefit.mitsuba)."""
-
-        def __init__(self, props):
-            mi.BSDF.__init__(self, props)
-            if "filename" not in props:
-                raise FibrefitError("the fibrefit BSDF needs a `filename` property (a fibrefit result JSON)")
-            self.filename = str(props["filename"])
-            maps = str(props["maps"]) if "maps" in props else None
-            capture = str(props["capture"]) if "capture" in props else None
-            self.material: Material = _load(self.filename, maps, capture)
-            flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
-            if self.material.has_maps:
-                flags = flags | mi.BSDFFlags.SpatiallyVarying
-            self.m_flags = flags
-            self.m_components = [flags]
-
-        def _inputs(self, si, *xs):
-            n = _width(si.wi, si.uv, *xs)
-            v = _rows(si.wi, n, 3)
-            uv = _rows(si.uv, n, 2)
-            return n, v, uv
-
-        def eval(self, ctx, si, wo, active=True):
-            n, v, uv = self._inputs(si, wo)
-            l = _rows(wo, n, 3)
-            f = self.material.eval(_unit(l), _unit(v), uv)
-            cos = np.clip(l[:, 2], 0.0, None)[:, None]
-            return dr.select(active, spectrum(f * cos), 0.0)
-
-        def pdf(self, ctx, si, wo, active=True):
-            n, v, uv = self._inputs(si, wo)
-            l = _rows(wo, n, 3)
-            p = self.material.pdf(_unit(v), _unit(l), uv)
-            return dr.select(active, floats(p), 0.0)
-
-        def eval_pdf(self, ctx, si, wo, active=True):
-            n, v, uv = self._inputs(si, wo)
-            l = _rows(wo, n, 3)
-            lu, vu = _unit(l), _unit(v)
-            f = self.material.eval(lu, vu, uv)
-            cos = np.clip(l[:, 2], 0.0, None)[:, None]
-            p = self.material.pdf(vu, lu, uv)
-            return dr.select(active, spectrum(f * cos), 0.0), dr.select(active, floats(p), 0.0)
-
-        def sample(self, ctx, si, sample1, sample2, active=True):
-            n, v, uv = self._inputs(si, sample1, sample2)
-            u = np.clip(_rows(sample2, n, 2), 0.0, np.nextafter(1.0, 0.0))
-            l, w, p = self.material.sample(_unit(v), u, uv)
-            bs = dr.zeros(mi.BSDFSample3f, n) if not scalar else mi.BSDFSample3f()
-            bs.wo = vectors(l)
-            bs.pdf = dr.select(active, floats(p), 0.0)
-            bs.eta = 1.0
-            bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
-            bs.sampled_component = mi.UInt32(0)
-            return bs, dr.select(active & (bs.pdf > 0), spectrum(w), 0.0)
-
-        def traverse(self, callback):
-            pass
-
-        def parameters_changed(self, keys):
-            pass
-
-        def to_string(self):
-            return f"FibrefitBSDF[filename={self.filename!r}, model={self.material.model!r}, maps={self.material.has_maps}]"
-
-    mi.register_bsdf("fibrefit", lambda props: FibrefitBSDF(props))
+    cls = bsdf_class()
+    mi.register_bsdf("fibrefit", lambda props: cls(props))
     _REGISTERED[v] = True
 
 
@@ -216,9 +277,17 @@ def captured_image(capture_toml: str, image_index: int) -> Tuple[np.ndarray, np.
     return _native.capture_image(_os.fspath(capture_toml), _image_index(image_index))
 
 
-def _direction(theta_deg: float, phi_deg: float) -> np.ndarray:
-    t, p = _math.radians(theta_deg), _math.radians(phi_deg)
-    return np.array([_math.sin(t) * _math.cos(p), _math.sin(t) * _math.sin(p), _math.cos(t)])
+def image_scene(capture_toml: PathLike, image_index: int) -> Dict[str, Any]:
+    """Image ``image_index`` of a capture as a renderer's scene, from fibrefit's library
+    (``fibrefit::api::capture``), millimetres and the swatch frame: ``size_mm``, ``width``,
+    ``height`` (pixels), ``light`` (``type`` ``"directional"``: ``towards_light`` (unit),
+    ``irradiance``; ``"point"``: ``position_mm``, ``intensity_mm`` (irradiance = intensity_mm /
+    r^2, r in mm)) and ``camera`` (``type`` ``"orthographic"``: ``towards_camera`` (unit),
+    ``to_world`` (4x4, rows), ``near_clip_mm``, ``far_clip_mm``; ``"pinhole"``: ``position_mm``,
+    ``to_world``, ``fov_x_deg``, ``principal_point_offset_x``, ``principal_point_offset_y``,
+    ``near_clip_mm``, ``far_clip_mm``). A view-map camera, a pinhole at or below the swatch and
+    non-square pixels under a pinhole are refused."""
+    return _json.loads(_native_call(_native.image_scene, _os.fspath(capture_toml), _image_index(image_index)))
 
 
 def capture_scene(
@@ -244,77 +313,38 @@ def capture_scene(
     """
     import mitsuba as mi
 
-    geo = capture_geometry(capture_toml)
-    images = geo["images"]
-    if not 0 <= image_index < len(images):
-        raise FibrefitError(f"{capture_toml}: image {image_index} asked for, but the capture has {len(images)} images")
-    img = images[image_index]
-    w_mm, h_mm = geo["swatch"]["size_mm"]
-    W, H = int(img["width"]), int(img["height"])
+    g = image_scene(capture_toml, image_index)
+    w_mm, h_mm = g["size_mm"]
     T = mi.ScalarTransform4f
-    light = img["light"]
+    light = g["light"]
     if light["type"] == "directional":
-        ld = _direction(light["theta_deg"], light["phi_deg"])
+        # Mitsuba's direction is the one the light travels in
         emitter = {
             "type": "directional",
-            "direction": (-ld).tolist(),
+            "direction": [-c for c in light["towards_light"]],
             "irradiance": {"type": "rgb", "value": [light["irradiance"]] * 3},
         }
-    elif light["type"] == "point":
-        # fibrefit: E = intensity / r^2 with r in metres; the scene is in millimetres
+    else:
         emitter = {
             "type": "point",
-            "position": list(map(float, light["position_mm"])),
-            "intensity": {"type": "rgb", "value": [light["intensity"] * 1e6] * 3},
+            "position": light["position_mm"],
+            "intensity": {"type": "rgb", "value": [light["intensity_mm"]] * 3},
         }
-    else:
-        raise FibrefitError(f"{capture_toml}: image {image_index}: light type {light['type']!r} has no Mitsuba counterpart")
-    cam = img["camera"]
-    film = {"type": "hdrfilm", "width": W, "height": H, "rfilter": {"type": "box"}, "pixel_format": "rgb"}
-    if cam["type"] == "orthographic":
-        v = _direction(cam["theta_deg"], cam["phi_deg"])
-        # film (fx, fy) -> camera (1 - 2 fx, (1 - 2 fy) H / W); an affine camera-to-world map
-        # puts the ray through pixel (x, y) on the swatch point of that pixel, along -v
-        a = H / W
-        far = 10.0 * (w_mm + h_mm)
-        m = np.zeros((4, 4))
-        m[:3, 0] = [-w_mm / 2.0, 0.0, 0.0]
-        m[:3, 1] = [0.0, h_mm / (2.0 * a), 0.0]
-        m[:3, 2] = -v
-        m[:3, 3] = far * v
-        m[3, 3] = 1.0
-        sensor = {
-            "type": "orthographic",
-            "to_world": T(m.tolist()),
-            "near_clip": 1e-3,
-            "far_clip": 4.0 * far,
-            "film": film,
-        }
-    elif cam["type"] == "pinhole":
-        cx, cy, cz = map(float, cam["position_mm"])
-        if cz <= 0:
-            raise FibrefitError(f"{capture_toml}: image {image_index}: the pinhole is not above the swatch (z = {cz} mm)")
-        if abs((w_mm / W) - (h_mm / H)) > 1e-9 * max(w_mm / W, h_mm / H):
-            raise FibrefitError(
-                f"{capture_toml}: image {image_index}: pixels of {w_mm / W} x {h_mm / H} mm are not square; "
-                "a Mitsuba perspective camera cannot render this rectified image"
-            )
-        # looking straight down from the pinhole, an off-axis frustum over the swatch: the image
-        # plane is parallel to the swatch, so the picture is the rectified image
-        sensor = {
-            "type": "perspective",
-            "to_world": T([[-1.0, 0.0, 0.0, cx], [0.0, 1.0, 0.0, cy], [0.0, 0.0, -1.0, cz], [0.0, 0.0, 0.0, 1.0]]),
-            "fov": _math.degrees(2.0 * _math.atan(w_mm / (2.0 * cz))),
-            "fov_axis": "x",
-            "principal_point_offset_x": -cx / w_mm,
-            "principal_point_offset_y": cy / h_mm,
-            "near_clip": 1e-3,
-            "far_clip": 10.0 * (cz + w_mm + h_mm),
-            "film": film,
-        }
-    else:
-        raise FibrefitError(
-            f"{capture_toml}: image {image_index}: camera type {cam['type']!r} (per-pixel view maps) has no Mitsuba counterpart"
+    cam = g["camera"]
+    film = {"type": "hdrfilm", "width": g["width"], "height": g["height"], "rfilter": {"type": "box"}, "pixel_format": "rgb"}
+    sensor: Dict[str, Any] = {
+        "type": "orthographic" if cam["type"] == "orthographic" else "perspective",
+        "to_world": T(cam["to_world"]),
+        "near_clip": cam["near_clip_mm"],
+        "far_clip": cam["far_clip_mm"],
+        "film": film,
+    }
+    if cam["type"] == "pinhole":
+        sensor.update(
+            fov=cam["fov_x_deg"],
+            fov_axis="x",
+            principal_point_offset_x=cam["principal_point_offset_x"],
+            principal_point_offset_y=cam["principal_point_offset_y"],
         )
     if spp is None:
         sensor["sampler"] = {"type": "stratified", "sample_count": 1, "jitter": False}

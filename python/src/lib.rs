@@ -3,17 +3,18 @@
 //! layer converts and checks shapes only: the science is in the crate. Every error is a
 //! `fibrefit.FibrefitError` (a `ValueError`) carrying the message the CLI would print.
 
-use fibrefit::api::fit::{self as fit_api, FitRequest, FitRun, FitTargets, Maps};
+use fibrefit::api::eval::Evaluation;
+use fibrefit::api::export::{self as export_api, ExportRequest};
+use fibrefit::api::fit::{self as fit_api, FitOptions, FitRequest, FitRun, FitTargets, Maps};
 use fibrefit::api::material::{Material as MaterialCore, Sampled};
-use fibrefit::api::{
-    DataKind, GonioOptions, LoadOptions, MeasuredOptions, Origin, Outputs, Subsample,
-};
+use fibrefit::api::{DataKind, LoadFlags, Origin, Outputs};
 use numpy::{
     IntoPyArray, PyArray1, PyArray2, PyArrayMethods, PyReadonlyArrayDyn, PyUntypedArrayMethods,
 };
 use pyo3::exceptions::PyValueError;
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyBytes, PyDict};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 pyo3::create_exception!(
@@ -268,42 +269,33 @@ fn load(
     Ok(Material { inner, warnings })
 }
 
-fn load_options(o: &Bound<'_, PyDict>) -> PyResult<LoadOptions> {
-    fn get<'py, T: FromPyObjectOwned<'py>>(o: &Bound<'py, PyDict>, k: &str, d: T) -> PyResult<T> {
-        match o.get_item(k)? {
-            Some(v) if !v.is_none() => v.extract::<T>().map_err(|e| {
-                FibrefitError::new_err(format!("option `{k}`: {}", Into::<PyErr>::into(e)))
-            }),
-            _ => Ok(d),
-        }
+/// The loading flags of `load_data`, `fit` and `score` (keyword arguments, each as the command
+/// line's flag of its name; `None`: the command line's default).
+#[allow(clippy::too_many_arguments)]
+fn load_flags(
+    stride: Option<usize>,
+    fraction: Option<f64>,
+    subsample_seed: Option<u64>,
+    directions: Option<usize>,
+    direction_seed: Option<u64>,
+    max_theta: Option<f64>,
+    skip_bad_rows: bool,
+    small_angles_ok: bool,
+    columns: Option<BTreeMap<String, String>>,
+) -> LoadFlags {
+    let d = LoadFlags::default();
+    LoadFlags {
+        skip_bad_rows,
+        small_angles_ok,
+        // {ours: theirs}, as `--columns`
+        columns: columns.unwrap_or_default().into_iter().collect(),
+        stride,
+        fraction,
+        subsample_seed: subsample_seed.unwrap_or(d.subsample_seed),
+        directions: directions.unwrap_or(d.directions),
+        direction_seed: direction_seed.unwrap_or(d.direction_seed),
+        max_theta_deg: max_theta.unwrap_or(d.max_theta_deg),
     }
-    let m = MeasuredOptions::default();
-    LoadOptions {
-        gonio: GonioOptions {
-            skip_bad_rows: get(o, "skip_bad_rows", false)?,
-            small_angles_ok: get(o, "small_angles_ok", false)?,
-            // {ours: theirs}, as `--columns`
-            columns: get(
-                o,
-                "columns",
-                std::collections::BTreeMap::<String, String>::new(),
-            )?
-            .into_iter()
-            .collect(),
-        },
-        subsample: Subsample {
-            stride: get(o, "stride", 1usize)?,
-            fraction: get(o, "fraction", 1.0f64)?,
-            seed: get(o, "subsample_seed", 0u64)?,
-        },
-        measured: MeasuredOptions {
-            directions: get(o, "directions", m.directions)?,
-            seed: get(o, "direction_seed", m.seed)?,
-            max_theta_deg: get(o, "max_theta", m.max_theta_deg)?,
-        },
-    }
-    .checked()
-    .map_err(err)
 }
 
 /// The samples of a goniometric CSV, image capture TOML or measured-BRDF file as numpy arrays:
@@ -311,16 +303,39 @@ fn load_options(o: &Bound<'_, PyDict>) -> PyResult<LoadOptions> {
 /// `phi_o` (degrees), `value` ((N, C) BRDF in 1/sr), `sigma` ((N, C), or None where the file
 /// gives none), `weight`, `fibre_azimuth_deg` (NaN where the file gives none), `origin` (the
 /// CSV line, or (image, x, y) of a pixel), `channels`, `kind`, `source`, `image_size`.
-/// Options as `fit`'s loading options (stride, fraction, subsample_seed, directions,
-/// direction_seed, max_theta, skip_bad_rows, small_angles_ok, columns).
+/// The loading flags as the command line's of the same names.
 #[pyfunction]
-#[pyo3(signature = (path, options))]
+#[pyo3(signature = (
+    path, *, stride=None, fraction=None, subsample_seed=None, directions=None,
+    direction_seed=None, max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None
+))]
+#[allow(clippy::too_many_arguments)]
 fn load_data<'py>(
     py: Python<'py>,
     path: PathBuf,
-    options: Bound<'py, PyDict>,
+    stride: Option<usize>,
+    fraction: Option<f64>,
+    subsample_seed: Option<u64>,
+    directions: Option<usize>,
+    direction_seed: Option<u64>,
+    max_theta: Option<f64>,
+    skip_bad_rows: bool,
+    small_angles_ok: bool,
+    columns: Option<BTreeMap<String, String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let opts = load_options(&options)?;
+    let opts = load_flags(
+        stride,
+        fraction,
+        subsample_seed,
+        directions,
+        direction_seed,
+        max_theta,
+        skip_bad_rows,
+        small_angles_ok,
+        columns,
+    )
+    .options()
+    .map_err(err)?;
     let s = py
         .detach(|| fibrefit::api::data::load(&path, &opts))
         .map_err(err)?;
@@ -485,13 +500,17 @@ impl FitResult {
     }
 }
 
-/// Fit `data` (goniometric CSV, capture TOML or measured-BRDF file): `config` a fit config
-/// TOML, `model` a rung id or "auto" (overrides the config's), `metric` (linear, log, cosine),
-/// `fuzz` (True: add the fuzz layer; False: leave it out, `auto` tries no candidate with it;
-/// None: the config's, or auto's default of each rung without and with it), `maps` a directory for per-texel maps (captures), `progress`
-/// (bars on stderr), loading options as `load_data`.
+/// Fit `data` (goniometric CSV, capture TOML or measured-BRDF file), as `fibrefit fit`:
+/// `config` a fit config TOML, `model` a rung id or "auto" (overrides the config's), `metric`
+/// (linear, log, cosine), `fuzz` (True: `--fuzz`; False: `--no-fuzz`; None: the config's),
+/// `maps` a directory for per-texel maps (captures), `progress` (bars on stderr), the loading
+/// flags as `load_data`'s (merged with the config's as the command line merges them).
 #[pyfunction]
-#[pyo3(signature = (data, config=None, model=None, metric=None, fuzz=None, maps=None, progress=false, options=None))]
+#[pyo3(signature = (
+    data, config=None, model=None, *, metric=None, fuzz=None, maps=None, progress=false,
+    stride=None, fraction=None, subsample_seed=None, directions=None, direction_seed=None,
+    max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None
+))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
@@ -502,61 +521,221 @@ fn fit(
     fuzz: Option<bool>,
     maps: Option<PathBuf>,
     progress: bool,
-    options: Option<Bound<'_, PyDict>>,
+    stride: Option<usize>,
+    fraction: Option<f64>,
+    subsample_seed: Option<u64>,
+    directions: Option<usize>,
+    direction_seed: Option<u64>,
+    max_theta: Option<f64>,
+    skip_bad_rows: bool,
+    small_angles_ok: bool,
+    columns: Option<BTreeMap<String, String>>,
 ) -> PyResult<FitResult> {
-    let cfg = fit_api::configure(
-        config.as_deref(),
-        model.as_deref(),
-        metric.as_deref(),
+    let options = FitOptions {
+        config,
+        model,
+        metric,
         fuzz,
-        &data,
-    )
-    .map_err(err)?;
-    let mut load = match &options {
-        Some(o) => load_options(o)?,
-        None => LoadOptions::default(),
-    };
-    let given = |k: &str| -> PyResult<bool> {
-        Ok(match &options {
-            Some(o) => o.get_item(k)?.is_some_and(|v| !v.is_none()),
-            None => false,
-        })
-    };
-    // the config's stride and fraction unless given
-    if !given("stride")? {
-        load.subsample.stride = cfg.knobs.stride;
-    }
-    if !given("fraction")? {
-        load.subsample.fraction = cfg.knobs.fraction;
-    }
-    // the config's [columns] unless given
-    if !given("columns")? {
-        load.gonio.columns = cfg
-            .columns
-            .iter()
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-    }
-    let load = load.checked().map_err(err)?;
-    let request = FitRequest {
-        data,
-        config: cfg,
-        load,
+        load: load_flags(
+            stride,
+            fraction,
+            subsample_seed,
+            directions,
+            direction_seed,
+            max_theta,
+            skip_bad_rows,
+            small_angles_ok,
+            columns,
+        ),
         maps: match maps {
             Some(d) => Maps::Into(d),
             None => Maps::None,
         },
         progress: fibrefit::Progress::new(!progress),
     };
+    let request = options.request(&data).map_err(err)?;
     fit_api::check(&request).map_err(err)?;
     let req = request.clone();
     let run = py.detach(move || fit_api::fit(&req)).map_err(err)?;
     Ok(FitResult {
         run,
         request,
-        config_file: config,
+        config_file: options.config,
         written: None,
     })
+}
+
+/// Score the result JSON `result` on `data` (goniometric CSV or capture TOML), as
+/// `fibrefit score`: (the score as JSON, as `--json` prints it; the text it prints without).
+/// The loading flags as `load_data`'s.
+#[pyfunction]
+#[pyo3(signature = (
+    result, data, *, stride=None, fraction=None, subsample_seed=None, directions=None,
+    direction_seed=None, max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None
+))]
+#[allow(clippy::too_many_arguments)]
+fn score(
+    py: Python<'_>,
+    result: PathBuf,
+    data: PathBuf,
+    stride: Option<usize>,
+    fraction: Option<f64>,
+    subsample_seed: Option<u64>,
+    directions: Option<usize>,
+    direction_seed: Option<u64>,
+    max_theta: Option<f64>,
+    skip_bad_rows: bool,
+    small_angles_ok: bool,
+    columns: Option<BTreeMap<String, String>>,
+) -> PyResult<(String, String)> {
+    let load = load_flags(
+        stride,
+        fraction,
+        subsample_seed,
+        directions,
+        direction_seed,
+        max_theta,
+        skip_bad_rows,
+        small_angles_ok,
+        columns,
+    )
+    .options()
+    .map_err(err)?;
+    let s = py
+        .detach(|| fibrefit::api::score::score(&result, &data, &load))
+        .map_err(err)?;
+    let json =
+        serde_json::to_string_pretty(&s).map_err(|e| FibrefitError::new_err(e.to_string()))?;
+    Ok((json, fibrefit::api::score_text(&s)))
+}
+
+/// The BRDF and intensity of the parameter file (or result JSON) `params` at the queries of
+/// the CSV `queries`, as `fibrefit eval`: (brdf, intensity), (N, C) arrays in 1/sr (intensity
+/// f cos theta_i), C = 3 for RGB parameters or albedo columns, else 1. `model` overrides the
+/// file's rung; `progress`: the bar and the parameter file's warnings on stderr.
+#[pyfunction]
+#[pyo3(signature = (params, queries, model=None, *, progress=false))]
+fn eval<'py>(
+    py: Python<'py>,
+    params: PathBuf,
+    queries: PathBuf,
+    model: Option<String>,
+    progress: bool,
+) -> PyResult<(Bound<'py, PyArray2<f64>>, Bound<'py, PyArray2<f64>>)> {
+    let progress = fibrefit::Progress::new(!progress);
+    let out = py
+        .detach(|| Evaluation::load(&params, model.as_deref(), &queries, &progress)?.run(&progress))
+        .map_err(err)?;
+    let brdf: Vec<[f64; 3]> = out.values.iter().map(|(b, _)| *b).collect();
+    let intensity: Vec<[f64; 3]> = out.values.iter().map(|(_, i)| *i).collect();
+    Ok((
+        table(py, &brdf, out.channels)?,
+        table(py, &intensity, out.channels)?,
+    ))
+}
+
+/// The fitted model of the result JSON (or parameter file) `result` as `fibrefit export`
+/// builds it, in memory: a dict with `model`, `shader` (the source in `shader`'s language:
+/// wgsl, glsl, hlsl or msl; or None), `glb` (bytes of the GLB preview on `object` when `gltf`;
+/// or None), `gltf_material` (the fitted glTF material and its errors; or None) and `textures`
+/// (what the GLB's textures were made from; or None). `check`: run the shader on the GPU
+/// driver first (this package is built without one: refused). `model` overrides the file's
+/// rung; `progress`: notes and warnings on stderr.
+#[pyfunction]
+#[pyo3(signature = (result, shader=None, gltf=false, object="swatch", check=false, model=None, *, progress=false))]
+#[allow(clippy::too_many_arguments)]
+fn export<'py>(
+    py: Python<'py>,
+    result: PathBuf,
+    shader: Option<String>,
+    gltf: bool,
+    object: &str,
+    check: bool,
+    model: Option<String>,
+    progress: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    if shader.is_none() && !gltf {
+        return Err(FibrefitError::new_err(
+            "nothing to export: give shader=LANG and/or gltf=True",
+        ));
+    }
+    if check && shader.is_none() {
+        return Err(FibrefitError::new_err(
+            "check=True checks the exported shader: give shader=LANG",
+        ));
+    }
+    let req = ExportRequest {
+        result,
+        model,
+        shader: shader
+            .as_deref()
+            .map(|s| {
+                s.parse()
+                    .map_err(|e: String| FibrefitError::new_err(format!("shader: {e}")))
+            })
+            .transpose()?,
+        check,
+        gltf,
+        object: object.to_string(),
+        progress: fibrefit::Progress::new(!progress),
+    };
+    let out = py.detach(|| export_api::export(&req)).map_err(err)?;
+    let d = PyDict::new(py);
+    d.set_item("model", out.model.as_str())?;
+    d.set_item("shader", out.shader)?;
+    match out.glb {
+        Some((bytes, fitted)) => {
+            d.set_item("glb", PyBytes::new(py, &bytes))?;
+            let m = &fitted.material;
+            let g = PyDict::new(py);
+            g.set_item("base_color", m.base_color.to_vec())?;
+            g.set_item("roughness", m.roughness)?;
+            g.set_item("anisotropy_strength", m.anisotropy_strength)?;
+            g.set_item("anisotropy_rotation_rad", m.anisotropy_rotation)?;
+            g.set_item("ior", m.ior)?;
+            match m.sheen {
+                Some(s) => {
+                    let sh = PyDict::new(py);
+                    sh.set_item("colour", s.colour)?;
+                    sh.set_item("roughness", s.roughness)?;
+                    g.set_item("sheen", sh)?;
+                }
+                None => g.set_item("sheen", py.None())?,
+            }
+            g.set_item("rms_error", fitted.rms_error)?;
+            g.set_item("relative_rms_error", fitted.relative_rms_error)?;
+            g.set_item(
+                "isotropic_relative_rms_error",
+                fitted.isotropic_relative_rms_error,
+            )?;
+            g.set_item(
+                "without_sheen_relative_rms_error",
+                fitted.without_sheen_relative_rms_error,
+            )?;
+            g.set_item(
+                "with_sheen_relative_rms_error",
+                fitted.with_sheen_relative_rms_error,
+            )?;
+            g.set_item("directions", fitted.directions)?;
+            d.set_item("gltf_material", g)?;
+        }
+        None => {
+            d.set_item("glb", py.None())?;
+            d.set_item("gltf_material", py.None())?;
+        }
+    }
+    match out.textures {
+        Some(t) => {
+            let td = PyDict::new(py);
+            td.set_item("directory", path_str(&t.directory))?;
+            td.set_item("width", t.width)?;
+            td.set_item("height", t.height)?;
+            td.set_item("names", t.names)?;
+            d.set_item("textures", td)?;
+        }
+        None => d.set_item("textures", py.None())?,
+    }
+    Ok(d)
 }
 
 /// The crate's version.
@@ -575,6 +754,14 @@ fn path_str(p: &Path) -> String {
 fn capture_geometry(py: Python<'_>, capture: PathBuf) -> PyResult<String> {
     py.detach(|| fibrefit::api::data::capture_geometry_json(&capture))
         .map_err(|e| err(e.context(path_str(&capture))))
+}
+
+/// Image `index` of a capture TOML as a renderer's scene (for
+/// `fibrefit.mitsuba.capture_scene`): a JSON string (see `fibrefit::api::capture::ImageScene`).
+#[pyfunction]
+fn image_scene(py: Python<'_>, capture: PathBuf, index: usize) -> PyResult<String> {
+    py.detach(|| fibrefit::api::capture::image_scene_json(&capture, index))
+        .map_err(err)
 }
 
 /// Image `index` of a capture as the fit reads it, times its exposure: an (H, W, C) float32
@@ -612,6 +799,10 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(load, m)?)?;
     m.add_function(wrap_pyfunction!(load_data, m)?)?;
     m.add_function(wrap_pyfunction!(fit, m)?)?;
+    m.add_function(wrap_pyfunction!(score, m)?)?;
+    m.add_function(wrap_pyfunction!(eval, m)?)?;
+    m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(image_scene, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(capture_geometry, m)?)?;
     m.add_function(wrap_pyfunction!(capture_image, m)?)?;

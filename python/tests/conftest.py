@@ -34,3 +34,21 @@ def write_params(tmp_path, name, text):
     p = tmp_path / name
     p.write_text(text)
     return p
+
+
+def cli_binary():
+    """The `fibrefit` command line to compare the bindings with: $FIBREFIT_CLI, else the newest
+    of the workspace's target/{release,debug}/fibrefit ($CARGO_TARGET_DIR's first), else one
+    on PATH; None when there is none (`cargo build` makes one; CI's `cargo test` does)."""
+    import shutil
+
+    env = os.environ.get("FIBREFIT_CLI")
+    if env:
+        return env
+    dirs = [pathlib.Path(os.environ["CARGO_TARGET_DIR"])] if os.environ.get("CARGO_TARGET_DIR") else []
+    dirs.append(ROOT / "target")
+    for d in dirs:
+        found = [d / p / "fibrefit" for p in ("release", "debug") if (d / p / "fibrefit").is_file()]
+        if found:
+            return str(max(found, key=lambda p: p.stat().st_mtime))
+    return shutil.which("fibrefit")

@@ -101,6 +101,153 @@ pub fn configure(
     Ok(cfg)
 }
 
+/// The loading flags of a front end, as the command line's `--stride`, `--columns`, ...
+/// give them (absent flags at the command line's defaults): taken as they are by commands
+/// without a config ([`LoadFlags::options`]), merged with a fit config's by [`FitOptions`].
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadFlags {
+    /// Goniometric CSV: skip bad rows (counted and reported) instead of stopping at the first.
+    pub skip_bad_rows: bool,
+    /// Goniometric CSV: the angles really are small degrees (do not stop on radian-looking
+    /// data).
+    pub small_angles_ok: bool,
+    /// Goniometric CSV: the file's own column names, (ours, theirs); they extend and override a
+    /// config's `[columns]`.
+    pub columns: Vec<(String, String)>,
+    /// Image captures: every `stride`-th pixel in x and y; `None`: the config's, else 1.
+    pub stride: Option<usize>,
+    /// Image captures: a seeded random fraction of the pixels, in (0, 1]; `None`: the
+    /// config's, else 1.
+    pub fraction: Option<f64>,
+    /// Seed of the random pixel fraction.
+    pub subsample_seed: u64,
+    /// Measured-BRDF files: direction pairs drawn, light and view uniform in solid angle
+    /// (a count).
+    pub directions: usize,
+    /// Measured-BRDF files: seed of the drawn directions.
+    pub direction_seed: u64,
+    /// Measured-BRDF files: largest theta of light and view, degrees.
+    pub max_theta_deg: f64,
+}
+
+impl Default for LoadFlags {
+    fn default() -> Self {
+        let m = crate::load::rgl::MeasuredOptions::default();
+        Self {
+            skip_bad_rows: false,
+            small_angles_ok: false,
+            columns: Vec::new(),
+            stride: None,
+            fraction: None,
+            subsample_seed: 0,
+            directions: m.directions,
+            direction_seed: m.seed,
+            max_theta_deg: m.max_theta_deg,
+        }
+    }
+}
+
+impl LoadFlags {
+    /// The loading options, checked; `stride` and `fraction` fall back to the given defaults
+    /// (a config's), [`LoadFlags::columns`] extend and override `columns` (a config's
+    /// `[columns]`).
+    pub fn options_with(
+        &self,
+        stride: usize,
+        fraction: f64,
+        columns: &std::collections::BTreeMap<String, String>,
+    ) -> Result<LoadOptions> {
+        let mut map: Vec<(String, String)> = columns
+            .iter()
+            .map(|(k, v)| (k.clone(), v.clone()))
+            .collect();
+        for (ours, theirs) in &self.columns {
+            map.retain(|(o, _)| o != ours);
+            map.push((ours.clone(), theirs.clone()));
+        }
+        LoadOptions {
+            gonio: crate::load::gonio::GonioOptions {
+                skip_bad_rows: self.skip_bad_rows,
+                small_angles_ok: self.small_angles_ok,
+                columns: map,
+            },
+            subsample: crate::load::capture::Subsample {
+                stride: self.stride.unwrap_or(stride),
+                fraction: self.fraction.unwrap_or(fraction),
+                seed: self.subsample_seed,
+            },
+            measured: crate::load::rgl::MeasuredOptions {
+                directions: self.directions,
+                seed: self.direction_seed,
+                max_theta_deg: self.max_theta_deg,
+            },
+        }
+        .checked()
+    }
+
+    /// The loading options without a config (stride and fraction 1 unless given), checked.
+    pub fn options(&self) -> Result<LoadOptions> {
+        self.options_with(1, 1.0, &Default::default())
+    }
+
+    /// The loading options of a fit configured by `cfg`: its `[knobs]` stride and fraction
+    /// unless given, its `[columns]` extended and overridden by [`LoadFlags::columns`].
+    pub fn options_for(&self, cfg: &FitConfig) -> Result<LoadOptions> {
+        self.options_with(cfg.knobs.stride, cfg.knobs.fraction, &cfg.columns)
+    }
+}
+
+/// A fit as a front end asks for it (the command line's `fibrefit fit` flags, the Python
+/// package's keyword arguments): [`FitOptions::request`] merges the config file with the
+/// overrides and the loading flags into a [`FitRequest`], the one place that merge happens.
+#[derive(Clone, Debug)]
+pub struct FitOptions {
+    /// A fit config (TOML); `None`: every setting at its default (then `model` is needed).
+    pub config: Option<PathBuf>,
+    /// A rung id or `auto`, overriding the config's `model`.
+    pub model: Option<String>,
+    /// The residual metric (`linear`, `log` or `cosine`), overriding the config's.
+    pub metric: Option<String>,
+    /// The fuzz layer: `Some(true)` added, `Some(false)` left out, `None` the config's (see
+    /// [`configure`]).
+    pub fuzz: Option<bool>,
+    /// The loading flags (merged with the config's stride, fraction and `[columns]`).
+    pub load: LoadFlags,
+    /// What the fit recovers besides the global parameters.
+    pub maps: Maps,
+    /// Where progress lines, bars, notes and warnings go.
+    pub progress: crate::progress::Progress,
+}
+
+impl FitOptions {
+    /// The fit of `data` these options ask for: the configuration ([`configure`]: the config
+    /// file or a rung's defaults, with `model`, `metric` and `fuzz` over it) and the loading
+    /// options ([`LoadFlags::options_for`] the configuration). Not yet [`check`]ed.
+    pub fn request(&self, data: &Path) -> Result<FitRequest> {
+        let config = configure(
+            self.config.as_deref(),
+            self.model.as_deref(),
+            self.metric.as_deref(),
+            self.fuzz,
+            data,
+        )?;
+        let load = self.load.options_for(&config)?;
+        Ok(FitRequest {
+            data: data.to_path_buf(),
+            config,
+            load,
+            maps: self.maps.clone(),
+            progress: self.progress,
+        })
+    }
+
+    /// Every file the fit of `req` (made by [`FitOptions::request`]) reads, the config file
+    /// included.
+    pub fn inputs(&self, req: &FitRequest) -> Vec<PathBuf> {
+        inputs(req, self.config.as_deref())
+    }
+}
+
 /// What a fit recovers besides the global parameters.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Maps {
@@ -119,7 +266,7 @@ pub struct FitRequest {
     pub data: PathBuf,
     /// The fit's configuration ([`configure`]: a config file, or a rung's defaults).
     pub config: FitConfig,
-    /// Loading options (`LoadArgs::options_with` the config's stride and fraction).
+    /// Loading options ([`LoadFlags::options_for`] the config).
     pub load: LoadOptions,
     /// What is recovered besides the global parameters.
     pub maps: Maps,

@@ -2,6 +2,7 @@
 //! other front end (the Python package) call these; they hold the orchestration of the stages
 //! (load -> model -> fit -> export) and no argument parsing or printing of results.
 
+pub mod capture;
 pub mod data;
 pub mod eval;
 pub mod export;
@@ -15,6 +16,7 @@ pub use crate::export::atomic::Outputs;
 pub use crate::export::result_json::ResultFile;
 pub use crate::fit::config::{FitConfig, Metric, ModelChoice};
 pub use crate::fit::maps::TexelMaps;
+pub use crate::fit::score::text as score_text;
 pub use crate::fit::selection::{Candidate, SelectionOutcome};
 pub use crate::fit::{FitOutcome, ParamRecord};
 pub use crate::load::capture::Subsample;
@@ -26,3 +28,5 @@ pub use crate::load::LoadOptions;
 pub use crate::model::frame::Vec3;
 pub use crate::model::ModelId;
 pub use crate::progress::Progress;
+pub use capture::{ImageScene, SceneCamera, SceneLight};
+pub use fit::{FitOptions, LoadFlags};

@@ -1,6 +1,7 @@
 //! Loading flags shared by every command that reads measurements.
 
-use crate::load::{capture::Subsample, gonio::GonioOptions, rgl::MeasuredOptions, LoadOptions};
+use crate::api::fit::LoadFlags;
+use crate::load::LoadOptions;
 use anyhow::Result;
 use clap::Args;
 
@@ -38,45 +39,26 @@ pub struct LoadArgs {
 }
 
 impl LoadArgs {
-    /// Loading options; `stride` and `fraction` fall back to the given defaults (a config's),
-    /// `--columns` extends and overrides `columns` (a config's `[columns]`).
-    pub fn options_with(
-        &self,
-        stride: usize,
-        fraction: f64,
-        columns: &std::collections::BTreeMap<String, String>,
-    ) -> Result<LoadOptions> {
-        let mut map: Vec<(String, String)> = columns
-            .iter()
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        if let Some(text) = &self.columns {
-            for (ours, theirs) in crate::load::gonio::parse_columns(text)? {
-                map.retain(|(o, _)| *o != ours);
-                map.push((ours, theirs));
-            }
-        }
-        LoadOptions {
-            gonio: GonioOptions {
-                skip_bad_rows: self.skip_bad_rows,
-                small_angles_ok: self.small_angles_ok,
-                columns: map,
+    /// The flags as the library takes them (`--columns` parsed).
+    pub fn flags(&self) -> Result<LoadFlags> {
+        Ok(LoadFlags {
+            skip_bad_rows: self.skip_bad_rows,
+            small_angles_ok: self.small_angles_ok,
+            columns: match &self.columns {
+                Some(text) => crate::load::gonio::parse_columns(text)?,
+                None => Vec::new(),
             },
-            subsample: Subsample {
-                stride: self.stride.unwrap_or(stride),
-                fraction: self.fraction.unwrap_or(fraction),
-                seed: self.subsample_seed,
-            },
-            measured: MeasuredOptions {
-                directions: self.directions,
-                seed: self.direction_seed,
-                max_theta_deg: self.max_theta,
-            },
-        }
-        .checked()
+            stride: self.stride,
+            fraction: self.fraction,
+            subsample_seed: self.subsample_seed,
+            directions: self.directions,
+            direction_seed: self.direction_seed,
+            max_theta_deg: self.max_theta,
+        })
     }
 
+    /// Loading options without a config ([`LoadFlags::options`]).
     pub fn options(&self) -> Result<LoadOptions> {
-        self.options_with(1, 1.0, &Default::default())
+        self.flags()?.options()
     }
 }

@@ -1,7 +1,7 @@
 //! `fibrefit fit`: parse the command line, reserve the outputs, run [`crate::api::fit`], print.
 
 use super::data::LoadArgs;
-use crate::api::fit::{self as fit_api, FitRequest, FitTargets, Maps};
+use crate::api::fit::{self as fit_api, FitOptions, FitTargets, Maps};
 use crate::api::tiles::{self, TileRequest};
 use crate::export::atomic::Outputs;
 use crate::fit;
@@ -93,32 +93,25 @@ pub struct FitArgs {
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
-    let config = fit_api::configure(
-        args.config.as_deref(),
-        args.model.as_deref(),
-        args.metric.as_deref(),
-        match (args.fuzz, args.no_fuzz) {
+    let options = FitOptions {
+        config: args.config.clone(),
+        model: args.model.clone(),
+        metric: args.metric.clone(),
+        fuzz: match (args.fuzz, args.no_fuzz) {
             (true, _) => Some(true),
             (_, true) => Some(false),
             _ => None,
         },
-        &args.data,
-    )?;
-    let load =
-        args.load
-            .options_with(config.knobs.stride, config.knobs.fraction, &config.columns)?;
-    let req = FitRequest {
-        data: args.data.clone(),
-        load,
+        load: args.load.flags()?,
         maps: match (&args.maps, args.map_globals) {
             (_, true) => Maps::Globals,
             (Some(dir), false) => Maps::Into(dir.clone()),
             (None, false) => Maps::None,
         },
         progress: crate::progress::Progress::new(args.quiet || args.json),
-        config,
     };
-    let inputs = fit_api::inputs(&req, args.config.as_deref());
+    let req = options.request(&args.data)?;
+    let inputs = options.inputs(&req);
     if let Some(tile) = &args.tile {
         return run_tile(args, req, tile, &inputs);
     }

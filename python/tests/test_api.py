@@ -1,0 +1,150 @@
+"""fibrefit.score / eval / export: the commands of the command line as functions, giving what
+`fibrefit score`, `fibrefit eval` and `fibrefit export` give on the same files; and the fit's
+loading flags as typed keyword arguments."""
+
+import json
+import subprocess
+
+import numpy as np
+import pytest
+
+import fibrefit
+from conftest import CONFIGS, DATA, cli_binary
+
+CLI = cli_binary()
+needs_cli = pytest.mark.skipif(CLI is None, reason="no fibrefit command line built (cargo build)")
+
+
+def run_cli(*args):
+    p = subprocess.run([CLI, *map(str, args)], capture_output=True, text=True)
+    assert p.returncode == 0, p.stderr
+    return p.stdout
+
+
+@pytest.fixture(scope="module")
+def silk_result(tmp_path_factory):
+    """The silk gonio set fitted with its config, written as a result JSON."""
+    d = tmp_path_factory.mktemp("silk")
+    r = fibrefit.fit(DATA / "silk" / "gonio.csv", config=CONFIGS / "fit_silk.toml")
+    r.to_json(d / "fit.json")
+    return d / "fit.json"
+
+
+@needs_cli
+def test_score_is_the_clis(silk_result):
+    for data, flags in [
+        (DATA / "silk" / "gonio.csv", {}),
+        (DATA / "silk" / "capture.toml", {"stride": 4, "fraction": 0.5, "subsample_seed": 3}),
+    ]:
+        s = fibrefit.score(silk_result, data, **flags)
+        args = [a for k, v in flags.items() for a in (f"--{k.replace('_', '-')}", v)]
+        assert s.result == json.loads(run_cli("score", silk_result, data, "--json", *args))
+        assert s.report() == run_cli("score", silk_result, data, *args)
+        assert s.verdict in s.report() and s.result["samples"] > 0
+
+
+def test_score_of_its_own_data_reproduces_the_fit(silk_result):
+    s = fibrefit.score(silk_result, DATA / "silk" / "gonio.csv")
+    fitted = json.loads(silk_result.read_text())["statistics"]
+    assert s.statistics["rmse"] == pytest.approx(fitted["rmse"], rel=1e-9)
+
+
+@needs_cli
+@pytest.mark.parametrize("params", ["silk_params", "result"])
+def test_eval_is_the_clis(silk_result, params):
+    p = CONFIGS / "silk_params.toml" if params == "silk_params" else silk_result
+    q = DATA / "queries_slices.csv"
+    brdf, intensity = fibrefit.eval(p, q)
+    rows = run_cli("eval", "--params", p, "--queries", q).splitlines()
+    header = rows[0].split(",")
+    table = np.array([[float(x) for x in r.split(",")] for r in rows[1:]])
+    c = brdf.shape[1]
+    assert brdf.shape == intensity.shape == (len(rows) - 1, c)
+    assert header[-2 * c :] == (["brdf", "intensity"] if c == 1 else [f"{k}_{x}" for k in ("brdf", "intensity") for x in "rgb"])
+    # the CLI writes each f64 in its shortest exact form: the very values
+    np.testing.assert_array_equal(brdf, table[:, -2 * c : -c])
+    np.testing.assert_array_equal(intensity, table[:, -c:])
+
+
+def test_eval_with_another_rung_and_errors(tmp_path):
+    q = DATA / "queries_slices.csv"
+    brdf, _ = fibrefit.eval(CONFIGS / "silk_params.toml", q, model="poulin-fournier")
+    silk, _ = fibrefit.eval(CONFIGS / "silk_params.toml", q)
+    assert brdf.shape == silk.shape and not np.array_equal(brdf, silk)
+    with pytest.raises(fibrefit.FibrefitError, match="nothing.csv"):
+        fibrefit.eval(CONFIGS / "silk_params.toml", tmp_path / "nothing.csv")
+    with pytest.raises(fibrefit.FibrefitError, match="no-such-rung"):
+        fibrefit.eval(CONFIGS / "silk_params.toml", q, model="no-such-rung")
+
+
+@needs_cli
+def test_export_is_the_clis(silk_result, tmp_path):
+    for lang in ["wgsl", "glsl", "hlsl", "msl"]:
+        e = fibrefit.export(silk_result, shader=lang)
+        out = tmp_path / f"s.{lang}"
+        run_cli("export", silk_result, "--shader", lang, "--out", out, "-q")
+        assert e.shader == out.read_text() and e.glb is None and e.gltf_material is None
+        assert e.model == "varying-topology"
+    for obj in ["swatch", "sphere"]:
+        e = fibrefit.export(silk_result, gltf=True, object=obj)
+        glb = tmp_path / f"{obj}.glb"
+        run_cli("export", silk_result, "--gltf", glb, "--object", obj, "-q")
+        assert e.glb == glb.read_bytes() and e.shader is None
+        m = e.gltf_material
+        assert len(m["base_color"]) == 3 and 0 <= m["roughness"] <= 1 and m["directions"] > 0
+    both = fibrefit.export(silk_result, shader="wgsl", gltf=True)
+    assert both.shader and both.glb[:4] == b"glTF"
+
+
+def test_export_refusals(silk_result):
+    with pytest.raises(fibrefit.FibrefitError, match="nothing to export"):
+        fibrefit.export(silk_result)
+    with pytest.raises(fibrefit.FibrefitError, match="unknown shader language 'cuda'"):
+        fibrefit.export(silk_result, shader="cuda")
+    with pytest.raises(fibrefit.FibrefitError, match="--object cube"):
+        fibrefit.export(silk_result, gltf=True, object="cube")
+    # the package has no GPU driver to check the shader on
+    with pytest.raises(fibrefit.FibrefitError, match="gpu"):
+        fibrefit.export(silk_result, shader="wgsl", check=True)
+
+
+def test_loading_flags_are_typed_keywords():
+    capture = DATA / "brushed" / "capture.toml"
+    # unknown keywords are Python's TypeError, naming the keyword
+    with pytest.raises(TypeError, match="strde"):
+        fibrefit.load_data(capture, strde=2)
+    with pytest.raises(TypeError, match="strde"):
+        fibrefit.fit(capture, model="lambert", strde=2)
+    with pytest.raises(TypeError, match="strde"):
+        fibrefit.score(DATA / "brushed" / "truth.json", capture, strde=2)
+    # values of the wrong type or range are FibrefitErrors naming the argument
+    with pytest.raises(fibrefit.FibrefitError, match="stride"):
+        fibrefit.load_data(capture, stride="2")
+    with pytest.raises(fibrefit.FibrefitError):
+        fibrefit.load_data(capture, stride=-1)
+    with pytest.raises(fibrefit.FibrefitError, match="columns"):
+        fibrefit.load_data(capture, columns=["brdf"])
+    with pytest.raises(fibrefit.FibrefitError, match=r"--fraction must lie in \(0, 1\]"):
+        fibrefit.load_data(capture, fraction=1.5)
+    a = fibrefit.load_data(capture, stride=2, fraction=0.5, subsample_seed=1)
+    b = fibrefit.load_data(capture, stride=2, fraction=0.5, subsample_seed=2)
+    assert a["l"].shape[0] != b["l"].shape[0] or not np.array_equal(a["origin"], b["origin"])
+
+
+def test_columns_extend_the_configs_as_the_cli_does(tmp_path):
+    # the file's own names for every column, given partly by the config and partly by `columns`
+    rows = (DATA / "brushed" / "gonio.csv").read_text().splitlines(keepends=True)
+    header = [h.strip() for h in rows[0].split(",")]
+    renamed = {"theta_i": "ti", "phi_i": "pi", "theta_o": "to", "phi_o": "po"}
+    data = tmp_path / "renamed.csv"
+    data.write_text(",".join(renamed.get(h, h) for h in header) + "\n" + "".join(rows[1:301]))
+    cfg = tmp_path / "cfg.toml"
+    cfg.write_text('model = "lambert"\n[columns]\ntheta_i = "ti"\nphi_i = "pi"\n')
+    with pytest.raises(fibrefit.FibrefitError):
+        fibrefit.fit(data, config=cfg)
+    r = fibrefit.fit(data, config=cfg, columns={"theta_o": "to", "phi_o": "po"})
+    plain = tmp_path / "plain.csv"
+    plain.write_text("".join(rows[:301]))
+    lambert = tmp_path / "lambert.toml"
+    lambert.write_text('model = "lambert"\n')
+    np.testing.assert_array_equal(r.params["kd"].value, fibrefit.fit(plain, config=lambert).params["kd"].value)
