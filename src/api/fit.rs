@@ -3,6 +3,7 @@
 //! into outputs reserved with [`FitTargets::reserve`]. The CLI (`fibrefit fit`) and any other
 //! front end call these; nothing here parses arguments or prints results.
 
+pub use super::data::LoadFlags;
 use crate::export::atomic::{OutputId, Outputs};
 use crate::export::maps_out::{self, MapFiles};
 use crate::export::report::{self, ReportFiles};
@@ -99,102 +100,6 @@ pub fn configure(
         cfg.validate().map_err(|e| anyhow!("--model: {e}"))?;
     }
     Ok(cfg)
-}
-
-/// The loading flags of a front end, as the command line's `--stride`, `--columns`, ...
-/// give them (absent flags at the command line's defaults): taken as they are by commands
-/// without a config ([`LoadFlags::options`]), merged with a fit config's by [`FitOptions`].
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoadFlags {
-    /// Goniometric CSV: skip bad rows (counted and reported) instead of stopping at the first.
-    pub skip_bad_rows: bool,
-    /// Goniometric CSV: the angles really are small degrees (do not stop on radian-looking
-    /// data).
-    pub small_angles_ok: bool,
-    /// Goniometric CSV: the file's own column names, (ours, theirs); they extend and override a
-    /// config's `[columns]`.
-    pub columns: Vec<(String, String)>,
-    /// Image captures: every `stride`-th pixel in x and y; `None`: the config's, else 1.
-    pub stride: Option<usize>,
-    /// Image captures: a seeded random fraction of the pixels, in (0, 1]; `None`: the
-    /// config's, else 1.
-    pub fraction: Option<f64>,
-    /// Seed of the random pixel fraction.
-    pub subsample_seed: u64,
-    /// Measured-BRDF files: direction pairs drawn, light and view uniform in solid angle
-    /// (a count).
-    pub directions: usize,
-    /// Measured-BRDF files: seed of the drawn directions.
-    pub direction_seed: u64,
-    /// Measured-BRDF files: largest theta of light and view, degrees.
-    pub max_theta_deg: f64,
-}
-
-impl Default for LoadFlags {
-    fn default() -> Self {
-        let m = crate::load::rgl::MeasuredOptions::default();
-        Self {
-            skip_bad_rows: false,
-            small_angles_ok: false,
-            columns: Vec::new(),
-            stride: None,
-            fraction: None,
-            subsample_seed: 0,
-            directions: m.directions,
-            direction_seed: m.seed,
-            max_theta_deg: m.max_theta_deg,
-        }
-    }
-}
-
-impl LoadFlags {
-    /// The loading options, checked; `stride` and `fraction` fall back to the given defaults
-    /// (a config's), [`LoadFlags::columns`] extend and override `columns` (a config's
-    /// `[columns]`).
-    pub fn options_with(
-        &self,
-        stride: usize,
-        fraction: f64,
-        columns: &std::collections::BTreeMap<String, String>,
-    ) -> Result<LoadOptions> {
-        let mut map: Vec<(String, String)> = columns
-            .iter()
-            .map(|(k, v)| (k.clone(), v.clone()))
-            .collect();
-        for (ours, theirs) in &self.columns {
-            map.retain(|(o, _)| o != ours);
-            map.push((ours.clone(), theirs.clone()));
-        }
-        LoadOptions {
-            gonio: crate::load::gonio::GonioOptions {
-                skip_bad_rows: self.skip_bad_rows,
-                small_angles_ok: self.small_angles_ok,
-                columns: map,
-            },
-            subsample: crate::load::capture::Subsample {
-                stride: self.stride.unwrap_or(stride),
-                fraction: self.fraction.unwrap_or(fraction),
-                seed: self.subsample_seed,
-            },
-            measured: crate::load::rgl::MeasuredOptions {
-                directions: self.directions,
-                seed: self.direction_seed,
-                max_theta_deg: self.max_theta_deg,
-            },
-        }
-        .checked()
-    }
-
-    /// The loading options without a config (stride and fraction 1 unless given), checked.
-    pub fn options(&self) -> Result<LoadOptions> {
-        self.options_with(1, 1.0, &Default::default())
-    }
-
-    /// The loading options of a fit configured by `cfg`: its `[knobs]` stride and fraction
-    /// unless given, its `[columns]` extended and overridden by [`LoadFlags::columns`].
-    pub fn options_for(&self, cfg: &FitConfig) -> Result<LoadOptions> {
-        self.options_with(cfg.knobs.stride, cfg.knobs.fraction, &cfg.columns)
-    }
 }
 
 /// A fit as a front end asks for it (the command line's `fibrefit fit` flags, the Python
