@@ -82,6 +82,12 @@ impl Progress {
         }
     }
 
+    /// A warning (`warning: MSG`) printed even when quiet: a loss the user must see (an
+    /// optional output that could not be written).
+    pub fn alert(&self, msg: &str) {
+        eprintln!("warning: {msg}");
+    }
+
     /// Text as it is (a table, a note) unless quiet.
     pub fn say(&self, text: &str) {
         if !self.quiet {

@@ -763,7 +763,7 @@ impl FitRun {
                 },
             ) {
                 let w = format!("{}: the report could not be written: {e:#}", dir.display());
-                progress.warn(&w);
+                progress.alert(&w);
                 self.result.warnings.push(w);
                 files.discard(outs);
             }

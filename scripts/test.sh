@@ -1,0 +1,37 @@
+#!/usr/bin/env bash
+# Set up what the tests need on a fresh Debian or Ubuntu machine, then run every test: Rust
+# (cargo test), then the Python package (built with maturin into a virtual environment, tested
+# with pytest, Mitsuba 3 for the plugin's tests). Safe to run again: it installs only what is
+# missing, and the virtual environment (.venv-test/) is kept between runs.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+
+# apt: the shader tests run the exported shader on a GPU driver (the CPU Vulkan driver
+# llvmpipe, mesa-vulkan-drivers); the exported GLSL is compiled by glslang (glslang-tools); the
+# Python tests render with Mitsuba 3's LLVM variant, which needs libLLVM 16 or newer (Debian 12's
+# default is 15: libllvm19); the Python package needs venv and pip
+need=()
+compgen -G "/usr/share/vulkan/icd.d/lvp_icd*.json" >/dev/null || need+=(mesa-vulkan-drivers)
+command -v glslangValidator >/dev/null || need+=(glslang-tools)
+compgen -G "/usr/lib/*/libLLVM-19.so*" >/dev/null || compgen -G "/usr/lib/*/libLLVM.so.19*" >/dev/null || need+=(libllvm19)
+python3 -c "import venv, ensurepip" 2>/dev/null || need+=(python3-venv)
+command -v cargo >/dev/null || { echo "scripts/test.sh: cargo not found: install Rust first (https://rustup.rs)" >&2; exit 2; }
+if [ ${#need[@]} -gt 0 ]; then
+    echo "scripts/test.sh: installing ${need[*]}" >&2
+    sudo=""
+    [ "$(id -u)" -eq 0 ] || sudo="sudo"
+    $sudo apt-get install -y --no-install-recommends "${need[@]}" ||
+        { $sudo apt-get update -q && $sudo apt-get install -y --no-install-recommends "${need[@]}"; }
+fi
+
+# pip: the Python package's build and test tools, in a virtual environment that sees the
+# system's packages (nothing already installed is downloaded again)
+venv=.venv-test
+[ -x "$venv/bin/python" ] || python3 -m venv --system-site-packages "$venv"
+py="$venv/bin/python"
+"$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
+
+# every test
+cargo test
+"$py" -m pip install --quiet --disable-pip-version-check ./python
+"$py" -m pytest -q python/tests
