@@ -209,7 +209,7 @@ fn on_real_felt_a_fibre_rung_with_spread_beats_ward() {
     let ward = common::felt_heldout(&auto.for_rung(ModelId::Ward));
     // the fibres' surface term is grey (issue 23 item 5): the felt's coloured broad lobe, light
     // scattered inside the dyed fibres, is the fuzz layer's (without it poulin-fournier predicts
-    // 0.457 against Ward's 0.419; with a coloured ks 0.327: docs/guide/fit.md)
+    // 0.457 against Ward's 0.419; with a coloured ks 0.327: docs/figures.md)
     let fuzzed: fibrefit::fit::config::FitConfig = toml::from_str(
         "model = \"auto\"\nmetric = \"log\"\n[knobs]\nazimuth_nodes = 12\n[parameters]\nfuzz_depth = {}\n",
     )

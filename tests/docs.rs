@@ -106,3 +106,14 @@ fn the_model_contract_lives_in_the_repository() {
         "the README explains `rung` where it first uses it"
     );
 }
+
+#[test]
+fn the_fit_guide_stays_a_users_guide() {
+    let text = std::fs::read_to_string(root().join("docs/guide/fit.md")).unwrap();
+    let n = text.lines().count();
+    assert!(
+        n <= 250,
+        "docs/guide/fit.md is a user's guide of at most 250 lines (measurements belong in \
+         docs/figures.md, the config's keys in docs/formats.md): {n} lines"
+    );
+}
