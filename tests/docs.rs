@@ -46,10 +46,15 @@ fn the_readme_opens_with_the_two_commands() {
     assert_eq!(lines[0], "# fibrefit");
     assert_eq!(lines[2], "```sh");
     assert!(lines[3].starts_with("cargo run --release -- fit data_synthetic/"));
-    assert!(lines[4].starts_with("cargo test"));
+    assert_eq!(lines[4], "scripts/test.sh", "the test command sets itself up");
+    let script = std::fs::read_to_string(root().join("scripts/test.sh")).unwrap();
+    for step in ["apt-get install", "cargo test", "pytest"] {
+        assert!(script.contains(step), "scripts/test.sh lacks `{step}`");
+    }
+    let ci = std::fs::read_to_string(root().join(".ci/run")).unwrap();
     assert!(
-        lines[4].contains("pytest"),
-        "the test command runs the Python tests too"
+        ci.contains("scripts/test.sh"),
+        ".ci/run runs the README's test command"
     );
     assert_eq!(lines[5], "```");
     // the main job's data and config are shipped

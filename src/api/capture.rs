@@ -1,6 +1,6 @@
 //! A capture image's scene for renderers outside fibrefit (the Mitsuba scene of
 //! `fibrefit.mitsuba.capture_scene`): the swatch, the light and the camera of one image of a
-//! capture TOML, read as the fit reads them (`capture`) and put the way a
+//! capture TOML, read as the fit reads them (`load::capture`) and put the way a
 //! renderer sets them up. Millimetres throughout (the scene's unit), the swatch frame (z the
 //! macro normal, x the swatch's x axis; the swatch a `size_mm` rectangle centred on the origin),
 //! angles in degrees. Rendered with the capture's rectification, pixel (row, column) of the
