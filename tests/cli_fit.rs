@@ -36,6 +36,10 @@ fn main_job_writes_a_complete_result_that_eval_reproduces() {
     let line: serde_json::Value = serde_json::from_slice(&o.stdout).expect("one JSON line");
     assert_eq!(line["model"], "varying-topology");
     assert!(line["relative_rmse"].as_f64().unwrap() < 0.02);
+    // the verdict, and with sigmas the reduced chi-square (not the residual variance)
+    assert_eq!(line["verdict"], "fits within the noise", "{line}");
+    assert!(line["reduced_chi_square"].as_f64().is_some(), "{line}");
+    assert!(line.get("residual_variance").is_none(), "{line}");
     assert!(report.join("report.md").exists());
 
     let r: serde_json::Value = serde_json::from_str(&fs::read_to_string(&out).unwrap()).unwrap();

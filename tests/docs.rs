@@ -46,7 +46,10 @@ fn the_readme_opens_with_the_two_commands() {
     assert_eq!(lines[0], "# fibrefit");
     assert_eq!(lines[2], "```sh");
     assert!(lines[3].starts_with("cargo run --release -- fit data_synthetic/"));
-    assert_eq!(lines[4], "scripts/test.sh", "the test command sets itself up");
+    assert_eq!(
+        lines[4], "scripts/test.sh",
+        "the test command sets itself up"
+    );
     let script = std::fs::read_to_string(root().join("scripts/test.sh")).unwrap();
     for step in ["apt-get install", "cargo test", "pytest"] {
         assert!(script.contains(step), "scripts/test.sh lacks `{step}`");

@@ -151,7 +151,15 @@ fn cross_validation_picks_lambert_for_a_small_noisy_lambertian_set() {
     assert_eq!(s.chosen, "lambert");
     assert_eq!(s.validation, "5-fold cross-validation");
     // every sample held out once, each candidate with and without the fuzz layer
-    assert_eq!(s.heldout_samples, 200);
+    assert_eq!(s.counts.heldout_samples_total, 200);
+    // per fold: n / folds held out, the rest trained on, and the table says so
+    assert_eq!(s.counts.heldout_samples_per_fold, 200 / 5);
+    assert_eq!(s.counts.train_samples_per_fold, 200 - 200 / 5);
+    assert!(
+        table(&s).contains("160 training / 40 held-out samples per fold, 200 held out in all"),
+        "{}",
+        table(&s)
+    );
     assert_eq!(s.candidates.len(), 8);
     assert!(s.candidates.iter().any(|c| c.name == "ward + fuzz"));
     for c in s.candidates.iter().filter(|c| c.error.is_none()) {
@@ -323,4 +331,72 @@ fn data_spanning_decades_without_sigmas_are_fitted_in_the_log_metric_and_the_rep
         fibrefit::fit::config::metric_for_data(&without_sigmas(&l)).0,
         Metric::Linear
     );
+}
+
+/// `fibrefit fit --model auto` prints the model-selection table once (in the report, not again
+/// through the progress lines), with the right counts: 5 folds of 300 hold out 60 each; the
+/// result's `selection` block says what it counts; and `--json` carries the verdict and,
+/// without sigmas, the residual variance under its own name, never a reduced chi-square.
+#[test]
+fn the_selection_table_is_printed_once_with_per_fold_counts_and_json_is_honest() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = synth_text(
+        dir.path(),
+        "flat",
+        "model = \"lambert\"\n[params]\nkd = 0.6\n[gonio]\n\
+         random = { count = 300, seed = 4, max_theta_deg = 80 }\n\
+         [noise]\nrelative = 0.02\nseed = 6\n",
+    );
+    let csv = dir.path().join("flat.csv");
+    strip_sigmas(&d, &csv);
+    let cfg = dir.path().join("auto.toml");
+    std::fs::write(
+        &cfg,
+        "model = \"auto\"\nstarts = 2\nseed = 2\n[optimizer]\nglobal_candidates = 24\n\
+         global_subsample = 300\n[selection]\nrungs = [\"lambert\", \"max-normal\"]\nfuzz = false\n",
+    )
+    .unwrap();
+    let out = dir.path().join("r.json");
+    let run = |json: bool| {
+        let mut c = fibrefit();
+        c.env("FIBREFIT_PROGRESS", "1")
+            .arg("fit")
+            .arg(&csv)
+            .arg("--config")
+            .arg(&cfg)
+            .arg("--out")
+            .arg(&out);
+        if json {
+            c.arg("--json");
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+        (
+            String::from_utf8_lossy(&o.stdout).into_owned(),
+            String::from_utf8_lossy(&o.stderr).into_owned(),
+        )
+    };
+    let (stdout, stderr) = run(false);
+    let all = format!("{stdout}{stderr}");
+    assert_eq!(all.matches("Model selection by").count(), 1, "{all}");
+    assert!(stdout.contains("Model selection by"), "{stdout}");
+    assert!(
+        stdout.contains("240 training / 60 held-out samples per fold, 300 held out in all"),
+        "{stdout}"
+    );
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    let s = &r["selection"];
+    assert_eq!(s["folds"], 5, "{s}");
+    assert_eq!(s["train_samples_per_fold"], 240, "{s}");
+    assert_eq!(s["heldout_samples_per_fold"], 60, "{s}");
+    assert_eq!(s["heldout_samples_total"], 300, "{s}");
+    // --json: the summary line with the verdict; no sigmas: no chi-square
+    let (stdout, _) = run(true);
+    let line: serde_json::Value = serde_json::from_str(stdout.trim()).expect("one JSON line");
+    assert_eq!(line["verdict"], r["quality"]["verdict"], "{line}");
+    assert!(line["verdict"].as_str().is_some_and(|v| !v.is_empty()));
+    assert!(line.get("reduced_chi_square").is_none(), "{line}");
+    assert!(line["residual_variance"].as_f64().is_some(), "{line}");
+    assert_eq!(line["sigmas_given"], false, "{line}");
 }

@@ -334,9 +334,11 @@ class Result:
 
     def __repr__(self) -> str:
         s = self.statistics
+        # without sigmas chi-square is not defined: the residual variance, by its own name
+        spread = "reduced_chi_square" if s.get("sigmas_given") else "residual_variance"
         return (
             f"Result(model={self.model!r}, samples={self.result['data']['samples']}, "
-            f"reduced_chi_square={s.get('reduced_chi_square')}, warnings={len(self.warnings)})"
+            f"{spread}={s.get(spread)}, warnings={len(self.warnings)})"
         )
 
 

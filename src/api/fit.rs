@@ -175,7 +175,7 @@ pub struct FitRequest {
     pub load: LoadOptions,
     /// What is recovered besides the global parameters.
     pub maps: Maps,
-    /// Where progress lines, bars and the model-selection table go.
+    /// Where progress lines and bars go (the model-selection table is in the report).
     pub progress: crate::progress::Progress,
 }
 
@@ -242,10 +242,9 @@ pub struct AutoProgress {
     pub candidates: Vec<crate::fit::selection::Candidate>,
     /// The training fit's parameters of every rung fitted, as a result states them.
     pub fits: Vec<(String, serde_json::Value)>,
-    /// Samples the candidates were fitted on (the training split, or all but one fold).
-    pub train_samples: usize,
-    /// Samples held out to measure each candidate's error.
-    pub heldout_samples: usize,
+    /// Samples the candidates were fitted on and held out to measure their errors, per fold
+    /// and in all.
+    pub counts: crate::fit::selection::Counts,
     /// Set once every rung is done: the rung being refitted on all samples.
     pub chosen: Option<String>,
     /// The data file's name (no directory) and sample count.
@@ -289,8 +288,9 @@ impl AutoProgress {
             "rungs_done": self.candidates.iter().map(|c| c.name.clone()).collect::<Vec<_>>(),
             "rungs_not_done": self.rungs.iter().skip(self.candidates.len()).cloned().collect::<Vec<_>>(),
             "chosen": self.chosen,
-            "train_samples": self.train_samples,
-            "heldout_samples": self.heldout_samples,
+            "train_samples_per_fold": self.counts.train_samples_per_fold,
+            "heldout_samples_per_fold": self.counts.heldout_samples_per_fold,
+            "heldout_samples_total": self.counts.heldout_samples_total,
             "model_selection": self.candidates,
             "training_fits": self.fits.iter().map(|(r, p)| serde_json::json!({ "candidate": r, "parameters": p })).collect::<Vec<_>>(),
         })
@@ -441,8 +441,7 @@ fn select_stage(
     let s = fit::selection::select_with(samples, cfg, &req.progress, &mut |d| {
         with_sink(&mut |p| {
             p.candidates = d.candidates.to_vec();
-            p.train_samples = d.train_samples;
-            p.heldout_samples = d.heldout_samples;
+            p.counts = d.counts;
             if let (Some(o), Some(c)) = (d.outcome, d.candidates.last()) {
                 p.fits.push((
                     c.name.clone(),
@@ -463,7 +462,7 @@ fn select_stage(
         None => cfg.for_rung(s.chosen_rung.parse().map_err(|e: String| anyhow!(e))?),
     };
     cfg.metric_reason = reason;
-    req.progress.say(&fit::selection::table(&s));
+    // the table is said once: in the report (`FitRun::report_text`), which the CLI prints
     Ok(s)
 }
 
@@ -740,6 +739,29 @@ impl FitTargets {
 }
 
 impl FitRun {
+    /// The one-line summary `fibrefit fit --json` prints: the rung, the result file `out`, the
+    /// sample count, the quality verdict, the errors, the spread of the residuals under its own
+    /// name (`reduced_chi_square` with sigmas, `residual_variance` without: chi-square is not
+    /// defined then, as the report says), and the work done.
+    pub fn summary_json(&self, out: Option<&Path>) -> serde_json::Value {
+        let (o, s) = (&self.outcome, &self.outcome.statistics);
+        let mut v = serde_json::json!({
+            "model": self.model.as_str(),
+            "out": out.map(|p| p.display().to_string()),
+            "samples": self.samples.samples.len(),
+            "verdict": o.quality.verdict,
+            "rmse": s.rmse,
+            "relative_rmse": s.relative_rmse,
+            "sigmas_given": s.sigmas_given,
+            "iterations": o.iterations,
+            "evaluations": o.evaluations,
+            "seconds": o.elapsed_seconds,
+            "warnings": o.warnings.len(),
+        });
+        v[s.names().1] = s.reduced_chi_square.into();
+        v
+    }
+
     /// Write the run's files into their reserved outputs (committed by the caller): the maps,
     /// the report (optional: its failure becomes a warning in the result, never the lost fit),
     /// then the result JSON.

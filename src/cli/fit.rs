@@ -163,16 +163,7 @@ pub fn run(args: &FitArgs) -> Result<()> {
     let mut printed = Ok(());
     let outcome = &run.outcome;
     if args.json {
-        let s = &outcome.statistics;
-        printed = super::print_out(&format!(
-            "{}\n",
-            serde_json::json!({
-                "model": run.model.as_str(), "out": out_path.as_ref().map(|p| p.display().to_string()), "samples": run.samples.samples.len(),
-                "rmse": s.rmse, "relative_rmse": s.relative_rmse, "reduced_chi_square": s.reduced_chi_square,
-                "iterations": outcome.iterations, "evaluations": outcome.evaluations,
-                "seconds": outcome.elapsed_seconds, "warnings": outcome.warnings.len()
-            })
-        ));
+        printed = super::print_out(&format!("{}\n", run.summary_json(out_path.as_deref())));
     } else if !args.quiet {
         printed = super::print_out(&run.report_text);
         match &out_path {

@@ -649,8 +649,9 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
                 "chosen": s.chosen,
                 "chosen_rung": s.chosen_rung,
                 "fuzz": s.chosen_fuzz,
-                "train_samples": s.train_samples,
-                "heldout_samples": s.heldout_samples,
+                "train_samples_per_fold": s.counts.train_samples_per_fold,
+                "heldout_samples_per_fold": s.counts.heldout_samples_per_fold,
+                "heldout_samples_total": s.counts.heldout_samples_total,
             })
         }),
         quality: Some(serde_json::to_value(&outcome.quality)?),

@@ -278,19 +278,25 @@ fn records(
     records
 }
 
-/// The minima with their free shapes named, for the quality checks and the outcome.
+/// The minima with their free shapes named, for the quality checks and the outcome: as fitted,
+/// periodic ones wrapped into their period (as the records give them). The polishing merged
+/// those a symmetry of the rung maps onto each other (`basins::Metric`).
 fn named_minima(minima: &[(ParamSet, f64)]) -> Vec<(Vec<(String, f64)>, f64)> {
     minima
         .iter()
         .map(|(s, c)| {
-            (
-                s.shapes
-                    .iter()
-                    .filter(|x| x.vary)
-                    .map(|x| (x.kind.name().to_string(), x.value))
-                    .collect(),
-                *c,
-            )
+            let mut values: Vec<(Param, f64)> = s
+                .shapes
+                .iter()
+                .filter(|x| x.vary)
+                .map(|x| (x.kind, x.value))
+                .collect();
+            crate::model::rung::wrap_periodic(&mut values);
+            let named = values
+                .into_iter()
+                .map(|(p, v)| (p.name().to_string(), v))
+                .collect();
+            (named, *c)
         })
         .collect()
 }

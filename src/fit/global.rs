@@ -17,7 +17,7 @@
 //! What comes out is the list of distinct competitive basins, best first; the final stage
 //! polishes each on all samples.
 
-pub use super::basins::{box_distance, Basin, BASIN_SEPARATION};
+pub use super::basins::{Basin, Keyed, Metric, BASIN_SEPARATION};
 use super::config::Optimizer;
 use super::parameters::ParamSet;
 use super::polish::run_lm;
@@ -83,7 +83,7 @@ pub fn search(
 ) -> Result<Vec<Basin>> {
     let Stage { sub, template, bar } = stage;
     let (lo, hi) = sub.design_box();
-    let periods = sub.periods();
+    let metric = Metric::of(sub, template);
     let count = opt
         .global_candidates
         .unwrap_or_else(|| crate::fit::config::default_candidates(lo.len()));
@@ -98,7 +98,7 @@ pub fn search(
     // geometric coordinates are designed again with the others at the best basin.
     let geometric = sub.geometric();
     if geometric.iter().any(|&g| g) && geometric.iter().any(|&g| !g) {
-        let best = cluster(found.clone(), &lo, &hi, &periods)[0].theta.clone();
+        let best = cluster(found.clone(), &metric)[0].theta.clone();
         let n_geo = geometric.iter().filter(|&&g| g).count();
         // a third of them on the face of touching fibres (the smallest spacing): the common
         // case, and a face a box-filling design reaches only by chance
@@ -126,7 +126,7 @@ pub fn search(
             tol,
         )?);
     }
-    let basins = competitive(cluster(found, &lo, &hi, &periods), sub);
+    let basins = competitive(cluster(found, &metric), sub);
     bar.inc_length(basins.len() as u64 * BASIN_POLISH_ITERATIONS);
     let polished: Vec<Basin> = basins
         .into_iter()
@@ -136,7 +136,7 @@ pub fn search(
             Ok(Basin { theta, cost })
         })
         .collect::<Result<_>>()?;
-    Ok(competitive(cluster(polished, &lo, &hi, &periods), sub))
+    Ok(competitive(cluster(polished, &metric), sub))
 }
 
 /// Cost every candidate, pick the first `forced` and the best others that lie apart (up to
@@ -149,8 +149,7 @@ fn screen_and_polish(
     tol: f64,
 ) -> Result<Vec<Basin>> {
     let Stage { sub, template, bar } = stage;
-    let (lo, hi) = sub.design_box();
-    let periods = sub.periods();
+    let metric = Metric::of(sub, template);
     let costs: Vec<f64> = candidates
         .par_iter()
         .map(|c| {
@@ -162,14 +161,15 @@ fn screen_and_polish(
     let mut order: Vec<usize> = (forced..candidates.len()).collect();
     order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
     let mut chosen: Vec<usize> = (0..forced).collect();
+    let keyed: Vec<Keyed> = candidates.iter().map(|c| metric.keyed(c.clone())).collect();
     for &k in &order {
         if chosen.len() >= polish_count.max(forced) {
             break;
         }
         if costs[k].is_finite()
-            && chosen.iter().all(|&c| {
-                box_distance(&candidates[k], &candidates[c], &lo, &hi, &periods) > START_SEPARATION
-            })
+            && chosen
+                .iter()
+                .all(|&c| metric.distance(&keyed[k], &keyed[c]) > START_SEPARATION)
         {
             chosen.push(k);
         }
@@ -191,24 +191,21 @@ fn screen_and_polish(
         .collect()
 }
 
-/// Merge points closer than [`BASIN_SEPARATION`], keeping the cheaper; best first.
-pub fn cluster(
-    mut points: Vec<Basin>,
-    lo: &DVector<f64>,
-    hi: &DVector<f64>,
-    periods: &[Option<f64>],
-) -> Vec<Basin> {
+/// Merge points closer than [`BASIN_SEPARATION`] (by `metric`: points a symmetry of the rung
+/// maps onto each other are one), keeping the cheaper; best first.
+pub fn cluster(mut points: Vec<Basin>, metric: &Metric) -> Vec<Basin> {
     points.sort_by(|a, b| a.cost.total_cmp(&b.cost));
-    let mut out: Vec<Basin> = Vec::new();
+    let mut out: Vec<(Keyed, Basin)> = Vec::new();
     for p in points {
+        let k = metric.keyed(p.theta.clone());
         if out
             .iter()
-            .all(|q| box_distance(&p.theta, &q.theta, lo, hi, periods) > BASIN_SEPARATION)
+            .all(|(q, _)| metric.distance(&k, q) > BASIN_SEPARATION)
         {
-            out.push(p);
+            out.push((k, p));
         }
     }
-    out
+    out.into_iter().map(|(_, b)| b).collect()
 }
 
 /// The basins (best first) whose cost could still beat the best's once polished: within

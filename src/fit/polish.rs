@@ -1,7 +1,7 @@
 //! Local polishing: bounded Levenberg–Marquardt runs from a start, and the final stage that
 //! polishes every competitive basin of the global stage on all samples.
 
-use super::basins::{box_distance, Basin, BASIN_SEPARATION};
+use super::basins::{Basin, Keyed, Metric, BASIN_SEPARATION};
 use super::lm;
 use super::parameters::ParamSet;
 use super::problem::{ArgminProblem, FitProblem};
@@ -84,16 +84,18 @@ pub fn final_stage(
         })
         .collect::<Result<_>>()?;
     minima.sort_by(|a, b| a.cost.total_cmp(&b.cost));
-    let (lo, hi) = full.design_box();
-    let periods = full.periods();
-    let mut distinct: Vec<Minimum> = Vec::new();
+    // one basin per symmetry class too: the cheaper of two that are one after canonicalisation
+    let metric = Metric::of(full, template);
+    let mut distinct: Vec<(Keyed, Minimum)> = Vec::new();
     for m in minima {
+        let k = metric.keyed(m.theta.clone());
         if distinct
             .iter()
-            .all(|d| box_distance(&m.theta, &d.theta, &lo, &hi, &periods) > BASIN_SEPARATION)
+            .all(|(d, _)| metric.distance(&k, d) > BASIN_SEPARATION)
         {
-            distinct.push(m);
+            distinct.push((k, m));
         }
     }
+    let distinct: Vec<Minimum> = distinct.into_iter().map(|(_, m)| m).collect();
     Ok(distinct)
 }

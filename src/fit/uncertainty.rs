@@ -154,17 +154,26 @@ pub struct Statistics {
     pub bic: f64,
 }
 
+impl Statistics {
+    /// The names of `chi_square` and `reduced_chi_square` as they are: ("chi_square",
+    /// "reduced_chi_square") with sigmas; without, chi-square is not defined: ("sum_of_squares",
+    /// "residual_variance").
+    pub fn names(&self) -> (&'static str, &'static str) {
+        if self.sigmas_given {
+            ("chi_square", "reduced_chi_square")
+        } else {
+            ("sum_of_squares", "residual_variance")
+        }
+    }
+}
+
 impl serde::Serialize for Statistics {
     fn serialize<S: serde::Serializer>(&self, ser: S) -> Result<S::Ok, S::Error> {
         use serde::ser::SerializeMap;
         let mut m = ser.serialize_map(Some(9))?;
         m.serialize_entry("n", &self.n)?;
         m.serialize_entry("free_parameters", &self.free_parameters)?;
-        let (sum, reduced) = if self.sigmas_given {
-            ("chi_square", "reduced_chi_square")
-        } else {
-            ("sum_of_squares", "residual_variance")
-        };
+        let (sum, reduced) = self.names();
         m.serialize_entry(sum, &self.chi_square)?;
         m.serialize_entry(reduced, &self.reduced_chi_square)?;
         m.serialize_entry("sigmas_given", &self.sigmas_given)?;

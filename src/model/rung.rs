@@ -2,7 +2,7 @@
 //! (`model/rungs/`, as `pub static RUNG`). The registry (`model/rungs/mod.rs`) lists the rungs
 //! and names them (`ModelId`).
 
-use super::parameter::{Ability, Param};
+use super::parameter::{Ability, Param, Scale};
 use super::topology::Topology;
 use super::ShadingModel;
 
@@ -81,6 +81,43 @@ pub enum Cost {
     Adaptive,
 }
 
+/// A symmetry of a rung's parameters beyond the periodic ones of the parameter table: the
+/// parameter sets it maps onto each other describe one BRDF, so a fit's minima are one solution
+/// when their [`Rung::canonicalise`]d values agree.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Symmetry {
+    /// The lobe's roughness along the fibres and across them swapped, with the fibre azimuth
+    /// turned by 90 degrees (T -> B, B -> -T), is the same lobe. Canonical: `along >= across`.
+    SwapAxes {
+        /// The roughness along the fibres (T).
+        along: Param,
+        /// The roughness across the fibres (B).
+        across: Param,
+    },
+}
+
+impl Symmetry {
+    /// Map `values` to this symmetry's canonical representative; a no-op unless every parameter
+    /// it moves is among `values` (a held parameter makes the image a different solution).
+    fn canonicalise(self, values: &mut [(Param, f64)]) {
+        match self {
+            Symmetry::SwapAxes { along, across } => {
+                let find = |p: Param| values.iter().position(|v| v.0 == p);
+                let (Some(a), Some(b), Some(z)) = (find(along), find(across), find(Param::Azimuth))
+                else {
+                    return;
+                };
+                if values[a].1 < values[b].1 {
+                    let t = values[a].1;
+                    values[a].1 = values[b].1;
+                    values[b].1 = t;
+                    values[z].1 += 90.0;
+                }
+            }
+        }
+    }
+}
+
 /// One rung of the ladder, declared in its own file.
 pub struct Rung {
     /// The id as the CLI and JSON spell it.
@@ -99,12 +136,27 @@ pub struct Rung {
     pub auto_rank: Option<u8>,
     /// A typical parameter set (benchmarks, tests), values by parameter.
     pub example: &'static [(Param, f64)],
+    /// The symmetries of its parameters beyond the table's periodic ones (the fibre azimuth's
+    /// 180 degrees, T -> -T, holds for every rung): [`Rung::canonicalise`].
+    pub symmetries: &'static [Symmetry],
 }
 
 impl Rung {
     /// Whether the rung has `ability`.
     pub fn has(&self, ability: Ability) -> bool {
         self.abilities.contains(&ability)
+    }
+
+    /// Map `values` (a parameter set's free values, or all of its values) to the canonical
+    /// representative of their symmetry class: the rung's [`Symmetry`]s first (each only when
+    /// every parameter it moves is among `values`), then every periodic parameter wrapped into
+    /// its period centred on 0 (the fibre azimuth into [-90, 90)). Two minima whose canonical
+    /// values agree are one solution.
+    pub fn canonicalise(&self, values: &mut [(Param, f64)]) {
+        for s in self.symmetries {
+            s.canonicalise(values);
+        }
+        wrap_periodic(values);
     }
 
     /// The example as a parameter file's text, its exponent (when it has one) replaced by `e`.
@@ -122,8 +174,58 @@ impl Rung {
     }
 }
 
+/// Every periodic parameter of `values` (the parameter table's `Scale::Periodic`) wrapped into
+/// its period centred on 0: the fibre azimuth into [-90, 90).
+pub fn wrap_periodic(values: &mut [(Param, f64)]) {
+    for (p, v) in values.iter_mut() {
+        if let Scale::Periodic(period) = p.info().scale {
+            *v = (*v + 0.5 * period).rem_euclid(period) - 0.5 * period;
+        }
+    }
+}
+
 impl std::fmt::Debug for Rung {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         write!(f, "Rung({})", self.name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn canonicalise_swaps_wards_axes_and_wraps_the_azimuth() {
+        let ward = &crate::model::rungs::ward::RUNG;
+        // the two minima: one lobe with its axes swapped
+        let mut a = [
+            (Param::AlphaX, 0.3516),
+            (Param::AlphaY, 0.0805),
+            (Param::Azimuth, -0.12),
+        ];
+        let mut b = [
+            (Param::AlphaX, 0.0805),
+            (Param::AlphaY, 0.3516),
+            (Param::Azimuth, 89.88),
+        ];
+        ward.canonicalise(&mut a);
+        ward.canonicalise(&mut b);
+        for (x, y) in a.iter().zip(&b) {
+            assert_eq!(x.0, y.0);
+            assert!((x.1 - y.1).abs() < 1e-12, "{a:?} vs {b:?}");
+        }
+        assert!((a[2].1 + 0.12).abs() < 1e-12);
+        // the azimuth's period (T -> -T), for every rung: into [-90, 90)
+        let pf = &crate::model::rungs::poulin_fournier::RUNG;
+        for (v, want) in [(100.0, -80.0), (-100.0, 80.0), (90.0, -90.0), (270.0, -90.0), (15.0, 15.0)] {
+            let mut x = [(Param::Exponent, 30.0), (Param::Azimuth, v)];
+            pf.canonicalise(&mut x);
+            assert!((x[1].1 - want).abs() < 1e-12, "{v}: {x:?}");
+            assert_eq!(x[0].1, 30.0);
+        }
+        // a held azimuth (absent from the free values): the swap is a different solution
+        let mut held = [(Param::AlphaX, 0.08), (Param::AlphaY, 0.35)];
+        ward.canonicalise(&mut held);
+        assert_eq!(held, [(Param::AlphaX, 0.08), (Param::AlphaY, 0.35)]);
     }
 }

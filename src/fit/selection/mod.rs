@@ -101,10 +101,8 @@ pub struct SelectionOutcome {
     pub folds: usize,
     /// The metric the errors are in (the fit's).
     pub metric: String,
-    /// Samples each candidate was fitted on.
-    pub train_samples: usize,
-    /// Samples held out.
-    pub heldout_samples: usize,
+    /// Samples each candidate was fitted on and held out, per fold and in all.
+    pub counts: Counts,
     /// Shape values of the chosen candidate's fit: an extra start for the final fit.
     #[serde(skip)]
     pub hints: Vec<Vec<(Param, f64)>>,
@@ -141,8 +139,57 @@ pub struct RungDone<'a> {
     pub outcome: Option<&'a FitOutcome>,
     /// The candidates to try, in order (their names).
     pub rungs: &'a [String],
-    pub train_samples: usize,
-    pub heldout_samples: usize,
+    /// Samples fitted on and held out, per fold and in all.
+    pub counts: Counts,
+}
+
+/// How many samples a `--model auto` run fitted each candidate on and held out: per fold (what
+/// one fit saw and was measured on) and in all (with cross-validation every sample once).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct Counts {
+    /// Folds of cross-validation (1 for one split).
+    pub folds: usize,
+    /// Samples one fit was trained on: all but one fold (the fewest over the folds), or the
+    /// training split.
+    pub train_samples_per_fold: usize,
+    /// Samples one fold holds out (the most over the folds, which differ by at most one), or
+    /// the held-out split.
+    pub heldout_samples_per_fold: usize,
+    /// Samples held out in all (every sample once with cross-validation).
+    pub heldout_samples_total: usize,
+}
+
+impl Counts {
+    /// The counts of `plan` over `n` samples.
+    fn of(plan: &Plan, n: usize) -> Self {
+        let heldout_samples_per_fold = plan.folds.iter().map(Vec::len).max().unwrap_or(0);
+        Self {
+            folds: plan.folds.len(),
+            train_samples_per_fold: match plan.cross_validated {
+                true => n - heldout_samples_per_fold,
+                false => plan.train.len(),
+            },
+            heldout_samples_per_fold,
+            heldout_samples_total: plan.folds.iter().map(Vec::len).sum(),
+        }
+    }
+
+    /// In words: "240 training / 60 held-out samples per fold, 300 held out in all" (ranges
+    /// where the folds differ by one), or "240 training / 60 held-out samples" for one split.
+    pub fn text(&self) -> String {
+        let (t, h) = (self.train_samples_per_fold, self.heldout_samples_per_fold);
+        if self.folds <= 1 {
+            return format!("{t} training / {h} held-out samples");
+        }
+        let (t, h) = match self.heldout_samples_total % self.folds {
+            0 => (t.to_string(), h.to_string()),
+            _ => (format!("{t}-{}", t + 1), format!("{}-{h}", h - 1)),
+        };
+        format!(
+            "{t} training / {h} held-out samples per fold, {} held out in all",
+            self.heldout_samples_total
+        )
+    }
 }
 
 /// The candidates of `cfg`: every rung, without and with the fuzz layer (only with it when the

@@ -18,11 +18,7 @@ pub fn select_with(
     let plan = plan(n, cfg);
     let mut run = Run {
         anchor_samples: subset(samples, &plan.anchor),
-        heldout_samples: plan.folds.iter().map(Vec::len).sum(),
-        train_samples: match plan.cross_validated {
-            true => n - n.div_ceil(plan.folds.len()),
-            false => plan.train.len(),
-        },
+        counts: Counts::of(&plan, n),
         plan,
         samples,
         cfg,
@@ -48,8 +44,7 @@ struct Run<'a> {
     plan: Plan,
     /// The samples every candidate's anchor fit uses.
     anchor_samples: Samples,
-    heldout_samples: usize,
-    train_samples: usize,
+    counts: Counts,
     /// (name, rung, fuzz, config) of every candidate, in order.
     list: Vec<(String, ModelId, bool, FitConfig)>,
     candidates: Vec<Candidate>,
@@ -107,8 +102,7 @@ impl Run<'_> {
                 candidates: &self.candidates,
                 outcome: fitted.as_ref(),
                 rungs: &names,
-                train_samples: self.train_samples,
-                heldout_samples: self.heldout_samples,
+                counts: self.counts,
             });
         }
     }
@@ -322,8 +316,7 @@ impl Run<'_> {
             validation,
             folds: plan.folds.len(),
             metric: metric_name(cfg.metric).into(),
-            train_samples: self.train_samples,
-            heldout_samples: self.heldout_samples,
+            counts: self.counts,
             candidates: self.candidates,
             hints: ordered_hints,
             chosen_config: Some(chosen_config),

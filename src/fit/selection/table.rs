@@ -13,14 +13,12 @@ pub fn metric_name(m: Metric) -> &'static str {
 /// The selection table in markdown.
 pub fn table(s: &SelectionOutcome) -> String {
     let mut t = format!(
-        "Model selection by {} ({} training / {} held-out samples{}; errors in the {} metric)\n\
+        "Model selection by {} ({}; errors in the {} metric)\n\
          Rule: {}.\n\n\
          | candidate | free parameters | held-out error | standard error | per fold | held-out RMSE [1/sr] | held-out relative RMSE | held-out log error | knobs | ns per evaluation | fit time [s] | chosen |\n\
          |---|---|---|---|---|---|---|---|---|---|---|---|\n",
         s.validation,
-        s.train_samples,
-        s.heldout_samples,
-        if s.folds > 1 { " per fold" } else { "" },
+        s.counts.text(),
         s.metric,
         s.rule
     );

@@ -29,6 +29,7 @@ pub static RUNG: Rung = Rung {
     cost: Cost::ClosedForm,
     auto_rank: Some(0),
     example: &[(Param::Kd, 0.5)],
+    symmetries: &[],
 };
 
 #[derive(Clone, Copy, Debug, Default)]

@@ -35,6 +35,7 @@ pub static RUNG: Rung = Rung {
     cost: Cost::ClosedForm,
     auto_rank: Some(3),
     example: &[(Param::Kd, 0.3), (Param::Ks, 0.6), (Param::Exponent, 100.0)],
+    symmetries: &[],
 };
 
 #[derive(Clone, Copy, Debug)]

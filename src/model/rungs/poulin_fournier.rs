@@ -48,6 +48,7 @@ pub static RUNG: Rung = Rung {
         (Param::Exponent, 100.0),
         (Param::Spacing, 2.6),
     ],
+    symmetries: &[],
 };
 
 #[derive(Clone, Debug)]

@@ -42,6 +42,7 @@ pub static RUNG: Rung = Rung {
     cost: Cost::Adaptive,
     auto_rank: None,
     example: crate::model::varying_topology::EXAMPLE,
+    symmetries: &[],
 };
 
 /// Relative tolerance of each inner integral (the model promise is 1e-9).

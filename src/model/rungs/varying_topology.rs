@@ -75,6 +75,7 @@ pub static RUNG: Rung = Rung {
     cost: Cost::HeightHistogram,
     auto_rank: Some(5),
     example: EXAMPLE,
+    symmetries: &[],
 };
 
 /// The varying-topology example (the reference shares it).

@@ -11,7 +11,9 @@
 //! view; this one does not.
 
 use crate::model::parameter::{Ability::*, Param};
-use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
+use crate::model::rung::{
+    Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection, Symmetry,
+};
 use crate::model::{Basis, DirectionPair, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
 
@@ -40,6 +42,10 @@ pub static RUNG: Rung = Rung {
         (Param::AlphaX, 0.05),
         (Param::AlphaY, 0.2),
     ],
+    symmetries: &[Symmetry::SwapAxes {
+        along: Param::AlphaX,
+        across: Param::AlphaY,
+    }],
 };
 
 #[derive(Clone, Copy, Debug)]
