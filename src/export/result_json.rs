@@ -191,6 +191,7 @@ pub fn result_from_value(
         selection: Default::default(),
         maps: Default::default(),
         columns: Default::default(),
+        data: Default::default(),
         notes: Vec::new(),
         metric_follows_data: false,
         metric_reason: None,
