@@ -24,8 +24,10 @@ The loading flags (keyword-only, as the command line's flags of the same names; 
 command line's default): ``stride`` and ``fraction`` (captures: every stride-th pixel, a seeded
 fraction of them; default a fit config's, else 1), ``subsample_seed`` (0), ``directions``
 (measured-BRDF files: direction pairs drawn, 3000), ``direction_seed`` (0), ``max_theta``
-(degrees, 78), ``skip_bad_rows``, ``small_angles_ok`` (goniometric CSVs) and ``columns`` (a dict
-of our column names to the file's, as ``--columns``; it extends a fit config's ``[columns]``).
+(degrees, 78), ``skip_bad_rows``, ``small_angles_ok`` (goniometric tables), ``columns`` (a dict
+of our column names to the file's, as ``--columns``; it extends a fit config's ``[columns]``) and
+``angles`` (``"deg"`` or ``"rad"``: the unit of a goniometric table's angle columns, as
+``--angles``; default a fit config's ``[data] angles``, else degrees).
 
 Frames and units: directions are unit vectors in the swatch frame (z the macro normal, x the
 swatch's x axis, as the command line's angles); ``l`` points towards the light and ``v``
@@ -225,8 +227,10 @@ def load_data(
     skip_bad_rows: bool = False,
     small_angles_ok: bool = False,
     columns: Optional[Dict[str, str]] = None,
+    angles: Optional[str] = None,
 ) -> Dict[str, Any]:
-    """The samples of a goniometric CSV, capture TOML or measured-BRDF file as numpy arrays.
+    """The samples of a goniometric table (``.csv``, ``.tsv``, ``.txt``, ``.dat``), capture TOML
+    or measured-BRDF file as numpy arrays.
 
     Keys: ``l``, ``v`` ((N, 3) unit vectors), ``theta_i``, ``phi_i``, ``theta_o``, ``phi_o``
     (degrees), ``value`` ((N, C) BRDF, 1/sr), ``sigma`` ((N, C) or None), ``weight``,
@@ -234,7 +238,8 @@ def load_data(
     (image, x, y) per pixel), ``channels``, ``kind``, ``source``, ``image_size``.
     The loading flags as the command line's (see the module docs): ``stride``, ``fraction``,
     ``subsample_seed`` (captures), ``directions``, ``direction_seed``, ``max_theta`` (measured
-    files), ``skip_bad_rows``, ``small_angles_ok``, ``columns`` (goniometric CSVs).
+    files), ``skip_bad_rows``, ``small_angles_ok``, ``columns``, ``angles`` (``"deg"`` or
+    ``"rad"``; goniometric tables).
     """
     return _native_call(
         _native.load_data,
@@ -248,6 +253,7 @@ def load_data(
         skip_bad_rows=skip_bad_rows,
         small_angles_ok=small_angles_ok,
         columns=columns,
+        angles=angles,
     )
 
 
@@ -360,6 +366,7 @@ def fit(
     skip_bad_rows: bool = False,
     small_angles_ok: bool = False,
     columns: Optional[Dict[str, str]] = None,
+    angles: Optional[str] = None,
 ) -> Result:
     """Fit ``data`` (goniometric CSV, capture TOML, RGL ``.bsdf`` or MERL ``.binary``), as
     ``fibrefit fit`` does.
@@ -370,7 +377,7 @@ def fit(
     ``"auto"``), ``False`` leaves it out (``--no-fuzz``), ``None`` the config's or the default
     (``"auto"`` tries each rung without and with it); ``maps``: a directory for per-texel maps
     (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr. The
-    loading flags as :func:`load_data`'s; ``stride``, ``fraction`` and ``columns`` merged with
+    loading flags as :func:`load_data`'s; ``stride``, ``fraction``, ``columns`` and ``angles`` merged with
     the config's as the command line merges them (the library does it, once for both).
     """
     return Result(
@@ -392,6 +399,7 @@ def fit(
             skip_bad_rows=skip_bad_rows,
             small_angles_ok=small_angles_ok,
             columns=columns,
+            angles=angles,
         )
     )
 
@@ -437,6 +445,7 @@ def score(
     skip_bad_rows: bool = False,
     small_angles_ok: bool = False,
     columns: Optional[Dict[str, str]] = None,
+    angles: Optional[str] = None,
 ) -> Score:
     """A fitted result evaluated exactly as the fit did (rung, knobs, topology map, residual
     metric) on ``data`` (goniometric CSV or capture TOML), as ``fibrefit score``. The loading
@@ -455,6 +464,7 @@ def score(
             skip_bad_rows=skip_bad_rows,
             small_angles_ok=small_angles_ok,
             columns=columns,
+            angles=angles,
         )
     )
 

@@ -282,20 +282,29 @@ fn load_flags(
     skip_bad_rows: bool,
     small_angles_ok: bool,
     columns: Option<BTreeMap<String, String>>,
-) -> LoadFlags {
+    angles: Option<String>,
+) -> PyResult<LoadFlags> {
     let d = LoadFlags::default();
-    LoadFlags {
+    Ok(LoadFlags {
         skip_bad_rows,
         small_angles_ok,
         // {ours: theirs}, as `--columns`
         columns: columns.unwrap_or_default().into_iter().collect(),
+        // "deg" or "rad", as `--angles`
+        angles: angles
+            .map(|a| {
+                a.parse()
+                    .map_err(|e: String| anyhow::anyhow!("angles: {e}"))
+            })
+            .transpose()
+            .map_err(err)?,
         stride,
         fraction,
         subsample_seed: subsample_seed.unwrap_or(d.subsample_seed),
         directions: directions.unwrap_or(d.directions),
         direction_seed: direction_seed.unwrap_or(d.direction_seed),
         max_theta_deg: max_theta.unwrap_or(d.max_theta_deg),
-    }
+    })
 }
 
 /// The samples of a goniometric CSV, image capture TOML or measured-BRDF file as numpy arrays:
@@ -303,11 +312,11 @@ fn load_flags(
 /// `phi_o` (degrees), `value` ((N, C) BRDF in 1/sr), `sigma` ((N, C), or None where the file
 /// gives none), `weight`, `fibre_azimuth_deg` (NaN where the file gives none), `origin` (the
 /// CSV line, or (image, x, y) of a pixel), `channels`, `kind`, `source`, `image_size`.
-/// The loading flags as the command line's of the same names.
+/// The loading flags as the command line's of the same names (`angles`: "deg" or "rad").
 #[pyfunction]
 #[pyo3(signature = (
     path, *, stride=None, fraction=None, subsample_seed=None, directions=None,
-    direction_seed=None, max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None
+    direction_seed=None, max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None, angles=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn load_data<'py>(
@@ -322,6 +331,7 @@ fn load_data<'py>(
     skip_bad_rows: bool,
     small_angles_ok: bool,
     columns: Option<BTreeMap<String, String>>,
+    angles: Option<String>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let opts = load_flags(
         stride,
@@ -333,7 +343,8 @@ fn load_data<'py>(
         skip_bad_rows,
         small_angles_ok,
         columns,
-    )
+        angles,
+    )?
     .options()
     .map_err(err)?;
     let s = py
@@ -509,7 +520,7 @@ impl FitResult {
 #[pyo3(signature = (
     data, config=None, model=None, *, metric=None, fuzz=None, maps=None, progress=false,
     stride=None, fraction=None, subsample_seed=None, directions=None, direction_seed=None,
-    max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None
+    max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None, angles=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
@@ -530,6 +541,7 @@ fn fit(
     skip_bad_rows: bool,
     small_angles_ok: bool,
     columns: Option<BTreeMap<String, String>>,
+    angles: Option<String>,
 ) -> PyResult<FitResult> {
     let options = FitOptions {
         config,
@@ -546,7 +558,8 @@ fn fit(
             skip_bad_rows,
             small_angles_ok,
             columns,
-        ),
+            angles,
+        )?,
         maps: match maps {
             Some(d) => Maps::Into(d),
             None => Maps::None,
@@ -571,7 +584,7 @@ fn fit(
 #[pyfunction]
 #[pyo3(signature = (
     result, data, *, stride=None, fraction=None, subsample_seed=None, directions=None,
-    direction_seed=None, max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None
+    direction_seed=None, max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None, angles=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn score(
@@ -587,6 +600,7 @@ fn score(
     skip_bad_rows: bool,
     small_angles_ok: bool,
     columns: Option<BTreeMap<String, String>>,
+    angles: Option<String>,
 ) -> PyResult<(String, String)> {
     let load = load_flags(
         stride,
@@ -598,7 +612,8 @@ fn score(
         skip_bad_rows,
         small_angles_ok,
         columns,
-    )
+        angles,
+    )?
     .options()
     .map_err(err)?;
     let s = py

@@ -1,12 +1,13 @@
 //! Data in: measurements loaded as samples, a capture's geometry and images as the fit reads
 //! them, and the check that stops a wait on a FIFO or device (a front end's Ctrl-C).
 
+pub use crate::load::gonio::AngleUnit;
 use crate::load::samples::Samples;
 use crate::load::LoadOptions;
 use anyhow::Result;
 use std::path::Path;
 
-/// The samples of a goniometric CSV or TSV, an image capture (TOML) or a measured BRDF file
+/// The samples of a goniometric table (`.csv`, `.tsv`, `.txt`, `.dat`), an image capture (TOML) or a measured BRDF file
 /// (`.bsdf`, `.binary`), loaded as `opts` says.
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Samples> {
     crate::load::load_data(path, opts)
@@ -45,6 +46,9 @@ pub struct LoadFlags {
     /// Goniometric CSV: the file's own column names, (ours, theirs); they extend and override a
     /// config's `[columns]`.
     pub columns: Vec<(String, String)>,
+    /// Goniometric tables: the unit of the angle columns (`--angles deg|rad`); `None`: the
+    /// config's `[data] angles`, else degrees.
+    pub angles: Option<AngleUnit>,
     /// Image captures: every `stride`-th pixel in x and y; `None`: the config's, else 1.
     pub stride: Option<usize>,
     /// Image captures: a seeded random fraction of the pixels, in (0, 1]; `None`: the
@@ -68,6 +72,7 @@ impl Default for LoadFlags {
             skip_bad_rows: false,
             small_angles_ok: false,
             columns: Vec::new(),
+            angles: None,
             stride: None,
             fraction: None,
             subsample_seed: 0,
@@ -79,13 +84,14 @@ impl Default for LoadFlags {
 }
 
 impl LoadFlags {
-    /// The loading options, checked; `stride` and `fraction` fall back to the given defaults
-    /// (a config's), [`LoadFlags::columns`] extend and override `columns` (a config's
+    /// The loading options, checked; `stride`, `fraction` and `angles` fall back to the given
+    /// defaults (a config's), [`LoadFlags::columns`] extend and override `columns` (a config's
     /// `[columns]`).
     pub fn options_with(
         &self,
         stride: usize,
         fraction: f64,
+        angles: AngleUnit,
         columns: &std::collections::BTreeMap<String, String>,
     ) -> Result<LoadOptions> {
         let mut map: Vec<(String, String)> = columns
@@ -101,6 +107,7 @@ impl LoadFlags {
                 skip_bad_rows: self.skip_bad_rows,
                 small_angles_ok: self.small_angles_ok,
                 columns: map,
+                angles: self.angles.unwrap_or(angles),
             },
             subsample: crate::load::capture::Subsample {
                 stride: self.stride.unwrap_or(stride),
@@ -118,12 +125,18 @@ impl LoadFlags {
 
     /// The loading options without a config (stride and fraction 1 unless given), checked.
     pub fn options(&self) -> Result<LoadOptions> {
-        self.options_with(1, 1.0, &Default::default())
+        self.options_with(1, 1.0, AngleUnit::Deg, &Default::default())
     }
 
     /// The loading options of a fit configured by `cfg`: its `[knobs]` stride and fraction
-    /// unless given, its `[columns]` extended and overridden by [`LoadFlags::columns`].
+    /// and its `[data]` angle unit unless given, its `[columns]` extended and overridden by
+    /// [`LoadFlags::columns`].
     pub fn options_for(&self, cfg: &crate::fit::config::FitConfig) -> Result<LoadOptions> {
-        self.options_with(cfg.knobs.stride, cfg.knobs.fraction, &cfg.columns)
+        self.options_with(
+            cfg.knobs.stride,
+            cfg.knobs.fraction,
+            cfg.data.angles,
+            &cfg.columns,
+        )
     }
 }

@@ -20,7 +20,7 @@ pub use crate::fit::score::text as score_text;
 pub use crate::fit::selection::{Candidate, SelectionOutcome};
 pub use crate::fit::{FitOutcome, ParamRecord};
 pub use crate::load::capture::Subsample;
-pub use crate::load::gonio::GonioOptions;
+pub use crate::load::gonio::{AngleUnit, GonioOptions};
 pub use crate::load::image_io::LinearImage;
 pub use crate::load::rgl::MeasuredOptions;
 pub use crate::load::samples::{DataKind, Origin, Sample, Samples};

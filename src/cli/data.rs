@@ -7,6 +7,10 @@ use clap::Args;
 
 #[derive(Debug, Args, Clone)]
 pub struct LoadArgs {
+    /// Goniometric tables: the unit of the angle columns, converted on loading [default: deg,
+    /// or the fit config's `[data] angles`]
+    #[arg(long, value_name = "UNIT", value_parser = ["deg", "rad"])]
+    pub angles: Option<String>,
     /// Goniometric CSV: skip bad rows (counted and reported) instead of stopping at the first
     #[arg(long)]
     pub skip_bad_rows: bool,
@@ -48,6 +52,11 @@ impl LoadArgs {
                 Some(text) => crate::load::gonio::parse_columns(text)?,
                 None => Vec::new(),
             },
+            angles: self
+                .angles
+                .as_deref()
+                .map(|a| a.parse().map_err(|e: String| anyhow::anyhow!("--angles: {e}")))
+                .transpose()?,
             stride: self.stride,
             fraction: self.fraction,
             subsample_seed: self.subsample_seed,

@@ -11,15 +11,17 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-DATA is a goniometric CSV, an image capture TOML or an RGL measured BRDF (.bsdf, sampled at
---directions pairs; see `fibrefit inspect --help`).
+DATA is a goniometric table (.csv, .tsv, .txt or .dat, the delimiter sniffed from the header;
+angles in degrees, or radians with --angles rad), an image capture TOML or an RGL measured BRDF
+(.bsdf, sampled at --directions pairs; see `fibrefit inspect --help`).
 The config (TOML) names the rung (`model`), each parameter's `value`, `min`, `max`, `vary`,
 the residual `metric` (linear: additive noise, under a decade of range; log: ln(f + eps),
 eps = 1 % of the median, for measured BRDFs spanning decades; cosine: errors in shaded
 intensity), [knobs] (quadrature_order, histogram_bins,
 stride, fraction, topology_map), [optimizer] (max_iterations, tolerance, global_candidates
 [default 32 + 24 per free shape parameter], global_subsample [600], separable), `starts` [6]
-and `seed`. Examples: configs/fit_*.toml.
+and `seed`, and how the lab's tables are written: [columns] (ours = \"theirs\", as --columns)
+and [data] angles = \"rad\" (as --angles; the flags override). Examples: configs/fit_*.toml.
 The search covers the shape space (a space-filling design, the distinct best candidates
 polished, every competitive basin polished on all samples), so the fit is the global minimum;
 when it does not fit within the noise, when other minima are as good, or when residuals are
@@ -32,7 +34,7 @@ fibrefit-result/1) is written atomically: a failed fit writes nothing. An auto r
 --report; it exits 130. Progress (per rung, per stage) goes to stderr on a terminal;
 FIBREFIT_PROGRESS=1 shows it elsewhere too, FIBREFIT_PROGRESS=0 hides it.")]
 pub struct FitArgs {
-    /// Goniometric CSV, capture TOML or measured BRDF (.bsdf)
+    /// Goniometric table (.csv, .tsv, .txt, .dat), capture TOML or measured BRDF (.bsdf, .binary)
     pub data: PathBuf,
     /// Fit configuration (TOML) [default: every setting at its default; then --model is needed]
     #[arg(long, value_name = "FILE")]

@@ -8,12 +8,13 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-DATA is a goniometric CSV (.csv: theta_i,phi_i,theta_o,phi_o in degrees and brdf or radiance with
-irradiance; comma-, tab-, semicolon- or whitespace-separated, the delimiter read off the header
-and named in the summary; the file's own column names mapped with --columns) or an image capture
-description (.toml). Bad input gives the same errors as `fit`.")]
+DATA is a goniometric table (.csv, .tsv, .txt or .dat: theta_i,phi_i,theta_o,phi_o in degrees,
+or radians with --angles rad, and brdf or radiance with irradiance; comma-, tab-, semicolon- or
+whitespace-separated whatever the extension, the delimiter read off the header and named in the
+summary; the file's own column names mapped with --columns) or an image capture description
+(.toml). Bad input gives the same errors as `fit`.")]
 pub struct InspectArgs {
-    /// Goniometric CSV or capture TOML
+    /// Goniometric table (.csv, .tsv, .txt, .dat) or capture TOML
     pub data: PathBuf,
     /// Print the summary as JSON
     #[arg(long)]

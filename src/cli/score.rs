@@ -9,7 +9,7 @@ use std::path::PathBuf;
 #[derive(Debug, Args)]
 #[command(after_help = "\
 Evaluates RESULT (a `fibrefit fit` JSON) exactly as the fit did (rung, knobs, topology map,
-residual metric) on DATA (goniometric CSV or capture TOML) and prints: residual and sample
+residual metric) on DATA (goniometric table or capture TOML) and prints: residual and sample
 counts, chi-square and reduced chi-square when DATA has sigmas (else the sum of squares), RMSE
 in 1/sr and relative RMSE (RMSE / RMS data), per channel RMSE, relative RMSE and log error
 (RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median value), and the mean residual in
@@ -21,7 +21,7 @@ scoring held-out data is how a fit is checked. Writes nothing.")]
 pub struct ScoreArgs {
     /// Result JSON written by `fibrefit fit`
     pub result: PathBuf,
-    /// Goniometric CSV or capture TOML
+    /// Goniometric table (.csv, .tsv, .txt, .dat) or capture TOML
     pub data: PathBuf,
     /// Print the score as JSON on stdout
     #[arg(long)]

@@ -19,7 +19,7 @@ use std::path::{Path, PathBuf};
 pub const SCHEMA: &str = "fibrefit-result/1";
 
 /// A parameter file (TOML or JSON) or a fitted result, as parameters; a result's relative
-/// topology map is taken from beside it.
+/// topology map is taken from beside it ([`locate_map`]).
 pub fn read_params(path: &Path) -> Result<RawParams> {
     if path.is_dir() {
         // named as what it is, whatever its name says (a folder `fit.json`, `data.csv`)
@@ -45,15 +45,75 @@ pub fn read_params(path: &Path) -> Result<RawParams> {
 }
 
 /// The parameters of the result `value` read from `path` (a relative topology map taken from
-/// beside it).
+/// beside it, checked by its hash: [`locate_map`]).
 fn raw_of_result(value: &serde_json::Value, path: &Path) -> Result<RawParams> {
     let mut raw = params_of_result(value).map_err(|e| anyhow!("{}: {e}", path.display()))?;
     if let Some(map) = &raw.topology_map {
-        if map.is_relative() {
-            raw.topology_map = Some(path.parent().unwrap_or(Path::new(".")).join(map));
-        }
+        raw.topology_map = Some(locate_map(path, map, recorded_map_hash(value))?);
     }
     Ok(raw)
+}
+
+/// The SHA-256 a result records of its topology map (`knobs.topology_map_sha256`; absent in
+/// files written before it was recorded).
+fn recorded_map_hash(value: &serde_json::Value) -> Option<&str> {
+    value["knobs"]["topology_map_sha256"].as_str()
+}
+
+/// Where the topology map `named` by the result at `result` is: relative to the result's own
+/// folder (never the working directory), so a result folder copied with its map loads
+/// anywhere. Refused, naming the path looked for, when it is not there; refused, naming both
+/// hashes, when the result records the map's SHA-256 and the file's differs.
+pub fn locate_map(result: &Path, named: &Path, sha256: Option<&str>) -> Result<PathBuf> {
+    let folder = match result.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+        _ => PathBuf::from("."),
+    };
+    let at = folder.join(named);
+    // the absolute path tried, for the messages (`..` taken off the resolved folder)
+    let base = std::fs::canonicalize(&folder)
+        .unwrap_or_else(|_| std::env::current_dir().unwrap_or_default().join(&folder));
+    let mut shown = PathBuf::new();
+    for c in base.join(named).components() {
+        match c {
+            std::path::Component::ParentDir => {
+                shown.pop();
+            }
+            std::path::Component::CurDir => {}
+            c => shown.push(c),
+        }
+    }
+    if !at.is_file() {
+        bail!(
+            "{}: the topology map the result names (knobs.topology_map = {:?}) is not there: \
+             looked for {} ({}); copy the map with the result, keeping their relative layout",
+            result.display(),
+            named.display().to_string(),
+            shown.display(),
+            match named.is_relative() {
+                true => "relative to the result's folder, never the working directory",
+                false => "an absolute path",
+            }
+        );
+    }
+    if let Some(expected) = sha256 {
+        let got = crate::load::input::read_input_as(
+            &at,
+            crate::load::MAX_INPUT_BYTES,
+            "topology map",
+        )?
+        .sha256;
+        if !got.eq_ignore_ascii_case(expected) {
+            bail!(
+                "{}: the topology map {} is not the one this result was fitted with: its sha256 \
+                 is {got}, the result recorded {expected} (knobs.topology_map_sha256); restore \
+                 that map, or fit again with this one",
+                result.display(),
+                shown.display()
+            );
+        }
+    }
+    Ok(at)
 }
 
 /// The one check of a parameter set's values that every command reading a result or a
@@ -87,9 +147,9 @@ pub fn read_result(path: &Path, channels: usize) -> Result<FittedResult> {
         checked_params(&raw, None, &path.display().to_string())?;
     }
     let mut r = result_from_value(&v, &path.display().to_string(), channels)?;
-    // a relative topology map lies beside the result (as fit writes it)
-    if let Some(map) = r.knobs.topology_map.as_mut().filter(|m| m.is_relative()) {
-        *map = path.parent().unwrap_or(Path::new(".")).join(&*map);
+    // a relative topology map lies beside the result (as fit writes it), checked by its hash
+    if let Some(map) = r.knobs.topology_map.as_mut() {
+        *map = locate_map(path, map, recorded_map_hash(&v))?;
     }
     Ok(r)
 }
@@ -191,6 +251,7 @@ pub fn result_from_value(
         selection: Default::default(),
         maps: Default::default(),
         columns: Default::default(),
+        data: Default::default(),
         notes: Vec::new(),
         metric_follows_data: false,
         metric_reason: None,
@@ -380,8 +441,13 @@ pub struct Knobs {
     /// Image captures: the texels the global fit used at most (0: all).
     #[serde(default)]
     pub fit_texels: usize,
+    /// The topology map, relative to the result's folder (as written by `fit`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<String>,
+    /// SHA-256 of the topology map's bytes as the fit read them: readers refuse a map that
+    /// differs (absent in files written before it was recorded, which load unchecked).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub topology_map_sha256: Option<String>,
     pub separable: bool,
     pub starts: usize,
     pub seed: u64,
@@ -505,6 +571,7 @@ pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
             .topology_map
             .as_ref()
             .map(|p| p.display().to_string()),
+        topology_map_sha256: None,
         separable: cfg.optimizer.separable,
         starts: cfg.starts,
         seed: cfg.seed,
@@ -588,6 +655,18 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
                 .display()
                 .to_string(),
         );
+        // of the bytes the fit read (read again only if no loader recorded them)
+        knobs.topology_map_sha256 = Some(match crate::load::sha256_read(&mp.source) {
+            Some(h) => h,
+            None => {
+                crate::load::input::read_input_as(
+                    &mp.source,
+                    crate::load::MAX_INPUT_BYTES,
+                    "topology map",
+                )?
+                .sha256
+            }
+        });
     }
     let selection = p.selection;
     Ok(ResultFile {

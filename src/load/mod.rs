@@ -85,6 +85,17 @@ pub fn input_files(path: &Path) -> Vec<std::path::PathBuf> {
     out
 }
 
+/// The extensions of goniometric tables (any case): the delimiter is sniffed from the content
+/// (comma, tab, semicolon or whitespace), never decided by the extension.
+pub const GONIO_EXTENSIONS: [&str; 4] = ["csv", "tsv", "txt", "dat"];
+
+/// Whether `path` names a goniometric table by its extension ([`GONIO_EXTENSIONS`]).
+pub fn is_gonio_table(path: &Path) -> bool {
+    path.extension()
+        .and_then(|e| e.to_str())
+        .is_some_and(|e| GONIO_EXTENSIONS.iter().any(|g| e.eq_ignore_ascii_case(g)))
+}
+
 /// Whether `path` names an image capture description (`.toml`).
 pub fn is_capture(path: &Path) -> bool {
     path.extension()
@@ -92,25 +103,27 @@ pub fn is_capture(path: &Path) -> bool {
         .is_some_and(|e| e.eq_ignore_ascii_case("toml"))
 }
 
-/// Load a goniometric CSV (`.csv`), an image capture description (`.toml`) or an RGL measured
-/// BRDF (`.bsdf`, sampled at seeded directions).
+/// Load a goniometric table (`.csv`, `.tsv`, `.txt`, `.dat`), an image capture description
+/// (`.toml`), an RGL measured BRDF (`.bsdf`, sampled at seeded directions) or a MERL `.binary`.
 pub fn load_data(path: &Path, opts: &LoadOptions) -> Result<samples::Samples> {
     Ok(load_data_with_format(path, opts)?.0)
 }
 
-/// [`load_data`], and for a goniometric CSV what its header said (delimiter, columns).
+/// [`load_data`], and for a goniometric table what its header said (delimiter, columns).
 pub fn load_data_with_format(
     path: &Path,
     opts: &LoadOptions,
 ) -> Result<(samples::Samples, Option<gonio::Format>)> {
     let plain = |s: samples::Samples| (s, None);
+    if is_gonio_table(path) {
+        return gonio::load_with_format(path, &opts.gonio).map(|(s, f)| (s, Some(f)));
+    }
     match path
         .extension()
         .and_then(|e| e.to_str())
         .map(str::to_ascii_lowercase)
         .as_deref()
     {
-        Some("csv") => gonio::load_with_format(path, &opts.gonio).map(|(s, f)| (s, Some(f))),
         // every pixel as a sample (image by image, rows from the top), via the compact store
         Some("toml") => Ok(plain(
             capture_store::CaptureStore::load(path, opts.subsample)?.to_samples(),
@@ -118,7 +131,7 @@ pub fn load_data_with_format(
         Some("bsdf") => rgl::load(path, opts.measured).map(plain),
         Some("binary") => merl::load(path, opts.measured).map(plain),
         _ => bail!(
-            "{}: unknown data file type; expected a goniometric .csv, an image capture .toml, an RGL measured BRDF .bsdf or a MERL .binary",
+            "{}: unknown data file type; expected a goniometric table (.csv, .tsv, .txt or .dat; comma-, tab-, semicolon- or whitespace-separated), an image capture .toml, an RGL measured BRDF .bsdf or a MERL .binary",
             path.display()
         ),
     }

@@ -23,7 +23,7 @@ impl RawParams {
             .to_ascii_lowercase();
         // measurements are not parameters: say what is expected, not a TOML parse error
         if let Some(kind) = match ext.as_str() {
-            "csv" => Some("a goniometric data file (CSV)"),
+            "csv" | "tsv" => Some("a goniometric data file (CSV or TSV)"),
             "bsdf" | "binary" => Some("a measured-BRDF file"),
             "exr" | "png" | "jpg" | "jpeg" | "tif" | "tiff" => Some("an image"),
             _ => None,

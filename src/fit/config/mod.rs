@@ -132,6 +132,9 @@ pub struct FitConfig {
     /// `[columns]`: a goniometric CSV's own column names, `ours = "theirs"` (as `--columns`).
     #[serde(default, skip_serializing_if = "BTreeMap::is_empty")]
     pub columns: BTreeMap<String, String>,
+    /// `[data]`: how the lab's goniometric tables are written (`angles = "rad"`, as `--angles`).
+    #[serde(default, skip_serializing_if = "DataSection::is_default")]
+    pub data: DataSection,
     /// What configuring decided that the user should read (parameters another rung lacks,
     /// ignored): shown with the fit's warnings. Not a key of the file.
     #[serde(skip)]

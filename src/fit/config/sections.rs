@@ -194,6 +194,23 @@ impl MapsConfig {
     }
 }
 
+/// `[data]`: how a lab's goniometric tables are written, so that it is said once (the column
+/// names are `[columns]`). A command-line flag overrides it.
+#[derive(Clone, Debug, Default, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct DataSection {
+    /// The unit of the angle columns, `"deg"` (the default) or `"rad"` (as `--angles`).
+    #[serde(default)]
+    pub angles: crate::load::gonio::AngleUnit,
+}
+
+impl DataSection {
+    /// Whether nothing is set (the section is then not written).
+    pub fn is_default(&self) -> bool {
+        *self == Self::default()
+    }
+}
+
 /// Model components (applied on top of `[parameters]`).
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]

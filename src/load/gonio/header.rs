@@ -1,7 +1,7 @@
 //! The header of a goniometric CSV: its delimiter, the columns it names (mapped by
 //! [`GonioOptions::columns`]) and where each column this loader reads stands.
 
-use super::{GonioOptions, COLUMNS};
+use super::{AngleUnit, GonioOptions, COLUMNS};
 use anyhow::{anyhow, bail, Result};
 
 /// How the fields of a line are separated.
@@ -98,6 +98,8 @@ impl Format {
 pub(super) struct Layout {
     pub delimiter: Delimiter,
     pub angles: [usize; 4],
+    /// The unit of the angle columns.
+    pub unit: AngleUnit,
     /// The value columns (grey, or r, g, b).
     pub values: Vec<usize>,
     pub irradiance: Option<usize>,
@@ -179,6 +181,7 @@ fn layout(header: &[String], name: &str) -> Result<Layout> {
     Ok(Layout {
         delimiter: Delimiter::Comma,
         angles,
+        unit: AngleUnit::Deg,
         values,
         irradiance,
         sigma,
@@ -287,6 +290,7 @@ pub(super) fn parse_header(bytes: &[u8], name: &str, opts: &GonioOptions) -> Res
         )
     })?;
     lay.delimiter = delimiter;
+    lay.unit = opts.angles;
     Ok(Header {
         header,
         format: Format {

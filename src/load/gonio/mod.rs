@@ -6,6 +6,8 @@
 //! f = radiance / (irradiance cos theta_i). Optional `sigma` (or `sigma_r,sigma_g,sigma_b`), the
 //! standard deviation of each value in the same units as the values, or `weight`.
 //!
+//! Angles in radians are read with [`GonioOptions::angles`] (`--angles rad`).
+//!
 //! The delimiter is read off the header line (comma, tab, semicolon or runs of whitespace:
 //! [`Delimiter::sniff`]); a file's own column names map to these with
 //! [`GonioOptions::columns`] (`--columns theta_i=theta_in,...`).
@@ -37,6 +39,64 @@ pub struct GonioOptions {
     pub small_angles_ok: bool,
     /// The file's own column names: (our name, the file's name), e.g. ("theta_i", "theta_in").
     pub columns: Vec<(String, String)>,
+    /// The unit of the angle columns (`--angles`, a fit config's `[data] angles`); radians are
+    /// converted to degrees as the rows are read.
+    pub angles: AngleUnit,
+}
+
+/// The unit of a goniometric table's angle columns: degrees (the default) or radians.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
+#[serde(try_from = "String", into = "String")]
+pub enum AngleUnit {
+    /// Degrees (what fibrefit's own files use).
+    #[default]
+    Deg,
+    /// Radians, converted to degrees on loading.
+    Rad,
+}
+
+impl AngleUnit {
+    /// The unit's name as the flag and the config take it (`deg`, `rad`).
+    pub fn name(self) -> &'static str {
+        match self {
+            AngleUnit::Deg => "deg",
+            AngleUnit::Rad => "rad",
+        }
+    }
+
+    /// An angle read in this unit, in degrees.
+    pub fn to_degrees(self, x: f64) -> f64 {
+        match self {
+            AngleUnit::Deg => x,
+            AngleUnit::Rad => x.to_degrees(),
+        }
+    }
+}
+
+impl std::str::FromStr for AngleUnit {
+    type Err = String;
+    fn from_str(s: &str) -> std::result::Result<Self, String> {
+        match s.trim().to_ascii_lowercase().as_str() {
+            "deg" | "degrees" => Ok(AngleUnit::Deg),
+            "rad" | "radians" => Ok(AngleUnit::Rad),
+            _ => Err(format!(
+                "`{s}` is not an angle unit: give `deg` (degrees, the default) or `rad` (radians)"
+            )),
+        }
+    }
+}
+
+impl TryFrom<String> for AngleUnit {
+    type Error = String;
+    fn try_from(s: String) -> std::result::Result<Self, String> {
+        s.parse()
+    }
+}
+
+impl From<AngleUnit> for String {
+    fn from(u: AngleUnit) -> String {
+        u.name().to_owned()
+    }
 }
 
 /// Every column name fibrefit reads.
@@ -317,7 +377,8 @@ impl ParseState {
         if !bad_lines.is_empty() {
             samples.retain(|s| !matches!(s.origin, Origin::Line(l) if bad_lines.contains(&l)));
         }
-        if !opts.small_angles_ok {
+        // a file said to be in radians is not second-guessed
+        if !opts.small_angles_ok && opts.angles == AngleUnit::Deg {
             check_not_radians(&samples, name)?;
         }
         Ok(Samples {
@@ -352,7 +413,8 @@ fn check_not_radians(samples: &[Sample], name: &str) -> Result<()> {
     if theta_max <= std::f64::consts::FRAC_PI_2 && phi_in_radian_range {
         bail!(
             "{name}: every theta is at most {theta_max:.3} degrees over {} rows: the angles look like radians. \
-             fibrefit reads degrees; convert the file, or pass --small-angles-ok if these really are degrees",
+             fibrefit reads degrees unless told: give --angles rad (or `[data] angles = \"rad\"` in the fit config; \
+             Python: angles=\"rad\"), or pass --small-angles-ok if these really are degrees",
             samples.len()
         );
     }

@@ -2,7 +2,7 @@
 //! and turned into a [`Sample`].
 
 use super::header::{Delimiter, Layout, ANGLES};
-use super::{GonioOptions, MAX_MAGNITUDE};
+use super::{AngleUnit, GonioOptions, MAX_MAGNITUDE};
 use crate::load::samples::{Origin, Sample};
 use crate::model::frame::direction_from_angles;
 
@@ -224,20 +224,29 @@ struct Row<'a> {
 }
 
 impl Row<'_> {
-    /// theta_i, phi_i, theta_o, phi_o in degrees: thetas in [0, 90), phis in [-360, 360].
+    /// theta_i, phi_i, theta_o, phi_o in degrees (converted from the file's unit): thetas in
+    /// [0, 90), phis in [-360, 360].
     fn angles(&self) -> std::result::Result<[f64; 4], String> {
-        let mut deg = [0.0; 4];
+        let unit = self.lay.unit;
+        let mut raw = [0.0; 4];
         for k in 0..4 {
-            deg[k] = number(self.record, self.lay.angles[k], ANGLES[k])?;
+            raw[k] = number(self.record, self.lay.angles[k], ANGLES[k])?;
         }
+        let deg = raw.map(|x| unit.to_degrees(x));
+        // the value as the file gives it (and in degrees, when it gives radians)
+        let shown = |k: usize| match unit {
+            AngleUnit::Deg => format!("{}", raw[k]),
+            AngleUnit::Rad => format!("{} rad ({:.3} degrees)", raw[k], deg[k]),
+        };
         for k in [0, 2] {
             if deg[k] < 0.0 {
-                return Err(format!("column `{}` = {} is negative; theta is measured from the normal, in [0, 90) degrees", ANGLES[k], deg[k]));
+                return Err(format!("column `{}` = {} is negative; theta is measured from the normal, in [0, 90) degrees", ANGLES[k], shown(k)));
             }
             if deg[k] >= 90.0 {
                 return Err(format!(
                     "column `{}` = {} is at or below the horizon; theta must be < 90 degrees",
-                    ANGLES[k], deg[k]
+                    ANGLES[k],
+                    shown(k)
                 ));
             }
         }
@@ -245,7 +254,8 @@ impl Row<'_> {
             if !(-360.0..=360.0).contains(&deg[k]) {
                 return Err(format!(
                     "column `{}` = {} is outside [-360, 360] degrees",
-                    ANGLES[k], deg[k]
+                    ANGLES[k],
+                    shown(k)
                 ));
             }
         }

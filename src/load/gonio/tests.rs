@@ -139,3 +139,34 @@ fn delimiters_are_sniffed_and_columns_mapped() {
     assert!(check_columns(&parse_columns("theta=x").unwrap()).is_err());
     assert!(parse_columns("theta_i").is_err());
 }
+
+#[test]
+fn radians_are_converted_when_said() {
+    let deg = "theta_i,phi_i,theta_o,phi_o,brdf\n30,90,60,180,0.1\n";
+    let rad = format!(
+        "theta_i,phi_i,theta_o,phi_o,brdf\n{},{},{},{},0.1\n",
+        30f64.to_radians(),
+        90f64.to_radians(),
+        60f64.to_radians(),
+        180f64.to_radians()
+    );
+    let opts = GonioOptions {
+        angles: AngleUnit::Rad,
+        ..Default::default()
+    };
+    let a = read(rad.as_bytes(), "g.csv", &opts).unwrap();
+    let b = parse(deg).unwrap();
+    assert!((a.samples[0].l - b.samples[0].l).norm() < 1e-12);
+    assert!((a.samples[0].v - b.samples[0].v).norm() < 1e-12);
+    // a theta beyond the horizon is named as the file gives it, and in degrees
+    let e = read(
+        "theta_i,phi_i,theta_o,phi_o,brdf\n1.6,0,0.2,0,0.1\n".as_bytes(),
+        "g.csv",
+        &opts,
+    )
+    .unwrap_err()
+    .to_string();
+    assert!(e.contains("g.csv:2") && e.contains("1.6 rad (91.673 degrees)"), "{e}");
+    assert_eq!("RAD".parse::<AngleUnit>(), Ok(AngleUnit::Rad));
+    assert!("grad".parse::<AngleUnit>().unwrap_err().contains("deg"));
+}
