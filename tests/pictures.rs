@@ -254,7 +254,8 @@ fn a_render_of_the_silk_fit_keeps_its_highlight_and_has_no_black_half() {
                 "160",
                 "160",
             ])
-            .args(["-q", "--out", out])
+            // the flat lighting: one key light and the fill (studio, the default, adds more)
+            .args(["--preset", "flat", "-q", "--out", out])
             .args(extra)
             .current_dir(d)
             .assert()
