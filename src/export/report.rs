@@ -282,7 +282,7 @@ fn slices_section(
         "## Slices\n\nThe fitted BRDF (1/sr, {per}{}) along the plane of the fibres (T-N, fibres at \
          {psi_deg:.1} deg) and across it (B-N) at incidence {} deg: the light on the negative side, the \
          view at a signed angle (+: the far side){}; dots: the {points} samples near a slice (theta_i \
-         within {:.0} deg, both directions within {:.0} deg of the plane), their mean +-1 sd per 2 deg bin of theta_o.\n\n![slices](slices.png)\n\n",
+         within {:.0} deg, both directions within {:.0} deg of the plane), their mean +-1 sd per 2 deg bin of theta_o; rings: the fit at those samples' own directions; shaded: the fit over their offsets from the plane (its curve is drawn in the plane, where no sample lies exactly).\n\n![slices](slices.png)\n\n",
         if log_y { ", log axis" } else { "" },
         brdf_plots::SLICE_THETAS.map(|t| format!("{t:.0}")).join(", "),
         if report.measured.is_some() {
