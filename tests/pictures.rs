@@ -254,7 +254,8 @@ fn a_render_of_the_silk_fit_keeps_its_highlight_and_has_no_black_half() {
                 "160",
                 "160",
             ])
-            .args(["-q", "--out", out])
+            // the flat lighting: one key light and the fill (studio, the default, adds more)
+            .args(["--preset", "flat", "-q", "--out", out])
             .args(extra)
             .current_dir(d)
             .assert()
@@ -303,4 +304,124 @@ fn a_render_of_the_silk_fit_keeps_its_highlight_and_has_no_black_half() {
     let err = String::from_utf8_lossy(&bad.get_output().stderr).to_string();
     assert!(err.contains("--fill -1"), "{err}");
     assert!(!d.join("x.png").exists());
+}
+
+/// Issue 40, item 4: the silk fit (within the noise) drawn in slices: the model at the plotted
+/// samples' own directions agrees with the plotted means within their spread, a band covers
+/// the samples' offsets from the plane, the legend lies clear of every dot, and the captions
+/// count what is drawn.
+#[test]
+fn silk_slices_show_the_model_where_the_data_are() {
+    use fibrefit::export::brdf_plots::{self, Curve, SlicePlot};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let run = fibrefit()
+        .arg("fit")
+        .arg(root().join("data_synthetic/silk/gonio.csv"))
+        .arg("--config")
+        .arg(root().join("configs/fit_silk.toml"))
+        .args(["--out", "silk.json", "--report", "rep", "-q"])
+        .current_dir(d)
+        .output()
+        .unwrap();
+    assert!(
+        run.status.success(),
+        "{}",
+        String::from_utf8_lossy(&run.stderr)
+    );
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("silk.json")).unwrap()).unwrap();
+    let psi = json["parameters"]["fibre_azimuth_deg"]["value"]
+        .as_f64()
+        .expect("the fitted azimuth");
+    let (material, _) =
+        fibrefit::api::material::Material::load(&d.join("silk.json"), None).unwrap();
+    let samples = fibrefit::api::data::load(
+        &root().join("data_synthetic/silk/gonio.csv"),
+        &Default::default(),
+    )
+    .unwrap();
+    let fitted = |l: &fibrefit::api::Vec3, v: &fibrefit::api::Vec3| Some(material.eval(l, v, None));
+    let curves = [Curve {
+        name: "fitted".into(),
+        brdf: &fitted,
+        dashed: false,
+    }];
+    let out = brdf_plots::slices(
+        Sink::File(&d.join("slices.png")),
+        &SlicePlot {
+            title: "silk",
+            psi_deg: psi,
+            channels: samples.channels,
+            curves: &curves,
+            samples: &samples.samples,
+            log_y: true,
+        },
+    )
+    .unwrap();
+    // the model at the samples agrees with the data's means within their spread
+    let mut worst: f64 = 0.0;
+    for b in &out.bins {
+        let fit = b.fit.expect("the fit at every bin");
+        for c in 0..3 {
+            let spread = b.sd[c].max(b.sigma[c]);
+            assert!(spread > 0.0, "{b:?}");
+            worst = worst.max((fit[c] - b.mean[c]).abs() / spread);
+        }
+    }
+    assert!(
+        worst < 4.0,
+        "a bin's fit is {worst:.2} spreads from its mean"
+    );
+    // the legend lies clear of every dot (radius 3 px)
+    let (l, t, r, bt) = out.legend;
+    assert!(out.dots.len() > 100, "{}", out.dots.len());
+    for &(x, y) in &out.dots {
+        assert!(
+            x + 3 < l || x - 3 > r || y + 3 < t || y - 3 > bt,
+            "dot ({x}, {y}) under the legend {:?}",
+            out.legend
+        );
+    }
+    // the captions count what is drawn: three dots (R, G, B) per bin
+    let drawn: Vec<_> = out.bins.iter().filter(|b| b.drawn).collect();
+    assert_eq!(out.dots.len(), 3 * drawn.len());
+    let n: usize = drawn.iter().map(|b| b.n).sum();
+    assert_eq!(out.drawn.points, n);
+    let captioned: usize = out
+        .drawn
+        .panels
+        .iter()
+        .map(|c| {
+            c.split(" deg (")
+                .nth(1)
+                .and_then(|t| t.split(' ').next())
+                .and_then(|t| t.parse::<usize>().ok())
+                .unwrap_or_else(|| panic!("{c}"))
+        })
+        .sum();
+    assert_eq!(captioned, n);
+    // the report says the same counts: the slices' and the hemisphere maps' samples drawn
+    let md = std::fs::read_to_string(d.join("rep/report.md")).unwrap();
+    assert!(
+        md.contains(&format!("dots: the {n} samples near a slice")),
+        "{md}"
+    );
+    let hemi = brdf_plots::hemispheres(
+        Sink::File(&d.join("hemi.png")),
+        &brdf_plots::HemispherePlot {
+            title: "silk",
+            psi_deg: psi,
+            channels: samples.channels,
+            fitted: &fitted,
+            measured: None,
+            samples: &samples.samples,
+        },
+    )
+    .unwrap();
+    assert!(hemi.points > 0);
+    assert!(
+        md.contains(&format!(" {} samples drawn;", hemi.points)),
+        "{md}"
+    );
 }

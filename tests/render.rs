@@ -578,3 +578,80 @@ fn ward_alphas_follow_the_curvature_of_a_mesh() {
         .assert()
         .code(2);
 }
+
+/// Issue 40, item 5: `--preset studio|grazing|flat`; each renders, studio lights the rim on
+/// the side away from the key light, a bad preset is refused naming the presets.
+#[test]
+fn presets_render_and_studio_lights_the_rim() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::write(
+        d.join("p.toml"),
+        "model = \"poulin-fournier\"\nkd = 0.5\nks = 0.4\nexponent = 30\nspacing = 2.0\n",
+    )
+    .unwrap();
+    let render = |preset: &str| {
+        let out = format!("{preset}.exr");
+        fibrefit()
+            .current_dir(d)
+            .args(["render", "--params", "p.toml", "--object", "sphere"])
+            .args([
+                "--preset",
+                preset,
+                "--size",
+                "64",
+                "64",
+                "--supersample",
+                "1",
+            ])
+            .args(["--out", &out, "--aovs", preset, "-q"])
+            .assert()
+            .success();
+        let img = image_io::read(&d.join(&out), None, None).unwrap();
+        let normal = image_io::read(&d.join(preset).join("normal.exr"), None, None).unwrap();
+        (img, normal)
+    };
+    let (flat, normal) = render("flat");
+    let (studio, _) = render("studio");
+    let (grazing, _) = render("grazing");
+    let channels = flat.data.len() / (64 * 64);
+    let lum = |img: &image_io::LinearImage, i: usize| {
+        (0..3)
+            .map(|c| img.data[channels * i + c] as f64)
+            .sum::<f64>()
+    };
+    // every preset lights the sphere
+    for img in [&flat, &studio, &grazing] {
+        let lit = (0..64 * 64).filter(|&i| lum(img, i) > 0.0).count();
+        assert!(lit > 64 * 64 / 3, "{lit}");
+    }
+    // the rim: near the silhouette (the normal nearly across the view), on the side away from
+    // the flat key light (40,120; camera 50,270 by default)
+    let (cam, key) = (dir_of(50.0, 270.0), dir_of(40.0, 120.0));
+    let rim: Vec<usize> = (0..64 * 64)
+        .filter(|&i| {
+            let n = vec3(&normal, i);
+            dot(n, n) > 0.5 && dot(n, cam) < 0.3 && dot(n, key) < -0.2
+        })
+        .collect();
+    assert!(rim.len() > 20, "{}", rim.len());
+    let mean = |img: &image_io::LinearImage| {
+        rim.iter().map(|&i| lum(img, i)).sum::<f64>() / rim.len() as f64
+    };
+    let (s, f) = (mean(&studio), mean(&flat));
+    assert!(s > 1.5 * f, "rim: studio {s}, flat {f}");
+    // a bad preset: exit 2, the presets named, nothing written
+    let bad = fibrefit()
+        .current_dir(d)
+        .args([
+            "render", "--params", "p.toml", "--preset", "disco", "--out", "x.png",
+        ])
+        .assert()
+        .code(2);
+    let err = String::from_utf8_lossy(&bad.get_output().stderr).to_string();
+    assert!(
+        err.contains("studio") && err.contains("grazing") && err.contains("flat"),
+        "{err}"
+    );
+    assert!(!d.join("x.png").exists());
+}

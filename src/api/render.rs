@@ -15,14 +15,19 @@ use crate::render::{self, Camera, Light, Material, Picture};
 use anyhow::{anyhow, bail, Result};
 use std::path::{Path, PathBuf};
 
-/// One object at the origin, directional lights of unit irradiance, an orthographic camera.
+pub use crate::render::lighting::Preset as LightPreset;
+
+/// One object at the origin, directional lights (a preset's, or the caller's of unit
+/// irradiance), an orthographic camera.
 #[derive(Clone, Debug)]
 pub struct FlagScene {
     /// torus, sphere, swatch or MESH.obj
     pub object: String,
     /// Meshes' fibre field: curvature, uv or constant.
     pub tangents: String,
-    /// Directions towards the lights (unit, world z up).
+    /// The lighting: a preset's lights placed around the camera, or (`Flat`) `lights`.
+    pub preset: LightPreset,
+    /// Directions towards the lights of `Flat` (unit, world z up).
     pub lights: Vec<Vec3>,
     /// Direction towards the camera.
     pub camera: Vec3,
@@ -245,11 +250,14 @@ pub fn missing_maps(params: &Path, named: &str, looked: &Path) -> String {
     )
 }
 
-/// The scene the flags describe: one object at the origin, directional lights of unit
-/// irradiance, an orthographic camera.
+/// The scene the flags describe: one object at the origin, the preset's directional lights
+/// (or `flat`: the flags' of unit irradiance) and the fill, an orthographic camera.
 fn flags_scene(f: &FlagScene, params: &ModelParams) -> Result<Scene> {
     let obj = object(&f.object, &f.tangents, params)?;
-    let mut lights = directional(&f.lights);
+    let mut lights = f
+        .preset
+        .lights(f.camera)
+        .unwrap_or_else(|| directional(&f.lights));
     lights.extend(crate::render::fill_light(f.camera, f.fill, "--fill")?);
     let [w, h] = f.size;
     crate::render::check_budget(w, h, f.supersample, "--size/--supersample")?;

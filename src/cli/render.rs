@@ -1,7 +1,9 @@
 //! `fibrefit render`: a material on an object, as a picture and its AOVs; `--paper-figures` renders
 //! the topology-map paper's figures 6 and 7 as one grid ([`crate::api::render`]).
 
-use crate::api::render::{self as render_api, FlagScene, Render, RenderRequest, SceneSource};
+use crate::api::render::{
+    self as render_api, FlagScene, LightPreset, Render, RenderRequest, SceneSource,
+};
 use crate::export::atomic::Outputs;
 use crate::export::picture::{reserve_aovs, write_aovs, write_labelled_grid, write_picture};
 use crate::model::frame::{direction_from_angles, Vec3};
@@ -37,8 +39,13 @@ pub struct RenderArgs {
     /// texture coordinates) or constant (fibre_azimuth_deg from x, projected on the surface)
     #[arg(long, value_name = "FIELD", default_value = "curvature")]
     pub tangents: String,
-    /// A directional light of unit irradiance from THETA,PHI degrees (repeatable)
-    /// [default: 40,120]
+    /// Lighting: studio (a key light, a raking light at 80 deg and a rim light behind the
+    /// object, so sheen, fuzz and anisotropy show), grazing (one light at 80 deg incidence) or
+    /// flat (the --light lights) [default: studio, or flat when --light is given]
+    #[arg(long, value_name = "PRESET", value_parser = ["studio", "grazing", "flat"])]
+    pub preset: Option<String>,
+    /// A directional light of unit irradiance from THETA,PHI degrees (repeatable; --preset
+    /// flat) [default: 40,120]
     #[arg(long, value_name = "THETA,PHI", allow_hyphen_values = true)]
     pub light: Vec<String>,
     /// An orthographic camera looking from THETA,PHI degrees
@@ -148,6 +155,21 @@ pub fn run(args: &RenderArgs) -> Result<()> {
         }
         return Ok(());
     }
+    // lights given: they are the lighting; a preset that places its own is refused with them
+    let preset = match (args.preset.as_deref(), args.light.is_empty()) {
+        (None, true) => LightPreset::Studio,
+        (None, false) => LightPreset::Flat,
+        (Some(p), lights_empty) => {
+            let p = LightPreset::parse(p)?;
+            if p != LightPreset::Flat && !lights_empty {
+                anyhow::bail!(
+                    "--light sets the lights of --preset flat; --preset {} places its own",
+                    args.preset.as_deref().unwrap_or_default()
+                );
+            }
+            p
+        }
+    };
     let lights: Vec<Vec3> = if args.light.is_empty() {
         vec![direction("40,120", "--light")?]
     } else {
@@ -167,6 +189,7 @@ pub fn run(args: &RenderArgs) -> Result<()> {
             None => SceneSource::Flags(FlagScene {
                 object: args.object.clone(),
                 tangents: args.tangents.clone(),
+                preset,
                 lights,
                 camera,
                 size: [args.size[0], args.size[1]],

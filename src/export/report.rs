@@ -277,12 +277,12 @@ fn slices_section(
             log_y,
         },
     )?;
-    let (points, per) = (points.points, points.note);
+    let (points, per) = (points.drawn.points, points.drawn.note);
     Ok(format!(
         "## Slices\n\nThe fitted BRDF (1/sr, {per}{}) along the plane of the fibres (T-N, fibres at \
          {psi_deg:.1} deg) and across it (B-N) at incidence {} deg: the light on the negative side, the \
          view at a signed angle (+: the far side){}; dots: the {points} samples near a slice (theta_i \
-         within {:.0} deg, both directions within {:.0} deg of the plane), their mean +-1 sd per 2 deg bin of theta_o.\n\n![slices](slices.png)\n\n",
+         within {:.0} deg, both directions within {:.0} deg of the plane), their mean +-1 sd per 2 deg bin of theta_o; rings: the fit at those samples' own directions; shaded: the fit over their offsets from the plane (its curve is drawn in the plane, where no sample lies exactly).\n\n![slices](slices.png)\n\n",
         if log_y { ", log axis" } else { "" },
         brdf_plots::SLICE_THETAS.map(|t| format!("{t:.0}")).join(", "),
         if report.measured.is_some() {
@@ -313,11 +313,16 @@ fn hemispheres_section(
             samples: &report.samples.samples,
         },
     )?;
+    // count what is drawn: a measured file's maps draw none of the samples
+    let drawn = match (near.points, report.measured.is_some()) {
+        (0, true) => "No samples drawn (the measured column is the file itself)".to_string(),
+        (0, false) => "No samples lie near the lights shown".to_string(),
+        (n, _) => format!("{n} samples drawn"),
+    };
     Ok(format!(
         "## Hemisphere maps\n\nEvery view direction for a light (orthographic, seen from above). {} \
-         {} samples drawn; residual colour bar +/-{:.2} %.\n\n![hemisphere maps](hemispheres.png)\n\n",
+         {drawn}; residual colour bar +/-{:.2} %.\n\n![hemisphere maps](hemispheres.png)\n\n",
         near.note,
-        near.points,
         near.colour_bars.last().map_or(0.0, |b| b.hi),
     ))
 }

@@ -9,6 +9,7 @@
 //! horizon), no interreflection: the BRDF as a renderer's direct lighting shows it.
 
 pub mod curvature;
+pub mod lighting;
 pub mod mesh_object;
 pub mod objects;
 pub mod preview_mesh;

@@ -202,6 +202,7 @@ fn figures(
             log_y: true,
         },
     )?
+    .drawn
     .points;
     let mut md = format!(
         "## Slices\n\nThe fitted BRDF (channel mean, 1/sr, log axis) along the plane of the fibres \

@@ -13,6 +13,7 @@
 
 mod common;
 mod hemispheres;
+mod legend;
 mod slices;
 
 pub use common::{Brdf, Curve};
@@ -22,5 +23,5 @@ pub use hemispheres::{
 };
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use slices::{
-    near_slice, slices, SlicePlot, BIN_DEG, NEAR_PLANE_COSINE, NEAR_THETA_DEG, SLICE_THETAS,
+    near_slice, slices, DrawnBin, NearSample, SlicePlot, SlicesDrawn, BIN_DEG, MAX_BAND_OFFSETS, NEAR_PLANE_COSINE, NEAR_THETA_DEG, SLICE_THETAS,
 };
