@@ -500,7 +500,7 @@ fn help_texts_and_a_data_file_as_params() {
         assert_eq!(o.status.code(), Some(2), "{cmd}");
         let e = text(&o.stderr);
         assert!(
-            e.contains("a goniometric data file (CSV), not parameters")
+            e.contains("a goniometric data file (CSV or TSV), not parameters")
                 && e.contains("a result JSON written by `fibrefit fit` or a parameter TOML"),
             "{cmd}: {e}"
         );
