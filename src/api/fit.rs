@@ -528,6 +528,7 @@ fn ward_stage(
     req: &FitRequest,
     cfg: &FitConfig,
     outcome: &FitOutcome,
+    m: &dyn crate::model::ShadingModel,
     channels: usize,
     warnings: &mut Vec<String>,
 ) -> Result<Option<rj::WardFallback>> {
@@ -535,18 +536,11 @@ fn ward_stage(
         return Ok(None);
     }
     req.progress.line("fit: the Ward fallback");
-    let m = model_for(
-        &outcome.set,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
-        cfg.knobs.azimuth_nodes,
-        outcome.map.clone(),
-    );
     let albedos = albedos_of(&outcome.set);
     // in degrees through radians, as it always was (the fallback's fit is seeded by it)
     let psi = outcome.set.shape_value(Param::Azimuth).to_radians();
     Ok(
-        match ward_fallback::fit(m.as_ref(), &albedos, psi.to_degrees(), cfg.seed, channels) {
+        match ward_fallback::fit(m, &albedos, psi.to_degrees(), cfg.seed, channels) {
             Ok(w) => {
                 warnings.extend(w.warnings.iter().cloned());
                 Some(rj::WardFallback::of(w))
@@ -595,10 +589,19 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         Some(_) => None,
     };
     let mut warnings = outcome.warnings.clone();
-    let ward = ward_stage(req, &cfg, &outcome, channels, &mut warnings)?;
+    // the fitted model, built once for the fallback and the check values
+    let model = model_for(
+        &outcome.set,
+        cfg.knobs.quadrature_order,
+        cfg.knobs.histogram_bins,
+        cfg.knobs.azimuth_nodes,
+        outcome.map.clone(),
+    );
+    let ward = ward_stage(req, &cfg, &outcome, model.as_ref(), channels, &mut warnings)?;
     let mut result = rj::assemble(rj::ResultParts {
         config: &cfg,
         outcome: &outcome,
+        model: model.as_ref(),
         samples: &data.samples,
         data: &req.data,
         stride: req.load.subsample.stride,

@@ -584,6 +584,8 @@ pub struct ResultParts<'a> {
     /// The configuration of the fitted rung (auto's choice applied).
     pub config: &'a FitConfig,
     pub outcome: &'a FitOutcome,
+    /// The fitted model (the rung at the outcome's shapes and the config's knobs).
+    pub model: &'a dyn crate::model::ShadingModel,
     pub samples: &'a crate::load::samples::Samples,
     /// The data file fitted (its name and the hash of the bytes its loader read are recorded).
     pub data: &'a Path,
@@ -598,15 +600,13 @@ pub struct ResultParts<'a> {
     pub warnings: Vec<String>,
 }
 
-/// The BRDF of the fitted model at each of [`check_directions`], per channel (1/sr).
-pub fn check_values(outcome: &FitOutcome, cfg: &FitConfig, channels: usize) -> Vec<CheckValue> {
-    let m = crate::fit::problem::model_for(
-        &outcome.set,
-        cfg.knobs.quadrature_order,
-        cfg.knobs.histogram_bins,
-        cfg.knobs.azimuth_nodes,
-        outcome.map.clone(),
-    );
+/// The BRDF of the fitted model `m` (the rung of `outcome` at its shapes) at each of
+/// [`check_directions`], per channel (1/sr).
+pub fn check_values(
+    m: &dyn crate::model::ShadingModel,
+    outcome: &FitOutcome,
+    channels: usize,
+) -> Vec<CheckValue> {
     let albedos = crate::fit::problem::albedos_of(&outcome.set);
     let psi = outcome
         .set
@@ -619,7 +619,7 @@ pub fn check_values(outcome: &FitOutcome, cfg: &FitConfig, channels: usize) -> V
             phi_i: d[1],
             theta_o: d[2],
             phi_o: d[3],
-            brdf: crate::model::brdf_at_degrees(m.as_ref(), &albedos, psi, d, channels),
+            brdf: crate::model::brdf_at_degrees(m, &albedos, psi, d, channels),
         })
         .collect()
 }
@@ -709,7 +709,7 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
             samples: samples.samples.len(),
             channels,
         },
-        check_values: check_values(outcome, cfg, channels),
+        check_values: check_values(p.model, outcome, channels),
         ward_fallback: p.ward_fallback,
         model_selection: selection
             .map(|s| {

@@ -255,9 +255,10 @@ fn spacing_levels(cfg: &FitConfig, rung: ModelId) -> (f64, f64) {
 
 /// One parameter as the config gives it (or the table's defaults): bounds checked against
 /// the model's limits.
-struct Resolved<'a> {
+struct Resolved {
     name: &'static str,
-    entry: &'a ParamEntry,
+    /// The entry's colour choice (`ks` only).
+    colour: Option<bool>,
     listed: bool,
     min: f64,
     max: f64,
@@ -265,16 +266,13 @@ struct Resolved<'a> {
     value: Albedo,
 }
 
-impl<'a> Resolved<'a> {
-    fn of(cfg: &'a FitConfig, param: Param, spacing0: f64, spacing_max: f64) -> Result<Self> {
-        static EMPTY: std::sync::OnceLock<ParamEntry> = std::sync::OnceLock::new();
+impl Resolved {
+    fn of(cfg: &FitConfig, param: Param, spacing0: f64, spacing_max: f64) -> Result<Self> {
         let info = param.info();
         let name = info.name;
         let listed = cfg.parameters.contains_key(name);
-        let e = cfg
-            .parameters
-            .get(name)
-            .unwrap_or_else(|| EMPTY.get_or_init(ParamEntry::default));
+        let empty = ParamEntry::default();
+        let e = cfg.parameters.get(name).unwrap_or(&empty);
         let level = |l: crate::model::parameter::Level| l.at(spacing_max, spacing0);
         let (hard_lo, hard_hi) = (level(info.limits.0), level(info.limits.1));
         let min = e.min.unwrap_or(level(info.fit_range.0));
@@ -288,7 +286,7 @@ impl<'a> Resolved<'a> {
             .unwrap_or(Albedo::Grey(level(info.start).clamp(min, max)));
         Ok(Self {
             name,
-            entry: e,
+            colour: e.colour,
             listed,
             min,
             max,
@@ -323,7 +321,7 @@ impl<'a> Resolved<'a> {
         let grey = channels > 1
             && vary
             && param == super::config::COLOUR_CHOICE
-            && self.entry.colour != Some(true);
+            && self.colour != Some(true);
         if grey && value.is_rgb() {
             bail!("parameters.{name}: an RGB start for a grey `{name}`; give one number or `colour = true`");
         }
