@@ -29,7 +29,7 @@ fi
 venv=.venv-test
 [ -x "$venv/bin/python" ] || python3 -m venv --system-site-packages "$venv"
 py="$venv/bin/python"
-"$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
+"$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" "pandas>=1.3" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
 
 # every test
 cargo test

@@ -25,6 +25,7 @@
 //!     load: LoadOptions::default(),
 //!     maps: Maps::None,
 //!     progress: fibrefit::Progress::quiet(),
+//!     held: None,
 //! })?;
 //! println!("{}", run.report_text); // statistics, parameters with standard errors, quality
 //! let result = serde_json::to_value(&run.result)?; // what `fibrefit fit --out` writes

@@ -21,6 +21,7 @@ fn a_fit_through_the_api_is_the_cli_fit() {
         maps: Maps::None,
         progress: fibrefit::progress::Progress::quiet(),
         config: cfg,
+        held: None,
     };
     let mut run = fit::fit(&req).unwrap();
     assert_eq!(run.model.as_str(), "poulin-fournier");
@@ -104,4 +105,94 @@ fn fuzz_true_false_and_none_set_auto_s_candidates() {
         .err()
         .unwrap();
     assert!(e.to_string().contains("parameter `fuzz`"), "{e}");
+}
+
+/// Measurements a program holds (numpy arrays, a DataFrame's table through Python) fit as the
+/// file they came from: the same samples, the same parameters.
+#[test]
+fn held_arrays_and_tables_fit_as_their_file() {
+    use fibrefit::api::{FitOptions, Held, OwnedArrays};
+    let data = root().join("data_synthetic/silk/gonio.csv");
+    let text = std::fs::read_to_string(&data).unwrap();
+    let cut: String = text.lines().take(301).collect::<Vec<_>>().join("\n") + "\n";
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("silk.csv");
+    std::fs::write(&file, &cut).unwrap();
+    let options = FitOptions {
+        config: None,
+        model: Some("ward".into()),
+        metric: None,
+        fuzz: None,
+        load: Default::default(),
+        maps: Maps::None,
+        progress: fibrefit::progress::Progress::quiet(),
+    };
+    let from_file = fit::fit(&options.request(&file).unwrap()).unwrap();
+    let samples = &from_file.samples.samples;
+    let arrays = OwnedArrays {
+        l: samples.iter().map(|s| [s.l.x, s.l.y, s.l.z]).collect(),
+        v: samples.iter().map(|s| [s.v.x, s.v.y, s.v.z]).collect(),
+        values: samples.iter().flat_map(|s| s.value).collect(),
+        channels: 3,
+        sigma: Some(samples.iter().flat_map(|s| s.sigma.unwrap()).collect()),
+    };
+    let held = [
+        Held::Arrays {
+            arrays,
+            name: "arrays".into(),
+        },
+        Held::Table {
+            text: cut.clone(),
+            name: "DataFrame".into(),
+        },
+    ];
+    for h in held {
+        let req = options.request_held(h).unwrap();
+        assert!(
+            fit::inputs(&req, None).is_empty(),
+            "nothing on disk is read"
+        );
+        let run = fit::fit(&req).unwrap();
+        assert_eq!(run.samples.samples.len(), 300);
+        for (a, b) in run.samples.samples.iter().zip(samples) {
+            assert!((a.l - b.l).norm() < 1e-12 && (a.v - b.v).norm() < 1e-12);
+            assert_eq!((a.value, a.sigma), (b.value, b.sigma));
+        }
+        let (x, y) = (&run.outcome.statistics, &from_file.outcome.statistics);
+        assert!(
+            (x.rmse - y.rmse).abs() <= 1e-9 * y.rmse,
+            "{} vs {}",
+            x.rmse,
+            y.rmse
+        );
+    }
+    // what is wrong, named with the array and row
+    let bad = |f: &dyn Fn(&mut OwnedArrays)| {
+        let mut a = OwnedArrays {
+            l: vec![[0.0, 0.0, 1.0]; 4],
+            v: vec![[0.6, 0.0, 0.8]; 4],
+            values: vec![0.3; 4],
+            channels: 1,
+            sigma: None,
+        };
+        f(&mut a);
+        let e = options
+            .request_held(Held::Arrays {
+                arrays: a,
+                name: "arrays".into(),
+            })
+            .err()
+            .expect("refused");
+        format!("{e:#}")
+    };
+    assert!(bad(&|a| a.l[2] = [0.0, 0.0, 2.0]).contains("arrays: l[2] = (0, 0, 2) has length 2"));
+    assert!(
+        bad(&|a| a.v[1] = [1.0, 0.0, 0.0]).contains("v[1] = (1, 0, 0) is at or below the horizon")
+    );
+    assert!(bad(&|a| a.values[3] = f64::NAN).contains("values[3] = NaN"));
+    assert!(bad(&|a| a.values[0] = -0.3).contains("values[0] = -0.3 is negative beyond noise"));
+    assert!(bad(&|a| a.sigma = Some(vec![0.1, 0.1, 0.0, 0.1]))
+        .contains("sigma[2] = 0 must be positive"));
+    assert!(bad(&|a| a.v.pop().map(|_| ()).unwrap()).contains("l has 4 rows, v has 3"));
+    assert!(bad(&|a| a.sigma = Some(vec![0.1; 3])).contains("sigma has 3 entries"));
 }

@@ -349,14 +349,19 @@ class Result:
 
 
 def fit(
-    data: PathLike,
+    data: Any = None,
     config: Optional[PathLike] = None,
     model: Optional[str] = None,
     *,
+    l: Any = None,
+    v: Any = None,
+    values: Any = None,
+    sigma: Any = None,
     metric: Optional[str] = None,
     fuzz: Optional[bool] = None,
     maps: Optional[PathLike] = None,
     progress: bool = False,
+    threads: Optional[int] = None,
     stride: Optional[int] = None,
     fraction: Optional[float] = None,
     subsample_seed: Optional[int] = None,
@@ -368,28 +373,56 @@ def fit(
     columns: Optional[Dict[str, str]] = None,
     angles: Optional[str] = None,
 ) -> Result:
-    """Fit ``data`` (goniometric CSV, capture TOML, RGL ``.bsdf`` or MERL ``.binary``), as
-    ``fibrefit fit`` does.
+    """Fit measurements, as ``fibrefit fit`` does.
+
+    The measurements: ``data``, a file (goniometric table ``.csv``/``.tsv``/``.txt``/``.dat``,
+    capture TOML, RGL ``.bsdf`` or MERL ``.binary``) or a pandas DataFrame with a table's
+    columns (``theta_i, phi_i, theta_o, phi_o`` in degrees, ``brdf`` or ``brdf_r, brdf_g,
+    brdf_b``, optional ``sigma``...; ``columns`` and ``angles`` map and convert them as for a
+    file; errors name the table's line: line 1 is the header, line k + 2 the row at position
+    k); or numpy arrays ``l``, ``v`` ((N, 3) unit directions towards the light and the viewer,
+    swatch frame, normal +z), ``values`` ((N,) or (N, 3) BRDF values in 1/sr) and optionally
+    ``sigma`` ((N,) or as ``values``, 1/sr).
 
     ``config``: a fit config TOML (``configs/fit_*.toml``); ``model``: a rung id or ``"auto"``
     (overrides the config's; needed without a config); ``metric``: ``"linear"``, ``"log"`` or
     ``"cosine"``; ``fuzz``: ``True`` adds the fuzz layer (to the rung, or to every candidate of
     ``"auto"``), ``False`` leaves it out (``--no-fuzz``), ``None`` the config's or the default
     (``"auto"`` tries each rung without and with it); ``maps``: a directory for per-texel maps
-    (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr. The
-    loading flags as :func:`load_data`'s; ``stride``, ``fraction``, ``columns`` and ``angles`` merged with
-    the config's as the command line merges them (the library does it, once for both).
+    (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr;
+    ``threads``: worker threads (``None``: one per core, or ``RAYON_NUM_THREADS``). The loading
+    flags as :func:`load_data`'s; ``stride``, ``fraction``, ``columns`` and ``angles`` merged
+    with the config's as the command line merges them (the library does it, once for both).
     """
+    table = None
+    if hasattr(data, "to_csv") and hasattr(data, "columns"):
+        # a DataFrame is read as the table it holds, by the same reader as a file
+        table, data = data.to_csv(index=False), None
+    elif data is not None and not isinstance(data, (str, bytes, _os.PathLike)):
+        raise FibrefitError(
+            f"data: expected a file path or a pandas DataFrame, got {type(data).__name__} "
+            "(arrays go in l, v, values and sigma)"
+        )
+    arrays: Dict[str, Any] = {}
+    if l is not None:
+        arrays["l"] = _f64("l", l, 3)
+    if v is not None:
+        arrays["v"] = _f64("v", v, 3)
+    for name, a in (("values", values), ("sigma", sigma)):
+        if a is not None:
+            arrays[name] = _values(name, a)
     return Result(
         _native_call(
             _native.fit,
-            _os.fspath(data),
+            None if data is None else _os.fspath(data),
             _path(config),
             model,
+            table=table,
             metric=metric,
             fuzz=fuzz,
             maps=_path(maps),
             progress=progress,
+            threads=threads,
             stride=stride,
             fraction=fraction,
             subsample_seed=subsample_seed,
@@ -400,8 +433,22 @@ def fit(
             small_angles_ok=small_angles_ok,
             columns=columns,
             angles=angles,
+            **arrays,
         )
     )
+
+
+def _values(name: str, a: Any) -> np.ndarray:
+    """`a` as a C-contiguous float64 (N,) or (N, C) array."""
+    if np.iscomplexobj(a):
+        raise FibrefitError(f"{name}: complex values; expected real numbers")
+    try:
+        arr = np.ascontiguousarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise FibrefitError(f"{name}: not an array of numbers ({e})") from None
+    if arr.ndim not in (1, 2):
+        raise FibrefitError(f"{name}: expected an (N,) or (N, C) array, got shape {arr.shape}")
+    return arr
 
 
 class Score:

@@ -58,14 +58,20 @@ def load_data(
     columns: Optional[Dict[str, str]] = None,
 ) -> Dict[str, Any]: ...
 def fit(
-    data: str,
+    data: Optional[str] = None,
     config: Optional[str] = None,
     model: Optional[str] = None,
     *,
+    table: Optional[str] = None,
+    l: Optional[np.ndarray] = None,
+    v: Optional[np.ndarray] = None,
+    values: Optional[np.ndarray] = None,
+    sigma: Optional[np.ndarray] = None,
     metric: Optional[str] = None,
     fuzz: Optional[bool] = None,
     maps: Optional[str] = None,
     progress: bool = False,
+    threads: Optional[int] = None,
     stride: Optional[int] = None,
     fraction: Optional[float] = None,
     subsample_seed: Optional[int] = None,
@@ -75,6 +81,7 @@ def fit(
     skip_bad_rows: bool = False,
     small_angles_ok: bool = False,
     columns: Optional[Dict[str, str]] = None,
+    angles: Optional[str] = None,
 ) -> FitResult: ...
 def score(
     result: str,

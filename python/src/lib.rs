@@ -511,27 +511,37 @@ impl FitResult {
     }
 }
 
-/// Fit `data` (goniometric CSV, capture TOML or measured-BRDF file), as `fibrefit fit`:
-/// `config` a fit config TOML, `model` a rung id or "auto" (overrides the config's), `metric`
-/// (linear, log, cosine), `fuzz` (True: `--fuzz`; False: `--no-fuzz`; None: the config's),
-/// `maps` a directory for per-texel maps (captures), `progress` (bars on stderr), the loading
+/// Fit `data` (goniometric CSV, capture TOML or measured-BRDF file), as `fibrefit fit`, or
+/// measurements held in memory: `table` (a pandas DataFrame written as CSV, read as a file is),
+/// or `l`, `v` ((N, 3) unit directions), `values` ((N, C) BRDF values in 1/sr, C = 1 or 3) and
+/// optionally `sigma` ((N,) or (N, C)). `config` a fit config TOML, `model` a rung id or "auto"
+/// (overrides the config's), `metric` (linear, log, cosine), `fuzz` (True: `--fuzz`; False:
+/// `--no-fuzz`; None: the config's), `maps` a directory for per-texel maps (captures),
+/// `progress` (bars on stderr), `threads` (worker threads; None: one per core), the loading
 /// flags as `load_data`'s (merged with the config's as the command line merges them).
 #[pyfunction]
 #[pyo3(signature = (
-    data, config=None, model=None, *, metric=None, fuzz=None, maps=None, progress=false,
+    data=None, config=None, model=None, *, table=None, l=None, v=None, values=None, sigma=None,
+    metric=None, fuzz=None, maps=None, progress=false, threads=None,
     stride=None, fraction=None, subsample_seed=None, directions=None, direction_seed=None,
     max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None, angles=None
 ))]
 #[allow(clippy::too_many_arguments)]
 fn fit(
     py: Python<'_>,
-    data: PathBuf,
+    data: Option<PathBuf>,
     config: Option<PathBuf>,
     model: Option<String>,
+    table: Option<String>,
+    l: Option<PyReadonlyArrayDyn<'_, f64>>,
+    v: Option<PyReadonlyArrayDyn<'_, f64>>,
+    values: Option<PyReadonlyArrayDyn<'_, f64>>,
+    sigma: Option<PyReadonlyArrayDyn<'_, f64>>,
     metric: Option<String>,
     fuzz: Option<bool>,
     maps: Option<PathBuf>,
     progress: bool,
+    threads: Option<usize>,
     stride: Option<usize>,
     fraction: Option<f64>,
     subsample_seed: Option<u64>,
@@ -566,15 +576,96 @@ fn fit(
         },
         progress: fibrefit::Progress::new(!progress),
     };
-    let request = options.request(&data).map_err(err)?;
+    let source = FitSource::of(data, table, [l, v, values, sigma])?;
+    let request = py
+        .detach(|| match source {
+            FitSource::File(path) => options.request(&path),
+            FitSource::Held(held) => options.request_held(held),
+        })
+        .map_err(err)?;
     fit_api::check(&request).map_err(err)?;
     let req = request.clone();
-    let run = py.detach(move || fit_api::fit(&req)).map_err(err)?;
+    let run = py
+        .detach(move || fibrefit::api::with_threads(threads, || fit_api::fit(&req)))
+        .and_then(|r| r)
+        .map_err(err)?;
     Ok(FitResult {
         run,
         request,
         config_file: options.config,
         written: None,
+    })
+}
+
+/// What `fit` fits: a file, or measurements held in memory.
+enum FitSource {
+    File(PathBuf),
+    Held(fibrefit::api::Held),
+}
+
+impl FitSource {
+    /// The one source `fit`'s arguments name: `data`, `table`, or the arrays
+    /// `[l, v, values, sigma]`.
+    fn of(
+        data: Option<PathBuf>,
+        table: Option<String>,
+        arrays: [Option<PyReadonlyArrayDyn<'_, f64>>; 4],
+    ) -> PyResult<Self> {
+        let [l, v, values, sigma] = arrays;
+        let any_array = l.is_some() || v.is_some() || values.is_some() || sigma.is_some();
+        let bad = |m: &str| Err(FibrefitError::new_err(m.to_string()));
+        match (data, table, any_array) {
+            (Some(p), None, false) => Ok(Self::File(p)),
+            (None, Some(text), false) => Ok(Self::Held(fibrefit::api::Held::Table {
+                text,
+                name: "DataFrame".into(),
+            })),
+            (None, None, true) => {
+                let (Some(l), Some(v), Some(values)) = (l, v, values) else {
+                    return bad("l, v and values are needed together (sigma is optional)");
+                };
+                Ok(Self::Held(fibrefit::api::Held::Arrays {
+                    arrays: owned_arrays(&l, &v, &values, sigma.as_ref())?,
+                    name: "arrays".into(),
+                }))
+            }
+            (None, None, false) => bad("nothing to fit: give data (a file or a DataFrame) or l, v and values (numpy arrays)"),
+            _ => bad("give one source of measurements: data (a file or a DataFrame) or l, v and values (numpy arrays), not both"),
+        }
+    }
+}
+
+/// `fit`'s arrays as rows: `values` (N,) or (N, C); `sigma` (N,) or as `values`.
+fn owned_arrays(
+    l: &PyReadonlyArrayDyn<'_, f64>,
+    v: &PyReadonlyArrayDyn<'_, f64>,
+    values: &PyReadonlyArrayDyn<'_, f64>,
+    sigma: Option<&PyReadonlyArrayDyn<'_, f64>>,
+) -> PyResult<fibrefit::api::OwnedArrays> {
+    let channels = match values.shape() {
+        [_] => 1,
+        [_, c] => *c,
+        s => {
+            return Err(FibrefitError::new_err(format!(
+                "values: expected an (N,) or (N, C) array, got shape {s:?}"
+            )))
+        }
+    };
+    let flat = |a: &PyReadonlyArrayDyn<'_, f64>| a.as_array().iter().copied().collect::<Vec<f64>>();
+    if let Some(s) = sigma {
+        if s.ndim() > 2 {
+            return Err(FibrefitError::new_err(format!(
+                "sigma: expected an (N,) or (N, C) array, got shape {:?}",
+                s.shape()
+            )));
+        }
+    }
+    Ok(fibrefit::api::OwnedArrays {
+        l: rows::<3>(l, "l")?,
+        v: rows::<3>(v, "v")?,
+        values: flat(values),
+        channels,
+        sigma: sigma.map(flat),
     })
 }
 

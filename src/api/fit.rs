@@ -143,13 +143,106 @@ impl FitOptions {
             load,
             maps: self.maps.clone(),
             progress: self.progress,
+            held: None,
         })
+    }
+
+    /// The fit of measurements a program holds (`data`: numpy arrays, a pandas DataFrame's
+    /// table), configured as [`FitOptions::request`] configures a file's (a table's columns and
+    /// angle unit from the loading flags and the config). Not yet [`check`]ed.
+    pub fn request_held(&self, data: Held) -> Result<FitRequest> {
+        let name = match &data {
+            Held::Table { name, .. } | Held::Arrays { name, .. } => name.clone(),
+        };
+        let mut req = self.request(Path::new(&name))?;
+        if req.maps != Maps::None {
+            bail!("{name}: per-texel maps come from an image capture (a capture TOML), not from samples in memory");
+        }
+        use sha2::{Digest, Sha256};
+        let mut hash = Sha256::new();
+        let samples = match data {
+            Held::Table { text, name } => {
+                hash.update(text.as_bytes());
+                crate::load::gonio::read(text.as_bytes(), &name, &req.load.gonio)?
+            }
+            Held::Arrays { arrays, name } => {
+                let a = &arrays;
+                let numbers = a.l.iter().chain(&a.v).flatten();
+                let numbers = numbers.chain(&a.values).chain(a.sigma.iter().flatten());
+                for x in numbers {
+                    hash.update(x.to_le_bytes());
+                }
+                crate::load::arrays::samples(&arrays.view(), &name)?
+            }
+        };
+        let sha256 = hash.finalize().iter().map(|b| format!("{b:02x}")).collect();
+        req.held = Some(std::sync::Arc::new(HeldSamples { samples, sha256 }));
+        Ok(req)
     }
 
     /// Every file the fit of `req` (made by [`FitOptions::request`]) reads, the config file
     /// included.
     pub fn inputs(&self, req: &FitRequest) -> Vec<PathBuf> {
         inputs(req, self.config.as_deref())
+    }
+}
+
+/// Measurements a program holds, to fit without a file ([`FitOptions::request_held`]).
+#[derive(Clone, Debug)]
+pub enum Held {
+    /// A goniometric table's text (a DataFrame written as CSV), read as a file's would be;
+    /// `name` labels its errors (`NAME:LINE: problem`, line 1 the header).
+    Table {
+        /// The table: a header line, then one row per measurement.
+        text: String,
+        /// What errors and the result call the data.
+        name: String,
+    },
+    /// Directions and values as arrays (see [`crate::load::arrays::Arrays`]).
+    Arrays {
+        /// The arrays.
+        arrays: OwnedArrays,
+        /// What errors and the result call the data.
+        name: String,
+    },
+}
+
+/// Samples held in memory, with the SHA-256 (hex) of what they were made from (the table's
+/// text; the arrays' values as little-endian f64: l, v, values, then sigma), which the result
+/// records as a file's hash.
+#[derive(Clone, Debug)]
+pub struct HeldSamples {
+    /// The samples.
+    pub samples: Samples,
+    /// The hash of their source.
+    pub sha256: String,
+}
+
+/// [`crate::load::arrays::Arrays`] owning its rows.
+#[derive(Clone, Debug, Default)]
+pub struct OwnedArrays {
+    /// Unit directions towards the light (swatch frame, normal +z).
+    pub l: Vec<[f64; 3]>,
+    /// Unit directions towards the viewer.
+    pub v: Vec<[f64; 3]>,
+    /// BRDF values in 1/sr, `channels` per row.
+    pub values: Vec<f64>,
+    /// 1 (grey) or 3 (RGB).
+    pub channels: usize,
+    /// Standard deviations in 1/sr: one per row or one per value.
+    pub sigma: Option<Vec<f64>>,
+}
+
+impl OwnedArrays {
+    /// The arrays, borrowed.
+    pub fn view(&self) -> crate::load::arrays::Arrays<'_> {
+        crate::load::arrays::Arrays {
+            l: &self.l,
+            v: &self.v,
+            values: &self.values,
+            channels: self.channels,
+            sigma: self.sigma.as_deref(),
+        }
     }
 }
 
@@ -177,6 +270,9 @@ pub struct FitRequest {
     pub maps: Maps,
     /// Where progress lines and bars go (the model-selection table is in the report).
     pub progress: crate::progress::Progress,
+    /// Samples held in memory ([`FitOptions::request_held`]), fitted instead of reading
+    /// `data`, which then only names them.
+    pub held: Option<std::sync::Arc<HeldSamples>>,
 }
 
 /// A finished fit.
@@ -205,7 +301,10 @@ pub struct FitRun {
 
 /// Every file a fit reads: its data (a capture's images and maps too), config, topology map.
 pub fn inputs(req: &FitRequest, config_file: Option<&Path>) -> Vec<PathBuf> {
-    let mut inputs = crate::load::input_files(&req.data);
+    let mut inputs = match req.held {
+        Some(_) => Vec::new(),
+        None => crate::load::input_files(&req.data),
+    };
     inputs.extend(config_file.map(Path::to_path_buf));
     inputs.extend(req.config.knobs.topology_map.iter().cloned());
     inputs
@@ -391,13 +490,14 @@ struct Loaded {
 /// maps keep the linear metric).
 fn load_stage(req: &FitRequest, cfg: &mut FitConfig) -> Result<Loaded> {
     // captures are held compactly by texel; the global fit takes a seeded sample of texels
-    let store = match crate::load::is_capture(&req.data) {
+    let store = match req.held.is_none() && crate::load::is_capture(&req.data) {
         true => Some(CaptureStore::load(&req.data, req.load.subsample)?),
         false => None,
     };
     let fit_texels = store.as_ref().map(|st| fit_texel_sample(st, cfg));
-    let samples = match (&store, &fit_texels) {
-        (Some(st), Some(ids)) => st.samples_of(ids),
+    let samples = match (&store, &fit_texels, &req.held) {
+        (Some(st), Some(ids), _) => st.samples_of(ids),
+        (_, _, Some(held)) => held.samples.clone(),
         _ => load_data(&req.data, &req.load)?,
     };
     cfg.check_work(samples.samples.len())
@@ -604,6 +704,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         model: model.as_ref(),
         samples: &data.samples,
         data: &req.data,
+        data_sha256: req.held.as_ref().map(|h| h.sha256.clone()),
         stride: req.load.subsample.stride,
         fraction: req.load.subsample.fraction,
         all_pixels: all_pixels.as_ref(),
@@ -727,7 +828,7 @@ impl FitTargets {
             Some(dir) => {
                 let mut files = ReportFiles::reserve(outs, dir)?;
                 // a residual map per capture image
-                if crate::load::is_capture(&req.data) {
+                if req.held.is_none() && crate::load::is_capture(&req.data) {
                     let n = crate::load::capture::CaptureFile::load(&req.data)?
                         .images
                         .len();

@@ -2,6 +2,7 @@
 //! other front end (the Python package) call these; they hold the orchestration of the stages
 //! (load -> model -> fit -> export) and no argument parsing or printing of results.
 
+pub mod batch;
 pub mod capture;
 pub mod data;
 pub mod eval;
@@ -29,4 +30,22 @@ pub use crate::model::frame::Vec3;
 pub use crate::model::ModelId;
 pub use crate::progress::Progress;
 pub use capture::{ImageScene, SceneCamera, SceneLight};
-pub use fit::{FitOptions, LoadFlags};
+pub use fit::{FitOptions, Held, HeldSamples, LoadFlags, OwnedArrays};
+
+/// Run `f` on a pool of `threads` worker threads (`None`: rayon's global pool, as many as the
+/// machine has cores unless `RAYON_NUM_THREADS` says otherwise). Every parallel stage of the
+/// library runs on the pool it is called from.
+pub fn with_threads<T: Send>(
+    threads: Option<usize>,
+    f: impl FnOnce() -> T + Send,
+) -> anyhow::Result<T> {
+    match threads {
+        None => Ok(f()),
+        Some(0) => anyhow::bail!("--threads 0: give at least 1 thread"),
+        Some(n) => Ok(rayon::ThreadPoolBuilder::new()
+            .num_threads(n)
+            .build()
+            .map_err(|e| anyhow::anyhow!("--threads {n}: cannot start the threads: {e}"))?
+            .install(f)),
+    }
+}

@@ -1,6 +1,7 @@
 //! `fibrefit fit`: parse the command line, reserve the outputs, run [`crate::api::fit`], print.
 
 use super::data::LoadArgs;
+use crate::api::batch::{Batch, Done};
 use crate::api::fit::{self as fit_api, FitOptions, FitTargets, Maps};
 use crate::api::tiles::{self, TileRequest};
 use crate::export::atomic::Outputs;
@@ -32,10 +33,15 @@ fibrefit-result/1) is written atomically: a failed fit writes nothing. An auto r
 (Ctrl-C, SIGTERM) after a rung finished writes the rungs it finished to --out, marked
 `\"partial\": true` (schema fibrefit-partial/1, no fitted model), and a PARTIAL report.md into
 --report; it exits 130. Progress (per rung, per stage) goes to stderr on a terminal;
-FIBREFIT_PROGRESS=1 shows it elsewhere too, FIBREFIT_PROGRESS=0 hides it.")]
+FIBREFIT_PROGRESS=1 shows it elsewhere too, FIBREFIT_PROGRESS=0 hides it.
+Many swatches: `fibrefit fit swatches/*.csv --model auto --out-dir fits` fits each into
+fits/NAME/ and lists them in fits/summary.csv; runs sharing --out-dir (Slurm job arrays, GNU
+parallel) add their rows to the same summary. Recipes: docs/guide/batch.md.")]
 pub struct FitArgs {
-    /// Goniometric table (.csv, .tsv, .txt, .dat), capture TOML or measured BRDF (.bsdf, .binary)
-    pub data: PathBuf,
+    /// Goniometric table (.csv, .tsv, .txt, .dat), capture TOML or measured BRDF (.bsdf,
+    /// .binary); several (with --out-dir) are fitted one after another with the same settings
+    #[arg(required = true, value_name = "DATA")]
+    pub data: Vec<PathBuf>,
     /// Fit configuration (TOML) [default: every setting at its default; then --model is needed]
     #[arg(long, value_name = "FILE")]
     pub config: Option<PathBuf>,
@@ -87,15 +93,43 @@ pub struct FitArgs {
     /// No progress bar and no report on stdout
     #[arg(long, short)]
     pub quiet: bool,
-    /// Print a one-line machine-readable summary (JSON) on stdout
+    /// Print a one-line machine-readable summary (JSON) on stdout (with --out-dir: one line
+    /// per input, its summary row)
     #[arg(long)]
     pub json: bool,
+    /// Fit every DATA into DIR/NAME/ (NAME: the file name without its extension): the result
+    /// (result.json) and the report (report.md and figures), and a row per input in
+    /// DIR/summary.csv (rung, verdict, held-out error, RMSE, seconds; rows of other runs into
+    /// the same DIR are kept, so job arrays can share it). An input that fails is a `failed`
+    /// row; the others go on, and the run exits 2 at the end
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["out", "report", "maps", "map_globals", "tile", "globals"])]
+    pub out_dir: Option<PathBuf>,
+    /// With --out-dir: leave out inputs whose DIR/NAME/result.json exists and whose summary row
+    /// says ok (a rerun after an interruption, a requeued job)
+    #[arg(long, requires = "out_dir")]
+    pub skip_done: bool,
+    /// Worker threads [default: one per core, or RAYON_NUM_THREADS]; with GNU parallel or job
+    /// arrays sharing a machine, jobs x threads = cores
+    #[arg(long, value_name = "N")]
+    pub threads: Option<usize>,
     #[command(flatten)]
     pub load: LoadArgs,
 }
 
 pub fn run(args: &FitArgs) -> Result<()> {
-    let options = FitOptions {
+    crate::api::with_threads(args.threads, || match &args.out_dir {
+        Some(dir) => run_batch(args, dir),
+        None if args.data.len() > 1 => Err(anyhow!(
+            "{} data files: give --out-dir DIR to fit each into its own folder with a summary (one file at a time otherwise)",
+            args.data.len()
+        )),
+        None => run_one(args),
+    })?
+}
+
+/// The options every input of the command line is fitted with.
+fn options(args: &FitArgs) -> Result<FitOptions> {
+    Ok(FitOptions {
         config: args.config.clone(),
         model: args.model.clone(),
         metric: args.metric.clone(),
@@ -111,8 +145,88 @@ pub fn run(args: &FitArgs) -> Result<()> {
             (None, false) => Maps::None,
         },
         progress: crate::progress::Progress::new(args.quiet || args.json),
+    })
+}
+
+/// `fit --out-dir DIR`: every input into its folder, a line per input on stderr (a JSON line
+/// on stdout with --json), exit 2 at the end when any failed.
+fn run_batch(args: &FitArgs, dir: &std::path::Path) -> Result<()> {
+    let batch = Batch {
+        inputs: args.data.clone(),
+        options: options(args)?,
+        out_dir: dir.to_path_buf(),
+        skip_done: args.skip_done,
     };
-    let req = options.request(&args.data)?;
+    let mut printed = Ok(());
+    let rows = batch.run(&mut |d| {
+        if args.json && printed.is_ok() {
+            printed = serde_json::to_string(d.row)
+                .map_err(anyhow::Error::from)
+                .and_then(|j| super::print_out(&format!("{j}\n")));
+        }
+        if !args.quiet {
+            eprintln!("{}", batch_line(&d, dir));
+        }
+    })?;
+    printed?;
+    let failed: Vec<&str> = rows
+        .iter()
+        .filter(|r| r.status != "ok")
+        .map(|r| r.input.as_str())
+        .collect();
+    let summary = dir.join(crate::export::summary_csv::FILE);
+    if !args.quiet {
+        eprintln!("wrote {} ({} inputs: {} ok, {} failed)", summary.display(), rows.len(), rows.len() - failed.len(), failed.len());
+    }
+    if !failed.is_empty() {
+        return Err(anyhow!(
+            "{} of {} inputs failed (see {}): {}",
+            failed.len(),
+            rows.len(),
+            summary.display(),
+            failed.join(", ")
+        ));
+    }
+    Ok(())
+}
+
+/// The stderr line of one finished input of a batch.
+fn batch_line(d: &Done, dir: &std::path::Path) -> String {
+    let r = d.row;
+    let head = format!("[{}/{}] {}", d.index + 1, d.of, r.input);
+    if d.skipped {
+        return format!("{head}: done before ({}), skipped", r.result);
+    }
+    if r.status != "ok" {
+        return format!("{head}: FAILED: {}", r.error);
+    }
+    let heldout = match r.heldout_error {
+        Some(e) => format!(", held-out {} error {e:.4}", r.heldout_metric),
+        None => String::new(),
+    };
+    let loud = match d.run.map(|run| run.outcome.quality.warnings.len()) {
+        Some(n) if n > 0 => format!(
+            "\n  FIT QUALITY: {}: {n} warning{} in {}",
+            r.verdict.to_uppercase(),
+            if n == 1 { "" } else { "s" },
+            dir.join(&r.report).display()
+        ),
+        _ => String::new(),
+    };
+    format!(
+        "{head}: {}, {}{heldout}, {} -> {}{loud}",
+        r.model,
+        r.verdict,
+        crate::progress::seconds(r.seconds),
+        dir.join(&r.name).display()
+    )
+}
+
+/// `fit DATA`: one input, its outputs where --out, --report and --maps say.
+fn run_one(args: &FitArgs) -> Result<()> {
+    let options = options(args)?;
+    let data = &args.data[0];
+    let req = options.request(data)?;
     let inputs = options.inputs(&req);
     if let Some(tile) = &args.tile {
         return run_tile(args, req, tile, &inputs);

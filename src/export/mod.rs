@@ -14,4 +14,5 @@ pub mod plots;
 pub mod report;
 pub mod result_json;
 pub mod shader;
+pub mod summary_csv;
 pub mod tangent_field;

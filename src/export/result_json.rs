@@ -589,6 +589,8 @@ pub struct ResultParts<'a> {
     pub samples: &'a crate::load::samples::Samples,
     /// The data file fitted (its name and the hash of the bytes its loader read are recorded).
     pub data: &'a Path,
+    /// The hash of data held in memory (no loader read `data`, which only names them).
+    pub data_sha256: Option<String>,
     /// The loader's subsampling: keep every `stride`-th sample, then this fraction.
     pub stride: usize,
     pub fraction: f64,
@@ -699,8 +701,12 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
                 .map(|f| f.to_string_lossy().into_owned())
                 .unwrap_or_default(),
             // of the bytes the loader read, not of the file as it is now
-            sha256: crate::load::sha256_read(p.data)
-                .ok_or_else(|| anyhow!("{}: its loader recorded no hash", p.data.display()))?,
+            sha256: match &p.data_sha256 {
+                Some(h) => h.clone(),
+                None => crate::load::sha256_read(p.data).ok_or_else(|| {
+                    anyhow!("{}: its loader recorded no hash", p.data.display())
+                })?,
+            },
             kind: match samples.kind {
                 DataKind::Gonio => "goniometric".into(),
                 DataKind::Capture => "image capture".into(),

@@ -1,5 +1,6 @@
 //! Loaders: files in, validated [`samples::Samples`] out. No model code here.
 
+pub mod arrays;
 pub mod bracket;
 pub mod capture;
 pub mod capture_store;

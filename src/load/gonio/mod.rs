@@ -158,10 +158,16 @@ pub fn check_columns(columns: &[(String, String)]) -> Result<()> {
 }
 
 /// Values (BRDF, sigma, weight) beyond this magnitude are refused: their squares would overflow.
-const MAX_MAGNITUDE: f64 = 1e100;
+pub(crate) const MAX_MAGNITUDE: f64 = 1e100;
 
 /// Without sigmas, negatives down to this fraction of the largest value are noise.
-const NEGATIVE_FRACTION: f64 = 0.01;
+pub(crate) const NEGATIVE_FRACTION: f64 = 0.01;
+
+/// Sigmas below this are refused: their inverse squares would overflow.
+pub(crate) const MIN_SIGMA: f64 = 1e-100;
+
+/// Negative values up to this many standard deviations are noise; beyond, an error.
+pub(crate) const NEGATIVE_SIGMAS: f64 = 4.0;
 
 /// Most rows of one goniometric CSV: 10 million (each sample is held in memory, with the fit's
 /// own per-sample arrays several hundred bytes in all; about 5 GB at this limit).

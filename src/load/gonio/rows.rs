@@ -2,7 +2,7 @@
 //! and turned into a [`Sample`].
 
 use super::header::{Delimiter, Layout, ANGLES};
-use super::{AngleUnit, GonioOptions, MAX_MAGNITUDE};
+use super::{AngleUnit, GonioOptions, MAX_MAGNITUDE, MIN_SIGMA, NEGATIVE_SIGMAS};
 use crate::load::samples::{Origin, Sample};
 use crate::model::frame::direction_from_angles;
 
@@ -28,11 +28,7 @@ fn number(record: &csv::ByteRecord, i: usize, col: &str) -> std::result::Result<
     }
 }
 
-/// Sigmas below this are refused: their inverse squares would overflow.
-const MIN_SIGMA: f64 = 1e-100;
 
-/// Negative values up to this many standard deviations are noise; beyond, an error.
-const NEGATIVE_SIGMAS: f64 = 4.0;
 
 #[derive(Default)]
 pub(super) struct Chunk {
