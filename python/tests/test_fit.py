@@ -116,3 +116,74 @@ def test_auto_fuzz_true_false_and_default_set_the_candidates(tmp_path):
     )
     with pytest.raises(fibrefit.FibrefitError, match="lists the fuzz layer's parameter `fuzz_depth`"):
         fibrefit.fit(data, config=listed, fuzz=False)
+
+
+def _silk_head(tmp_path, rows=300):
+    text = (DATA / "silk" / "gonio.csv").read_text().splitlines()
+    path = tmp_path / "silk.csv"
+    path.write_text("\n".join(text[: rows + 1]) + "\n")
+    return path
+
+
+def _values(r):
+    return {k: p.value for k, p in r.params.items()}
+
+
+def test_fit_from_arrays_and_a_dataframe_is_the_file_fit(tmp_path):
+    import pandas as pd
+
+    path = _silk_head(tmp_path)
+    ref = fibrefit.fit(path, model="ward")
+    d = fibrefit.load_data(path)
+    # numpy arrays a user already holds: directions, values and sigmas
+    a = fibrefit.fit(l=d["l"], v=d["v"], values=d["value"], sigma=d["sigma"], model="ward", threads=1)
+    # a DataFrame with the table's columns
+    df = pd.read_csv(path)
+    b = fibrefit.fit(df, model="ward")
+    # a lab's own column names and radians, mapped and converted as for a file
+    names = {"theta_i": "ti", "phi_i": "pi", "theta_o": "to", "phi_o": "po"}
+    lab = df.rename(columns=names)
+    for c in names.values():
+        lab[c] = np.radians(lab[c])
+    c = fibrefit.fit(lab, model="ward", columns=names, angles="rad")
+    for r in (a, b, c):
+        assert r.model == ref.model and r.statistics["n"] == ref.statistics["n"] == 900  # 300 rows x RGB
+        for k, x in _values(ref).items():
+            np.testing.assert_allclose(_values(r)[k], x, rtol=1e-6, atol=1e-9, err_msg=k)
+    # the result names its data and records their hash, as a file's
+    out = tmp_path / "arrays.json"
+    a.to_json(out)
+    written = json.loads(out.read_text())
+    assert written["data"]["file"] == "arrays" and len(written["data"]["sha256"]) == 64
+    # grey values as (N,), one sigma per row
+    g = fibrefit.fit(l=d["l"], v=d["v"], values=d["value"][:, 1], sigma=d["sigma"][:, 1], model="lambert")
+    assert g.material().channels == 1
+
+
+def test_fit_from_memory_names_what_is_wrong():
+    import pandas as pd
+
+    l = np.tile([0.0, 0.0, 1.0], (4, 1))
+    v = np.tile([0.6, 0.0, 0.8], (4, 1))
+    vals = np.full(4, 0.3)
+    with pytest.raises(fibrefit.FibrefitError, match="l, v and values are needed together"):
+        fibrefit.fit(l=l, values=vals, model="lambert")
+    with pytest.raises(fibrefit.FibrefitError, match="not both"):
+        fibrefit.fit(DATA / "silk" / "gonio.csv", l=l, v=v, values=vals, model="lambert")
+    with pytest.raises(fibrefit.FibrefitError, match="nothing to fit"):
+        fibrefit.fit(model="lambert")
+    below = v.copy()
+    below[2] = [1.0, 0.0, 0.0]
+    with pytest.raises(fibrefit.FibrefitError, match=r"arrays: v\[2\] = \(1, 0, 0\) is at or below the horizon"):
+        fibrefit.fit(l=l, v=below, values=vals, model="lambert")
+    with pytest.raises(fibrefit.FibrefitError, match=r"values: expected an \(N,\) or \(N, C\) array"):
+        fibrefit.fit(l=l, v=v, values=np.zeros((4, 3, 1)), model="lambert")
+    with pytest.raises(fibrefit.FibrefitError, match="data: expected a file path or a pandas DataFrame"):
+        fibrefit.fit([1, 2, 3], model="lambert")
+    df = pd.DataFrame({"theta_i": [10.0, 20.0], "phi_i": [0.0, 0.0], "theta_o": [30.0, 95.0],
+                       "phi_o": [180.0, 180.0], "brdf": [0.3, 0.3]})
+    # the table's line: line 1 is the header, row k is line k + 2
+    with pytest.raises(fibrefit.FibrefitError, match=r"DataFrame:3: column `theta_o` = 95 is at or below the horizon"):
+        fibrefit.fit(df, model="lambert")
+    with pytest.raises(fibrefit.FibrefitError, match="--threads 0"):
+        fibrefit.fit(df.iloc[:1], model="lambert", threads=0)

@@ -1,7 +1,7 @@
 //! Many swatches: fit every input into its own folder of one output folder, with a summary
 //! (`fibrefit fit A B C --out-dir DIR`). Each input gets `DIR/NAME/result.json` and its report
 //! (`DIR/NAME/report.md` and figures), NAME being its file name without the extension, and a
-//! row in `DIR/summary.csv` ([`crate::export::summary_csv`]). An input that fails writes
+//! row in `DIR/summary.csv` (`summary_csv`). An input that fails writes
 //! nothing of its own and is a `failed` row; the others go on.
 
 use super::fit::{self as fit_api, FitOptions, FitRun, FitTargets, Maps};

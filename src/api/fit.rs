@@ -198,7 +198,7 @@ pub enum Held {
         /// What errors and the result call the data.
         name: String,
     },
-    /// Directions and values as arrays (see [`crate::load::arrays::Arrays`]).
+    /// Directions and values as arrays (see `Arrays`).
     Arrays {
         /// The arrays.
         arrays: OwnedArrays,
@@ -218,7 +218,7 @@ pub struct HeldSamples {
     pub sha256: String,
 }
 
-/// [`crate::load::arrays::Arrays`] owning its rows.
+/// `Arrays` owning its rows.
 #[derive(Clone, Debug, Default)]
 pub struct OwnedArrays {
     /// Unit directions towards the light (swatch frame, normal +z).
@@ -235,7 +235,7 @@ pub struct OwnedArrays {
 
 impl OwnedArrays {
     /// The arrays, borrowed.
-    pub fn view(&self) -> crate::load::arrays::Arrays<'_> {
+    pub(crate) fn view(&self) -> crate::load::arrays::Arrays<'_> {
         crate::load::arrays::Arrays {
             l: &self.l,
             v: &self.v,

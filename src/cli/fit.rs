@@ -176,18 +176,29 @@ fn run_batch(args: &FitArgs, dir: &std::path::Path) -> Result<()> {
         .collect();
     let summary = dir.join(crate::export::summary_csv::FILE);
     if !args.quiet {
-        eprintln!("wrote {} ({} inputs: {} ok, {} failed)", summary.display(), rows.len(), rows.len() - failed.len(), failed.len());
+        eprintln!(
+            "wrote {} ({}: {} ok, {} failed)",
+            summary.display(),
+            counted(rows.len(), "input"),
+            rows.len() - failed.len(),
+            failed.len()
+        );
     }
     if !failed.is_empty() {
         return Err(anyhow!(
-            "{} of {} inputs failed (see {}): {}",
+            "{} of {} failed (see {}): {}",
             failed.len(),
-            rows.len(),
+            counted(rows.len(), "input"),
             summary.display(),
             failed.join(", ")
         ));
     }
     Ok(())
+}
+
+/// `n` and `what`, plural unless one.
+fn counted(n: usize, what: &str) -> String {
+    format!("{n} {what}{}", if n == 1 { "" } else { "s" })
 }
 
 /// The stderr line of one finished input of a batch.

@@ -104,6 +104,11 @@ impl Run<'_> {
                 rungs: &names,
                 counts: self.counts,
             });
+            // said after `on_rung` has it: what the line reports done is done for the caller
+            // too (an interrupted run's partial result holds every rung said to be fitted)
+            if let Some(c) = self.candidates.last() {
+                self.progress.line(&done_line(c, self.cfg.metric));
+            }
         }
     }
 
@@ -173,24 +178,6 @@ impl Run<'_> {
                 None
             }
         };
-        self.progress.line(&match &c.error {
-            None => format!(
-                "auto: {name} fitted in {}: held-out error {:.4} +/- {:.4} ({} metric{})",
-                crate::progress::seconds(c.fit_seconds),
-                c.cv_error,
-                c.cv_standard_error,
-                metric_name(cfg.metric),
-                if c.knobs == "coarse" {
-                    ", coarse knobs"
-                } else {
-                    ""
-                }
-            ),
-            Some(e) => format!(
-                "auto: {name} failed after {}: {e}",
-                crate::progress::seconds(c.fit_seconds)
-            ),
-        });
         self.candidates.push(c);
         fitted
     }
@@ -328,4 +315,28 @@ fn hints_for(a: &Option<ParamSet>) -> Vec<(Param, f64)> {
     a.as_ref()
         .map(|s| s.shapes.iter().map(|s| (s.kind, s.value)).collect())
         .unwrap_or_default()
+}
+
+/// The progress line of a finished candidate.
+fn done_line(c: &Candidate, metric: Metric) -> String {
+    match &c.error {
+        None => format!(
+            "auto: {} fitted in {}: held-out error {:.4} +/- {:.4} ({} metric{})",
+            c.name,
+            crate::progress::seconds(c.fit_seconds),
+            c.cv_error,
+            c.cv_standard_error,
+            metric_name(metric),
+            if c.knobs == "coarse" {
+                ", coarse knobs"
+            } else {
+                ""
+            }
+        ),
+        Some(e) => format!(
+            "auto: {} failed after {}: {e}",
+            c.name,
+            crate::progress::seconds(c.fit_seconds)
+        ),
+    }
 }
