@@ -487,6 +487,55 @@ fn tiles_fitted_as_parallel_processes_merge_into_the_single_run_bit_for_bit() {
             assert!((x - y).abs() <= 1e-12 * x.abs().max(1.0), "{k}: {a} vs {b}");
         }
     }
+    // the result records each map's hash (the same for the single run and the merged tiles,
+    // whose maps are the same bits); copied with its maps the result renders anywhere, and a
+    // map that is not the fit's is refused, naming both hashes
+    let hashes = read("single.json")["maps"]["sha256"].clone();
+    assert_eq!(hashes, read("merged.json")["maps"]["sha256"]);
+    assert!(
+        hashes["height.exr"].as_str().is_some_and(|h| h.len() == 64),
+        "{hashes}"
+    );
+    let moved = tempfile::tempdir().unwrap();
+    std::fs::create_dir(moved.path().join("single")).unwrap();
+    for f in hashes.as_object().unwrap().keys() {
+        std::fs::copy(
+            d.join("single").join(f),
+            moved.path().join("single").join(f),
+        )
+        .unwrap();
+    }
+    std::fs::copy(d.join("single.json"), moved.path().join("fit.json")).unwrap();
+    let render = || {
+        std::process::Command::new(env!("CARGO_BIN_EXE_fibrefit"))
+            .current_dir(d)
+            .args([
+                "render", "--object", "swatch", "--size", "16", "16", "--out", "r.png", "--params",
+            ])
+            .arg(moved.path().join("fit.json"))
+            .output()
+            .unwrap()
+    };
+    let o = render();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    std::fs::remove_file(d.join("r.png")).unwrap();
+    std::fs::copy(
+        d.join("single/height_std_error.exr"),
+        moved.path().join("single/height.exr"),
+    )
+    .unwrap();
+    let o = render();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("height.exr is not the one this result was fitted with"),
+        "{err}"
+    );
+    assert!(
+        err.contains(hashes["height.exr"].as_str().unwrap()),
+        "{err}"
+    );
+    assert!(!d.join("r.png").exists());
     // refused, writing nothing: a tile index out of range, a missing tile, other globals
     let o = fit(&[
         "--globals",

@@ -873,6 +873,9 @@ impl FitRun {
         let progress = self.progress;
         if let (Some(files), Some(maps)) = (&targets.maps, &self.maps) {
             maps_out::write(outs, files, &self.config.maps.requested(), maps)?;
+            if let Some(block) = self.result.maps.as_mut() {
+                block["sha256"] = serde_json::to_value(files.exr_hashes(outs)?)?;
+            }
         }
         if let Some((dir, files)) = &targets.report {
             let fitted = fit::fitted_brdf(&self.outcome, &self.config);

@@ -214,6 +214,7 @@ pub fn maps_dir(
         return Ok(None);
     };
     if looked.is_dir() {
+        check_map_hashes(params, &looked)?;
         return Ok(Some(looked));
     }
     progress.warn(&format!(
@@ -239,6 +240,39 @@ pub fn named_maps_dir(params: &Path) -> Result<Option<(String, PathBuf)>> {
     };
     let looked = params.parent().unwrap_or(Path::new(".")).join(named);
     Ok(Some((named.to_string(), looked)))
+}
+
+/// The maps in `dir` (found beside the result `params`) are the ones the result recorded
+/// (`maps.sha256`: each EXR's SHA-256); results written before the hashes pass unchecked.
+fn check_map_hashes(params: &Path, dir: &Path) -> Result<()> {
+    let v: serde_json::Value = serde_json::from_str(&crate::load::input::read_text(params)?)
+        .map_err(|e| anyhow!("{}: {e}", params.display()))?;
+    let Some(recorded) = v["maps"]["sha256"].as_object() else {
+        return Ok(());
+    };
+    for (file, expected) in recorded {
+        let Some(expected) = expected.as_str() else {
+            continue;
+        };
+        let at = dir.join(file);
+        if !at.is_file() {
+            bail!(
+                "{}: the map {} that the result recorded is not there (copy the maps directory with the result)",
+                params.display(),
+                at.display()
+            );
+        }
+        let got =
+            crate::load::input::read_input_as(&at, crate::load::MAX_INPUT_BYTES, "map")?.sha256;
+        if !got.eq_ignore_ascii_case(expected) {
+            bail!(
+                "{}: the map {} is not the one this result was fitted with: its sha256 is {got}, the result recorded {expected} (maps.sha256); restore the fit's maps, or give --maps DIR to use these",
+                params.display(),
+                at.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// What a warning says of a maps directory a result names that is not there.

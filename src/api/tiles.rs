@@ -241,6 +241,7 @@ pub fn merge(req: &MergeRequest) -> Result<MergeOutcome> {
     desc["method"]["residual_variance"] = serde_json::json!(variance);
     desc["method"]["tiles"] = serde_json::json!(n);
     desc["summary"] = serde_json::to_value(maps::summary(&maps, &req, h_max))?;
+    desc["sha256"] = serde_json::to_value(map_files.exr_hashes(&mut outs)?)?;
     g["maps"] = desc;
     if let Some(w) = g["warnings"].as_array_mut() {
         w.extend(warns.iter().map(|x| serde_json::json!(x)));

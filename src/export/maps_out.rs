@@ -56,6 +56,28 @@ impl MapFiles {
         })
     }
 
+    /// The SHA-256 (hex) of each EXR staged by [`write`], by file name: what a result records
+    /// in `maps.sha256` so that readers can tell its maps from others.
+    pub fn exr_hashes(
+        &self,
+        outs: &mut Outputs,
+    ) -> Result<std::collections::BTreeMap<String, String>> {
+        use sha2::{Digest, Sha256};
+        use std::io::{Seek, SeekFrom};
+        let mut out = std::collections::BTreeMap::new();
+        for (file, id) in self.ids.iter().filter(|(f, _)| f.ends_with(".exr")) {
+            let (f, name) = outs.file_and_name(*id);
+            let mut hash = Sha256::new();
+            f.seek(SeekFrom::Start(0))
+                .and_then(|_| std::io::copy(f, &mut hash))
+                .and_then(|_| f.seek(SeekFrom::End(0)))
+                .with_context(|| format!("{}: cannot read back the map", name.display()))?;
+            let hex: String = hash.finalize().iter().map(|b| format!("{b:02x}")).collect();
+            out.insert(file.clone(), hex);
+        }
+        Ok(out)
+    }
+
     fn id(&self, file: &str) -> Result<OutputId> {
         self.ids
             .iter()
