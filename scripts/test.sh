@@ -5,6 +5,11 @@
 # missing, and the virtual environment (.venv-test/) is kept between runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+# where the time goes: each phase's wall seconds on stderr, and a summary at the end
+phases=()
+phase_start=$SECONDS
+phase() { phases+=("$1 $((SECONDS - phase_start)) s"); echo "scripts/test.sh: $1 took $((SECONDS - phase_start)) s" >&2; phase_start=$SECONDS; }
+trap 'echo "scripts/test.sh: phases: ${phases[*]:-none}; total $SECONDS s" >&2' EXIT
 
 # apt: the shader tests run the exported shader on a GPU driver (the CPU Vulkan driver
 # llvmpipe, mesa-vulkan-drivers); the exported GLSL is compiled by glslang (glslang-tools); the
@@ -30,8 +35,14 @@ venv=.venv-test
 [ -x "$venv/bin/python" ] || python3 -m venv --system-site-packages "$venv"
 py="$venv/bin/python"
 "$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" "pandas>=1.3" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
+phase "set-up (apt, pip)"
 
 # every test
+cargo test --no-run
+phase "building the Rust tests"
 cargo test
+phase "running the Rust tests"
 "$py" -m pip install --quiet --disable-pip-version-check ./python
+phase "building the Python package"
 "$py" -m pytest -q python/tests
+phase "running the Python tests"
