@@ -51,6 +51,10 @@ pub fn apply(q: &mut Quality, warnings: &mut Vec<String>, c: FloorCheck, sigmas_
             let note = q.noise.note.clone();
             q.warnings.retain(|w| *w != note);
             warnings.retain(|w| *w != note);
+            q.noise.note = "no sigmas, no repeated directions and no neighbouring pixels to \
+                            estimate the noise from: the fit is judged against the floor, what \
+                            the data themselves allow"
+                .into();
         }
         q.verdict = c.verdict.clone();
         if !c.within {

@@ -130,17 +130,22 @@ fn finish(sums: &[Sums], names: &[String]) -> Vec<Region> {
         .collect()
 }
 
-/// One region in words: "the model is 25 % low at grazing forward scattering (41 % of the
-/// excess; 0.310 against the floor's 0.060, 120 samples)".
-fn region_words(r: &Region) -> String {
+/// A region's headline: "the model is 25 % low at grazing forward scattering".
+fn headline(r: &Region) -> String {
     let bias = match r.bias_percent {
         b if b <= -5.0 => format!("the model is {:.0} % low", -b),
         b if b >= 5.0 => format!("the model is {b:.0} % high"),
-        _ => "the model scatters (no bias)".into(),
+        b => format!("the model errs both ways (mean bias {b:+.0} %)"),
     };
+    format!("{bias} at {}", r.name)
+}
+
+/// One region in words: "the model is 25 % low at grazing forward scattering (41 % of the
+/// excess; 0.310 against the floor's 0.060, 120 samples)".
+fn region_words(r: &Region) -> String {
     format!(
-        "{bias} at {} ({:.0} % of the excess error; {:.3} against the floor's {:.3}, {} samples)",
-        r.name,
+        "{} ({:.0} % of the excess error; {:.3} against the floor's {:.3}, {} samples)",
+        headline(r),
         100.0 * r.excess_share,
         r.model_error,
         r.floor_error,
@@ -148,19 +153,27 @@ fn region_words(r: &Region) -> String {
     )
 }
 
+/// The (at most `k`) regions of `rs` named in words: at least [`NAMED_MIN`] samples and
+/// [`NAMED_SHARE`] of the excess, the largest share first.
+fn pick(rs: &[Region], k: usize) -> Vec<Region> {
+    let mut v: Vec<Region> = rs
+        .iter()
+        .filter(|r| r.n >= NAMED_MIN && r.excess_share >= NAMED_SHARE)
+        .cloned()
+        .collect();
+    v.sort_by(|a, b| b.excess_share.total_cmp(&a.excess_share));
+    v.truncate(k);
+    v
+}
+
+/// The region holding most of the excess, in a few words (for a verdict), or `None`.
+pub fn short(regions: &[Region]) -> Option<String> {
+    pick(regions, 1).first().map(headline)
+}
+
 /// Where the excess concentrates, in words: the (at most two) regions holding at least
 /// [`NAMED_SHARE`] of it, and the worst half-vector bin.
 pub fn words(regions: &[Region], bins: &[Region]) -> String {
-    let pick = |rs: &[Region], k: usize| -> Vec<Region> {
-        let mut v: Vec<Region> = rs
-            .iter()
-            .filter(|r| r.n >= NAMED_MIN && r.excess_share >= NAMED_SHARE)
-            .cloned()
-            .collect();
-        v.sort_by(|a, b| b.excess_share.total_cmp(&a.excess_share));
-        v.truncate(k);
-        v
-    };
     let named = pick(regions, 2);
     if named.is_empty() {
         return "no region of directions stands out: the excess over the floor is spread evenly"
@@ -173,7 +186,7 @@ pub fn words(regions: &[Region], bins: &[Region]) -> String {
         .join("; ");
     if let Some(b) = pick(bins, 1).first() {
         t += &format!(
-            "; by half-vector angle, most at {} ({:.0} % of the excess, bias {:+.0} %)",
+            "; by half-vector angle from the normal, most at {} ({:.0} % of the excess, bias {:+.0} %)",
             b.name.trim_start_matches("half-vector "),
             100.0 * b.excess_share,
             b.bias_percent
