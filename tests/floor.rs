@@ -19,6 +19,13 @@ const NOISE: f64 = 0.08;
 /// noised by [`NOISE`] relative, written without its sigma columns (a measurement that gives
 /// none).
 fn synth_without_sigmas(dir: &Path, count: usize) -> PathBuf {
+    synth_noised(dir, count, 5)
+}
+
+/// [`synth_without_sigmas`] with the noise seeded by `seed` (the same directions).
+fn synth_noised(dir: &Path, count: usize, seed: u64) -> PathBuf {
+    let dir = &dir.join(format!("noise{seed}"));
+    std::fs::create_dir_all(dir).unwrap();
     let cfg = dir.join("s.toml");
     std::fs::write(
         &cfg,
@@ -26,7 +33,7 @@ fn synth_without_sigmas(dir: &Path, count: usize) -> PathBuf {
             "model = \"poulin-fournier\"\n[params]\nkd = [0.5, 0.35, 0.2]\nks = 0.2\nexponent = 8\n\
              spacing = 2.4\nfibre_azimuth_deg = 10\nfuzz = 3.0\nfuzz_depth = 0.3\nfuzz_asymmetry = 0.6\n\
              [gonio]\nrandom = {{ count = {count}, seed = 3, max_theta_deg = 80 }}\n\
-             [noise]\nrelative = {NOISE}\nseed = 5\n"
+             [noise]\nrelative = {NOISE}\nseed = {seed}\n"
         ),
     )
     .unwrap();
@@ -152,4 +159,108 @@ fn the_right_model_is_within_the_floor_and_a_wrong_one_misses_structure() {
         .warnings
         .iter()
         .any(|w| w.starts_with("the model misses structure the data hold")));
+}
+
+#[test]
+fn repeated_and_reciprocal_pairs_give_the_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    // the same 1500 directions noised three times: once as they are, once again (repeats),
+    // once with light and view swapped (reciprocal pairs of a reciprocal model)
+    let read = |seed| {
+        let p = synth_noised(dir.path(), 1500, seed);
+        let t = std::fs::read_to_string(p).unwrap();
+        t.lines().skip(1).map(str::to_string).collect::<Vec<_>>()
+    };
+    let (a, b, c) = (read(5), read(6), read(7));
+    let mut csv = String::from("theta_i,phi_i,theta_o,phi_o,brdf_r,brdf_g,brdf_b\n");
+    for l in a.iter().chain(&b) {
+        csv += &format!("{l}\n");
+    }
+    for l in &c {
+        let f: Vec<&str> = l.split(',').collect();
+        csv += &format!("{},{},{},{},{}\n", f[2], f[3], f[0], f[1], f[4..].join(","));
+    }
+    let path = dir.path().join("pairs.csv");
+    std::fs::write(&path, csv).unwrap();
+    let samples = load_data(&path, &LoadOptions::default()).unwrap();
+    let (splits, validation) = splits_for(samples.samples.len(), &Selection::default(), 0).unwrap();
+    let run = floor_on(
+        &samples,
+        &FloorRequest {
+            splits: &splits,
+            metric: Metric::Log,
+            eps: None,
+            seed: 0,
+            validation,
+            choice: Choice::default(),
+        },
+    )
+    .unwrap();
+    let (rep, rec) = (
+        run.floor.repeated_directions.expect("repeats"),
+        run.floor.reciprocal_pairs.expect("reciprocal pairs"),
+    );
+    eprintln!(
+        "repeats {rep:?}, reciprocal {rec:?}, floor {}",
+        run.floor.error
+    );
+    for p in [&rep, &rec] {
+        assert!(p.pairs >= 1000, "{p:?}");
+        assert!(
+            (p.noise / NOISE - 1.0).abs() < 0.15,
+            "{p:?} against {NOISE}"
+        );
+    }
+}
+
+#[test]
+fn score_gives_the_floor_of_the_data_it_scores_and_judges_by_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_without_sigmas(dir.path(), 1200);
+    let out = dir.path().join("lambert.json");
+    let fit = assert_cmd::Command::cargo_bin("fibrefit")
+        .unwrap()
+        .args([
+            "fit",
+            data.to_str().unwrap(),
+            "--model",
+            "lambert",
+            "--no-fuzz",
+        ])
+        .args(["--metric", "log", "--quiet", "--out", out.to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(
+        fit.status.success(),
+        "{}",
+        String::from_utf8_lossy(&fit.stderr)
+    );
+    // the banner says it even with --quiet
+    let err = String::from_utf8_lossy(&fit.stderr);
+    assert!(
+        err.contains("FIT QUALITY: MISSES STRUCTURE THE DATA HOLD"),
+        "{err}"
+    );
+    let score = assert_cmd::Command::cargo_bin("fibrefit")
+        .unwrap()
+        .args([
+            "score",
+            out.to_str().unwrap(),
+            data.to_str().unwrap(),
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        score.status.success(),
+        "{}",
+        String::from_utf8_lossy(&score.stderr)
+    );
+    let v: serde_json::Value = serde_json::from_slice(&score.stdout).unwrap();
+    let ratio = v["floor"]["ratio"].as_f64().expect("a floor");
+    assert!(ratio > 2.0, "{v}");
+    assert!(v["verdict"]
+        .as_str()
+        .unwrap()
+        .starts_with("misses structure the data hold"));
 }
