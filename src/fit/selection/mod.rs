@@ -70,7 +70,7 @@ pub struct Candidate {
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
     /// Per held-out sample, the mean over channels of its squared residual (in the order of
-    /// the selection's [`Split`]s' held-out samples).
+    /// the selection's splits' held-out samples).
     #[serde(skip)]
     pub heldout_errors: Vec<f64>,
     /// The model's values on the held-out samples, in the same order.
