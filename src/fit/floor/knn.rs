@@ -352,6 +352,31 @@ mod tests {
     use rand::{Rng, SeedableRng};
 
     #[test]
+    fn a_local_linear_fit_is_exact_for_values_linear_in_the_chart_and_a_mean_has_leverage_1_over_k(
+    ) {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+        let f = |p: &Point| 1.0 + 2.0 * p[0] - p[1] + 0.5 * p[3];
+        let pts: Vec<(Point, usize)> = (0..400)
+            .map(|i| {
+                let mut p = [0.0; 6];
+                for x in p.iter_mut().take(4) {
+                    *x = rng.random::<f64>();
+                }
+                (p, i)
+            })
+            .collect();
+        let values = pts.iter().map(|(p, _)| [f(p); 3]).collect::<Vec<_>>();
+        let c = Coordinates::Directions;
+        let ll = Predictor::new(pts.clone(), values.clone(), 12, Method::LocalLinear, c);
+        let q = [0.4, 0.6, 0.5, 0.3, 0.0, 0.0];
+        let (v, leverage) = ll.predict(&q, None);
+        assert!((v[0] - f(&q)).abs() < 1e-3, "{} against {}", v[0], f(&q));
+        assert!(leverage > 1.0 / 12.0 && leverage < 1.0, "{leverage}");
+        let mean = Predictor::new(pts, values, 8, Method::Weighted { power: 0.0 }, c);
+        assert!((mean.predict(&q, None).1 - 1.0 / 8.0).abs() < 1e-12);
+    }
+
+    #[test]
     fn the_tree_finds_what_a_scan_finds() {
         let mut rng = rand::rngs::StdRng::seed_from_u64(7);
         let pts: Vec<Point> = (0..500)
