@@ -322,6 +322,25 @@ class Result:
         return list(self._r.warnings)
 
     @property
+    def verdict(self) -> str:
+        """With sigmas "fits within the noise" or "does not fit within the noise"; without,
+        judged by the floor: "within 1.2x of what the data allow" or "misses structure the data
+        hold: ..." (where, in words)."""
+        return self._r.verdict
+
+    @property
+    def floor(self) -> Optional[float]:
+        """What the data themselves allow: a nonparametric predictor's held-out error on the
+        model's own held-out samples, in the fit's metric (``None`` for per-texel maps). The
+        details, and where the model's excess lies: ``result["quality"]["floor"]``."""
+        return self._r.floor
+
+    @property
+    def floor_ratio(self) -> Optional[float]:
+        """The model's held-out error over the floor (within 1.2: as good as the data allow)."""
+        return self._r.floor_ratio
+
+    @property
     def has_maps(self) -> bool:
         return self._r.has_maps
 
@@ -454,7 +473,7 @@ def _values(name: str, a: Any) -> np.ndarray:
 class Score:
     """A result scored on data (:func:`score`): ``result`` is the score as ``fibrefit score
     --json`` prints it (a dict: ``model``, ``samples``, ``statistics``, ``channels``,
-    ``residual_bins``, ``verdict``, ``noise``), ``report()`` the text ``fibrefit score``
+    ``residual_bins``, ``verdict``, ``noise``, ``floor``), ``report()`` the text ``fibrefit score``
     prints."""
 
     def __init__(self, json_text: str, text: str):
@@ -468,8 +487,23 @@ class Score:
 
     @property
     def verdict(self) -> str:
-        """"fits within the noise", "does not fit within the noise" or "noise unknown"."""
+        """"fits within the noise" or "does not fit within the noise" (sigmas, neighbouring
+        pixels); without sigmas, judged by the floor: "within 1.2x of what the data allow" or
+        "misses structure the data hold: ..."."""
         return self.result["verdict"]
+
+    @property
+    def floor(self) -> Optional[float]:
+        """What these data themselves allow (a nonparametric predictor, cross-validated on
+        them, in the result's metric); ``None`` for captures."""
+        f = self.result.get("floor")
+        return None if f is None else f["floor"]
+
+    @property
+    def floor_ratio(self) -> Optional[float]:
+        """The result's error on these data over their floor."""
+        f = self.result.get("floor")
+        return None if f is None else f["ratio"]
 
     def report(self) -> str:
         """The score as ``fibrefit score`` prints it."""

@@ -466,6 +466,27 @@ impl FitResult {
         self.run.model.as_str()
     }
 
+    /// The quality verdict: with sigmas "fits within the noise" or "does not fit within the
+    /// noise"; without, judged by the floor: "within 1.2x of what the data allow" or "misses
+    /// structure the data hold: ...".
+    #[getter]
+    fn verdict(&self) -> String {
+        self.run.outcome.quality.verdict.clone()
+    }
+
+    /// The floor: what the data themselves allow on the model's held-out samples (RMS in the
+    /// fit's metric); None when it was not measured (per-texel maps).
+    #[getter]
+    fn floor(&self) -> Option<f64> {
+        self.run.outcome.quality.floor.as_ref().map(|f| f.floor)
+    }
+
+    /// The model's held-out error over the floor; None without a floor.
+    #[getter]
+    fn floor_ratio(&self) -> Option<f64> {
+        self.run.outcome.quality.floor.as_ref().map(|f| f.ratio)
+    }
+
     /// Whether per-texel maps were recovered (written by `to_json`).
     #[getter]
     fn has_maps(&self) -> bool {

@@ -148,3 +148,24 @@ def test_columns_extend_the_configs_as_the_cli_does(tmp_path):
     lambert = tmp_path / "lambert.toml"
     lambert.write_text('model = "lambert"\n')
     np.testing.assert_array_equal(r.params["kd"].value, fibrefit.fit(plain, config=lambert).params["kd"].value)
+
+
+def test_fit_and_score_carry_the_verdict_and_the_floor(tmp_path):
+    """Without sigmas the verdict is judged against the floor (what the data themselves allow);
+    the fit's Result and a Score both give the floor and the ratio."""
+    rows = (DATA / "silk" / "gonio.csv").read_text().splitlines()
+    header = rows[0].split(",")
+    keep = [k for k, name in enumerate(header) if not name.startswith("sigma")]
+    no_sigmas = tmp_path / "no_sigmas.csv"
+    no_sigmas.write_text(
+        "\n".join(",".join(r.split(",")[k] for k in keep) for r in rows if not r.startswith("#")) + "\n"
+    )
+    r = fibrefit.fit(no_sigmas, model="lambert", fuzz=False, metric="log")
+    assert r.floor is not None and r.floor > 0
+    assert r.floor_ratio == pytest.approx(r.result["quality"]["floor"]["ratio"])
+    assert r.verdict == r.result["quality"]["verdict"]
+    assert r.verdict.startswith("misses structure the data hold") or r.verdict.startswith("within 1.2x")
+    r.to_json(tmp_path / "fit.json")
+    s = fibrefit.score(tmp_path / "fit.json", no_sigmas)
+    assert s.floor is not None and s.floor_ratio is not None
+    assert s.verdict == s.result["verdict"]

@@ -678,6 +678,11 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
             outcome.warnings.insert(k, n.clone());
         }
     }
+    // the floor: what the data themselves allow, on the held-out samples (not for maps)
+    if global_work.is_none() {
+        let sel = selection.as_ref();
+        fit::floor::judge::fit_stage(&data.samples, &cfg, &mut outcome, sel, &req.progress);
+    }
     // parameters recovered per texel are not fixed: say so
     if global_work.is_some() {
         let per_texel = per_texel_names(&cfg.maps);
@@ -846,7 +851,9 @@ impl FitRun {
     /// The one-line summary `fibrefit fit --json` prints: the rung, the result file `out`, the
     /// sample count, the quality verdict, the errors, the spread of the residuals under its own
     /// name (`reduced_chi_square` with sigmas, `residual_variance` without: chi-square is not
-    /// defined then, as the report says), and the work done.
+    /// defined then, as the report says), the held-out error, the floor and their ratio
+    /// (`heldout_error`, `floor`, `floor_ratio`, when the floor was measured), and the work
+    /// done.
     pub fn summary_json(&self, out: Option<&Path>) -> serde_json::Value {
         let (o, s) = (&self.outcome, &self.outcome.statistics);
         let mut v = serde_json::json!({
@@ -863,6 +870,12 @@ impl FitRun {
             "warnings": o.warnings.len(),
         });
         v[s.names().1] = s.reduced_chi_square.into();
+        // the model's held-out error against what the data themselves allow (fit::floor)
+        if let Some(f) = &o.quality.floor {
+            v["heldout_error"] = f.heldout_error.into();
+            v["floor"] = f.floor.into();
+            v["floor_ratio"] = f.ratio.into();
+        }
         v
     }
 

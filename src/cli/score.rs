@@ -14,9 +14,11 @@ counts, chi-square and reduced chi-square when DATA has sigmas (else the sum of 
 in 1/sr and relative RMSE (RMSE / RMS data), per channel RMSE, relative RMSE and log error
 (RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median value), and the mean residual in
 bins of the half-vector angle and of its azimuth from the fibres (* = systematic, > 4 standard
-errors), and ends with the verdict in the fit report's words: \"fits within the noise\", \"does
-not fit within the noise\" or \"noise unknown\" (no sigmas, repeated directions or neighbouring
-pixels to judge the noise by). Scoring a fit's own training data reproduces its statistics;
+errors), the floor of DATA (what a nonparametric predictor of the data themselves reaches,
+cross-validated on them; not for captures), and ends with the verdict in the fit report's words:
+\"fits within the noise\" or \"does not fit within the noise\" (sigmas, neighbouring pixels);
+without sigmas, judged against the floor: \"within 1.2x of what the data allow\" or \"misses
+structure the data hold: ...\". Scoring a fit's own training data reproduces its statistics;
 scoring held-out data is how a fit is checked. Writes nothing.")]
 pub struct ScoreArgs {
     /// Result JSON written by `fibrefit fit`

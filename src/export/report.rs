@@ -196,8 +196,12 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
         );
     }
     t += &crate::fit::quality::bins_text(&q.residual_bins);
+    if let Some(f) = &q.floor {
+        t += &crate::fit::floor::text(f);
+    }
     t
 }
+
 
 /// What a fit report shows: the fit, the data it was fitted to, the report's text and the BRDFs
 /// its pictures draw.

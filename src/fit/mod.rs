@@ -13,6 +13,7 @@ pub mod basins;
 pub mod config;
 pub mod encoding_check;
 pub mod finish;
+pub mod floor;
 pub mod global;
 pub mod gltf_material;
 pub mod lm;

@@ -31,7 +31,9 @@ pub const DEGENERATE_CORRELATION: f64 = 0.995;
 
 #[derive(Clone, Debug, Serialize)]
 pub struct Quality {
-    /// "fits within the noise", "does not fit within the noise", or "noise unknown".
+    /// "fits within the noise", "does not fit within the noise", or "noise unknown"; for data
+    /// without sigmas judged by the floor, "within 1.2x of what the data allow" or "misses
+    /// structure the data hold: ..." (`fit::floor::judge`).
     pub verdict: String,
     pub noise: NoiseCheck,
     /// Distinct minima on all samples, best first (the first is the fit): the best and those
@@ -48,6 +50,10 @@ pub struct Quality {
     /// pair is held ([`degeneracies`]).
     pub degeneracies: Vec<Degeneracy>,
     pub warnings: Vec<String>,
+    /// The model's held-out error against the floor, what the data themselves allow
+    /// (`fit::floor`); it gives the verdict of data without sigmas.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub floor: Option<crate::fit::floor::FloorCheck>,
 }
 
 /// Two parameters the data do not separate: their correlation is within
@@ -492,6 +498,7 @@ pub fn assess_sums(
         residual_bins,
         degeneracies: Vec::new(),
         warnings,
+        floor: None,
     }
 }
 

@@ -48,10 +48,16 @@ pub struct Score {
     pub channels: Vec<ChannelScore>,
     pub residual_bins: Vec<quality::ResidualBin>,
     /// The fit's verdict on these data, in its words (quality::assess): "fits within the
-    /// noise", "does not fit within the noise" or "noise unknown".
+    /// noise", "does not fit within the noise" or "noise unknown"; without sigmas, judged by
+    /// the floor: "within 1.2x of what the data allow" or "misses structure the data hold: ...".
     pub verdict: String,
     /// How the noise was judged (sigmas, repeated directions, neighbouring pixels, none).
     pub noise: quality::NoiseCheck,
+    /// The model's error on these data (RMS in the result's metric) against their floor:
+    /// what a nonparametric predictor of the data themselves reaches held out (`fit::floor`);
+    /// it gives the verdict of data without sigmas. Absent for captures.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub floor: Option<super::floor::FloorCheck>,
 }
 
 /// Texels per piece of a capture scored a piece at a time (whole image rows).
@@ -69,7 +75,23 @@ pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
     run.add(result, &problem)?;
     let repeats =
         || quality::repeats_estimate(quality::repeats_sums(&problem.samples, problem.scale(), ch));
-    Ok(run.finish(result, repeats))
+    let mut score = run.finish(result, repeats);
+    with_floor(&mut score, samples, result.metric, eps);
+    Ok(score)
+}
+
+/// The floor of the scored `samples` (log floors `eps`) in `score`, and, without sigmas or
+/// neighbouring pixels, the verdict it gives. Too few samples: none.
+fn with_floor(score: &mut Score, samples: &Samples, metric: Metric, eps: [f64; 3]) {
+    let st = &score.statistics;
+    let error = (st.chi_square / st.n.max(1) as f64).sqrt();
+    let Ok(f) = super::floor::of_scored(samples, metric, eps, error) else {
+        return;
+    };
+    if !st.sigmas_given && score.noise.source != "neighbouring pixels" {
+        score.verdict = f.verdict.clone();
+    }
+    score.floor = Some(f);
 }
 
 /// Score `result` against the capture held by `store`, a piece at a time (whole rows of one
@@ -269,6 +291,7 @@ impl Running {
             residual_bins: q.residual_bins,
             verdict: q.verdict,
             noise: q.noise,
+            floor: None,
         }
     }
 }
@@ -307,6 +330,10 @@ pub fn text(s: &Score) -> String {
         );
     }
     t += &quality::bins_text(&s.residual_bins);
+    if let Some(f) = &s.floor {
+        t += "[[Floor]] (what the data themselves allow)\n";
+        t += &super::floor::text(f);
+    }
     // the verdict last, in the fit report's words
     t += &format!(
         "[[Verdict]]\n    verdict            = {}\n    noise ({})  {}\n",

@@ -66,6 +66,39 @@ pub struct FitProblem<'a> {
     pub evaluations: AtomicUsize,
 }
 
+/// The residual scale of sample `s` per channel in `metric`: 1/sigma or sqrt(weight), times
+/// cos(theta_i) for the cosine metric.
+pub fn residual_scale(metric: Metric, s: &Sample) -> [f64; 3] {
+    std::array::from_fn(|c| {
+        let base = match s.sigma {
+            Some(sig) => 1.0 / sig[c],
+            None => s.weight.sqrt(),
+        };
+        match metric {
+            Metric::Cosine => base * s.l.z,
+            _ => base,
+        }
+    })
+}
+
+/// The residual of the value `m` predicted for sample `s`, channel `c`, in `metric`:
+/// `scale` (the channel's [`residual_scale`]) times m - y, or for the log metric
+/// ln(m + eps) - ln(y + eps) (`eps` the channel's [`log_floor`]) weighted by sqrt(weight), or
+/// divided by the log value's sigma (sigma / (y + eps)).
+pub fn metric_residual(metric: Metric, scale: f64, eps: f64, s: &Sample, c: usize, m: f64) -> f64 {
+    let y = s.value[c];
+    match metric {
+        Metric::Linear | Metric::Cosine => scale * (m - y),
+        Metric::Log => {
+            let k = match s.sigma {
+                Some(sig) => (y.max(0.0) + eps) / sig[c],
+                None => s.weight.sqrt(),
+            };
+            k * ((m.max(0.0) + eps).ln() - (y.max(0.0) + eps).ln())
+        }
+    }
+}
+
 pub fn component_index(c: Component) -> usize {
     match c {
         Component::Diffuse => 0,
@@ -113,24 +146,7 @@ impl<'a> FitProblem<'a> {
             separable,
         } = settings;
         let separable = separable && metric != Metric::Log;
-        let scale = samples
-            .iter()
-            .map(|s| {
-                let mut k = [0.0; 3];
-                for (c, kc) in k.iter_mut().enumerate() {
-                    let base = match s.sigma {
-                        Some(sig) => 1.0 / sig[c],
-                        None => s.weight.sqrt(),
-                    };
-                    *kc = if metric == Metric::Cosine {
-                        base * s.l.z
-                    } else {
-                        base
-                    };
-                }
-                k
-            })
-            .collect();
+        let scale = samples.iter().map(|s| residual_scale(metric, s)).collect();
         let free_shapes = template.free_shapes();
         let free_albedos = template.free_albedos();
         let log_floor = if metric == Metric::Log {
@@ -567,18 +583,7 @@ impl<'a> FitProblem<'a> {
                     .iter()
                     .map(|(k, a)| self.albedo_at(*k, i, c, a[c]) * col[*k])
                     .sum();
-                let y = s.value[c];
-                r[i * ch + c] = match self.metric {
-                    Metric::Linear | Metric::Cosine => sc[c] * (m - y),
-                    Metric::Log => {
-                        let eps = self.log_floor[c];
-                        let k = match s.sigma {
-                            Some(sig) => (y.max(0.0) + eps) / sig[c],
-                            None => s.weight.sqrt(),
-                        };
-                        k * ((m.max(0.0) + eps).ln() - (y.max(0.0) + eps).ln())
-                    }
-                };
+                r[i * ch + c] = metric_residual(self.metric, sc[c], self.log_floor[c], s, c, m);
             }
         }
         r

@@ -234,9 +234,13 @@ pub(super) struct Plan {
 }
 
 pub(super) fn plan(n: usize, cfg: &FitConfig) -> Plan {
+    plan_of(n, &cfg.selection, cfg.seed)
+}
+
+/// [`plan`] from the selection settings `sel` and the seed.
+pub(super) fn plan_of(n: usize, sel: &crate::fit::config::Selection, seed: u64) -> Plan {
     let mut idx: Vec<usize> = (0..n).collect();
-    idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(cfg.seed ^ 0x5e1ec7));
-    let sel = &cfg.selection;
+    idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed ^ 0x5e1ec7));
     if n < sel.cv_below {
         let k = sel.folds.min(n);
         let folds = (0..k)
@@ -269,6 +273,8 @@ pub(super) struct Measured {
     pub(super) rmse: f64,
     pub(super) rel: f64,
     pub(super) log: f64,
+    /// The model's values on the held-out samples, in the order of `errors`.
+    pub(super) values: Vec<[f64; 3]>,
 }
 
 pub(super) fn complement(n: usize, fold: &[usize]) -> Vec<usize> {
@@ -326,6 +332,7 @@ pub(super) fn measure(
         rmse,
         rel,
         log,
+        values,
     })
 }
 
@@ -339,4 +346,6 @@ pub(super) fn set_errors(c: &mut Candidate, m: &Measured) {
     c.heldout_rmse = m.rmse;
     c.heldout_relative_rmse = m.rel;
     c.heldout_log_error = m.log;
+    c.heldout_errors = m.errors.clone();
+    c.heldout_values = m.values.clone();
 }

@@ -69,6 +69,13 @@ pub struct Candidate {
     /// Why it could not be fitted, if it failed.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub error: Option<String>,
+    /// Per held-out sample, the mean over channels of its squared residual (in the order of
+    /// the selection's splits' held-out samples).
+    #[serde(skip)]
+    pub heldout_errors: Vec<f64>,
+    /// The model's values on the held-out samples, in the same order.
+    #[serde(skip)]
+    pub heldout_values: Vec<[f64; 3]>,
 }
 
 impl Candidate {
@@ -109,13 +116,18 @@ pub struct SelectionOutcome {
     /// The configuration of the chosen candidate (its rung, the fuzz layer on or off).
     #[serde(skip)]
     pub chosen_config: Option<FitConfig>,
+    /// The folds (or the one split) every candidate was measured on.
+    #[serde(skip)]
+    pub splits: Vec<Split>,
 }
 
+mod heldout;
 mod measure;
 mod rule;
 mod run;
 mod table;
 
+pub use heldout::{of_fit, of_selection, splits_for, HeldOut, Split};
 use measure::*;
 pub use measure::{heldout, heldout_log_terms, model_values_on, problem_at, ranking_config};
 pub use rule::*;

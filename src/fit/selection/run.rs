@@ -155,6 +155,8 @@ impl Run<'_> {
             knobs: "coarse".into(),
             chosen: false,
             error: None,
+            heldout_errors: vec![],
+            heldout_values: vec![],
         };
         let fitted = match result {
             Ok((m, ns, o)) => {
@@ -285,15 +287,7 @@ impl Run<'_> {
         // which began from every simpler candidate's
         let ordered_hints = vec![hints_for(&self.anchors[chosen])];
         let plan = &self.plan;
-        let validation = match plan.cross_validated {
-            true => format!("{}-fold cross-validation", plan.folds.len()),
-            false => format!(
-                "one split ({:.0} % held out; {} samples, cross-validation below {})",
-                100.0 * cfg.selection.holdout,
-                self.samples.samples.len(),
-                cfg.selection.cv_below
-            ),
-        };
+        let validation = heldout::validation_text(plan, cfg, self.samples.samples.len());
         let (_, id, fuzz, chosen_config) = self.list.swap_remove(chosen);
         SelectionOutcome {
             chosen: self.candidates[chosen].name.clone(),
@@ -307,6 +301,7 @@ impl Run<'_> {
             candidates: self.candidates,
             hints: ordered_hints,
             chosen_config: Some(chosen_config),
+            splits: heldout::splits_of(plan, self.samples.samples.len()),
         }
     }
 }

@@ -1,0 +1,82 @@
+//! The floor in a fit: the model's held-out error (auto's chosen candidate's, or a named rung's
+//! measured on the same kind of folds) against the floor, and the verdict it gives data
+//! without sigmas.
+
+use super::{check, FloorCheck};
+use crate::fit::config::FitConfig;
+use crate::fit::quality::Quality;
+use crate::fit::selection::{self, SelectionOutcome};
+use crate::fit::FitOutcome;
+use crate::load::samples::Samples;
+
+/// Measure the floor of a fit of `samples` with `cfg` (`selection`: auto's, whose chosen
+/// candidate's held-out errors are the model's) and judge `outcome` by it ([`apply`]). A
+/// floor that cannot be measured is a warning, never the loss of the fit.
+pub fn fit_stage(
+    samples: &Samples,
+    cfg: &FitConfig,
+    outcome: &mut FitOutcome,
+    selection: Option<&SelectionOutcome>,
+    progress: &crate::progress::Progress,
+) {
+    progress.line("fit: the floor (what the data themselves allow, held out)");
+    let heldout = match selection.and_then(selection::of_selection) {
+        Some(h) => Ok(h),
+        None => selection::of_fit(samples, cfg, &outcome.set),
+    };
+    match heldout.and_then(|h| check(samples, cfg.metric, &h, cfg.seed)) {
+        Ok(c) => {
+            let sigmas = outcome.statistics.sigmas_given;
+            apply(&mut outcome.quality, &mut outcome.warnings, c, sigmas);
+        }
+        Err(e) => outcome.warnings.push(format!(
+            "the floor (what the data themselves allow) could not be measured: {e:#}"
+        )),
+    }
+}
+
+/// Does the verdict of data with these noise sources follow the floor? Without sigmas, unless
+/// neighbouring pixels of a capture measured the noise.
+pub fn judged_by_floor(q: &Quality, sigmas_given: bool) -> bool {
+    !sigmas_given && q.noise.source != "neighbouring pixels"
+}
+
+/// Put the floor check `c` into the quality block `q`; for data judged by the floor
+/// ([`judged_by_floor`]) its verdict replaces "noise unknown" (whose warning goes from `q` and
+/// `warnings`), and a model that misses structure the data hold is a warning in both (the FIT
+/// QUALITY banner).
+pub fn apply(q: &mut Quality, warnings: &mut Vec<String>, c: FloorCheck, sigmas_given: bool) {
+    if judged_by_floor(q, sigmas_given) {
+        if q.noise.source == "none" {
+            let note = q.noise.note.clone();
+            q.warnings.retain(|w| *w != note);
+            warnings.retain(|w| *w != note);
+            q.noise.note = "no sigmas, no repeated directions and no neighbouring pixels to \
+                            estimate the noise from: the fit is judged against the floor, what \
+                            the data themselves allow"
+                .into();
+        }
+        q.verdict = c.verdict.clone();
+        if !c.within {
+            let w = misses_warning(&c);
+            q.warnings.push(w.clone());
+            warnings.push(w);
+        }
+    }
+    q.floor = Some(c);
+}
+
+/// The warning of a model beyond the floor's limit.
+pub fn misses_warning(c: &FloorCheck) -> String {
+    format!(
+        "the model misses structure the data hold: its held-out error {:.4} is {:.2}x the floor \
+         {:.4} ({} on the same {}; within {}x is what the data allow): {}",
+        c.heldout_error,
+        c.ratio,
+        c.floor,
+        c.estimate.predictor,
+        c.estimate.validation,
+        c.limit,
+        c.where_text
+    )
+}
