@@ -49,6 +49,8 @@ fn summary(dir: &Path) -> Vec<csv::StringRecord> {
             "heldout_error",
             "heldout_metric",
             "heldout_relative_rmse",
+            "floor",
+            "floor_ratio",
             "rmse",
             "relative_rmse",
             "samples",
@@ -103,7 +105,7 @@ fn each_input_gets_its_folder_and_a_summary_row_and_a_failure_stops_nothing() {
     assert_eq!(&rows[0][0], "broken");
     assert_eq!(&rows[0][2], "failed");
     assert!(
-        rows[0][15].contains("broken.csv:2: malformed row"),
+        rows[0][17].contains("broken.csv:2: malformed row"),
         "{:?}",
         rows[0]
     );
@@ -119,13 +121,19 @@ fn each_input_gets_its_folder_and_a_summary_row_and_a_failure_stops_nothing() {
         let heldout: f64 = row[5].parse().unwrap();
         assert!(heldout.is_finite() && heldout > 0.0, "{row:?}");
         assert_eq!(&row[6], "linear");
-        assert_eq!(row[10].parse::<usize>().unwrap(), 300);
-        assert!(row[11].parse::<f64>().unwrap() > 0.0);
+        // the floor: what the data allow on the same held-out samples
+        let (floor, ratio): (f64, f64) = (row[8].parse().unwrap(), row[9].parse().unwrap());
+        assert!(
+            floor > 0.0 && (ratio - heldout / floor).abs() < 1e-6 * ratio,
+            "{row:?}"
+        );
+        assert_eq!(row[12].parse::<usize>().unwrap(), 300);
+        assert!(row[13].parse::<f64>().unwrap() > 0.0);
         // the result and report named relative to the folder, and there
         let result: serde_json::Value =
-            serde_json::from_slice(&fs::read(out.join(&row[12])).unwrap()).unwrap();
+            serde_json::from_slice(&fs::read(out.join(&row[14])).unwrap()).unwrap();
         assert_eq!(result["model"], row[3].to_string());
-        assert!(out.join(&row[13]).is_file());
+        assert!(out.join(&row[15]).is_file());
         assert!(out.join(name).join("slices.png").is_file());
     }
 }
@@ -165,10 +173,11 @@ fn runs_sharing_a_folder_keep_every_row_and_skip_done_leaves_finished_inputs() {
         rows.iter().map(|r| r[0].to_string()).collect::<Vec<_>>(),
         ["s0", "s1", "s2", "s3"]
     );
-    // a named rung has no held-out error; the summary says so by leaving it empty
+    // a named rung's held-out error too (the same folds as auto's), and its floor
+    assert!(rows.iter().all(|r| &r[2] == "ok" && &r[3] == "lambert"));
     assert!(rows
         .iter()
-        .all(|r| &r[2] == "ok" && r[5].is_empty() && &r[3] == "lambert"));
+        .all(|r| r[5].parse::<f64>().is_ok() && r[8].parse::<f64>().is_ok()));
     let before = fs::read(out.join("s1/result.json")).unwrap();
     fs::remove_dir_all(out.join("s2")).unwrap();
     let o = fibrefit()

@@ -164,6 +164,7 @@ fn row_of(run: &FitRun, input: &Path, name: &str, seconds: f64) -> Row {
         .selection
         .as_ref()
         .and_then(|sel| sel.candidates.iter().find(|c| c.chosen).map(|c| (sel, c)));
+    let floor = run.outcome.quality.floor.as_ref();
     let fuzz = match run.config.listed_fuzz_parameter() {
         Some(_) => " + fuzz",
         None => "",
@@ -174,9 +175,17 @@ fn row_of(run: &FitRun, input: &Path, name: &str, seconds: f64) -> Row {
         status: "ok".into(),
         model: format!("{}{fuzz}", run.model),
         verdict: run.outcome.quality.verdict.clone(),
-        heldout_error: chosen.map(|(_, c)| c.cv_error),
-        heldout_metric: chosen.map_or(String::new(), |(sel, _)| sel.metric.clone()),
+        heldout_error: floor
+            .map(|f| f.heldout_error)
+            .or(chosen.map(|(_, c)| c.cv_error)),
+        heldout_metric: match (floor, chosen) {
+            (Some(f), _) => f.estimate.metric.clone(),
+            (None, Some((sel, _))) => sel.metric.clone(),
+            (None, None) => String::new(),
+        },
         heldout_relative_rmse: chosen.map(|(_, c)| c.heldout_relative_rmse),
+        floor: floor.map(|f| f.floor),
+        floor_ratio: floor.map(|f| f.ratio),
         rmse: Some(s.rmse),
         relative_rmse: Some(s.relative_rmse),
         samples: Some(run.samples.samples.len()),

@@ -211,9 +211,10 @@ fn batch_line(d: &Done, dir: &std::path::Path) -> String {
     if r.status != "ok" {
         return format!("{head}: FAILED: {}", r.error);
     }
-    let heldout = match r.heldout_error {
-        Some(e) => format!(", held-out {} error {e:.4}", r.heldout_metric),
-        None => String::new(),
+    let heldout = match (r.heldout_error, r.floor_ratio) {
+        (Some(e), Some(q)) => format!(", held-out {} error {e:.4} ({q:.2}x the floor)", r.heldout_metric),
+        (Some(e), None) => format!(", held-out {} error {e:.4}", r.heldout_metric),
+        _ => String::new(),
     };
     let loud = match d.run.map(|run| run.outcome.quality.warnings.len()) {
         Some(n) if n > 0 => format!(

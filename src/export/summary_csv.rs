@@ -30,10 +30,9 @@ pub struct Row {
     pub model: String,
     /// The fit quality verdict (as `fit --json`'s `verdict`).
     pub verdict: String,
-    /// The held-out error of the fitted model in the fit metric's units, as the report's
-    /// model-selection table gives it (auto: the chosen candidate's cross-validated error;
-    /// residuals in standard deviations when the data give sigmas; empty for a named rung,
-    /// which fits every sample).
+    /// The held-out error of the fitted model in the fit metric's units (the report's
+    /// `[[Quality]]`: the same folds or split as auto's; residuals in standard deviations when
+    /// the data give sigmas); empty where it was not measured (per-texel maps).
     pub heldout_error: Option<f64>,
     /// The metric of `heldout_error` (`log`: ln(f + eps) residuals; `linear`: BRDF residuals;
     /// `cosine`: shaded-intensity residuals).
@@ -41,6 +40,11 @@ pub struct Row {
     /// The held-out RMSE relative to the RMS of the held-out values (comparable across files
     /// and metrics).
     pub heldout_relative_rmse: Option<f64>,
+    /// What the data themselves allow on the same held-out samples (a nonparametric
+    /// predictor's error, same metric).
+    pub floor: Option<f64>,
+    /// heldout_error / floor (within 1.2: the model fits as well as the data allow).
+    pub floor_ratio: Option<f64>,
     /// The fit's RMSE on all samples, 1/sr.
     pub rmse: Option<f64>,
     /// The fit's RMSE relative to the RMS of the values.
@@ -60,7 +64,7 @@ pub struct Row {
 }
 
 /// The columns, in order.
-pub const COLUMNS: [&str; 16] = [
+pub const COLUMNS: [&str; 18] = [
     "name",
     "input",
     "status",
@@ -69,6 +73,8 @@ pub const COLUMNS: [&str; 16] = [
     "heldout_error",
     "heldout_metric",
     "heldout_relative_rmse",
+    "floor",
+    "floor_ratio",
     "rmse",
     "relative_rmse",
     "samples",
