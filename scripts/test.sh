@@ -40,7 +40,7 @@ phase "set-up (apt, pip)"
 # every test
 cargo test --no-run
 phase "building the Rust tests"
-cargo test
+cargo test --no-fail-fast
 phase "running the Rust tests"
 "$py" -m pip install --quiet --disable-pip-version-check ./python
 phase "building the Python package"

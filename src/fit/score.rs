@@ -76,7 +76,11 @@ pub fn score(result: &FittedResult, samples: &Samples) -> Result<Score> {
     let repeats =
         || quality::repeats_estimate(quality::repeats_sums(&problem.samples, problem.scale(), ch));
     let mut score = run.finish(result, repeats);
-    with_floor(&mut score, samples, result.metric, eps);
+    // a capture's score has no floor (its pixels are judged by their neighbours' noise), so
+    // that this path and the one a piece at a time (`score_capture`) say the same
+    if samples.kind != crate::load::samples::DataKind::Capture {
+        with_floor(&mut score, samples, result.metric, eps);
+    }
     Ok(score)
 }
 
