@@ -218,8 +218,7 @@ fn batch_line(d: &Done, dir: &std::path::Path) -> String {
     };
     let loud = match d.run.map(|run| run.outcome.quality.warnings.len()) {
         Some(n) if n > 0 => format!(
-            "\n  FIT QUALITY: {}: {n} warning{} in {}",
-            r.verdict.to_uppercase(),
+            "\n  FIT QUALITY: {n} warning{} in {}",
             if n == 1 { "" } else { "s" },
             dir.join(&r.report).display()
         ),

@@ -376,6 +376,10 @@ fn pair_noise(samples: &[&Sample], space: &Space, reciprocal: bool, seed: u64) -
     })
 }
 
+/// Below this ratio the model predicts so much better than the interpolant that the floor
+/// says more about the directions' spacing than about the data's noise.
+pub const BEATS_THE_PREDICTOR: f64 = 0.5;
+
 /// A model's held-out error against the floor of the same samples.
 #[derive(Clone, Debug, Serialize)]
 pub struct FloorCheck {
@@ -528,10 +532,18 @@ pub fn text(f: &FloorCheck) -> String {
     );
     let _ = writeln!(
         t,
-        "    ratio              = {:.2} ({} {}x)",
+        "    ratio              = {:.2} ({} {}x{})",
         f.ratio,
         if f.within { "within" } else { "beyond" },
-        f.limit
+        f.limit,
+        // far below 1 the predictor, not the data, sets the floor: the directions are too
+        // sparse for interpolating them to follow what the model follows
+        if f.ratio < BEATS_THE_PREDICTOR {
+            "; the model predicts far better than interpolating the data can, so here the \
+             floor bounds the predictor, not the model: judge the fit by the noise"
+        } else {
+            ""
+        }
     );
     let _ = writeln!(t, "    where              = {}", f.where_text);
     for (name, p) in [
