@@ -37,7 +37,9 @@ py="$venv/bin/python"
 "$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" "pandas>=1.3" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
 phase "set-up (apt, pip)"
 
-# every test
+# every test; a fresh build gains nothing from incremental compilation (it only costs time and
+# disk), so it is off unless the caller says otherwise
+export CARGO_INCREMENTAL="${CARGO_INCREMENTAL:-0}"
 cargo test --no-run
 phase "building the Rust tests"
 cargo test --no-fail-fast
