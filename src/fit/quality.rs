@@ -17,7 +17,7 @@
 
 use crate::load::samples::{Origin, Sample};
 use serde::Serialize;
-use std::collections::{BTreeMap, HashMap};
+use std::collections::BTreeMap;
 
 /// Bins further than this many standard errors from zero are flagged.
 pub const BIN_Z_LIMIT: f64 = 4.0;
@@ -312,7 +312,7 @@ pub fn repeats_sums(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> (f64,
             y,
         ]
     };
-    let mut groups: HashMap<[i64; 8], Vec<usize>> = HashMap::new();
+    let mut groups: BTreeMap<[i64; 8], Vec<usize>> = BTreeMap::new(); // ordered: the same sum every run
     for (i, s) in samples.iter().enumerate() {
         groups.entry(key(s)).or_default().push(i);
     }
@@ -349,7 +349,9 @@ pub fn pixel_estimate((ss, count): (f64, usize)) -> Option<(f64, usize)> {
 /// The sums behind the noise from neighbouring pixels (above): squared second differences
 /// and their count. An image row's samples must come in one call.
 pub fn pixel_sums(samples: &[&Sample], residuals: &[f64], ch: usize) -> (f64, usize) {
-    let mut rows: HashMap<(u32, u32), Vec<(u32, usize)>> = HashMap::new();
+    // ordered rows: the sum runs in the same order every run (a hash map's order changed the
+    // estimate's last digits from run to run)
+    let mut rows: BTreeMap<(u32, u32), Vec<(u32, usize)>> = BTreeMap::new();
     for (i, s) in samples.iter().enumerate() {
         if let Origin::Pixel { image, x, y } = s.origin {
             rows.entry((image, y)).or_default().push((x, i));
