@@ -312,7 +312,8 @@ pub fn repeats_sums(samples: &[&Sample], scale: &[[f64; 3]], ch: usize) -> (f64,
             y,
         ]
     };
-    let mut groups: BTreeMap<[i64; 8], Vec<usize>> = BTreeMap::new(); // ordered: the same sum every run
+    // ordered: the same sum every run
+    let mut groups: BTreeMap<[i64; 8], Vec<usize>> = BTreeMap::new();
     for (i, s) in samples.iter().enumerate() {
         groups.entry(key(s)).or_default().push(i);
     }
