@@ -172,8 +172,8 @@ def test_fit_and_score_carry_the_verdict_and_the_floor(tmp_path):
 
 
 def test_undetermined_values_are_said(tmp_path):
-    """Ward fitted to data without a lobe (a matte surface): its specular albedo ends at 0 and
-    is undetermined, with why; the result, the material a renderer loads and the exports say so."""
+    """Ward fitted to data without a lobe (a matte surface): the lobe's widths are undetermined,
+    with why; the result, the material a renderer loads and the exports say so."""
     rng = np.random.default_rng(1)
 
     def hemisphere(n):
@@ -185,14 +185,14 @@ def test_undetermined_values_are_said(tmp_path):
     l, v = hemisphere(n), hemisphere(n)
     values = 0.3 / np.pi * (1 + 0.01 * rng.standard_normal(n))
     r = fibrefit.fit(l=l, v=v, values=values, model="ward", fuzz=False)
-    assert "rho_s" in r.undetermined, r.undetermined
-    assert r.undetermined["rho_s"].startswith("at its lower bound 0")
-    p = r.params["rho_s"]
-    assert p.determined is False and p.undetermined_reason == r.undetermined["rho_s"]
+    # a lobe that is not there: its widths end at their bounds, not measurements
+    assert {"alpha_x", "alpha_y"} <= set(r.undetermined), r.undetermined
+    p = r.params["alpha_x"]
+    assert p.determined is False and p.undetermined_reason == r.undetermined["alpha_x"]
     assert r.params["rho_d"].determined is True and "rho_d" not in r.undetermined
     r.to_json(tmp_path / "fit.json")
     m = fibrefit.load(tmp_path / "fit.json")
-    assert m.undetermined["rho_s"] == r.undetermined["rho_s"]
-    assert any("`rho_s` is undetermined" in w for w in m.warnings)
+    assert m.undetermined["alpha_x"] == r.undetermined["alpha_x"]
+    assert any("`alpha_x` is undetermined" in w for w in m.warnings)
     e = fibrefit.export(tmp_path / "fit.json", shader="wgsl", gltf=True)
-    assert "rho_s" in e.undetermined and "UNDETERMINED: `rho_s` is undetermined" in e.shader
+    assert "alpha_x" in e.undetermined and "UNDETERMINED: `alpha_x` is undetermined" in e.shader

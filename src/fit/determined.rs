@@ -6,8 +6,8 @@
 //! - **at a bound**: the fit ended on a bound of the parameter's range (the data ask for a value
 //!   beyond it and the model cannot give it), so it has no standard error;
 //! - **held by a degeneracy**: the data do not separate it from another parameter (correlation
-//!   within 1 - [`quality::DEGENERATE_CORRELATION`] of +-1), so it was held at its fitted value
-//!   ([`quality::degeneracies`]);
+//!   within 1 - [`crate::fit::quality::DEGENERATE_CORRELATION`] of +-1), so it was held at its fitted value
+//!   ([`crate::fit::quality::degeneracies`]);
 //! - **flat cost**: the cost hardly changes along it: no standard error could be computed, or its
 //!   +-1 standard error interval, in the fit's own coordinate (ln for the log-scale parameters,
 //!   1/d for the spacing), is at least [`FLAT_RANGE_FRACTION`] of its range `[min, max]` wide,
