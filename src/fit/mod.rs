@@ -75,7 +75,7 @@ pub struct ParamRecord {
     pub held: Option<String>,
     /// Per value, why the data do not determine it (at a bound, held, flat cost), or `None`
     /// when they do; empty when every value is determined or the parameter is fixed. The value
-    /// is still the one used. Set by [`determined::assess`].
+    /// is still the one used. Set by the fit (`fit::determined::assess`).
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub undetermined: Vec<Option<String>>,
 }
