@@ -114,6 +114,12 @@ fn check_recovery(o: &FitOutcome, what: &str) {
         o.correlations.iter().take(4).collect::<Vec<_>>(),
         o.warnings
     );
+    // a fit that recovers the truth calls nothing undetermined (no false alarms)
+    assert!(
+        o.quality.undetermined.is_empty(),
+        "{what}: {:?}",
+        o.quality.undetermined
+    );
     for (name, truth) in TRUTH {
         let r = record(o, name);
         let v = r.value[0];
@@ -231,6 +237,15 @@ fn fixed_parameters_stay_fixed_and_bounds_hold() {
     let e = record(&o, "exponent");
     assert_eq!(e.value[0], 40.0, "exponent should sit on its upper bound");
     assert!(e.at_bound[0] && e.std_error[0].is_none());
+    // not a measurement: undetermined, with the bound and the direction the data ask for
+    assert!(
+        e.undetermined(0)
+            .is_some_and(|w| w.starts_with("at its upper bound 40: the data ask for more")),
+        "{:?}",
+        e.undetermined
+    );
+    // a fixed parameter is not called undetermined (it was not fitted)
+    assert!(record(&o, "spacing").undetermined.is_empty());
     assert!(o
         .warnings
         .iter()
@@ -292,6 +307,11 @@ seed = 2
         o.warnings
     );
     assert!(!o.quality.ambiguous, "{:?}", o.quality.minima);
+    assert!(
+        o.quality.undetermined.is_empty(),
+        "{:?}",
+        o.quality.undetermined
+    );
     // the one solution is the truth or its image under the swap
     let (ax, ay) = (
         record(&o, "alpha_x").value[0],

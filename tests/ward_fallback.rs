@@ -137,6 +137,7 @@ fn a_ward_fallback_of_a_ward_truth_has_no_warning() {
         fixed_reason: None,
         grey: false,
         held: None,
+        undetermined: vec![],
     };
     let bound = fibrefit::fit::ward_fallback::warnings(
         0.1,

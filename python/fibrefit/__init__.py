@@ -173,8 +173,16 @@ class Material:
 
     @property
     def warnings(self) -> List[str]:
-        """Notes made while loading (parameters the rung does not use, maps not found)."""
+        """Notes made while loading (parameters the rung does not use, maps not found, values
+        the data did not determine)."""
         return list(self._m.warnings)
+
+    @property
+    def undetermined(self) -> Dict[str, str]:
+        """The result's values its data did not determine, label -> why (at a bound, held by a
+        degeneracy, a flat cost): the material uses them as given, but they are not
+        measurements."""
+        return dict(self._m.undetermined)
 
     def __repr__(self) -> str:
         return repr(self._m)
@@ -274,6 +282,16 @@ class Parameter:
     vary: bool
     at_bound: bool
     correl: Dict[str, float] = _field(default_factory=dict)
+    #: False when the data do not determine the value (for an RGB albedo, when any channel's is
+    #: not): at a bound, held by a degeneracy, or the cost is flat along it. ``value`` is then
+    #: the value used, not a measurement; ``undetermined_reason`` says why.
+    determined: bool = True
+    #: Why not (per channel for an RGB albedo: a list of str or None), else None.
+    undetermined_reason: Optional[Union[str, List[Optional[str]]]] = None
+
+
+def _any_false(x: Any) -> bool:
+    return any(v is False for v in x) if isinstance(x, list) else x is False
 
 
 def _number(x: Any) -> Any:
@@ -304,6 +322,9 @@ class Result:
                 vary=not fixed,
                 at_bound=bool(p.get("at_bound", False)),
                 correl=corr.get(name, {}),
+                # absent for fixed parameters and in results written before it existed
+                determined=not _any_false(p.get("determined", True)),
+                undetermined_reason=p.get("undetermined_reason"),
             )
 
     @property
@@ -341,6 +362,13 @@ class Result:
         return self._r.floor_ratio
 
     @property
+    def undetermined(self) -> Dict[str, str]:
+        """The values the data do not determine, label (``"spacing"``, ``"kd[b]"``) -> why (at a
+        bound, held by a degeneracy, or a flat cost): the fit used them, but they are not
+        measurements. Empty when the data determine every free value."""
+        return {u["label"]: u["reason"] for u in self.result.get("quality", {}).get("undetermined", [])}
+
+    @property
     def has_maps(self) -> bool:
         return self._r.has_maps
 
@@ -363,7 +391,8 @@ class Result:
         spread = "reduced_chi_square" if s.get("sigmas_given") else "residual_variance"
         return (
             f"Result(model={self.model!r}, samples={self.result['data']['samples']}, "
-            f"{spread}={s.get(spread)}, warnings={len(self.warnings)})"
+            f"{spread}={s.get(spread)}, undetermined={len(self.undetermined)}, "
+            f"warnings={len(self.warnings)})"
         )
 
 
@@ -571,13 +600,16 @@ class Exported:
     ``glb`` (the GLB file's bytes, or None), ``gltf_material`` (the fitted glTF material:
     ``base_color``, ``roughness``, ``anisotropy_strength``, ``anisotropy_rotation_rad``, ``ior``,
     ``sheen`` and its errors against the model; or None) and ``textures`` (the maps the GLB's
-    textures were made from: ``directory``, ``width``, ``height``, ``names``; or None)."""
+    textures were made from: ``directory``, ``width``, ``height``, ``names``; or None) and
+    ``undetermined`` (the result's values its data did not determine, label -> reason: the
+    exports use them as given, and the shader's header and the GLB's ``extras`` say so)."""
 
     model: str
     shader: Optional[str]
     glb: Optional[bytes]
     gltf_material: Optional[Dict[str, Any]]
     textures: Optional[Dict[str, Any]]
+    undetermined: Dict[str, str] = _field(default_factory=dict)
 
 
 def export(

@@ -31,6 +31,7 @@ from __future__ import annotations
 
 import json as _json
 import os as _os
+import warnings as _warnings
 from typing import Any, Dict, Optional, Tuple
 
 import numpy as np
@@ -141,6 +142,12 @@ class FibrefitBSDF:
         maps = str(props["maps"]) if "maps" in props else None
         capture = str(props["capture"]) if "capture" in props else None
         self.material: Material = _load(self.filename, maps, capture)
+        for label, why in self.material.undetermined.items():
+            # the renderer uses the value, but the data did not determine it: say so
+            _warnings.warn(
+                f"{self.filename}: `{label}` is undetermined ({why}); the BSDF uses its value as given",
+                stacklevel=2,
+            )
         flags = mi.BSDFFlags.GlossyReflection | mi.BSDFFlags.DiffuseReflection | mi.BSDFFlags.FrontSide
         if self.material.has_maps:
             flags = flags | mi.BSDFFlags.SpatiallyVarying

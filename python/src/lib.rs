@@ -225,10 +225,22 @@ impl Material {
         self.inner.source.display().to_string()
     }
 
-    /// Notes made while loading (parameters the rung does not use, maps not found).
+    /// Notes made while loading (parameters the rung does not use, maps not found, values the
+    /// data did not determine).
     #[getter]
     fn warnings(&self) -> Vec<String> {
         self.warnings.clone()
+    }
+
+    /// The result's values its data did not determine, label -> why: used as given, not
+    /// measurements.
+    #[getter]
+    fn undetermined(&self) -> Vec<(String, String)> {
+        self.inner
+            .undetermined
+            .iter()
+            .map(|u| (u.label.clone(), u.reason.clone()))
+            .collect()
     }
 
     fn __repr__(&self) -> String {
@@ -862,6 +874,12 @@ fn export<'py>(
         }
         None => d.set_item("textures", py.None())?,
     }
+    // the values the result's data did not determine, which the exports use as given
+    let und = PyDict::new(py);
+    for u in &out.undetermined {
+        und.set_item(u.label.as_str(), u.reason.as_str())?;
+    }
+    d.set_item("undetermined", und)?;
     Ok(d)
 }
 

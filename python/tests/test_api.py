@@ -169,3 +169,30 @@ def test_fit_and_score_carry_the_verdict_and_the_floor(tmp_path):
     s = fibrefit.score(tmp_path / "fit.json", no_sigmas)
     assert s.floor is not None and s.floor_ratio is not None
     assert s.verdict == s.result["verdict"]
+
+
+def test_undetermined_values_are_said(tmp_path):
+    """Ward fitted to data without a lobe (a matte surface): the lobe's widths are undetermined,
+    with why; the result, the material a renderer loads and the exports say so."""
+    rng = np.random.default_rng(1)
+
+    def hemisphere(n):
+        d = rng.standard_normal((n, 3))
+        d[:, 2] = np.abs(d[:, 2]) + 0.2
+        return d / np.linalg.norm(d, axis=1, keepdims=True)
+
+    n = 400
+    l, v = hemisphere(n), hemisphere(n)
+    values = 0.3 / np.pi * (1 + 0.01 * rng.standard_normal(n))
+    r = fibrefit.fit(l=l, v=v, values=values, model="ward", fuzz=False)
+    # a lobe that is not there: its widths end at their bounds, not measurements
+    assert {"alpha_x", "alpha_y"} <= set(r.undetermined), r.undetermined
+    p = r.params["alpha_x"]
+    assert p.determined is False and p.undetermined_reason == r.undetermined["alpha_x"]
+    assert r.params["rho_d"].determined is True and "rho_d" not in r.undetermined
+    r.to_json(tmp_path / "fit.json")
+    m = fibrefit.load(tmp_path / "fit.json")
+    assert m.undetermined["alpha_x"] == r.undetermined["alpha_x"]
+    assert any("`alpha_x` is undetermined" in w for w in m.warnings)
+    e = fibrefit.export(tmp_path / "fit.json", shader="wgsl", gltf=True)
+    assert "alpha_x" in e.undetermined and "UNDETERMINED: `alpha_x` is undetermined" in e.shader

@@ -14,17 +14,27 @@ use rayon::prelude::*;
 use std::path::{Path, PathBuf};
 
 /// A parameter file (TOML, JSON or a fitted result) with its rung (`model`, else the file's),
-/// validated; its warnings reported through `progress`.
+/// validated; its warnings reported through `progress`, and for a result each value its data
+/// did not determine (`parameters.*.determined` false: used as given, not measured).
 pub fn load_params(
     path: &std::path::Path,
     model: Option<&str>,
     progress: &crate::progress::Progress,
 ) -> Result<(RawParams, ModelId, ModelParams)> {
+    // a result's values the data did not determine are used as given, and said so
+    let undetermined = crate::export::result_json::undetermined_of(path);
     let raw = crate::export::result_json::read_params(path)?;
     let (id, params, warnings) =
         crate::export::result_json::checked_params(&raw, model, &path.display().to_string())?;
     for w in &warnings {
         progress.warn(&format!("{}: {w}", path.display()));
+    }
+    for u in &undetermined {
+        progress.warn(&format!(
+            "{}: {}; used as given, not a measurement",
+            path.display(),
+            crate::fit::determined::warning(u)
+        ));
     }
     Ok((raw, id, params))
 }

@@ -43,6 +43,10 @@ pub struct ExportOutcome {
     pub glb: Option<(Vec<u8>, FittedMaterial)>,
     /// The per-texel maps the GLB carries as textures (a `fit --maps` result).
     pub textures: Option<GlbTextures>,
+    /// The result's values its data did not determine (at a bound, held, flat cost): the
+    /// exports use them as given and say so (a warning, the shader's header, the GLB
+    /// material's `extras.fibrefit.undetermined`).
+    pub undetermined: Vec<crate::api::Undetermined>,
 }
 
 /// What the GLB's textures were made from.
@@ -98,6 +102,7 @@ fn maps_of(result: &Path, progress: &crate::progress::Progress) -> Result<Option
 
 /// Build what `req` asks for; a failure (a shader beyond its bound included) builds nothing.
 pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
+    let undetermined = crate::export::result_json::undetermined_of(&req.result);
     let (_, id, params) =
         crate::api::eval::load_params(&req.result, req.model.as_deref(), &req.progress)?;
     if let Some(map) = &params.topology.map {
@@ -108,7 +113,14 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
             params.histogram_bins
         ));
     }
-    let lines = provenance(&req.result, id, &params)?;
+    let mut lines = provenance(&req.result, id, &params)?;
+    // the values the data did not determine: used, but not as measurements
+    lines.extend(undetermined.iter().map(|u| {
+        format!(
+            "UNDETERMINED: {}; used as given, not a measurement",
+            crate::fit::determined::warning(u)
+        )
+    }));
     // everything is built in memory first: a failure writes nothing
     let shader_text = match req.shader {
         Some(lang) => Some(shader_source(req, id, &params, lines.clone(), lang)?),
@@ -116,7 +128,7 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
     };
     let (glb, textures) = match req.gltf {
         true => {
-            let (glb, textures) = glb_preview(req, id, &params, &lines)?;
+            let (glb, textures) = glb_preview(req, id, &params, &lines, &undetermined)?;
             (Some(glb), textures)
         }
         false => (None, None),
@@ -126,6 +138,7 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
         shader: shader_text,
         glb,
         textures,
+        undetermined,
     })
 }
 
@@ -201,6 +214,7 @@ fn glb_preview(
     id: ModelId,
     params: &ModelParams,
     lines: &[String],
+    undetermined: &[crate::fit::determined::Undetermined],
 ) -> Result<((Vec<u8>, FittedMaterial), Option<GlbTextures>)> {
     let model = model::build(id, params)?;
     let psi_deg = params.fibre_azimuth.to_degrees();
@@ -230,6 +244,7 @@ fn glb_preview(
             textures = Some(tex);
         }
     }
+    gltf_out::mark_undetermined(&mut material, undetermined);
     let mut bytes = Vec::new();
     gltf_out::write_glb_with_images(
         &mut bytes,

@@ -852,7 +852,8 @@ impl FitRun {
     /// sample count, the quality verdict, the errors, the spread of the residuals under its own
     /// name (`reduced_chi_square` with sigmas, `residual_variance` without: chi-square is not
     /// defined then, as the report says), the held-out error, the floor and their ratio
-    /// (`heldout_error`, `floor`, `floor_ratio`, when the floor was measured), and the work
+    /// (`heldout_error`, `floor`, `floor_ratio`, when the floor was measured), the labels of the
+    /// values the data do not determine (`undetermined`: `spacing`, `kd[b]`), and the work
     /// done.
     pub fn summary_json(&self, out: Option<&Path>) -> serde_json::Value {
         let (o, s) = (&self.outcome, &self.outcome.statistics);
@@ -870,6 +871,14 @@ impl FitRun {
             "warnings": o.warnings.len(),
         });
         v[s.names().1] = s.reduced_chi_square.into();
+        // the values the data do not determine (their values are used, not measured)
+        v["undetermined"] = o
+            .quality
+            .undetermined
+            .iter()
+            .map(|u| u.label.clone())
+            .collect::<Vec<_>>()
+            .into();
         // the model's held-out error against what the data themselves allow (fit::floor)
         if let Some(f) = &o.quality.floor {
             v["heldout_error"] = f.heldout_error.into();

@@ -38,6 +38,9 @@ pub struct Material {
     pub source: PathBuf,
     /// The per-texel maps directory used, if any.
     pub maps_dir: Option<PathBuf>,
+    /// The result's values its data did not determine (at a bound, held, flat cost): used as
+    /// given, not measurements (each also among the loading's warnings).
+    pub undetermined: Vec<crate::api::Undetermined>,
     shading: Box<dyn ShadingModel>,
     sampler: Sampler,
     texel_maps: Option<TexelMapsIn>,
@@ -68,7 +71,11 @@ impl Material {
                 crate::api::render::maps_dir(None, result, &crate::progress::Progress::quiet())?
             }
         };
-        let (m, mut warnings) = Self::from_raw(raw, result, maps)?;
+        let (mut m, mut warnings) = Self::from_raw(raw, result, maps)?;
+        m.set_undetermined(
+            crate::export::result_json::undetermined_of(result),
+            &mut warnings,
+        );
         if m.texel_maps.is_none() {
             if let Ok(Some((named, looked))) = crate::api::render::named_maps_dir(result) {
                 warnings.push(format!(
@@ -89,7 +96,28 @@ impl Material {
     ) -> Result<(Self, Vec<String>)> {
         let raw = crate::export::result_json::params_of_result(result)
             .map_err(|e| anyhow!("{}: {e:#}", source.display()))?;
-        Self::from_raw(raw, source, maps)
+        let (mut m, mut warnings) = Self::from_raw(raw, source, maps)?;
+        m.set_undetermined(
+            crate::export::result_json::undetermined_in(result),
+            &mut warnings,
+        );
+        Ok((m, warnings))
+    }
+
+    /// Record the result's undetermined values, each with a warning.
+    fn set_undetermined(
+        &mut self,
+        list: Vec<crate::api::Undetermined>,
+        warnings: &mut Vec<String>,
+    ) {
+        for u in &list {
+            warnings.push(format!(
+                "{}: {}; used as given, not a measurement",
+                self.source.display(),
+                crate::fit::determined::warning(u)
+            ));
+        }
+        self.undetermined = list;
     }
 
     fn from_raw(
@@ -124,6 +152,7 @@ impl Material {
                 params,
                 source: result.to_path_buf(),
                 maps_dir,
+                undetermined: Vec::new(),
                 shading,
                 sampler,
                 texel_maps,

@@ -17,6 +17,7 @@ pub use crate::export::atomic::Outputs;
 pub use crate::export::result_json::ResultFile;
 pub use crate::export::summary_csv::Row as SummaryRow;
 pub use crate::fit::config::{FitConfig, Metric, ModelChoice};
+pub use crate::fit::determined::Undetermined;
 pub use crate::fit::maps::TexelMaps;
 pub use crate::fit::score::text as score_text;
 pub use crate::fit::selection::{Candidate, SelectionOutcome};

@@ -101,6 +101,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         shader: shader_text,
         glb,
         textures,
+        ..
     } = export_api::export(&req)?;
     // write: every file staged, then committed together
     if let (Some(text), Some(id)) = (&shader_text, shader_out) {

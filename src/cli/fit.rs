@@ -374,7 +374,7 @@ pub fn run_tile(
 /// report on the terminal lists them already, so the banner names their count only.
 pub fn quality_banner(q: &fit::quality::Quality, listed_above: bool) {
     use std::io::IsTerminal;
-    if q.warnings.is_empty() {
+    if q.warnings.is_empty() && q.undetermined.is_empty() {
         return;
     }
     let (on, off) = if std::io::stderr().is_terminal() {
@@ -385,6 +385,15 @@ pub fn quality_banner(q: &fit::quality::Quality, listed_above: bool) {
     let rule = "=".repeat(78);
     eprintln!("{on}{rule}");
     eprintln!("FIT QUALITY: {}", q.verdict.to_uppercase());
+    if !q.undetermined.is_empty() {
+        let names: Vec<String> = q.undetermined.iter().map(|u| format!("`{}`", u.label)).collect();
+        eprintln!(
+            "UNDETERMINED: {} value{} the data do not determine, used but not measured: {}",
+            names.len(),
+            if names.len() == 1 { "" } else { "s" },
+            names.join(", ")
+        );
+    }
     if listed_above {
         let n = q.warnings.len();
         eprintln!(

@@ -321,6 +321,23 @@ pub fn textured_material(
     material
 }
 
+/// Record in `material`'s `extras.fibrefit.undetermined` the values its result's data did not
+/// determine (label, value used, reason): the material uses them, but they are not
+/// measurements. Nothing is added when there are none.
+pub fn mark_undetermined(material: &mut Value, undetermined: &[crate::fit::determined::Undetermined]) {
+    if undetermined.is_empty() {
+        return;
+    }
+    material["extras"]["fibrefit"]["undetermined"] = json!(undetermined
+        .iter()
+        .map(|u| json!({
+            "parameter": u.label,
+            "value_used": u.value,
+            "reason": u.reason,
+        }))
+        .collect::<Vec<_>>());
+}
+
 /// sRGB encoding (IEC 61966-2-1) of a linear value in [0, 1] to 8 bits, rounded.
 pub fn srgb8(linear: f64) -> u8 {
     let c = linear.clamp(0.0, 1.0);

@@ -57,12 +57,6 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str, metric: Option<&str>)
             } else {
                 format!("{}[{}]", r.name, ["r", "g", "b"][c])
             };
-            // the full-Jacobian column's name (a grey albedo has one for all channels)
-            let label = if r.grey {
-                r.name.as_str()
-            } else {
-                name.as_str()
-            };
             let line = if r.fixed && r.fixed_reason.as_deref() == Some(PER_TEXEL) {
                 format!("per texel (recovered as a map; {v:.6} is its global start: see [[Maps]])")
             } else if r.fixed {
@@ -70,23 +64,16 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str, metric: Option<&str>)
                     Some(why) => format!("{v:.6} (fixed: {why})"),
                     None => format!("{v:.6} (fixed)"),
                 }
-            } else if r.at_bound[c] {
+            } else if let Some(why) = r.undetermined(c) {
+                // not a measurement: the value is the one used, and why the data leave it open
+                let used = match r.std_error[c] {
+                    Some(e) => format!("{v:.6} +/- {e:.6}"),
+                    None => format!("{v:.6}"),
+                };
                 format!(
-                    "{v:.6} (init = {:.6}) at a bound of [{}, {}]: no standard error{}",
-                    r.init[c],
-                    r.min,
-                    r.max,
-                    match &r.held {
-                        Some(h) if h.contains(&format!("`{label}` is held")) => format!(" ({h})"),
-                        _ => String::new(),
-                    }
+                    "undetermined (value used: {used}; init = {:.6}): {why}",
+                    r.init[c]
                 )
-            } else if let Some(h) = r
-                .held
-                .as_ref()
-                .filter(|h| r.std_error[c].is_none() && h.contains(&format!("`{label}` is held")))
-            {
-                format!("{v:.6} (init = {:.6}) held: {h}", r.init[c])
             } else {
                 match r.std_error[c] {
                     Some(e) => format!(
@@ -166,6 +153,16 @@ pub fn quality_text(q: &crate::fit::quality::Quality) -> String {
     let _ = writeln!(t, "[[Quality]]");
     let _ = writeln!(t, "    verdict            = {}", q.verdict);
     let _ = writeln!(t, "    noise ({})  {}", q.noise.source, q.noise.note);
+    if !q.undetermined.is_empty() {
+        let n = q.undetermined.len();
+        let names: Vec<String> = q.undetermined.iter().map(|u| format!("`{}`", u.label)).collect();
+        let _ = writeln!(
+            t,
+            "    undetermined       = {n} value{} the data do not determine, used but not measured: {} (see [[Variables]])",
+            if n == 1 { "" } else { "s" },
+            names.join(", ")
+        );
+    }
     if q.minima.len() > 1 {
         let _ = writeln!(
             t,

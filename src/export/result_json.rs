@@ -419,6 +419,16 @@ pub struct ParamOut {
     /// it from another one (the `quality.degeneracies` pair).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub held: Option<String>,
+    /// Whether the data determine the value (for an RGB albedo per channel, `[r, g, b]`): false
+    /// when it ended at a bound, is held by a degeneracy or the cost is flat along it
+    /// (`fit::determined`); `value` is then the value used, not a measurement. Absent for fixed
+    /// parameters and in files written before it existed (read as determined).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub determined: Option<serde_json::Value>,
+    /// Why the data do not determine it: a string (per channel: a string or null), present when
+    /// `determined` is false for some value.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub undetermined_reason: Option<serde_json::Value>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -551,10 +561,82 @@ pub fn params_out(outcome: &FitOutcome) -> BTreeMap<String, ParamOut> {
                 fixed_reason: r.fixed_reason.clone().filter(|_| r.fixed),
                 grey: r.grey,
                 held: r.held.clone(),
+                determined: (!r.fixed).then(|| {
+                    let d: Vec<bool> = (0..r.value.len())
+                        .map(|c| r.undetermined(c).is_none())
+                        .collect();
+                    match d.len() {
+                        1 => serde_json::json!(d[0]),
+                        _ => serde_json::json!(d),
+                    }
+                }),
+                undetermined_reason: (!r.undetermined.is_empty()).then(|| {
+                    match r.value.len() {
+                        1 => serde_json::json!(r.undetermined(0)),
+                        n => serde_json::json!((0..n)
+                            .map(|c| r.undetermined(c))
+                            .collect::<Vec<_>>()),
+                    }
+                }),
             },
         );
     }
     out
+}
+
+/// The values a result JSON says its data do not determine (`parameters.*.determined` false),
+/// with the value used and why, in the parameters' order; none for a parameter file or a
+/// result written before `determined` existed. A grey albedo (`grey: true`) is one value.
+pub fn undetermined_in(v: &serde_json::Value) -> Vec<crate::fit::determined::Undetermined> {
+    let mut out = Vec::new();
+    let Some(params) = v.get("parameters").and_then(|p| p.as_object()) else {
+        return out;
+    };
+    for (name, e) in params {
+        let grey = e.get("grey").and_then(|g| g.as_bool()).unwrap_or(false);
+        let as_list = |x: Option<&serde_json::Value>| -> Vec<serde_json::Value> {
+            match x {
+                Some(serde_json::Value::Array(a)) => a.clone(),
+                Some(x) => vec![x.clone()],
+                None => Vec::new(),
+            }
+        };
+        let determined = as_list(e.get("determined"));
+        let values = as_list(e.get("value"));
+        let reasons = as_list(e.get("undetermined_reason"));
+        for (c, d) in determined.iter().enumerate() {
+            if d.as_bool() != Some(false) || (grey && c > 0) {
+                continue;
+            }
+            let label = if determined.len() == 1 || grey {
+                name.clone()
+            } else {
+                format!("{name}[{}]", ["r", "g", "b"][c.min(2)])
+            };
+            out.push(crate::fit::determined::Undetermined {
+                label,
+                value: values.get(c).and_then(|x| x.as_f64()).unwrap_or(f64::NAN),
+                reason: reasons
+                    .get(c)
+                    .and_then(|x| x.as_str())
+                    .unwrap_or("the result says so")
+                    .to_string(),
+            });
+        }
+    }
+    out
+}
+
+/// [`undetermined_in`] of the result file at `path` (none when it is not a readable result).
+pub fn undetermined_of(path: &Path) -> Vec<crate::fit::determined::Undetermined> {
+    if path.is_dir() {
+        return Vec::new();
+    }
+    crate::load::input::read_text_as(path, "result file")
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .map(|v| undetermined_in(&v))
+        .unwrap_or_default()
 }
 
 pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {

@@ -56,15 +56,9 @@ pub fn finish(
     let mut warnings = notes;
     warnings.extend(errors.cov.warnings.iter().cloned());
     warnings.extend(errors.degeneracies.iter().map(|d| d.note.clone()));
+    // values at a bound, held or along which the cost is flat are warned about as undetermined
+    // (`determined::apply`, below)
     let records = records(full, &set, &errors, &at_bound, ch);
-    for r in &records {
-        if r.at_bound.iter().any(|&b| b) {
-            warnings.push(format!(
-                "`{}` ended at a bound of [{}, {}]: no standard error",
-                r.name, r.min, r.max
-            ));
-        }
-    }
     let names = &errors.names;
     let correlations = errors
         .cov
@@ -89,7 +83,7 @@ pub fn finish(
         .warnings
         .extend(super::encoding_check::check(samples, &fitted));
     warnings.extend(quality.warnings.iter().cloned());
-    Ok(FitOutcome {
+    let mut outcome = FitOutcome {
         quality,
         set,
         records,
@@ -104,7 +98,9 @@ pub fn finish(
         elapsed_seconds: 0.0,
         fitted,
         map: None,
-    })
+    };
+    super::determined::apply(&mut outcome);
+    Ok(outcome)
 }
 
 /// Per free column of the full parameter vector (shapes, then albedos): on a bound?
@@ -238,6 +234,7 @@ fn records(
             fixed_reason: None,
             grey: false,
             held,
+            undetermined: Vec::new(),
         });
     }
     for (i, a) in set.albedos.iter().enumerate() {
@@ -273,6 +270,7 @@ fn records(
             fixed_reason: None,
             grey: a.grey && a.vary,
             held: (!held.is_empty()).then(|| held.join("; ")),
+            undetermined: Vec::new(),
         });
     }
     records

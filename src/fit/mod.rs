@@ -11,6 +11,7 @@
 pub mod all_pixels;
 pub mod basins;
 pub mod config;
+pub mod determined;
 pub mod encoding_check;
 pub mod finish;
 pub mod floor;
@@ -47,7 +48,7 @@ pub struct ParamRecord {
     pub name: String,
     /// One value (shapes, grey albedos) or three (RGB albedos).
     pub value: Vec<f64>,
-    /// Standard error per value (`None`: fixed, held, at a bound, or undetermined).
+    /// Standard error per value (`None`: fixed, held, at a bound, or not computable).
     pub std_error: Vec<Option<f64>>,
     /// The start value(s).
     pub init: Vec<f64>,
@@ -72,6 +73,18 @@ pub struct ParamRecord {
     /// would take its role); see `Degeneracy`.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub held: Option<String>,
+    /// Per value, why the data do not determine it (at a bound, held, flat cost), or `None`
+    /// when they do; empty when every value is determined or the parameter is fixed. The value
+    /// is still the one used. Set by the fit (`fit::determined::assess`).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub undetermined: Vec<Option<String>>,
+}
+
+impl ParamRecord {
+    /// Why the data do not determine value `c`, or `None` when they do (or it is fixed).
+    pub fn undetermined(&self, c: usize) -> Option<&str> {
+        self.undetermined.get(c).and_then(|x| x.as_deref())
+    }
 }
 
 /// Everything a fit produced.

@@ -49,6 +49,10 @@ pub struct Quality {
     /// Pairs of parameters the data do not separate, most correlated first, and which of each
     /// pair is held ([`degeneracies`]).
     pub degeneracies: Vec<Degeneracy>,
+    /// The free values the data do not determine (at a bound, held by a degeneracy, or along
+    /// which the cost is flat), with the value used and why ([`crate::fit::determined`]).
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub undetermined: Vec<crate::fit::determined::Undetermined>,
     pub warnings: Vec<String>,
     /// The model's held-out error against the floor, what the data themselves allow
     /// (`fit::floor`); it gives the verdict of data without sigmas.
@@ -500,6 +504,7 @@ pub fn assess_sums(
         ambiguous,
         residual_bins,
         degeneracies: Vec::new(),
+        undetermined: Vec::new(),
         warnings,
         floor: None,
     }

@@ -58,6 +58,8 @@ pub fn global_stage(
     if let Some(w) = inflate_records(&mut outcome, set, &inflation) {
         warnings.push(w);
     }
+    // wider errors may leave more of the globals undetermined
+    crate::fit::determined::apply(&mut outcome);
     // the stage's own work, not the last (fixed-maps) evaluation's
     outcome.iterations = run.iterations;
     let mut evaluations = first.evaluations;
