@@ -119,6 +119,20 @@
 //! to less than 1 over the hemisphere (the mass lost is that of the draws rejected), which is the
 //! exact density of the directions `sample` returns.
 //!
+//! # glTF's anisotropic GGX
+//!
+//! The `gltf` rung's lobe: its distribution of visible normals (Heitz 2018, "Sampling the GGX
+//! Distribution of Visible Normals"): v stretched by (alpha_t, alpha_b), a point of the unit
+//! disk warped onto the projected hemisphere, unstretched into h, and l = 2 (v.h) h - v. The
+//! density of h is D_v(h) = G1(v) max(0, v.h) D(h) / (N.v), so that of l is
+//!
+//! ```text
+//! p_lobe(l | v) = G1(v) D(h) / (4 N.v),   G1(v) = 1 / (1 + Lambda(v)),
+//! ```
+//!
+//! D and Lambda the rung's own (`rungs::gltf::ggx_d`, `ggx_lambda`). As for Ward, reflections
+//! below the horizon are returned as `None`.
+//!
 //! # Why the density is exact
 //!
 //! Every component is drawn by inverting its own closed-form CDF (the tube's by Newton to full
@@ -148,8 +162,8 @@ mod directions;
 mod lobe;
 
 use directions::{
-    cosine_direction, rescale, tube_direction, tube_pdf, turn, unturn, wallis, ward_direction,
-    ward_pdf, ONE_BELOW,
+    cosine_direction, ggx_direction, ggx_pdf, rescale, tube_direction, tube_pdf, turn, unturn,
+    wallis, ward_direction, ward_pdf, ONE_BELOW,
 };
 use lobe::{fibre_lobe_direction, fibre_lobe_pdf, ConeTable};
 
@@ -180,6 +194,8 @@ enum Lobe {
     Fibre { gamma: f64 },
     /// Ward's half-vector sampling (Walter 2005).
     Ward { ax: f64, ay: f64 },
+    /// The anisotropic GGX's visible normals (Heitz 2018), alpha_t along T.
+    Ggx { at: f64, ab: f64 },
 }
 
 /// The importance sampler of one rung with its parameters.
@@ -234,6 +250,11 @@ impl Sampler {
             LobeSampling::FibreCone => Lobe::Fibre {
                 gamma: LOBE_WIDTH / p.exponent.max(1.0).sqrt(),
             },
+            LobeSampling::Ggx => {
+                let (at, ab) =
+                    super::rungs::gltf::ggx_alphas(p.gltf.roughness, p.gltf.anisotropy);
+                Lobe::Ggx { at, ab }
+            }
         };
         // the spread applies where `model::with_spread` applies it
         let spread = p.azimuth_spread_deg > 0.0 && id.has(Ability::DirectionSpread);
@@ -352,6 +373,7 @@ impl Sampler {
                         fibre_lobe_direction(gamma, self.cone.as_ref(), &vj, [r, u1])
                     }
                     Lobe::Ward { ax, ay } => ward_direction(ax, ay, &turn(v, c, s), [r, u1]),
+                    Lobe::Ggx { at, ab } => ggx_direction(at, ab, &turn(v, c, s), [r, u1]),
                     Lobe::None => unreachable!("a lobe weight without a lobe"),
                 }
             };
@@ -380,6 +402,7 @@ impl Sampler {
                                 fibre_lobe_pdf(gamma, self.cone.as_ref(), &vj, &lj)
                             }
                             Lobe::Ward { ax, ay } => ward_pdf(ax, ay, &vj, &lj),
+                            Lobe::Ggx { at, ab } => ggx_pdf(at, ab, &vj, &lj),
                             Lobe::None => 0.0,
                         };
                 }
