@@ -194,7 +194,7 @@ enum Lobe {
     Fibre { gamma: f64 },
     /// Ward's half-vector sampling (Walter 2005).
     Ward { ax: f64, ay: f64 },
-    /// The anisotropic GGX's visible normals (Heitz 2018), alpha_t along T.
+    /// The anisotropic GGX's visible normals (Heitz 2018), `at` along T, `ab` along B.
     Ggx { at: f64, ab: f64 },
 }
 

@@ -105,7 +105,7 @@ struct FibrefitParams {
     extra: vec4<f32>,
     // x: base height H0, y: map scale s, z: H_max = sqrt(d^2 - 1) (fibre radii); w unused
     topology: vec4<f32>,
-    // the gltf rung (zeros for the others): [0] metallic, GGX alpha along t, alpha across,
+    // the gltf rung (zeros for the others): [0] metallic, GGX alpha along t, alpha along b (the anisotropy direction),
     // specular factor; [1] dielectric F0 from the ior, sheen, sheen alpha, unused; [2..] the
     // sheen's directional albedo E at N.v = k / 31, k = 0..31, four a row
     gltf: array<vec4<f32>, FIBREFIT_GLTF_ROWS>,

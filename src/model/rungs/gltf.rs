@@ -29,9 +29,14 @@
 //!   `D_GGX_anisotropic` and `V_GGX_anisotropic` (`source/Renderer/shaders/brdf.glsl`, commit
 //!   00536c7, the functions of those names) write them:
 //!   `D = a2 w2^2 / pi` with `a2 = at ab`, `f = (ab T.H, at B.H, a2 N.H)`, `w2 = a2 / f.f`;
-//!   `V = 0.5 / (N.L |(at T.V, ab B.V, N.V)| + N.V |(at T.L, ab B.L, N.L)|)`. The direction
-//!   is the fibres' T (`fibre_azimuth_deg`); with strength 0 it is the isotropic GGX of
-//!   Appendix B exactly. The Sample Viewer's clamps (`ab >= 0.001`, V in [0, 1]) are not
+//!   `V = 0.5 / (N.L |(at T.V, ab B.V, N.V)| + N.V |(at T.L, ab B.L, N.L)|)`. The
+//!   anisotropy direction (glTF's tangent, where alpha_t, the larger alpha, lies) is the
+//!   fibres' B = N x T, across them: a fibre's normals spread across it, so its highlight's
+//!   half vectors do (MODEL.md §2), and `fibre_azimuth_deg` keeps meaning the fibre direction
+//!   (held where the data give it). Measured: with the direction along T instead, the fit of
+//!   `data_synthetic/silk` (fibres at 20 deg) put the fibres at -69.5 deg. In glTF terms the
+//!   anisotropy rotation is the fibre azimuth + 90 deg. With strength 0 it is the isotropic
+//!   GGX of Appendix B exactly. The Sample Viewer's clamps (`ab >= 0.001`, V in [0, 1]) are not
 //!   taken: the roughness's lower bound 0.03 keeps alpha >= 9e-4 and V finite.
 //! - KHR_materials_sheen (`extensions/2.0/Khronos/KHR_materials_sheen/README.md`,
 //!   "Implementation Notes"): `f = f_sheen + (f_diffuse + f_specular) sheenAlbedoScaling` with
@@ -109,7 +114,7 @@ pub const SHEEN_E_NODES: usize = 32;
 #[derive(Clone, Debug)]
 pub struct Gltf {
     metallic: f64,
-    /// GGX alpha along the fibres (the anisotropy direction) and across them.
+    /// GGX alpha along the fibres (T) and across them (B, the anisotropy direction).
     alpha_t: f64,
     alpha_b: f64,
     specular: f64,
@@ -140,7 +145,7 @@ impl Gltf {
     }
 
     /// The rows the shader export bakes for this material (`FibrefitParams::gltf`): metallic,
-    /// alpha_t, alpha_b, specular; F0, sheen, sheen alpha, 0; then the E table, four a row.
+    /// alpha along T, alpha along B, specular; F0, sheen, sheen alpha, 0; then the E table, four a row.
     pub fn shader_rows(&self) -> Vec<[f64; 4]> {
         let mut rows = vec![
             [self.metallic, self.alpha_t, self.alpha_b, self.specular],
@@ -166,12 +171,13 @@ impl Gltf {
 /// Rows of the shader's `gltf` member: 2 + the E table's.
 pub const SHADER_ROWS: usize = 2 + SHEEN_E_NODES / 4;
 
-/// The GGX alphas along the anisotropy direction and across it (KHR_materials_anisotropy):
-/// alpha = roughness^2, alpha_t = mix(alpha, 1, strength^2), alpha_b = alpha.
+/// The GGX alphas along the fibres (T) and across them (B, the anisotropy direction):
+/// KHR_materials_anisotropy's alpha_b = alpha = roughness^2 along T and
+/// alpha_t = mix(alpha, 1, strength^2) along B.
 pub fn ggx_alphas(roughness: f64, strength: f64) -> (f64, f64) {
     let alpha = roughness * roughness;
     let s2 = strength * strength;
-    (alpha + (1.0 - alpha) * s2, alpha)
+    (alpha, alpha + (1.0 - alpha) * s2)
 }
 
 /// KHR_materials_ior: F0 = ((ior - 1) / (ior + 1))^2.
@@ -180,7 +186,8 @@ pub fn ior_f0(ior: f64) -> f64 {
 }
 
 /// The anisotropic GGX distribution D(h) (1/sr, h a unit half vector in the fibre frame),
-/// alpha_t along T: `D_GGX_anisotropic` of the Sample Viewer. 0 for h.n <= 0.
+/// `at` along T and `ab` along B: `D_GGX_anisotropic` of the Sample Viewer (whose tangent is
+/// here B, so its (ab T.H, at B.H) is this (ab h.t, at h.b) up to the names). 0 for h.n <= 0.
 pub fn ggx_d(at: f64, ab: f64, h: &Local) -> f64 {
     if !(h.n > 0.0) {
         return 0.0;
@@ -191,7 +198,8 @@ pub fn ggx_d(at: f64, ab: f64, h: &Local) -> f64 {
     a2 * w2 * w2 * FRAC_1_PI
 }
 
-/// The height-correlated anisotropic visibility V = G2 / (4 N.L N.V): `V_GGX_anisotropic`.
+/// The height-correlated anisotropic visibility V = G2 / (4 N.L N.V): `V_GGX_anisotropic`
+/// (`at` along T, `ab` along B).
 pub fn ggx_v(at: f64, ab: f64, l: &Local, v: &Local) -> f64 {
     let len = |w: &Local| ((at * w.t).powi(2) + (ab * w.b).powi(2) + w.n * w.n).sqrt();
     0.5 / (l.n * len(v) + v.n * len(l))
