@@ -159,6 +159,22 @@ fn cases() -> Vec<Case> {
         view(85.0, ALONG),
         None,
     );
+    push(
+        "narrow metal, anisotropic, 70 oblique",
+        Gltf,
+        "kd = [0.9, 0.6, 0.3]\nmetallic = 1\nroughness = 0.1\nanisotropy_strength = 0.8\n"
+            .to_string(),
+        view(70.0, 30.0),
+        None,
+    );
+    push(
+        "sheen, rough, 80 across",
+        Gltf,
+        "kd = 0.2\nroughness = 0.9\nsheen = 1\nsheen_roughness = 0.3\nfibre_azimuth_deg = 40\n"
+            .to_string(),
+        view(80.0, ACROSS),
+        None,
+    );
     out
 }
 
