@@ -273,12 +273,8 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     )?;
     writeln!(
         s,
-        "const FIBREFIT_GLTF_ROWS: u32 = {}u;",
-        gltf::SHADER_ROWS
-    )?;
-    writeln!(
-        s,
-        "const FIBREFIT_SPREAD_NODES: u32 = {}u;",
+        "const FIBREFIT_GLTF_ROWS: u32 = {}u;\nconst FIBREFIT_SPREAD_NODES: u32 = {}u;",
+        gltf::SHADER_ROWS,
         baked.spread.len()
     )?;
     writeln!(
