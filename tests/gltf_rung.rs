@@ -426,6 +426,7 @@ fn a_fit_recovers_known_parameters_within_their_errors() {
         let got = params[name]["value"].as_f64().unwrap();
         let se = params[name]["std_error"].as_f64();
         report.push(format!("{name} {got} +/- {se:?} (truth {want})"));
+        eprintln!("{}", report.last().unwrap());
         let se = se.unwrap_or_else(|| panic!("{name}: no standard error: {report:?}"));
         assert!(
             (got - want).abs() <= 4.0 * se + 1e-9,
@@ -437,4 +438,42 @@ fn a_fit_recovers_known_parameters_within_their_errors() {
         let se = params["kd"]["std_error"][c].as_f64().unwrap();
         assert!((got - want).abs() <= 4.0 * se, "kd[{c}] {got} +/- {se}");
     }
+}
+
+#[test]
+fn base_colour_and_fibre_direction_maps_run_for_the_gltf_rung() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = dir.path().join("maps.toml");
+    let capture = concat!(
+        env!("CARGO_MANIFEST_DIR"),
+        "/data_synthetic/silk/capture.toml"
+    );
+    let maps = dir.path().join("maps");
+    let fit = |text: &str| {
+        std::fs::write(&cfg, text).unwrap();
+        Command::cargo_bin("fibrefit")
+            .unwrap()
+            .args(["fit", capture, "--quiet", "--config"])
+            .arg(&cfg)
+            .arg("--maps")
+            .arg(&maps)
+            .arg("--out")
+            .arg(dir.path().join("result.json"))
+            .output()
+            .unwrap()
+    };
+    let out = fit("model = \"gltf\"\n[maps]\nkd = true\nfibre_azimuth = true\n");
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    for f in ["kd.exr", "fibre_azimuth.exr", "kd_std_error.exr"] {
+        assert!(maps.join(f).is_file(), "{f}");
+    }
+    // the specular column is glTF's layers (weight 1), not a lobe weight a map could carry
+    let out = fit("model = \"gltf\"\n[maps]\nks = true\n");
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("no specular lobe"), "{err}");
 }
