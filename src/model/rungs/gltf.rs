@@ -76,8 +76,7 @@ use std::f64::consts::{FRAC_1_PI, PI};
 /// The rung.
 pub static RUNG: Rung = Rung {
     name: "gltf",
-    description: "The glTF 2.0 metallic-roughness material with sheen, anisotropy along the \
-                  fibres, specular and IOR: what web and real-time engines render",
+    description: "glTF 2.0 metallic-roughness + sheen, anisotropy, specular, ior: web engines",
     abilities: &[FibreDiffuse, FibreDirection, GltfMaterial],
     build: |a| Box::new(Gltf::new(&a.gltf)),
     sampling: Sampling {
