@@ -18,6 +18,9 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
   topology_map    grayscale PNG (8/16 bit) or EXR map, relative to the parameter file
   fibre_azimuth_deg  fibre direction psi in [-90, 90] degrees       (default 0: along x)
   alpha_x, alpha_y   Ward roughness in (0.001, 1] (x along the fibres)
+  metallic, roughness, anisotropy_strength, specular_factor, ior, sheen, sheen_roughness
+                     gltf: glTF 2.0 metallic-roughness with KHR sheen (grey), anisotropy
+                     (across the fibres), specular and ior; kd is the base colour
   azimuth_spread_deg spread of the fibre directions around psi, [0, 180] degrees
                      (default 0: parallel; 180: isotropic, felt); fibre rungs
   azimuth_nodes      nodes of the spread's quadrature N_psi            (default 16)
@@ -41,7 +44,7 @@ OUTPUT: the query columns, then brdf,intensity (1/sr; I = f cos theta_i) for gre
 brdf_r,brdf_g,brdf_b,intensity_r,intensity_g,intensity_b for RGB ones.")]
 pub struct EvalArgs {
     /// Model id: lambert, max-normal, hast-diffuse, poulin-fournier, varying-topology,
-    /// reference, ward [default: the parameter file's `model`]
+    /// reference, ward, gltf [default: the parameter file's `model`]
     #[arg(long, value_name = "ID")]
     pub model: Option<String>,
     /// Parameter file (.toml or .json)

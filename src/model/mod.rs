@@ -23,7 +23,7 @@ pub use parameter::{Ability, Param};
 pub use params::{Albedo, ModelParams};
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use rungs::{
-    hast_diffuse, lambert, max_normal, poulin_fournier, reference, varying_topology, ward,
+    gltf, hast_diffuse, lambert, max_normal, poulin_fournier, reference, varying_topology, ward,
     AlignedInputs, ModelId, Rung,
 };
 
@@ -366,5 +366,6 @@ pub fn build_aligned(id: ModelId, p: &ModelParams) -> Box<dyn ShadingModel> {
         quadrature_order: p.quadrature_order,
         histogram_bins: p.histogram_bins,
         topology: &p.topology,
+        gltf: p.gltf,
     })
 }

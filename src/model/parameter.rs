@@ -40,6 +40,14 @@ pub enum Param {
     AzimuthNodes,
     TwoSided,
     Ambient,
+    GltfLayers,
+    Metallic,
+    Roughness,
+    AnisotropyStrength,
+    SpecularFactor,
+    Ior,
+    Sheen,
+    SheenRoughness,
 }
 
 /// What a rung can do, declared in its own file ([`super::rung::Rung::abilities`]). A
@@ -67,6 +75,10 @@ pub enum Ability {
     WardLobe,
     /// Lambert's preview lighting (`two_sided`, `ambient`).
     PreviewLighting,
+    /// The glTF 2.0 metallic-roughness BRDF with KHR_materials_sheen, _anisotropy, _specular
+    /// and _ior (`metallic`, `roughness`, `anisotropy_strength`, `specular_factor`, `ior`,
+    /// `sheen`, `sheen_roughness`, and the layers' unit weight `gltf_layers`).
+    GltfMaterial,
 }
 
 /// Who reads a parameter.
@@ -230,7 +242,7 @@ use Kind::{Albedo as A, Knob, Shape};
 use Reader::{FuzzLayer, Rung as R};
 
 /// Every parameter and knob, in the order rungs list them (a fit's parameters keep this order).
-pub const TABLE: [ParamInfo; 24] = [
+pub const TABLE: [ParamInfo; 32] = [
     row(
         Param::RhoD,
         "rho_d",
@@ -476,6 +488,91 @@ pub const TABLE: [ParamInfo; 24] = [
         Knob,
         R(PreviewLighting),
     ),
+    // the glTF rung (model/rungs/gltf.rs): base colour is `kd`; everything over the base
+    // colour's diffuse (the specular lobes, the sheen) is one column whose weight is 1 in glTF
+    row(
+        Param::GltfLayers,
+        "gltf_layers",
+        "1",
+        "weight of the glTF layers over the base colour's diffuse (specular lobes, sheen): 1 in glTF",
+        A(C::Specular),
+        R(GltfMaterial),
+    )
+    .absent(1.0)
+    .start(At(1.0))
+    .range(At(1.0), At(1.0))
+    .held()
+    .listed_only(),
+    row(
+        Param::Metallic,
+        "metallic",
+        "1",
+        "glTF metallic factor: 0 dielectric, 1 metal (the base colour is then F0)",
+        Shape,
+        R(GltfMaterial),
+    )
+    .start(At(0.1)),
+    row(
+        Param::Roughness,
+        "roughness",
+        "1",
+        "glTF perceptual roughness r (GGX alpha = r^2)",
+        Shape,
+        R(GltfMaterial),
+    )
+    .absent(0.5)
+    .start(At(0.5))
+    .range(At(0.03), At(1.0)),
+    row(
+        Param::AnisotropyStrength,
+        "anisotropy_strength",
+        "1",
+        "KHR_materials_anisotropy strength: alpha along the fibres = mix(alpha, 1, strength^2)",
+        Shape,
+        R(GltfMaterial),
+    )
+    .start(At(0.5)),
+    row(
+        Param::SpecularFactor,
+        "specular_factor",
+        "1",
+        "KHR_materials_specular factor: scales the dielectric Fresnel (F0 and F90)",
+        Shape,
+        R(GltfMaterial),
+    )
+    .absent(1.0)
+    .start(At(1.0)),
+    row(
+        Param::Ior,
+        "ior",
+        "1",
+        "KHR_materials_ior index of refraction: dielectric F0 = ((ior - 1) / (ior + 1))^2",
+        Shape,
+        R(GltfMaterial),
+    )
+    .absent(1.5)
+    .start(At(1.5))
+    .range(At(1.01), At(3.0)),
+    row(
+        Param::Sheen,
+        "sheen",
+        "1",
+        "KHR_materials_sheen colour, grey (one value for every channel)",
+        Shape,
+        R(GltfMaterial),
+    )
+    .start(At(0.2)),
+    row(
+        Param::SheenRoughness,
+        "sheen_roughness",
+        "1",
+        "KHR_materials_sheen roughness (Charlie alpha = roughness^2)",
+        Shape,
+        R(GltfMaterial),
+    )
+    .absent(0.5)
+    .start(At(0.5))
+    .range(At(0.3), At(1.0)),
 ];
 
 impl Param {

@@ -96,6 +96,30 @@ pub struct RawParams {
     /// `lambert` preview: ambient term (seed 003), irradiance-relative.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub ambient: Option<f64>,
+    /// `gltf`: the layers' weight over the base colour's diffuse (1: glTF).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gltf_layers: Option<Albedo>,
+    /// `gltf`: metallic factor in [0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub metallic: Option<f64>,
+    /// `gltf`: perceptual roughness (alpha = roughness^2).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub roughness: Option<f64>,
+    /// `gltf`: KHR_materials_anisotropy strength in [0, 1] (direction: the fibres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anisotropy_strength: Option<f64>,
+    /// `gltf`: KHR_materials_specular factor in [0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_factor: Option<f64>,
+    /// `gltf`: KHR_materials_ior index of refraction.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub ior: Option<f64>,
+    /// `gltf`: KHR_materials_sheen colour (grey) in [0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sheen: Option<f64>,
+    /// `gltf`: KHR_materials_sheen roughness.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sheen_roughness: Option<f64>,
 }
 
 pub const DEFAULT_QUADRATURE_ORDER: usize = 16;
@@ -127,6 +151,8 @@ pub struct ModelParams {
     pub fuzz_asymmetry: f64,
     pub azimuth_nodes: usize,
     pub preview: Preview,
+    /// The `gltf` rung's material (its defaults for other rungs).
+    pub gltf: GltfShape,
 }
 
 fn check_range(name: Param, v: f64, lo: f64, hi: f64) -> Result<f64> {
@@ -181,6 +207,14 @@ impl RawParams {
             Param::AzimuthNodes => self.azimuth_nodes.is_some(),
             Param::TwoSided => self.two_sided.is_some(),
             Param::Ambient => self.ambient.is_some(),
+            Param::GltfLayers => self.gltf_layers.is_some(),
+            Param::Metallic => self.metallic.is_some(),
+            Param::Roughness => self.roughness.is_some(),
+            Param::AnisotropyStrength => self.anisotropy_strength.is_some(),
+            Param::SpecularFactor => self.specular_factor.is_some(),
+            Param::Ior => self.ior.is_some(),
+            Param::Sheen => self.sheen.is_some(),
+            Param::SheenRoughness => self.sheen_roughness.is_some(),
         }
     }
 }
@@ -203,6 +237,8 @@ impl ModelParams {
         let topology = checked_topology(raw, id, spacing)?;
         let (mut albedos, alpha_x, alpha_y) = if id.has(Ability::WardLobe) {
             ward_albedos(raw)?
+        } else if id.has(Ability::GltfMaterial) {
+            (gltf_albedos(raw)?, 1.0, 1.0)
         } else {
             (fibre_albedos(raw, id)?, 1.0, 1.0)
         };
@@ -232,6 +268,7 @@ impl ModelParams {
                     two_sided: raw.two_sided.unwrap_or(false),
                     ambient,
                 },
+                gltf: GltfShape::from_raw(raw)?,
             },
             warnings,
         ))
@@ -268,6 +305,14 @@ fn unused_warnings(raw: &RawParams, id: ModelId) -> Vec<String> {
         HistogramBins,
         TwoSided,
         Ambient,
+        GltfLayers,
+        Metallic,
+        Roughness,
+        AnisotropyStrength,
+        SpecularFactor,
+        Ior,
+        Sheen,
+        SheenRoughness,
     ];
     for p in order {
         if raw.gives(p) && !id.reads(p) {
@@ -411,6 +456,99 @@ fn ward_albedos(raw: &RawParams) -> Result<(Albedos, f64, f64)> {
         rgb: rho_d.is_rgb() || rho_s.is_rgb(),
     };
     Ok((a, ax, ay))
+}
+
+/// The `gltf` rung's albedos: the base colour `kd` (diffuse column) and the layers' weight
+/// (specular column), 1 as glTF defines the material.
+fn gltf_albedos(raw: &RawParams) -> Result<Albedos> {
+    let kd = raw
+        .kd
+        .ok_or_else(|| anyhow!("model `gltf` needs `kd` (the base colour)"))?;
+    check_albedo(Param::Kd, &kd)?;
+    let layers = raw.gltf_layers.unwrap_or(Albedo::Grey(1.0));
+    for c in layers.channels() {
+        check_range(Param::GltfLayers, c, 1.0, 1.0)?;
+    }
+    Ok(Albedos {
+        diffuse: kd.channels(),
+        specular: [1.0; 3],
+        substrate: [0.0; 3],
+        fuzz: [0.0; 3],
+        rgb: kd.is_rgb(),
+    })
+}
+
+/// The `gltf` rung's shape parameters (MODEL.md's ladder, `model/rungs/gltf.rs`), as a
+/// parameter file or a fit gives them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct GltfShape {
+    /// metallic factor in [0, 1].
+    pub metallic: f64,
+    /// Perceptual roughness r (alpha = r^2).
+    pub roughness: f64,
+    /// KHR_materials_anisotropy strength in [0, 1] along the fibres.
+    pub anisotropy: f64,
+    /// KHR_materials_specular factor in [0, 1].
+    pub specular: f64,
+    /// KHR_materials_ior index of refraction.
+    pub ior: f64,
+    /// KHR_materials_sheen colour, grey.
+    pub sheen: f64,
+    /// KHR_materials_sheen roughness.
+    pub sheen_roughness: f64,
+}
+
+impl Default for GltfShape {
+    /// The parameter table's values for a rung (or file) without them.
+    fn default() -> Self {
+        Self::of(|p| p.info().absent)
+    }
+}
+
+impl GltfShape {
+    /// The shape with each parameter's value from `value`.
+    pub fn of(mut value: impl FnMut(Param) -> f64) -> Self {
+        Self {
+            metallic: value(Param::Metallic),
+            roughness: value(Param::Roughness),
+            anisotropy: value(Param::AnisotropyStrength),
+            specular: value(Param::SpecularFactor),
+            ior: value(Param::Ior),
+            sheen: value(Param::Sheen),
+            sheen_roughness: value(Param::SheenRoughness),
+        }
+    }
+
+    /// The values in `raw` (the table's absent values where it gives none), each within its
+    /// hard limits.
+    fn from_raw(raw: &RawParams) -> Result<Self> {
+        let given = |p: Param| match p {
+            Param::Metallic => raw.metallic,
+            Param::Roughness => raw.roughness,
+            Param::AnisotropyStrength => raw.anisotropy_strength,
+            Param::SpecularFactor => raw.specular_factor,
+            Param::Ior => raw.ior,
+            Param::Sheen => raw.sheen,
+            _ => raw.sheen_roughness,
+        };
+        let mut err = None;
+        let shape = Self::of(|p| {
+            let info = p.info();
+            let v = given(p).unwrap_or(info.absent);
+            let (lo, hi) = (info.limits.0.at(2.0, 2.0), info.limits.1.at(2.0, 2.0));
+            match check_range(p, v, lo, hi) {
+                Ok(v) => v,
+                Err(e) => {
+                    err.get_or_insert(e);
+                    info.absent
+                }
+            }
+        });
+        match err {
+            Some(e) => Err(e),
+            None => Ok(shape),
+        }
+    }
 }
 
 /// A fibre rung's albedos (kd, ks, substrate), those model `id` does not read zero.

@@ -18,6 +18,8 @@ pub struct AlignedInputs<'a> {
     pub quadrature_order: usize,
     pub histogram_bins: usize,
     pub topology: &'a Topology,
+    /// The `gltf` rung's material (the table's defaults for the other rungs).
+    pub gltf: super::params::GltfShape,
 }
 
 /// How the importance sampler's lobe technique proposes directions for a rung.
@@ -29,6 +31,9 @@ pub enum LobeSampling {
     Ward,
     /// A Cauchy lobe about the fibre's mirror cone (width from the exponent).
     FibreCone,
+    /// The anisotropic GGX lobe of the `gltf` rung: its visible normals, sampled exactly
+    /// (Heitz 2018).
+    Ggx,
 }
 
 /// How the sampler estimates the lobe's directional albedo (its mixture weight).

@@ -119,6 +119,20 @@
 //! to less than 1 over the hemisphere (the mass lost is that of the draws rejected), which is the
 //! exact density of the directions `sample` returns.
 //!
+//! # glTF's anisotropic GGX
+//!
+//! The `gltf` rung's lobe: its distribution of visible normals (Heitz 2018, "Sampling the GGX
+//! Distribution of Visible Normals"): v stretched by (alpha_t, alpha_b), a point of the unit
+//! disk warped onto the projected hemisphere, unstretched into h, and l = 2 (v.h) h - v. The
+//! density of h is D_v(h) = G1(v) max(0, v.h) D(h) / (N.v), so that of l is
+//!
+//! ```text
+//! p_lobe(l | v) = G1(v) D(h) / (4 N.v),   G1(v) = 1 / (1 + Lambda(v)),
+//! ```
+//!
+//! D and Lambda the rung's own (`rungs::gltf::ggx_d`, `ggx_lambda`). As for Ward, reflections
+//! below the horizon are returned as `None`.
+//!
 //! # Why the density is exact
 //!
 //! Every component is drawn by inverting its own closed-form CDF (the tube's by Newton to full
@@ -148,8 +162,8 @@ mod directions;
 mod lobe;
 
 use directions::{
-    cosine_direction, rescale, tube_direction, tube_pdf, turn, unturn, wallis, ward_direction,
-    ward_pdf, ONE_BELOW,
+    cosine_direction, ggx_direction, ggx_pdf, rescale, tube_direction, tube_pdf, turn, unturn,
+    wallis, ward_direction, ward_pdf, ONE_BELOW,
 };
 use lobe::{fibre_lobe_direction, fibre_lobe_pdf, ConeTable};
 
@@ -180,6 +194,16 @@ enum Lobe {
     Fibre { gamma: f64 },
     /// Ward's half-vector sampling (Walter 2005).
     Ward { ax: f64, ay: f64 },
+    /// The anisotropic GGX's visible normals (Heitz 2018), `at` along T, `ab` along B; for the
+    /// weights, the glTF layers' Fresnel: the dielectric's weight (1 - metallic) specular, its
+    /// F0, and the metallic factor.
+    Ggx {
+        at: f64,
+        ab: f64,
+        dielectric: f64,
+        f0: f64,
+        metal: f64,
+    },
 }
 
 /// The importance sampler of one rung with its parameters.
@@ -202,6 +226,8 @@ pub struct Sampler {
     /// Directional albedo per unit kd going to the tube and to the cosine technique.
     kd_tube: f64,
     kd_cos: f64,
+    /// Directional albedo per unit kd going to the lobe technique (glTF's metal).
+    kd_lobe: f64,
 }
 
 /// One sampled direction.
@@ -234,6 +260,17 @@ impl Sampler {
             LobeSampling::FibreCone => Lobe::Fibre {
                 gamma: LOBE_WIDTH / p.exponent.max(1.0).sqrt(),
             },
+            LobeSampling::Ggx => {
+                let g = &p.gltf;
+                let (at, ab) = super::rungs::gltf::ggx_alphas(g.roughness, g.anisotropy);
+                Lobe::Ggx {
+                    at,
+                    ab,
+                    dielectric: (1.0 - g.metallic) * g.specular,
+                    f0: super::rungs::gltf::ior_f0(g.ior),
+                    metal: g.metallic,
+                }
+            }
         };
         // the spread applies where `model::with_spread` applies it
         let spread = p.azimuth_spread_deg > 0.0 && id.has(Ability::DirectionSpread);
@@ -253,8 +290,13 @@ impl Sampler {
         if let Some(last) = cumulative.last_mut() {
             *last = 1.0;
         }
-        // directional albedo per unit kd of the diffuse term, by technique
-        let (kd_tube, kd_cos) = (rung.diffuse_tube, rung.diffuse_cosine);
+        // directional albedo per unit kd of the diffuse term, by technique; glTF's base colour
+        // is Lambertian for the dielectric, the metal's Fresnel on its GGX lobe for the metal
+        let (kd_tube, mut kd_cos) = (rung.diffuse_tube, rung.diffuse_cosine);
+        let mut kd_lobe = 0.0;
+        if let Lobe::Ggx { metal, .. } = lobe {
+            (kd_cos, kd_lobe) = (kd_cos * (1.0 - metal), metal);
+        }
         let fresnel = p.fresnel_ior > 0.0 && id.has(Ability::Fresnel);
         let cone = rung.cone_from.and_then(|from| ConeTable::new(from, p));
         Sampler {
@@ -268,6 +310,7 @@ impl Sampler {
             cumulative,
             kd_tube,
             kd_cos,
+            kd_lobe,
         }
     }
 
@@ -352,6 +395,9 @@ impl Sampler {
                         fibre_lobe_direction(gamma, self.cone.as_ref(), &vj, [r, u1])
                     }
                     Lobe::Ward { ax, ay } => ward_direction(ax, ay, &turn(v, c, s), [r, u1]),
+                    Lobe::Ggx { at, ab, .. } => {
+                        ggx_direction(at, ab, &turn(v, c, s), [r, u1])
+                    }
                     Lobe::None => unreachable!("a lobe weight without a lobe"),
                 }
             };
@@ -380,6 +426,7 @@ impl Sampler {
                                 fibre_lobe_pdf(gamma, self.cone.as_ref(), &vj, &lj)
                             }
                             Lobe::Ward { ax, ay } => ward_pdf(ax, ay, &vj, &lj),
+                            Lobe::Ggx { at, ab, .. } => ggx_pdf(at, ab, &vj, &lj),
                             Lobe::None => 0.0,
                         };
                 }
@@ -420,7 +467,7 @@ impl Sampler {
             ks * attenuation * self.lobe_albedo(v)
         } else {
             0.0
-        };
+        } + kd * self.kd_lobe * attenuation;
         let has_lobe = !matches!(self.lobe, Lobe::None) && lobe_albedo > 0.0;
         let diffuse = tube + cos;
         let lobe = if !has_lobe {
@@ -456,6 +503,19 @@ impl Sampler {
         };
         let shape = match (self.lobe, self.lobe_albedo) {
             (Lobe::None, _) => 0.0,
+            // glTF's layers: Schlick's Fresnel at N.v on the dielectric's and the metal's lobe
+            (
+                Lobe::Ggx {
+                    dielectric,
+                    f0,
+                    metal,
+                    ..
+                },
+                _,
+            ) => {
+                let x = (1.0 - v.n).clamp(0.0, 1.0).powi(5);
+                dielectric * (f0 + (1.0 - f0) * x) + metal * x
+            }
             // int cos^e(th - th_r) cos(th) dth dphi ~ pi cos(th_r) W(e), W the Wallis integral
             (_, LobeAlbedo::Wallis) => {
                 let w = wallis(self.exponent);

@@ -217,6 +217,10 @@ pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
                 quadrature_order: 16,
                 histogram_bins: 16,
                 topology: &topology,
+                gltf: model::params::GltfShape::of(|p| {
+                    let example = id.rung().example.iter().find(|e| e.0 == p);
+                    example.map_or(p.info().absent, |e| e.1)
+                }),
             })
         })
         .collect()

@@ -169,6 +169,85 @@ fn fibrefit_ward(l: vec3<f32>, v: vec3<f32>, ax: f32, ay: f32) -> vec4<f32> {
     return vec4<f32>(FIBREFIT_FRAC_1_PI, lobe, 0.0, 0.0);
 }
 
+// @section gltf
+// The glTF 2.0 metallic-roughness BRDF with KHR_materials_sheen, _anisotropy (along t),
+// _specular and _ior (src/model/rungs/gltf.rs, which cites the specifications): x the base
+// colour's column, y the layers' (specular lobes and sheen).
+fn fibrefit_gltf_lambda_l(x: f32, a: f32) -> f32 {
+    let t = (1.0 - a) * (1.0 - a);
+    let pa = mix(21.5473, 25.3245, t);
+    let pb = mix(3.82987, 3.32435, t);
+    let pc = mix(0.19823, 0.16801, t);
+    let pd = mix(-1.97760, -1.27393, t);
+    let pe = mix(-4.32054, -4.85967, t);
+    var xp = 0.0;
+    if (x > 0.0) {
+        xp = exp(pc * log(x));
+    }
+    return pa / (1.0 + pb * xp) + pd * x + pe;
+}
+
+fn fibrefit_gltf_sheen_lambda(c: f32, a: f32) -> f32 {
+    if (abs(c) < 0.5) {
+        return exp(fibrefit_gltf_lambda_l(c, a));
+    }
+    return exp(2.0 * fibrefit_gltf_lambda_l(0.5, a) - fibrefit_gltf_lambda_l(1.0 - c, a));
+}
+
+// The sheen's directional albedo E at cos theta, linear between the table's nodes.
+fn fibrefit_gltf_sheen_e(p: FibrefitParams, mu: f32) -> f32 {
+    var g = p.gltf;
+    let x = clamp(mu, 0.0, 1.0) * 31.0;
+    let k = min(u32(floor(x)), 30u);
+    let f = x - f32(k);
+    let a = g[2u + k / 4u][k % 4u];
+    let b = g[2u + (k + 1u) / 4u][(k + 1u) % 4u];
+    return a * (1.0 - f) + b * f;
+}
+
+fn fibrefit_gltf(l: vec3<f32>, v: vec3<f32>, p: FibrefitParams) -> vec4<f32> {
+    let g0 = p.gltf[0];
+    let g1 = p.gltf[1];
+    let m = g0.x;
+    let at = g0.y;
+    let ab = g0.z;
+    let sp = g0.w;
+    let h = normalize(l + v);
+    let vh = abs(dot(v, h));
+    let x1 = clamp(1.0 - vh, 0.0, 1.0);
+    let x2 = x1 * x1;
+    let x = x2 * x2 * x1;
+    // anisotropic GGX D and height-correlated V
+    let a2 = at * ab;
+    let f = vec3<f32>(ab * h.x, at * h.y, a2 * h.z);
+    let w2 = a2 / dot(f, f);
+    var d = 0.0;
+    if (h.z > 0.0) {
+        d = a2 * w2 * w2 * FIBREFIT_FRAC_1_PI;
+    }
+    let gv = l.z * length(vec3<f32>(at * v.x, ab * v.y, v.z));
+    let gl = v.z * length(vec3<f32>(at * l.x, ab * l.y, l.z));
+    let s = d * 0.5 / (gv + gl);
+    let fr = g1.x + (1.0 - g1.x) * x;
+    let diffuse = (1.0 - m) * (1.0 - sp * fr) * FIBREFIT_FRAC_1_PI + m * s * (1.0 - x);
+    let layers = (1.0 - m) * sp * fr * s + m * s * x;
+    var k = 1.0;
+    var sheen = 0.0;
+    if (g1.y > 0.0) {
+        let a = g1.z;
+        let e = max(fibrefit_gltf_sheen_e(p, l.z), fibrefit_gltf_sheen_e(p, v.z));
+        k = 1.0 - g1.y * e;
+        let sin2 = max(1.0 - h.z * h.z, 0.0);
+        var dc = 0.0;
+        if (sin2 > 0.0) {
+            dc = (2.0 + 1.0 / a) * exp(0.5 / a * log(sin2)) / (2.0 * FIBREFIT_PI);
+        }
+        let vs = 1.0 / ((1.0 + fibrefit_gltf_sheen_lambda(v.z, a) + fibrefit_gltf_sheen_lambda(l.z, a)) * (4.0 * v.z * l.z));
+        sheen = g1.y * dc * clamp(vs, 0.0, 1.0);
+    }
+    return vec4<f32>(k * diffuse, k * layers + sheen, 0.0, 0.0);
+}
+
 // @section cross_section
 // The periodic fibre cross-section (MODEL.md section 2; src/model/cross_section.rs): exact
 // visible-and-lit arcs of the two fibres of a period, closed-form diffuse, Gauss-Legendre lobe.

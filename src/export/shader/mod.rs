@@ -11,7 +11,7 @@ pub mod gpu;
 
 use crate::model::azimuth_spread::spread_nodes;
 use crate::model::numerics::quadrature::GaussLegendre;
-use crate::model::rungs::ShaderSection;
+use crate::model::rungs::{gltf, ShaderSection};
 use crate::model::topology::max_height;
 use crate::model::{Ability, ModelId, ModelParams};
 use anyhow::{anyhow, bail, Result};
@@ -105,6 +105,10 @@ struct FibrefitParams {
     extra: vec4<f32>,
     // x: base height H0, y: map scale s, z: H_max = sqrt(d^2 - 1) (fibre radii); w unused
     topology: vec4<f32>,
+    // the gltf rung (zeros for the others): [0] metallic, GGX alpha along t, alpha along b (the anisotropy direction),
+    // specular factor; [1] dielectric F0 from the ior, sheen, sheen alpha, unused; [2..] the
+    // sheen's directional albedo E at N.v = k / 31, k = 0..31, four a row
+    gltf: array<vec4<f32>, FIBREFIT_GLTF_ROWS>,
     // the spot's height distribution: x height H (fibre radii), y weight (summing to 1)
     heights: array<vec4<f32>, FIBREFIT_HEIGHT_NODES>,
     // the fibre-direction spread's nodes: x cos, y sin of the turn from t, z weight
@@ -211,6 +215,11 @@ fn params_rows(p: &ModelParams, baked: &Baked) -> Vec<[f64; 4]> {
             0.0,
         ],
     ];
+    if baked.id.has(Ability::GltfMaterial) {
+        rows.extend(gltf::Gltf::new(&p.gltf).shader_rows());
+    } else {
+        rows.extend([[0.0; 4]; gltf::SHADER_ROWS]);
+    }
     rows.extend(baked.heights.iter().map(|&(h, w)| [h, w, 0.0, 0.0]));
     rows.extend(baked.spread.iter().map(|&(c, s, w)| [c, s, w, 0.0]));
     rows
@@ -264,7 +273,8 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     )?;
     writeln!(
         s,
-        "const FIBREFIT_SPREAD_NODES: u32 = {}u;",
+        "const FIBREFIT_GLTF_ROWS: u32 = {}u;\nconst FIBREFIT_SPREAD_NODES: u32 = {}u;",
+        gltf::SHADER_ROWS,
         baked.spread.len()
     )?;
     writeln!(
@@ -290,6 +300,7 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     let rows = params_rows(p, &baked);
     let fmt = |r: &[[f64; 4]]| -> Vec<String> { r.iter().map(|v| vec4(*v)).collect() };
     let (fixed, arrays) = rows.split_at(7);
+    let (gltf_rows, arrays) = arrays.split_at(gltf::SHADER_ROWS);
     let (heights, spread) = arrays.split_at(baked.heights.len());
     let f = fmt(fixed);
     writeln!(
@@ -305,6 +316,7 @@ fn fibrefit_params() -> FibrefitParams {{
         {}, // alpha_x, alpha_y, fuzz depth, fuzz asymmetry
         {}, // H0, map scale, H_max
         array<vec4<f32>, {}>(\n            {}\n        ),
+        array<vec4<f32>, {}>(\n            {}\n        ),
         array<vec4<f32>, {}>(\n            {}\n        )
     );
 }}
@@ -316,6 +328,8 @@ fn fibrefit_params() -> FibrefitParams {{
         f[4],
         f[5],
         f[6],
+        gltf_rows.len(),
+        fmt(gltf_rows).join(",\n            "),
         heights.len(),
         fmt(heights).join(",\n            "),
         spread.len(),

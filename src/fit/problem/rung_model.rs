@@ -46,6 +46,7 @@ fn aligned_model_for(
         quadrature_order,
         histogram_bins,
         topology: &topology,
+        gltf: crate::model::params::GltfShape::of(|p| set.shape_value(p)),
     })
 }
 

@@ -8,6 +8,7 @@
 //! shader section, its tests (ARCHITECTURE.md, "Adding a rung"). Code elsewhere asks the rung
 //! (`id.rung().has(Ability::Topology)`), never matches on the id.
 
+pub mod gltf;
 pub mod hast_diffuse;
 pub mod lambert;
 pub mod max_normal;
@@ -38,6 +39,9 @@ pub enum ModelId {
     Reference,
     /// Ward's lobe with curvature-aligned tangents (`ward`).
     Ward,
+    /// The glTF 2.0 metallic-roughness material with sheen, anisotropy, specular and IOR
+    /// (`gltf`).
+    Gltf,
 }
 
 impl fmt::Display for ModelId {
@@ -64,8 +68,9 @@ impl FromStr for ModelId {
 }
 
 impl ModelId {
-    /// Cheapest first (the exported shader numbers the rungs in this order).
-    pub const ALL: [ModelId; 7] = [
+    /// Cheapest first (the exported shader numbers the rungs in this order); `gltf`, added
+    /// later, is last so the numbers of the others stay as exported shaders have them.
+    pub const ALL: [ModelId; 8] = [
         ModelId::Lambert,
         ModelId::MaxNormal,
         ModelId::HastDiffuse,
@@ -73,6 +78,7 @@ impl ModelId {
         ModelId::PoulinFournier,
         ModelId::VaryingTopology,
         ModelId::Reference,
+        ModelId::Gltf,
     ];
 
     /// The rung this id names: the registry's one `match`.
@@ -85,6 +91,7 @@ impl ModelId {
             ModelId::VaryingTopology => &varying_topology::RUNG,
             ModelId::Reference => &reference::RUNG,
             ModelId::Ward => &ward::RUNG,
+            ModelId::Gltf => &gltf::RUNG,
         }
     }
 

@@ -146,6 +146,58 @@ pub(super) fn ward_pdf(ax: f64, ay: f64, v: &Local, l: &Local) -> f64 {
     p_h / (2.0 * norm)
 }
 
+/// The anisotropic GGX's visible normal for the view v (Heitz 2018), reflected: l (may be
+/// below the horizon).
+pub(super) fn ggx_direction(at: f64, ab: f64, v: &Local, u: [f64; 2]) -> Local {
+    // the view in the stretched configuration
+    let (vt, vb, vn) = (at * v.t, ab * v.b, v.n);
+    let len = (vt * vt + vb * vb + vn * vn).sqrt();
+    let (vt, vb, vn) = (vt / len, vb / len, vn / len);
+    let lensq = vt * vt + vb * vb;
+    // T1 = (-vb, vt, 0) / |.|, T2 = V x T1
+    let (t1t, t1b) = if lensq > 0.0 {
+        let r = lensq.sqrt();
+        (-vb / r, vt / r)
+    } else {
+        (1.0, 0.0)
+    };
+    let (t2t, t2b, t2n) = (-vn * t1b, vn * t1t, vt * t1b - vb * t1t);
+    let r = u[0].sqrt();
+    let (s, c) = (TAU * u[1]).sin_cos();
+    let p1 = r * c;
+    let mut p2 = r * s;
+    let blend = 0.5 * (1.0 + vn);
+    p2 = (1.0 - blend) * (1.0 - p1 * p1).max(0.0).sqrt() + blend * p2;
+    let p3 = (1.0 - p1 * p1 - p2 * p2).max(0.0).sqrt();
+    let nt = p1 * t1t + p2 * t2t + p3 * vt;
+    let nb = p1 * t1b + p2 * t2b + p3 * vb;
+    let nn = p2 * t2n + p3 * vn;
+    // unstretched
+    let (ht, hb, hn) = (at * nt, ab * nb, nn.max(0.0));
+    let hl = (ht * ht + hb * hb + hn * hn).sqrt();
+    let h = Local {
+        t: ht / hl,
+        b: hb / hl,
+        n: hn / hl,
+    };
+    let vh = v.dot(&h);
+    Local {
+        t: 2.0 * vh * h.t - v.t,
+        b: 2.0 * vh * h.b - v.b,
+        n: 2.0 * vh * h.n - v.n,
+    }
+}
+
+/// Density of [`ggx_direction`] at l (both above the horizon): G1(v) D(h) / (4 N.v).
+pub(super) fn ggx_pdf(at: f64, ab: f64, v: &Local, l: &Local) -> f64 {
+    use crate::model::rungs::gltf::{ggx_d, ggx_lambda, half_vector};
+    let h = half_vector(l, v);
+    if !(h.n > 0.0 && v.n > 0.0) {
+        return 0.0;
+    }
+    ggx_d(at, ab, &h) / ((1.0 + ggx_lambda(at, ab, v)) * 4.0 * v.n)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
