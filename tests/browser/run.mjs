@@ -248,6 +248,23 @@ async function main() {
       console.log('FAIL: three.js with the departures patched does not equal eval within the tolerance');
     }
 
+    // a `gltf` fit with maps (the shipped silk capture): its base colour and anisotropy textures
+    // reach three.js and render finite, positive values
+    const mapsToml = path.join(work, 'maps.toml');
+    fs.writeFileSync(mapsToml, 'model = "gltf"\n[maps]\nkd = true\nfibre_azimuth = true\n');
+    run(['fit', path.join(repo, 'data_synthetic/silk/capture.toml'), '--quiet', '--config', mapsToml,
+      '--maps', path.join(work, 'maps'), '--out', path.join(work, 'maps.json')]);
+    run(['export', path.join(work, 'maps.json'), '--gltf', path.join(work, 'maps.glb'), '-q']);
+    const textured = await page.evaluate(([u, p, e]) => window.fibrefitRender(u, p, e, [], []),
+      ['/work/maps.glb', [[45, 0, 45, 180], [60, 90, 30, 270]], E]);
+    const mapsOk = ['map', 'anisotropyMap'].every((k) => textured.material.maps.includes(k))
+      && textured.values.every((v) => v.rgb.every((x) => Number.isFinite(x) && x > 0));
+    console.log(`\nthe silk capture's gltf --maps fit in three.js: textures ${textured.material.maps.join(', ')}; radiance ${textured.values.map((v) => v.rgb.map((x) => x.toFixed(4)).join('/')).join(', ')}`);
+    if (!mapsOk) {
+      failed = true;
+      console.log('FAIL: the maps GLB lacks its textures in three.js or renders non-finite or zero');
+    }
+
     // <model-viewer>: the GLB loads, without console errors
     const mv = await browser.newPage();
     const mvErrors = [];
