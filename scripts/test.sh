@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up what the tests need on a fresh Debian or Ubuntu machine, then run every test: Rust
 # (cargo test), then the Python package (built with maturin into a virtual environment, tested
-# with pytest, Mitsuba 3 for the plugin's tests). Safe to run again: it installs only what is
+# with pytest, Mitsuba 3 for the plugin's tests), then the browser tests (three.js and
+# <model-viewer> in headless Chromium, tests/browser). Safe to run again: it installs only what is
 # missing, and the virtual environment (.venv-test/) is kept between runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -20,6 +21,10 @@ compgen -G "/usr/share/vulkan/icd.d/lvp_icd*.json" >/dev/null || need+=(mesa-vul
 command -v glslangValidator >/dev/null || need+=(glslang-tools)
 compgen -G "/usr/lib/*/libLLVM-19.so*" >/dev/null || compgen -G "/usr/lib/*/libLLVM.so.19*" >/dev/null || need+=(libllvm19)
 python3 -c "import venv, ensurepip" 2>/dev/null || need+=(python3-venv)
+# the browser tests (tests/browser): three.js and <model-viewer> in headless Chromium, driven by
+# node (playwright-core from npm)
+command -v chromium >/dev/null || need+=(chromium)
+command -v npm >/dev/null || need+=(npm)
 command -v cargo >/dev/null || { echo "scripts/test.sh: cargo not found: install Rust first (https://rustup.rs)" >&2; exit 2; }
 if [ ${#need[@]} -gt 0 ]; then
     echo "scripts/test.sh: installing ${need[*]}" >&2
@@ -48,3 +53,17 @@ phase "running the Rust tests"
 phase "building the Python package"
 "$py" -m pytest -q python/tests
 phase "running the Python tests"
+
+# the browser tests: the exported GLB in three.js and <model-viewer> (tests/browser/run.mjs). The
+# npm packages (pinned by package-lock.json) go into tests/browser/node_modules, not committed,
+# installed again only when the lock file changed since the last install
+lock=tests/browser/package-lock.json
+stamp=tests/browser/node_modules/.fibrefit-lock.sha256
+if [ ! -f "$stamp" ] || [ "$(sha256sum "$lock" | cut -d' ' -f1)" != "$(cat "$stamp")" ]; then
+    (cd tests/browser && npm ci --no-audit --no-fund --loglevel=error)
+    sha256sum "$lock" | cut -d' ' -f1 >"$stamp"
+fi
+phase "installing the browser tests' npm packages"
+# the fibrefit binary `cargo test` built for the Rust tests
+FIBREFIT="${CARGO_TARGET_DIR:-target}/debug/fibrefit" node tests/browser/run.mjs
+phase "running the browser tests (three.js, model-viewer)"

@@ -597,9 +597,11 @@ def eval(
 @_dataclass
 class Exported:
     """What :func:`export` built: ``model`` (the rung's id), ``shader`` (the source, or None),
-    ``glb`` (the GLB file's bytes, or None), ``gltf_material`` (the fitted glTF material:
-    ``base_color``, ``roughness``, ``anisotropy_strength``, ``anisotropy_rotation_rad``, ``ior``,
-    ``sheen`` and its errors against the model; or None) and ``textures`` (the maps the GLB's
+    ``glb`` (the GLB file's bytes, or None), ``gltf_material`` (the glTF material: ``route``
+    ``"fitted"`` for a ``gltf`` fit written exactly, with ``metallic``, ``specular_factor`` and its
+    errors against the data; ``"converted"`` for a material fitted to another model, with its
+    errors against the model; both with ``base_color``, ``roughness``, ``anisotropy_strength``,
+    ``anisotropy_rotation_rad``, ``ior``, ``sheen``; or None), ``textures`` (the maps the GLB's
     textures were made from: ``directory``, ``width``, ``height``, ``names``; or None) and
     ``undetermined`` (the result's values its data did not determine, label -> reason: the
     exports use them as given, and the shader's header and the GLB's ``extras`` say so)."""

@@ -823,10 +823,45 @@ fn export<'py>(
     d.set_item("model", out.model.as_str())?;
     d.set_item("shader", out.shader)?;
     match out.glb {
-        Some((bytes, fitted)) => {
+        Some((bytes, export_api::GltfRoute::Fitted { values, error })) => {
+            d.set_item("glb", PyBytes::new(py, &bytes))?;
+            let g = PyDict::new(py);
+            let s = &values.shape;
+            g.set_item("route", "fitted")?;
+            g.set_item("base_color", values.base_color.to_vec())?;
+            g.set_item("metallic", s.metallic)?;
+            g.set_item("roughness", s.roughness)?;
+            g.set_item("anisotropy_strength", s.anisotropy)?;
+            g.set_item("anisotropy_rotation_rad", values.anisotropy_rotation)?;
+            g.set_item("specular_factor", s.specular)?;
+            g.set_item("ior", s.ior)?;
+            if s.sheen > 0.0 {
+                let sh = PyDict::new(py);
+                sh.set_item("colour", s.sheen)?;
+                sh.set_item("roughness", s.sheen_roughness)?;
+                g.set_item("sheen", sh)?;
+            } else {
+                g.set_item("sheen", py.None())?;
+            }
+            g.set_item("relative_rms_error_against_data", error.relative_rmse)?;
+            g.set_item("heldout_error", error.heldout_error)?;
+            g.set_item("error_text", error.text())?;
+            d.set_item("gltf_material", g)?;
+        }
+        Some((
+            bytes,
+            export_api::GltfRoute::Converted {
+                material: fitted,
+                why,
+                source_error,
+            },
+        )) => {
             d.set_item("glb", PyBytes::new(py, &bytes))?;
             let m = &fitted.material;
             let g = PyDict::new(py);
+            g.set_item("route", "converted")?;
+            g.set_item("why_converted", why)?;
+            g.set_item("source_error_text", source_error.text())?;
             g.set_item("base_color", m.base_color.to_vec())?;
             g.set_item("roughness", m.roughness)?;
             g.set_item("anisotropy_strength", m.anisotropy_strength)?;

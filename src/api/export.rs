@@ -39,14 +39,161 @@ pub struct ExportOutcome {
     pub model: ModelId,
     /// The shader source, in the language asked for.
     pub shader: Option<String>,
-    /// The GLB preview's bytes and the glTF material fitted to the model.
-    pub glb: Option<(Vec<u8>, FittedMaterial)>,
+    /// The GLB preview's bytes and the glTF material it carries.
+    pub glb: Option<(Vec<u8>, GltfRoute)>,
     /// The per-texel maps the GLB carries as textures (a `fit --maps` result).
     pub textures: Option<GlbTextures>,
     /// The result's values its data did not determine (at a bound, held, flat cost): the
     /// exports use them as given and say so (a warning, the shader's header, the GLB
     /// material's `extras.fibrefit.undetermined`).
     pub undetermined: Vec<crate::api::Undetermined>,
+}
+
+/// The glTF material a GLB carries, and how it was made.
+#[derive(Clone, Debug)]
+pub enum GltfRoute {
+    /// A `gltf` fit (no fuzz layer): the fit's own values, written exactly.
+    Fitted {
+        /// The values written.
+        values: gltf_out::RungValues,
+        /// The fit's error against its data, as the result states it.
+        error: DataError,
+    },
+    /// A glTF material fitted to the result's model (another rung, or a `gltf` fit with a
+    /// component glTF cannot carry): its error is against the model, not the data.
+    Converted {
+        /// The material fitted to the model, with its errors against the model.
+        material: FittedMaterial,
+        /// Why a `gltf` result was converted rather than written (None for other rungs).
+        why: Option<String>,
+        /// The converted fit's own error against its data, as the result states it.
+        source_error: DataError,
+    },
+}
+
+/// A fit's error against its data, as its result file states it (none for a parameter file).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct DataError {
+    /// The data file the fit read.
+    pub data: Option<String>,
+    /// Samples fitted.
+    pub samples: Option<usize>,
+    /// RMS of model - data over every sample and channel, 1/sr (`statistics.rmse`).
+    pub rmse: Option<f64>,
+    /// `rmse` over the RMS of the data (`statistics.relative_rmse`): in-sample.
+    pub relative_rmse: Option<f64>,
+    /// Held-out error: RMS in the fit's metric of `--model auto`'s chosen candidate
+    /// (`model_selection`), or the floor check's (`quality.floor`) where the result has one.
+    pub heldout_error: Option<f64>,
+    /// The metric of `heldout_error`.
+    pub heldout_metric: Option<String>,
+    /// The chosen candidate's relative RMSE on its held-out samples.
+    pub heldout_relative_rmse: Option<f64>,
+    /// The chosen candidate's log error on its held-out samples.
+    pub heldout_log_error: Option<f64>,
+    /// The floor (what the data allow), where the result measured it (`quality.floor`).
+    pub floor: Option<f64>,
+    /// `heldout_error` / `floor`.
+    pub floor_ratio: Option<f64>,
+}
+
+impl DataError {
+    /// The errors `result` (a fitted result's JSON) states; all none for anything else.
+    pub fn of_result(result: &Path) -> Self {
+        let Some(v) = crate::load::input::read_text(result)
+            .ok()
+            .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        else {
+            return Self::default();
+        };
+        let num = |x: &serde_json::Value| x.as_f64().filter(|f| f.is_finite());
+        let stats = &v["statistics"];
+        let mut e = Self {
+            data: v["data"]["file"].as_str().map(str::to_string),
+            samples: v["data"]["samples"].as_u64().map(|n| n as usize),
+            rmse: num(&stats["rmse"]),
+            relative_rmse: num(&stats["relative_rmse"]),
+            ..Self::default()
+        };
+        let chosen = v["model_selection"]
+            .as_array()
+            .and_then(|c| c.iter().find(|c| c["chosen"].as_bool() == Some(true)));
+        if let Some(c) = chosen {
+            e.heldout_error = num(&c["cv_error"]);
+            e.heldout_metric = v["selection"]["metric"].as_str().map(str::to_string);
+            e.heldout_relative_rmse = num(&c["heldout_relative_rmse"]);
+            e.heldout_log_error = num(&c["heldout_log_error"]);
+        }
+        let floor = &v["quality"]["floor"];
+        if let Some(h) = num(&floor["heldout_error"]) {
+            e.heldout_error = Some(h);
+            e.heldout_metric = floor["metric"]
+                .as_str()
+                .or(v["knobs"]["metric"].as_str())
+                .map(str::to_string);
+            e.floor = num(&floor["floor"]);
+            e.floor_ratio = num(&floor["ratio"]);
+        }
+        e
+    }
+
+    /// Whether the result states any error against data.
+    pub fn is_known(&self) -> bool {
+        self.relative_rmse.is_some() || self.heldout_error.is_some()
+    }
+
+    /// In words, for stderr: "relative RMS error 8.1 % over 3000 samples of silk.csv; held-out
+    /// error 0.135 (log)".
+    pub fn text(&self) -> String {
+        if !self.is_known() {
+            return "no error against data: the file is a parameter file, not a fit".into();
+        }
+        let mut parts = Vec::new();
+        if let Some(r) = self.relative_rmse {
+            parts.push(format!(
+                "relative RMS error {:.1} % over {} samples{} (in-sample)",
+                100.0 * r,
+                self.samples.map_or("its".into(), |n| n.to_string()),
+                self.data
+                    .as_ref()
+                    .map_or(String::new(), |d| format!(" of {d}"))
+            ));
+        }
+        if let Some(h) = self.heldout_error {
+            let mut t = format!(
+                "held-out error {h:.3}{}",
+                self.heldout_metric
+                    .as_ref()
+                    .map_or(String::new(), |m| format!(" ({m} metric)"))
+            );
+            if let Some(r) = self.heldout_relative_rmse {
+                t += &format!(", held-out relative RMS {:.1} %", 100.0 * r);
+            }
+            if let (Some(f), Some(q)) = (self.floor, self.floor_ratio) {
+                t += &format!(", {q:.2}x the floor {f:.3}");
+            }
+            parts.push(t);
+        }
+        parts.join("; ")
+    }
+
+    /// As the GLB's extras state it.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::json!({
+            "data": self.data,
+            "samples": self.samples,
+            "rms_error_per_sr": self.rmse,
+            "relative_rms_error": self.relative_rmse,
+            "relative_rms_error_is": "in-sample: over every sample fitted, against the data (the result's statistics.relative_rmse)",
+            "heldout_error": self.heldout_error,
+            "heldout_metric": self.heldout_metric,
+            "heldout_relative_rms_error": self.heldout_relative_rmse,
+            "heldout_log_error": self.heldout_log_error,
+            "floor": self.floor,
+            "floor_ratio": self.floor_ratio,
+            "text": self.text(),
+        })
+    }
 }
 
 /// What the GLB's textures were made from.
@@ -207,19 +354,33 @@ fn shader_source(
     shader::translate(&shader::wgsl(id, params, &lines)?, lang)
 }
 
-/// The GLB preview: the object with the fitted glTF material, textured by the maps a
-/// `fit --maps` result names when the mesh has texture coordinates.
+/// Why a `gltf` result cannot be written exactly (None: it can): glTF has no extension for the
+/// fuzz layer.
+pub fn not_pure_gltf(id: ModelId, params: &ModelParams) -> Option<String> {
+    if id != ModelId::Gltf {
+        return None;
+    }
+    (params.fuzz_depth > 0.0).then(|| {
+        format!(
+            "the result is a gltf + fuzz fit (fuzz_depth {}): glTF has no extension for the fuzz layer, so the GLB carries a glTF material converted from the whole model (fitted to the model, not the data)",
+            params.fuzz_depth
+        )
+    })
+}
+
+/// The GLB preview: the object with the result's glTF material, textured by the maps a
+/// `fit --maps` result names when the mesh has texture coordinates. A `gltf` fit without the
+/// fuzz layer is written exactly (its values, its maps as textures); any other result gets a
+/// glTF material fitted to its model, labelled as a conversion.
 fn glb_preview(
     req: &ExportRequest,
     id: ModelId,
     params: &ModelParams,
     lines: &[String],
     undetermined: &[crate::fit::determined::Undetermined],
-) -> Result<((Vec<u8>, FittedMaterial), Option<GlbTextures>)> {
-    let model = model::build(id, params)?;
+) -> Result<((Vec<u8>, GltfRoute), Option<GlbTextures>)> {
     let psi_deg = params.fibre_azimuth.to_degrees();
-    let mesh = preview(&req.object, psi_deg)?;
-    let fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1)?;
+    let (mesh, turn) = preview(&req.object, psi_deg)?;
     let maps = match maps_of(&req.result, &req.progress)? {
         Some(dir) if mesh.mesh.uvs.is_none() => {
             req.progress.warn(&format!(
@@ -231,19 +392,83 @@ fn glb_preview(
         }
         other => other,
     };
+    let error = DataError::of_result(&req.result);
+    let tangent_words = if matches!(req.object.as_str(), "swatch" | "sphere") {
+        format!("TANGENT is the UV u axis; the fibres lie at fibre_azimuth_deg {psi_deg} from it, towards the bitangent")
+    } else {
+        "TANGENT is the fibre direction (the mesh's own fibre field)".to_string()
+    };
+    let why = not_pure_gltf(id, params);
+    if let Some(w) = &why {
+        req.progress.warn(w);
+    }
     let mut images = Vec::new();
     let mut textures = None;
-    let mut material = gltf_out::fitted_material(&fitted, id, lines);
-    if let Some(dir) = maps {
-        let loaded = TexelMapsIn::load(&dir, None)
-            .map_err(|e| anyhow!("the maps the result names: {e:#}"))?;
-        let t = map_textures(model.as_ref(), params, &fitted, &loaded, &dir)?;
-        if let Some((tex, imgs, description)) = t {
-            material = gltf_out::textured_material(&fitted, id, lines, Some(&description));
-            images = imgs;
-            textures = Some(tex);
+    let (material, route) = if id == ModelId::Gltf && why.is_none() {
+        let values = gltf_out::RungValues {
+            base_color: params.albedos.diffuse,
+            shape: params.gltf,
+            anisotropy_rotation: turn + std::f64::consts::FRAC_PI_2,
+        };
+        let extras = serde_json::json!({
+            "model": id.as_str(),
+            "route": "fitted: the gltf rung's own fit, every value written as fitted (the rung is this glTF material)",
+            "error_against_data": error.json(),
+            "fibre_azimuth_deg": psi_deg,
+            "tangent": tangent_words,
+            "anisotropy_direction": "across the fibres: anisotropyRotation = the fibres' angle from the TANGENT + 90 deg",
+            "sheen_roughness": "the Charlie alpha is sheenRoughnessFactor^2 (the Khronos Sample Viewer and three.js)",
+            "source": lines,
+        });
+        let mut tx = None;
+        if let Some(dir) = maps {
+            let loaded = TexelMapsIn::load(&dir, None)
+                .map_err(|e| anyhow!("the maps the result names: {e:#}"))?;
+            if let Some((t, imgs, d)) = rung_textures(params, &loaded, &dir, &req.progress)? {
+                images = imgs;
+                textures = Some(t);
+                tx = Some(d);
+            }
         }
-    }
+        (
+            gltf_out::gltf_rung_material(&values, tx.as_ref(), extras),
+            GltfRoute::Fitted { values, error },
+        )
+    } else {
+        let model = model::build(id, params)?;
+        let mut fitted = gltf_material::fit(model.as_ref(), &params.albedos, 1)?;
+        // the fit's rotation is from the fibre direction; the file's from the TANGENT
+        fitted.material.anisotropy_rotation += turn;
+        let mut material = gltf_out::fitted_material(&fitted, id, lines);
+        if let Some(dir) = maps {
+            let loaded = TexelMapsIn::load(&dir, None)
+                .map_err(|e| anyhow!("the maps the result names: {e:#}"))?;
+            let t = map_textures(model.as_ref(), params, &fitted, &loaded, &dir)?;
+            if let Some((tex, imgs, description)) = t {
+                material = gltf_out::textured_material(&fitted, id, lines, Some(&description));
+                images = imgs;
+                textures = Some(tex);
+            }
+        }
+        let e = &mut material["extras"]["fibrefit"];
+        e["route"] = serde_json::json!(format!(
+            "converted: a glTF material fitted to the {id} model (not to the data); its error against the model is relative_rms_error"
+        ));
+        if let Some(w) = &why {
+            e["why_converted"] = serde_json::json!(w);
+        }
+        e["source_error_against_data"] = error.json();
+        e["tangent"] = serde_json::json!(tangent_words);
+        (
+            material,
+            GltfRoute::Converted {
+                material: fitted,
+                why,
+                source_error: error,
+            },
+        )
+    };
+    let mut material = material;
     gltf_out::mark_undetermined(&mut material, undetermined);
     let mut bytes = Vec::new();
     gltf_out::write_glb_with_images(
@@ -259,7 +484,126 @@ fn glb_preview(
         &images,
         &format!("fibrefit {} export", env!("CARGO_PKG_VERSION")),
     )?;
-    Ok(((bytes, fitted), textures))
+    Ok(((bytes, route), textures))
+}
+
+/// The textures of a `gltf` fit's maps (one texel per map pixel, rows from the top, as
+/// [`map_textures`]): base colour (sRGB) from `kd.exr`, and KHR_materials_anisotropy's texture
+/// from `fibre_azimuth.exr` (RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's
+/// azimuth - `fibre_azimuth_deg`, B = 1 so the strength is the fit's). The rung's maps hold no
+/// roughness, so there is no metallic-roughness texture; a height or ks map (which a `gltf`
+/// fit does not write) is not read, with a warning. A texel without a value takes the global.
+fn rung_textures(
+    params: &ModelParams,
+    maps: &TexelMapsIn,
+    dir: &Path,
+    progress: &crate::progress::Progress,
+) -> Result<
+    Option<(
+        GlbTextures,
+        Vec<gltf_out::TextureImage>,
+        gltf_out::RungTextures,
+    )>,
+> {
+    let (w, h) = (maps.width, maps.rows);
+    for (name, m) in [("height.exr", &maps.height), ("ks.exr", &maps.ks)] {
+        if m.is_some() {
+            progress.warn(&format!(
+                "{}: a gltf fit has no {name} map (glTF's layers have weight 1 and the rung no topology): not read",
+                dir.join(name).display()
+            ));
+        }
+    }
+    if maps.kd.is_none() && maps.psi.is_none() {
+        return Ok(None);
+    }
+    let n = w
+        .checked_mul(h)
+        .and_then(|n| n.checked_mul(3))
+        .ok_or_else(|| anyhow!("maps of {w}x{h} texels: too many for textures"))?;
+    let psi_deg = params.fibre_azimuth.to_degrees();
+    let (mut base, mut aniso) = (vec![0u8; n], vec![0u8; n]);
+    // the largest relative change 8-bit sRGB makes to a base colour channel above 0.01
+    let mut worst_base: f64 = 0.0;
+    for y in 0..h {
+        for x in 0..w {
+            let i = 3 * (y * w + x);
+            for c in 0..3 {
+                let k = TexelMapsIn::at(&maps.kd, x, y, c).unwrap_or(params.albedos.diffuse[c]);
+                let e = gltf_out::srgb8(k);
+                base[i + c] = e;
+                if k > 0.01 {
+                    worst_base = worst_base.max((srgb8_decoded(e) - k).abs() / k);
+                }
+            }
+            let turn = TexelMapsIn::at(&maps.psi, x, y, 0).map_or(0.0, |p| {
+                ((p - psi_deg + 90.0).rem_euclid(180.0) - 90.0).to_radians()
+            });
+            aniso[i..i + 3].copy_from_slice(&[
+                gltf_out::unorm8(0.5 * (turn.cos() + 1.0)),
+                gltf_out::unorm8(0.5 * (turn.sin() + 1.0)),
+                255,
+            ]);
+        }
+    }
+    let mut images = Vec::new();
+    let mut names = Vec::new();
+    let mut add = |name: &'static str, file: &str, rgb: &[u8]| -> Result<usize> {
+        images.push(gltf_out::TextureImage {
+            name: file.to_string(),
+            png: gltf_out::png_rgb8(w, h, rgb)?,
+        });
+        names.push(name);
+        Ok(images.len() - 1)
+    };
+    let t_base = maps
+        .kd
+        .is_some()
+        .then(|| add("base colour", "base_color", &base))
+        .transpose()?;
+    let t_aniso = maps
+        .psi
+        .is_some()
+        .then(|| add("anisotropy", "anisotropy", &aniso))
+        .transpose()?;
+    let description = serde_json::json!({
+        "maps": file_name(dir),
+        "size": [w, h],
+        "registration": "one texel per map pixel; image row 0 is the maps' top row (the mesh's v = 1, TEXCOORD_0 t = 0)",
+        "base_color": t_base.map(|_| format!(
+            "sRGB 8-bit: the fit's kd map (the global kd where a texel has none); the encoding changes a channel above 0.01 by at most {:.2} %",
+            100.0 * worst_base
+        )),
+        "anisotropy": t_aniso.map(|_| format!(
+            "RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's fibre azimuth - fibre_azimuth_deg {psi_deg}, turned further by anisotropyRotation (so across the texel's fibres); B = 1: the strength is anisotropyStrength"
+        )),
+        "roughness": "no texture: a gltf fit's maps hold base colour and fibre direction; roughnessFactor is the global fit's",
+    });
+    Ok(Some((
+        GlbTextures {
+            directory: dir.to_path_buf(),
+            width: w,
+            height: h,
+            names,
+            height_nodes: Vec::new(),
+        },
+        images,
+        gltf_out::RungTextures {
+            base_color: t_base,
+            anisotropy: t_aniso,
+            description,
+        },
+    )))
+}
+
+/// The linear value of an 8-bit sRGB code.
+fn srgb8_decoded(e: u8) -> f64 {
+    let c = f64::from(e) / 255.0;
+    if c <= 0.04045 {
+        c / 12.92
+    } else {
+        ((c + 0.055) / 1.055).powf(2.4)
+    }
 }
 
 /// The textures of a `fit --maps` result's maps (one texel per map pixel, rows from the top: the
@@ -517,15 +861,20 @@ fn provenance(path: &Path, id: ModelId, p: &ModelParams) -> Result<Vec<String>> 
     Ok(lines)
 }
 
-/// The preview mesh for `--object`.
-fn preview(object: &str, psi_deg: f64) -> Result<FramedMesh> {
+/// The preview mesh for `--object`, and the angle (radians) from its TANGENT to the fibres: on
+/// the swatch and the sphere TANGENT is the UV u axis (as engines that derive tangents from the
+/// texture coordinates have it) and the fibres lie at `psi_deg` from it; on the torus and an
+/// OBJ TANGENT is the fibre direction itself (0).
+fn preview(object: &str, psi_deg: f64) -> Result<(FramedMesh, f64)> {
+    let psi = psi_deg.to_radians();
     match object {
-        "swatch" => preview_mesh::swatch(psi_deg),
-        "sphere" => preview_mesh::sphere(psi_deg),
-        "torus" => preview_mesh::torus(),
-        o if o.to_ascii_lowercase().ends_with(".obj") => {
-            preview_mesh::curvature_aligned(mesh::load_obj(Path::new(o))?, psi_deg)
-        }
+        "swatch" => Ok((preview_mesh::swatch(0.0)?, psi)),
+        "sphere" => Ok((preview_mesh::sphere(0.0)?, psi)),
+        "torus" => Ok((preview_mesh::torus()?, 0.0)),
+        o if o.to_ascii_lowercase().ends_with(".obj") => Ok((
+            preview_mesh::curvature_aligned(mesh::load_obj(Path::new(o))?, psi_deg)?,
+            0.0,
+        )),
         o => bail!("--object {o}: expected swatch, sphere, torus or a .obj mesh"),
     }
 }

@@ -2,7 +2,7 @@
 //! `--gltf FILE.glb [--object ...]`: the fitted model as shader code a renderer runs, and as a
 //! glTF material for engines without custom shaders.
 
-use crate::api::export::{self as export_api, ExportOutcome, ExportRequest};
+use crate::api::export::{self as export_api, ExportOutcome, ExportRequest, GltfRoute};
 use crate::export::atomic::Outputs;
 use crate::export::shader::Language;
 use anyhow::{anyhow, bail, Result};
@@ -24,12 +24,18 @@ Every rung but `reference` (an adaptive integration, the yardstick).
 Rust model (10 000 random light/view pairs in random frames, texel heights, and the extremes)
 and refuses to write it if it disagrees by more than f32 allows (the bound is printed).
 GLTF: a preview mesh (swatch, sphere, the topology-map paper's torus, or an OBJ with curvature-aligned tangents)
-with NORMAL, TANGENT (the fibre direction), TEXCOORD_0 and a glTF material fitted to the model:
-base colour, roughness, KHR_materials_anisotropy and KHR_materials_ior, fitted over 1500
-direction pairs like the result's Ward fallback; the material's extras state its error. A
-`fit --maps` result's maps (the directory its `maps.directory` names) become PNG textures in
-the GLB: base colour (sRGB, from kd/ks/height), metallic-roughness (from height) and the
-anisotropy texture (fibre direction from the azimuth map, strength from height).")]
+with NORMAL, TANGENT (the UV u axis on the swatch and sphere, the fibres at fibre_azimuth_deg from
+it; the fibre direction on the torus and an OBJ), TEXCOORD_0 and a glTF material. A `gltf` fit
+(without the fuzz layer, which glTF cannot carry) is written exactly: base colour, metallic,
+roughness, KHR_materials_anisotropy (across the fibres), _specular, _ior and _sheen as fitted,
+its kd and fibre-direction maps as textures; its error against the data is printed and stated
+in the material's extras. Any other result gets a glTF material converted from the model:
+base colour, roughness, KHR_materials_anisotropy and KHR_materials_ior (and _sheen where it
+helps), fitted over 1500 direction pairs like the result's Ward fallback; the extras label it a
+conversion with its error against the model. A `fit --maps` result's maps (the directory its
+`maps.directory` names) become PNG textures in the GLB: base colour (sRGB, from kd/ks/height),
+metallic-roughness (from height) and the anisotropy texture (fibre direction from the azimuth
+map, strength from height).")]
 pub struct ExportArgs {
     /// A fitted result (.json) or any parameter file `eval` accepts
     pub result: PathBuf,
@@ -119,28 +125,67 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 lang.as_str()
             );
         }
-        if let (Some((_, fitted)), Some(path)) = (&glb, &args.gltf) {
-            let m = &fitted.material;
-            eprintln!(
-                "wrote {} ({}: base colour {:.3?}, roughness {:.3}, anisotropy strength {:.2} rotation {:.0} deg, ior {:.2}, {}; \
-                 relative RMS error of f cos {:.1} % over {} direction pairs; without anisotropy {:.1} %, with sheen {:.1} %, without {:.1} %)",
-                path.display(),
-                args.object,
-                m.base_color,
-                m.roughness,
-                m.anisotropy_strength,
-                m.anisotropy_rotation.to_degrees(),
-                m.ior,
-                m.sheen.map_or("no sheen".to_string(), |s| format!(
-                    "sheen colour {:.2} roughness {:.2}",
-                    s.colour, s.roughness
-                )),
-                100.0 * fitted.relative_rms_error,
-                fitted.directions,
-                100.0 * fitted.isotropic_relative_rms_error,
-                100.0 * fitted.with_sheen_relative_rms_error,
-                100.0 * fitted.without_sheen_relative_rms_error
-            );
+        if let (Some((_, route)), Some(path)) = (&glb, &args.gltf) {
+            match route {
+                GltfRoute::Fitted { values, error } => {
+                    let g = &values.shape;
+                    eprintln!(
+                        "wrote {} ({}: the gltf fit written exactly: base colour {:.3?}, metallic {:.3}, roughness {:.3}, \
+                         anisotropy strength {:.3} rotation {:.1} deg, specular {:.3}, ior {:.3}, {})",
+                        path.display(),
+                        args.object,
+                        values.base_color,
+                        g.metallic,
+                        g.roughness,
+                        g.anisotropy,
+                        values.anisotropy_rotation.to_degrees(),
+                        g.specular,
+                        g.ior,
+                        if g.sheen > 0.0 {
+                            format!("sheen colour {:.3} roughness {:.3}", g.sheen, g.sheen_roughness)
+                        } else {
+                            "no sheen".to_string()
+                        }
+                    );
+                    eprintln!("  error against the data: {}", error.text());
+                }
+                GltfRoute::Converted {
+                    material: fitted,
+                    why,
+                    source_error,
+                } => {
+                    let m = &fitted.material;
+                    eprintln!(
+                        "wrote {} ({}: a glTF material converted from the `{id}` model: base colour {:.3?}, roughness {:.3}, anisotropy strength {:.2} rotation {:.0} deg, ior {:.2}, {}; \
+                         relative RMS error of f cos against the model {:.1} % over {} direction pairs; without anisotropy {:.1} %, with sheen {:.1} %, without {:.1} %)",
+                        path.display(),
+                        args.object,
+                        m.base_color,
+                        m.roughness,
+                        m.anisotropy_strength,
+                        m.anisotropy_rotation.to_degrees(),
+                        m.ior,
+                        m.sheen.map_or("no sheen".to_string(), |s| format!(
+                            "sheen colour {:.2} roughness {:.2}",
+                            s.colour, s.roughness
+                        )),
+                        100.0 * fitted.relative_rms_error,
+                        fitted.directions,
+                        100.0 * fitted.isotropic_relative_rms_error,
+                        100.0 * fitted.with_sheen_relative_rms_error,
+                        100.0 * fitted.without_sheen_relative_rms_error
+                    );
+                    if why.is_some() {
+                        eprintln!("  (converted: see the warning above)");
+                    }
+                    if source_error.is_known() {
+                        eprintln!(
+                            "  the `{id}` fit's own error against the data: {}",
+                            source_error.text()
+                        );
+                    }
+                }
+            }
             if let Some(t) = &textures {
                 eprintln!(
                     "  textures from the maps in {} ({}x{}): {}{}",
@@ -166,7 +211,13 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             }
         }
     }
-    if let Some((_, fitted)) = &glb {
+    if let Some((
+        _,
+        GltfRoute::Converted {
+            material: fitted, ..
+        },
+    )) = &glb
+    {
         if fitted.relative_rms_error > 0.25 && !args.quiet {
             eprintln!(
                 "warning: the glTF material matches the fibre model only to {:.0} % RMS: a preview for engines without custom shaders, not the model (use --shader for that)",

@@ -338,6 +338,78 @@ pub fn mark_undetermined(material: &mut Value, undetermined: &[crate::fit::deter
         .collect::<Vec<_>>());
 }
 
+/// The `gltf` rung's fitted values as they go into a glTF document, unchanged: the rung is
+/// glTF 2.0's metallic-roughness BRDF with KHR_materials_sheen, _anisotropy, _specular and _ior
+/// (`model/rungs/gltf.rs`), so each value has its field.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RungValues {
+    /// baseColorFactor (linear RGB): the fit's `kd`.
+    pub base_color: [f64; 3],
+    /// The rung's shape: metallic, roughness, anisotropy strength, specular factor, IOR, sheen
+    /// colour (grey) and roughness.
+    pub shape: crate::model::params::GltfShape,
+    /// anisotropyRotation, radians from the TANGENT towards the bitangent: the anisotropy
+    /// direction lies across the fibres (the fibre direction from the TANGENT + 90 deg).
+    pub anisotropy_rotation: f64,
+}
+
+/// The textures of a `gltf` fit's maps (indices into the document's textures, all TEXCOORD_0).
+pub struct RungTextures {
+    /// sRGB base colour, the `kd` map: `baseColorFactor` becomes 1.
+    pub base_color: Option<usize>,
+    /// KHR_materials_anisotropy's texture: RG the fibre map's direction relative to the global
+    /// one, B = 1 (`anisotropyStrength` stays the fit's).
+    pub anisotropy: Option<usize>,
+    pub description: Value,
+}
+
+/// The glTF material of a `gltf` fit: its values exactly ([`RungValues`]), the textures of its
+/// maps where given, and `extras` (`extras.fibrefit`: the route, the error against the data,
+/// provenance). KHR_materials_sheen is written when the sheen colour is above 0 (0 is the
+/// extension's absence).
+pub fn gltf_rung_material(v: &RungValues, textures: Option<&RungTextures>, extras: Value) -> Value {
+    let (c, g) = (v.base_color, &v.shape);
+    let mut material = json!({
+        "name": "fibrefit gltf",
+        "pbrMetallicRoughness": {
+            "baseColorFactor": [c[0], c[1], c[2], 1.0],
+            "metallicFactor": g.metallic,
+            "roughnessFactor": g.roughness,
+        },
+        "extensions": {
+            "KHR_materials_anisotropy": {
+                "anisotropyStrength": g.anisotropy,
+                "anisotropyRotation": v.anisotropy_rotation,
+            },
+            "KHR_materials_specular": {
+                "specularFactor": g.specular,
+                "specularColorFactor": [1.0, 1.0, 1.0],
+            },
+            "KHR_materials_ior": { "ior": g.ior },
+        },
+        "extras": { "fibrefit": extras },
+    });
+    if g.sheen > 0.0 {
+        material["extensions"]["KHR_materials_sheen"] = json!({
+            "sheenColorFactor": [g.sheen, g.sheen, g.sheen],
+            "sheenRoughnessFactor": g.sheen_roughness,
+        });
+    }
+    if let Some(tx) = textures {
+        if let Some(i) = tx.base_color {
+            material["pbrMetallicRoughness"]["baseColorFactor"] = json!([1.0, 1.0, 1.0, 1.0]);
+            material["pbrMetallicRoughness"]["baseColorTexture"] =
+                json!({ "index": i, "texCoord": 0 });
+        }
+        if let Some(i) = tx.anisotropy {
+            material["extensions"]["KHR_materials_anisotropy"]["anisotropyTexture"] =
+                json!({ "index": i, "texCoord": 0 });
+        }
+        material["extras"]["fibrefit"]["textures"] = tx.description.clone();
+    }
+    material
+}
+
 /// sRGB encoding (IEC 61966-2-1) of a linear value in [0, 1] to 8 bits, rounded.
 pub fn srgb8(linear: f64) -> u8 {
     let c = linear.clamp(0.0, 1.0);
