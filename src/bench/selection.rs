@@ -87,22 +87,28 @@ pub fn verdict(truth: &str, candidates: &[Candidate]) -> Option<&'static str> {
     })
 }
 
-/// `--model auto` on `data` as the CLI runs it without a config: the metric from the data,
-/// selection, then the chosen candidate fitted on all samples from its optimum.
-pub fn auto_fit(
-    data: &Samples,
-    slow: bool,
-    progress: &crate::progress::Progress,
-) -> Result<(
+/// What [`auto_fit`] gives: the selection, the chosen candidate's fit on all samples, its
+/// config, the whole run's and the selection's wall seconds.
+pub type AutoFit = (
     selection::SelectionOutcome,
     crate::fit::FitOutcome,
     FitConfig,
     f64,
     f64,
-)> {
+);
+
+/// `--model auto` on `data` as the CLI runs it without a config: the metric from the data
+/// (or `metric`, as `--metric` sets it), selection, then the chosen candidate fitted on all
+/// samples from its optimum.
+pub fn auto_fit(
+    data: &Samples,
+    slow: bool,
+    metric: Option<crate::fit::config::Metric>,
+    progress: &crate::progress::Progress,
+) -> Result<AutoFit> {
     let t = Instant::now();
     let mut cfg: FitConfig = toml::from_str("model = \"auto\"\n")?;
-    cfg.metric = crate::fit::config::metric_for_data(data).0;
+    cfg.metric = metric.unwrap_or(crate::fit::config::metric_for_data(data).0);
     cfg.selection.coarse_ranking = !slow;
     let s = selection::select_with(
         data,
@@ -201,7 +207,7 @@ pub fn run(
                     if slow_path { ", config knobs" } else { "" }
                 ),
             );
-            let (s, o, cfg, seconds, selection_seconds) = auto_fit(data, slow_path, progress)?;
+            let (s, o, cfg, seconds, selection_seconds) = auto_fit(data, slow_path, None, progress)?;
             let (log, rel) = match check {
                 Some(c) => {
                     let (_, rel, log, _) = selection::heldout(&o, &cfg, c)?;

@@ -19,6 +19,8 @@ STUDIES (each writes its tables, CSV and plots into OUT and says the command tha
   sampling     the importance sampler against cosine sampling (OUT/sampling.*)
   selection FILE  `--model auto` on sparse subsets of a felt and on synthetic fabrics
                (OUT/selection.*)
+  real FILE... [--curet DIR]  real fabrics against their floor, what their data allow
+               (OUT/real_fabrics.*)
 `fibrefit bench STUDY --help` gives each study's options.")]
 pub struct BenchArgs {
     /// The study (default: speed)
@@ -76,6 +78,25 @@ pub enum Study {
     /// with known truth (--synth-sizes): every candidate's cross-validated error, the choice,
     /// the run's wall time: writes OUT/selection.md and .csv
     Selection(SelectionArgs),
+    /// Real fabrics against what their data allow: each file (and each sample of a CUReT
+    /// folder) fitted with `--model auto --metric log`, every candidate's held-out error, the
+    /// floor and the chosen model's ratio to it, where its excess lies, the better simple fit
+    /// (lambert, ward), the time: writes OUT/real_fabrics.md, .csv and the first measured
+    /// file's residual hemisphere maps
+    Real(RealArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RealArgs {
+    /// Real measurements fibrefit reads (measured .bsdf/MERL files, goniometric tables)
+    #[arg(value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// A CUReT folder (table.txt and abrdf_subset.dat): each of its samples is a data set
+    #[arg(long, value_name = "DIR")]
+    pub curet: Option<PathBuf>,
+    /// Direction pairs drawn from each measured file
+    #[arg(long, value_name = "N", default_value_t = 3000)]
+    pub directions: usize,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -271,6 +292,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         Study::Maps => maps(args),
         Study::Selection(sel) => selection(args, &sel),
         Study::Felt(f) => felt(args, &f),
+        Study::Real(r) => real(args, &r),
     }
 }
 
@@ -417,6 +439,42 @@ fn felt(args: &BenchArgs, f: &FeltArgs) -> Result<()> {
     )?;
     if !args.quiet {
         eprintln!("wrote {}", args.out.join("felt.md").display());
+    }
+    Ok(())
+}
+
+fn real(args: &BenchArgs, r: &RealArgs) -> Result<()> {
+    if r.files.is_empty() && r.curet.is_none() {
+        bail!("bench real: give at least one FILE or --curet DIR");
+    }
+    let t = Instant::now();
+    let run = crate::bench::real::run(
+        &r.files,
+        r.curet.as_deref(),
+        r.directions,
+        &crate::progress::Progress::new(args.quiet),
+    )?;
+    let mut command = String::from("fibrefit bench real");
+    for f in &r.files {
+        command += &format!(" {}", f.display());
+    }
+    if let Some(d) = &r.curet {
+        command += &format!(" --curet {}", d.display());
+    }
+    command += &format!(" --directions {}", r.directions);
+    let measured = match &run.drawn {
+        Some((i, ..)) => crate::load::measured_brdf(&run.rows[*i].source)?,
+        None => None,
+    };
+    crate::bench::report::real::write(
+        &args.out,
+        &run,
+        measured.as_deref(),
+        &command,
+        t.elapsed().as_secs_f64(),
+    )?;
+    if !args.quiet {
+        eprintln!("wrote {}", args.out.join("real_fabrics.md").display());
     }
     Ok(())
 }

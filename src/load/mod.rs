@@ -4,6 +4,7 @@ pub mod arrays;
 pub mod bracket;
 pub mod capture;
 pub mod capture_store;
+pub mod curet;
 pub mod gonio;
 pub mod gray_map;
 pub mod image_io;

@@ -5,6 +5,7 @@
 pub mod camera;
 pub mod felt;
 pub mod maps;
+pub mod real;
 pub mod robustness;
 pub mod sampling;
 pub mod selection;
