@@ -213,9 +213,16 @@ fn a_bad_curet_folder_is_refused_naming_file_and_line() {
         e.contains("table.txt, line 2") && e.contains("five numbers"),
         "{e}"
     );
-    curet_folder(dir.path(), &g, &[(2, vec![0.1, -4.0])]);
+    fs::write(dir.path().join("abrdf_subset.dat"), "2 0.1 NaN\n").unwrap();
     let e = format!("{:#}", curet::load_dir(dir.path()).unwrap_err());
-    assert!(e.contains("line 1") && e.contains("'-4'"), "{e}");
+    assert!(
+        e.contains("line 1") && e.contains("'NaN' is not a BRDF value"),
+        "{e}"
+    );
+    // a dark geometry's noise below 0 is left out, as the unmeasured 0 is
+    curet_folder(dir.path(), &g, &[(2, vec![0.1, -0.009])]);
+    let s = &curet::load_dir(dir.path()).unwrap()[0].1;
+    assert_eq!((s.samples.len(), s.dropped.invalid), (1, 1));
 }
 
 #[test]

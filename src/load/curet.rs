@@ -3,7 +3,8 @@
 //! `table.txt` (the 205 measurement geometries, `index theta_v phi_v theta_i phi_i` in radians,
 //! the sample's frame with z the normal) and `abrdf_subset.dat` (one row per sample: its number,
 //! then one BRDF value per geometry in the table's order, R, G and B averaged: grey). A value of
-//! 0 means "not measured" and is left out.
+//! 0 means "not measured" and is left out, as are the few slightly negative values of dark
+//! geometries (noise around 0), counted as dropped.
 
 use super::samples::{DataKind, Dropped, Origin, Sample, Samples};
 use crate::model::frame::direction_from_angles;
@@ -63,8 +64,10 @@ pub fn load_dir(dir: &Path) -> Result<Vec<(u32, Samples)>> {
             let value: f64 = f
                 .parse()
                 .ok()
-                .filter(|x: &f64| x.is_finite() && *x >= 0.0)
-                .with_context(|| format!("{}: '{f}' is not a BRDF value (a finite number >= 0)", at()))?;
+                .filter(|x: &f64| x.is_finite())
+                .with_context(|| format!("{}: '{f}' is not a BRDF value (a finite number)", at()))?;
+            // 0: not measured; below 0: a dark measurement's noise (CUReT's are down to -0.01),
+            // which neither metric can take as a value
             if value <= 0.0 {
                 dropped.invalid += 1;
             } else if l.z <= 0.0 || v.z <= 0.0 {
