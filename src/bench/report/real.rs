@@ -225,21 +225,7 @@ fn details(rows: &[RealRow]) -> String {
             r.data, r.samples, r.validation
         );
         for c in &r.candidates {
-            match &c.error {
-                Some(e) => md += &format!("| {} | - | failed: {e} | | | | |\n", c.name),
-                None => {
-                    md += &format!(
-                        "| {} | {} | {:.4} | {:.4} | {} | {} | {} |\n",
-                        c.name,
-                        c.free_parameters,
-                        c.cv_error,
-                        c.cv_standard_error,
-                        fmt(floor.map(|f| c.cv_error / f), 2),
-                        c.knobs,
-                        if c.chosen { "**yes**" } else { "" }
-                    )
-                }
-            }
+            md += &super::selection::candidate_row(c, &fmt(floor.map(|f| c.cv_error / f), 2));
         }
         if let Some(f) = &r.floor {
             md += &format!("\n{}\n", crate::fit::floor::text(f));

@@ -109,24 +109,27 @@ pub fn write(dir: &Path, rows: &[SelectionRow], command: &str, seconds: f64) -> 
             r.data, r.samples, r.path, r.truth
         );
         for c in &r.candidates {
-            match &c.error {
-                Some(e) => md += &format!("| {} | - | failed: {e} | | | | |\n", c.name),
-                None => {
-                    md += &format!(
-                        "| {} | {} | {:.4} | {:.4} | {} | {} | {} |\n",
-                        c.name,
-                        c.free_parameters,
-                        c.cv_error,
-                        c.cv_standard_error,
-                        c.folds_text(),
-                        c.knobs,
-                        if c.chosen { "**yes**" } else { "" }
-                    )
-                }
-            }
+            md += &candidate_row(c, &c.folds_text());
         }
     }
     let mut f = AtomicFile::create(&dir.join("selection.md"))?;
     f.writer().write_all(md.as_bytes())?;
     f.commit()
+}
+
+/// A candidate's row of a study's candidate table: name, free parameters, held-out error and
+/// its standard error, `extra` (a study's own column), knobs, chosen; a failed candidate's error.
+pub(crate) fn candidate_row(c: &crate::fit::selection::Candidate, extra: &str) -> String {
+    match &c.error {
+        Some(e) => format!("| {} | - | failed: {e} | | | | |\n", c.name),
+        None => format!(
+            "| {} | {} | {:.4} | {:.4} | {extra} | {} | {} |\n",
+            c.name,
+            c.free_parameters,
+            c.cv_error,
+            c.cv_standard_error,
+            c.knobs,
+            if c.chosen { "**yes**" } else { "" }
+        ),
+    }
 }
