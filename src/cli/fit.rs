@@ -112,6 +112,11 @@ pub struct FitArgs {
     /// arrays sharing a machine, jobs x threads = cores
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// The gltf rung's variant: khronos (the Khronos specification and Sample Viewer) or
+    /// threejs (what stock three.js r187 renders; metallic held at 0; docs/web.md) [default:
+    /// the config's knobs.gltf_variant, else khronos]
+    #[arg(long, value_name = "khronos|threejs")]
+    pub gltf_variant: Option<String>,
     #[command(flatten)]
     pub load: LoadArgs,
 }
@@ -145,6 +150,7 @@ fn options(args: &FitArgs) -> Result<FitOptions> {
             (None, false) => Maps::None,
         },
         progress: crate::progress::Progress::new(args.quiet || args.json),
+        gltf_variant: args.gltf_variant.clone(),
     })
 }
 
