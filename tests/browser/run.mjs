@@ -213,6 +213,29 @@ async function checkVariant(page, P, expectedVariant) {
 
 let expectedKhronos = {};
 
+// docs/web.md's ShaderMaterial recipe: `export --shader glsl-es` of the sheen material (khronos
+// and threejs) in a three.js ShaderMaterial against eval x cos x E; true when within tolerance.
+async function checkShaderMaterial(page, P, work, expected, expectedVariant) {
+  let worst = { d: 0 };
+  for (const [name, want] of [['sheen', expected.sheen], ['sheen-threejs', expectedVariant.sheen]]) {
+    const glsl = path.join(work, `${name}.glsl`);
+    run(['export', path.join(work, `${name}.toml`), '--shader', 'glsl-es', '--out', glsl, '-q']);
+    const lib = fs.readFileSync(glsl, 'utf8');
+    const r = await page.evaluate(([t, p, e, psi]) => window.fibrefitShaderRender(t, p, e, psi),
+      [lib, P.map((p) => p.d), E, PSI]);
+    P.forEach((p, i) => {
+      for (let c = 0; c < 3; c++) {
+        const d = r.values[i].covered === 16 ? (r.values[i].rgb[c] - want[i][c]) / want[i][c] : Infinity;
+        if (Math.abs(d) > Math.abs(worst.d)) worst = { d, name, p };
+      }
+    });
+  }
+  const ok = Math.abs(worst.d) <= TOLERANCE;
+  console.log(`\nthe GLSL ES export in a three.js ShaderMaterial (docs/web.md's recipe) against eval x cos x E: worst ${pct(worst.d, 4)} (${worst.name} at ${worst.p.d.join(', ')}) over ${P.length} pairs, khronos and threejs; tolerance ${100 * TOLERANCE} %`);
+  if (!ok) console.log('FAIL: the GLSL ES export in a ShaderMaterial does not render as eval');
+  return ok;
+}
+
 async function main() {
   if (!fs.existsSync(fibrefit)) throw new Error(`${fibrefit}: no fibrefit binary (cargo build, or set FIBREFIT)`);
   const work = fs.mkdtempSync(path.join(os.tmpdir(), 'fibrefit-browser-'));
@@ -314,6 +337,7 @@ async function main() {
     }
 
     if (!(await checkVariant(page, P, expectedVariant))) failed = true;
+    if (!(await checkShaderMaterial(page, P, work, expected, expectedVariant))) failed = true;
 
     // a `gltf` fit with maps (the shipped silk capture): its base colour and anisotropy textures
     // reach three.js and render finite, positive values
