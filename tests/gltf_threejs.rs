@@ -582,3 +582,81 @@ fn bad_variants_are_refused_naming_what() {
     assert_eq!(out.status.code(), Some(2), "{err}");
     assert!(err.contains("parameters.metallic"), "{err}");
 }
+
+#[test]
+fn score_of_a_threejs_result_with_metallic_is_its_eval() {
+    // a result's values rendered as three.js renders them (knobs.gltf_variant = threejs) with
+    // metallic > 0: score must carry the base colour squared's term as eval does
+    let dir = tempfile::tempdir().unwrap();
+    let csv = dir.path().join("gonio.csv");
+    let text =
+        "gltf_variant = \"threejs\"\nkd = [0.8, 0.5, 0.3]\nmetallic = 0.6\nroughness = 0.5\n\
+                anisotropy_strength = 0.4\nsheen = 0.2\nfibre_azimuth_deg = 20\n";
+    std::fs::write(&csv, synthesise(text, 400, 0.01)).unwrap();
+    let out = dir.path().join("k.json");
+    fibrefit()
+        .args([
+            "fit",
+            csv.to_str().unwrap(),
+            "--model",
+            "gltf",
+            "-q",
+            "--out",
+        ])
+        .arg(&out)
+        .assert()
+        .success();
+    let mut result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&out).unwrap()).unwrap();
+    assert!(result["parameters"]["metallic"]["value"].as_f64().unwrap() > 0.1);
+    result["knobs"]["gltf_variant"] = "threejs".into();
+    let swapped = dir.path().join("t.json");
+    std::fs::write(&swapped, result.to_string()).unwrap();
+    let score = fibrefit()
+        .args([
+            "score",
+            swapped.to_str().unwrap(),
+            csv.to_str().unwrap(),
+            "--json",
+        ])
+        .output()
+        .unwrap();
+    assert!(
+        score.status.success(),
+        "{}",
+        String::from_utf8_lossy(&score.stderr)
+    );
+    let score: serde_json::Value = serde_json::from_slice(&score.stdout).unwrap();
+    let rows = |p: &std::path::Path| -> Vec<Vec<f64>> {
+        let t = std::fs::read_to_string(p).unwrap();
+        t.lines()
+            .skip(1)
+            .map(|r| r.split(',').map(|x| x.parse().unwrap()).collect())
+            .collect()
+    };
+    let data = rows(&csv);
+    let (q, e) = (dir.path().join("q.csv"), dir.path().join("e.csv"));
+    let mut queries = String::from("theta_i,phi_i,theta_o,phi_o\n");
+    for d in &data {
+        queries.push_str(&format!("{},{},{},{}\n", d[0], d[1], d[2], d[3]));
+    }
+    std::fs::write(&q, queries).unwrap();
+    fibrefit()
+        .args(["eval", "--params", swapped.to_str().unwrap(), "--queries"])
+        .args([q.to_str().unwrap(), "--out", e.to_str().unwrap(), "-q"])
+        .assert()
+        .success();
+    let model = rows(&e);
+    let mut sum = 0.0;
+    for (d, m) in data.iter().zip(&model) {
+        for c in 0..3 {
+            sum += (m[4 + c] - d[4 + c]).powi(2);
+        }
+    }
+    let rmse = (sum / (3 * data.len()) as f64).sqrt();
+    let got = score["statistics"]["rmse"].as_f64().unwrap();
+    assert!(
+        (got - rmse).abs() <= 1e-9 * rmse,
+        "score {got} vs eval {rmse}"
+    );
+}

@@ -563,6 +563,25 @@ impl<'a> FitProblem<'a> {
         }
     }
 
+    /// The `gltf` rung's `threejs` variant's term in the base colour squared, kd^2 times the
+    /// substrate column (`model::rungs::gltf::threejs`), for sample `i`, channel `c`; 0 for
+    /// every other set. Zero in that variant's fits (metallic held at 0), so the albedos' linear
+    /// solve stays exact there; `score` and the reports of a threejs result with metallic > 0
+    /// need it.
+    fn base_colour_squared(&self, set: &ParamSet, i: usize, c: usize, col: &Columns) -> f64 {
+        if set.gltf_variant != crate::model::rungs::gltf::GltfVariant::Threejs {
+            return 0.0;
+        }
+        let k = component_index(Component::Diffuse);
+        set.albedos
+            .iter()
+            .find(|a| a.component == Component::Diffuse)
+            .map_or(0.0, |a| {
+                let kd = self.albedo_at(k, i, c, a.value[c]);
+                kd * kd * col[component_index(Component::Substrate)]
+            })
+    }
+
     /// Residual vector (sample-major, channel-minor) for columns and albedos.
     pub fn residuals(&self, cols: &[Columns], set: &ParamSet) -> DVector<f64> {
         let ch = self.channels();
@@ -582,7 +601,8 @@ impl<'a> FitProblem<'a> {
                 let m: f64 = comps
                     .iter()
                     .map(|(k, a)| self.albedo_at(*k, i, c, a[c]) * col[*k])
-                    .sum();
+                    .sum::<f64>()
+                    + self.base_colour_squared(set, i, c, col);
                 r[i * ch + c] = metric_residual(self.metric, sc[c], self.log_floor[c], s, c, m);
             }
         }
@@ -603,7 +623,8 @@ impl<'a> FitProblem<'a> {
                             let k = component_index(a.component);
                             self.albedo_at(k, i, c, a.value[c]) * col[k]
                         })
-                        .sum();
+                        .sum::<f64>()
+                        + self.base_colour_squared(set, i, c, col);
                 }
                 v
             })
