@@ -113,7 +113,7 @@ pub struct FitArgs {
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
     /// The gltf rung's variant: khronos (the Khronos specification and Sample Viewer) or
-    /// threejs (what stock three.js r187 renders; metallic held at 0; docs/web.md) [default:
+    /// threejs (what stock three.js r187 renders; docs/web.md) [default:
     /// the config's knobs.gltf_variant, else khronos]
     #[arg(long, value_name = "khronos|threejs")]
     pub gltf_variant: Option<String>,

@@ -316,11 +316,11 @@ impl FitConfig {
 
     /// The `gltf` rung's variant: `variant` when given (`--gltf-variant`, the Python `fit`'s
     /// `gltf_variant`), else the config's `knobs.gltf_variant`. `threejs` fits only the `gltf`
-    /// rung and holds `metallic` at 0: three.js tints its direct specular's multiple-scattering
-    /// factor with F0 = mix(F0, base colour, metallic), so its BRDF is quadratic in the base
-    /// colour once metallic > 0, and a fit solves the base colour linearly (exactly, as a
-    /// column); at metallic 0 it is affine in it, and exact. A config that gives metallic a
-    /// value other than 0, or bounds, is refused.
+    /// rung. three.js tints its direct specular's multiple-scattering factor with F0 =
+    /// mix(F0, base colour, metallic), so its BRDF is quadratic in the base colour once
+    /// metallic > 0: the global fit solves that exactly (`FitProblem::solve_albedos`), the
+    /// per-texel maps' linear solves do not, so with `[maps]` a threejs fit holds `metallic` at 0
+    /// (a config giving it another value, or bounds, is refused).
     pub fn apply_gltf_variant(&mut self, variant: Option<GltfVariant>) -> Result<()> {
         if let Some(v) = variant {
             self.knobs.gltf_variant = v;
@@ -339,15 +339,18 @@ impl FitConfig {
                 bail!("gltf_variant = {v} is a knob of the gltf rung; model `{id}` has no variant")
             }
         }
+        if self.maps.requested().is_empty() {
+            return Ok(());
+        }
         let name = Param::Metallic.name();
         if let Some(e) = self.parameters.get(name) {
             let nonzero = e.value.is_some_and(|a| a.channels() != [0.0; 3]);
             if nonzero || e.min.is_some() || e.max.is_some() {
                 bail!(
-                    "parameters.{name}: gltf_variant = {v} holds metallic at 0 (three.js's direct \
-                     specular is quadratic in the base colour once metallic > 0, and a fit solves \
-                     the base colour linearly); remove `{name}` from [parameters] or fit the \
-                     khronos variant"
+                    "parameters.{name}: gltf_variant = {v} with [maps] holds metallic at 0 (three.js's \
+                     BRDF is quadratic in the base colour once metallic > 0, and the per-texel \
+                     maps solve the base colour linearly); remove `{name}` from [parameters], the \
+                     maps, or fit the khronos variant"
                 );
             }
         }

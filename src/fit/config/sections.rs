@@ -31,7 +31,7 @@ pub struct Knobs {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<PathBuf>,
     /// The `gltf` rung's variant: `khronos` (the specification, default) or `threejs` (what
-    /// three.js r187 renders; its fits hold metallic at 0).
+    /// three.js r187 renders; with `[maps]` its fits hold metallic at 0).
     #[serde(default, skip_serializing_if = "GltfVariant::is_khronos")]
     pub gltf_variant: GltfVariant,
 }

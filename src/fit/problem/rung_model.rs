@@ -63,8 +63,7 @@ pub fn albedos_of(set: &ParamSet) -> model::Albedos {
                     a.substrate = p.value;
                 }
                 if set.gltf_variant == crate::model::rungs::gltf::GltfVariant::Threejs {
-                    // the threejs variant's c^2 column (its fits hold metallic at 0, where it
-                    // is zero)
+                    // the threejs variant's c^2 column
                     a.substrate = p.value.map(|c| c * c);
                 }
             }

@@ -54,8 +54,9 @@
 //!
 //! The c^2 column Q (three.js tints the compensation by F0b, which holds the base colour of a
 //! metal) is the basis's `substrate` column, whose albedo is kd^2 for this variant
-//! (`model::params`); it is zero for a dielectric (m = 0), which is what a fit of this variant
-//! holds (the fit solves the base colour linearly).
+//! (`model::params`, `fit::problem::rung_model::albedos_of`); it is zero for a dielectric
+//! (m = 0). A fit solves the base colour for it exactly, as the minimum of a quartic per channel
+//! (`fit::problem`'s `solve_threejs_base_colour`).
 //!
 //! # Reciprocity
 //!
