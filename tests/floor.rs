@@ -112,6 +112,7 @@ fn fit(data: &Path, model: &str, fuzz: Option<bool>) -> fibrefit::api::fit::FitR
         load: LoadFlags::default(),
         maps: Maps::None,
         progress: fibrefit::progress::Progress::quiet(),
+        gltf_variant: None,
     };
     fibrefit::api::fit::fit(&opts.request(data).unwrap()).unwrap()
 }

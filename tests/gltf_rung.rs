@@ -34,6 +34,7 @@ fn shape(metallic: f64, roughness: f64, anisotropy: f64, sheen: f64) -> GltfShap
         ior: 1.6,
         sheen,
         sheen_roughness: 0.5,
+        variant: Default::default(),
     }
 }
 

@@ -120,6 +120,32 @@ fn cases() -> Vec<Case> {
         let fresnel = format!("{}fresnel_ior = 1.5\n", base_text(id));
         push("fresnel, 70 along", id, fresnel, view(70.0, 10.0), None);
     }
+    // the gltf rung's threejs variant: the same lobes, its own BRDF (and weights); a metal
+    // below three.js's roughness floor too
+    let threejs = format!("{}gltf_variant = \"threejs\"\n", base_text(Gltf));
+    push(
+        "threejs, 45 along",
+        Gltf,
+        threejs.clone(),
+        view(45.0, ALONG),
+        None,
+    );
+    push(
+        "threejs, 80 across",
+        Gltf,
+        threejs,
+        view(80.0, ACROSS),
+        None,
+    );
+    push(
+        "threejs metal at roughness 0.03, 60 oblique",
+        Gltf,
+        "gltf_variant = \"threejs\"\nkd = [0.9, 0.6, 0.3]\nmetallic = 1\nroughness = 0.03\n\
+         anisotropy_strength = 0.5\n"
+            .to_string(),
+        view(60.0, 140.0),
+        None,
+    );
     for id in [VaryingTopology, Reference] {
         push(
             "texel height 1.3, 50 along",

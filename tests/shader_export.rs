@@ -307,7 +307,9 @@ fn translations_are_libraries_that_compile_inside_a_host_shader() {
                 assert!(c.contains(fun), "{name} {lang:?}: no {fun}");
             }
             let bad: &[&str] = match lang {
-                Language::Glsl => &["void main", "layout(", "#version", "buffer "],
+                Language::Glsl | Language::GlslEs => {
+                    &["void main", "layout(", "#version", "buffer "]
+                }
                 Language::Hlsl => &["[numthreads", "register(", "RWByteAddressBuffer"],
                 Language::Msl => &["kernel ", "[[buffer", "[[thread_position"],
                 Language::Wgsl => &[],
@@ -341,6 +343,49 @@ fn translations_are_libraries_that_compile_inside_a_host_shader() {
                 }
             }
         }
+    }
+}
+
+#[test]
+fn the_glsl_es_translation_compiles_as_a_webgl2_fragment_shader() {
+    // `--shader glsl-es`: GLSL ES 3.00 with its #version and precision lines first, for
+    // three.js's ShaderMaterial / RawShaderMaterial; every rung, and the gltf rung's threejs
+    // variant
+    let gltf = "model = 'gltf'\nkd = [0.5, 0.3, 0.2]\nmetallic = 0.4\nroughness = 0.35\n\
+                anisotropy_strength = 0.6\nsheen = 0.4\nfibre_azimuth_deg = 30";
+    let threejs = format!("{gltf}\ngltf_variant = 'threejs'");
+    let mut rungs = RUNGS.to_vec();
+    rungs.extend([("gltf", gltf), ("gltf, threejs", threejs.as_str())]);
+    for (name, text) in rungs {
+        let (id, p) = params(text);
+        let wgsl = shader::wgsl(id, &p, &[]).unwrap();
+        let t = shader::translate(&wgsl, Language::GlslEs).unwrap();
+        assert!(t.starts_with(shader::GLSL_ES_PRELUDE), "{name}");
+        let c = code(&t);
+        for bad in ["void main", "layout(", "_vs2fs", "_fs2p", "buffer "] {
+            assert!(!c.contains(bad), "{name}: has {bad}");
+        }
+        let Some(glslang) = glslang() else { continue };
+        let dir = tempfile::tempdir().unwrap();
+        let f = dir.path().join("host.frag");
+        std::fs::write(
+            &f,
+            format!(
+                "{t}\nin vec3 l;\nout vec4 colour;\n\
+                 void main() {{ vec3 n = vec3(0.0, 0.0, 1.0); vec3 tt = vec3(1.0, 0.0, 0.0);\n\
+                 colour = vec4(fibrefit_brdf(l, n, n, tt) + fibrefit_brdf_at(l, n, n, tt, 0.5, 0.1), 1.0); }}\n"
+            ),
+        )
+        .unwrap();
+        let out = std::process::Command::new(glslang)
+            .arg(&f)
+            .output()
+            .unwrap();
+        assert!(
+            out.status.success(),
+            "{name}: glslang rejects the GLSL ES: {}",
+            String::from_utf8_lossy(&out.stdout)
+        );
     }
 }
 

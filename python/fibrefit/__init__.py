@@ -410,6 +410,7 @@ def fit(
     maps: Optional[PathLike] = None,
     progress: bool = False,
     threads: Optional[int] = None,
+    gltf_variant: Optional[str] = None,
     stride: Optional[int] = None,
     fraction: Optional[float] = None,
     subsample_seed: Optional[int] = None,
@@ -438,7 +439,10 @@ def fit(
     ``"auto"``), ``False`` leaves it out (``--no-fuzz``), ``None`` the config's or the default
     (``"auto"`` tries each rung without and with it); ``maps``: a directory for per-texel maps
     (captures; written by :meth:`Result.to_json`); ``progress``: progress bars on stderr;
-    ``threads``: worker threads (``None``: one per core, or ``RAYON_NUM_THREADS``). The loading
+    ``threads``: worker threads (``None``: one per core, or ``RAYON_NUM_THREADS``);
+    ``gltf_variant``: the ``gltf`` rung's, ``"khronos"`` (the Khronos specification) or
+    ``"threejs"`` (what stock three.js r187 renders; ``--gltf-variant``), ``None`` the config's
+    ``knobs.gltf_variant`` or ``"khronos"``. The loading
     flags as :func:`load_data`'s; ``stride``, ``fraction``, ``columns`` and ``angles`` merged
     with the config's as the command line merges them (the library does it, once for both).
     """
@@ -471,6 +475,7 @@ def fit(
             maps=_path(maps),
             progress=progress,
             threads=threads,
+            gltf_variant=gltf_variant,
             stride=stride,
             fraction=fraction,
             subsample_seed=subsample_seed,

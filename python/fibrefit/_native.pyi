@@ -80,6 +80,7 @@ def fit(
     maps: Optional[str] = None,
     progress: bool = False,
     threads: Optional[int] = None,
+    gltf_variant: Optional[str] = None,
     stride: Optional[int] = None,
     fraction: Optional[float] = None,
     subsample_seed: Optional[int] = None,

@@ -550,12 +550,13 @@ impl FitResult {
 /// optionally `sigma` ((N,) or (N, C)). `config` a fit config TOML, `model` a rung id or "auto"
 /// (overrides the config's), `metric` (linear, log, cosine), `fuzz` (True: `--fuzz`; False:
 /// `--no-fuzz`; None: the config's), `maps` a directory for per-texel maps (captures),
-/// `progress` (bars on stderr), `threads` (worker threads; None: one per core), the loading
+/// `progress` (bars on stderr), `threads` (worker threads; None: one per core), `gltf_variant`
+/// (the gltf rung's: "khronos" or "threejs", as `--gltf-variant`), the loading
 /// flags as `load_data`'s (merged with the config's as the command line merges them).
 #[pyfunction]
 #[pyo3(signature = (
     data=None, config=None, model=None, *, table=None, l=None, v=None, values=None, sigma=None,
-    metric=None, fuzz=None, maps=None, progress=false, threads=None,
+    metric=None, fuzz=None, maps=None, progress=false, threads=None, gltf_variant=None,
     stride=None, fraction=None, subsample_seed=None, directions=None, direction_seed=None,
     max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None, angles=None
 ))]
@@ -575,6 +576,7 @@ fn fit(
     maps: Option<PathBuf>,
     progress: bool,
     threads: Option<usize>,
+    gltf_variant: Option<String>,
     stride: Option<usize>,
     fraction: Option<f64>,
     subsample_seed: Option<u64>,
@@ -608,6 +610,7 @@ fn fit(
             None => Maps::None,
         },
         progress: fibrefit::Progress::new(!progress),
+        gltf_variant,
     };
     let source = FitSource::of(data, table, [l, v, values, sigma])?;
     let request = py

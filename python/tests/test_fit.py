@@ -187,3 +187,22 @@ def test_fit_from_memory_names_what_is_wrong():
         fibrefit.fit(df, model="lambert")
     with pytest.raises(fibrefit.FibrefitError, match="--threads 0"):
         fibrefit.fit(df.iloc[:1], model="lambert", threads=0)
+
+
+def test_fit_gltf_variant_threejs_reaches_the_result(tmp_path):
+    # the gltf rung's threejs variant (three.js r187's BRDF): the keyword as --gltf-variant
+    data = DATA / "silk" / "gonio.csv"
+    r = fibrefit.fit(data, model="gltf", gltf_variant="threejs")
+    out = tmp_path / "fit.json"
+    r.to_json(out)
+    j = json.loads(out.read_text())
+    assert j["knobs"]["gltf_variant"] == "threejs"
+    assert "metallic" in j["parameters"]
+    # the default is the Khronos specification's
+    k = fibrefit.fit(data, model="gltf")
+    k.to_json(tmp_path / "k.json")
+    assert json.loads((tmp_path / "k.json").read_text())["knobs"]["gltf_variant"] == "khronos"
+    with pytest.raises(fibrefit.FibrefitError, match="--gltf-variant: unknown gltf variant"):
+        fibrefit.fit(data, model="gltf", gltf_variant="three")
+    with pytest.raises(fibrefit.FibrefitError, match="knob of the gltf rung"):
+        fibrefit.fit(data, model="ward", gltf_variant="threejs")

@@ -418,6 +418,8 @@ fn glb_preview(
             "tangent": tangent_words,
             "anisotropy_direction": "across the fibres: anisotropyRotation = the fibres' angle from the TANGENT + 90 deg",
             "sheen_roughness": "the Charlie alpha is sheenRoughnessFactor^2 (the Khronos Sample Viewer and three.js)",
+            "gltf_variant": params.gltf.variant.as_str(),
+            "exact_in": params.gltf.variant.exact_in(),
             "source": lines,
         });
         let mut tx = None;

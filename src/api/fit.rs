@@ -122,6 +122,9 @@ pub struct FitOptions {
     pub maps: Maps,
     /// Where progress lines, bars, notes and warnings go.
     pub progress: crate::progress::Progress,
+    /// The `gltf` rung's variant (`khronos` or `threejs`), overriding the config's
+    /// `knobs.gltf_variant` ([`FitConfig::apply_gltf_variant`]).
+    pub gltf_variant: Option<String>,
 }
 
 impl FitOptions {
@@ -129,13 +132,25 @@ impl FitOptions {
     /// file or a rung's defaults, with `model`, `metric` and `fuzz` over it) and the loading
     /// options ([`LoadFlags::options_for`] the configuration). Not yet [`check`]ed.
     pub fn request(&self, data: &Path) -> Result<FitRequest> {
-        let config = configure(
+        let mut config = configure(
             self.config.as_deref(),
             self.model.as_deref(),
             self.metric.as_deref(),
             self.fuzz,
             data,
         )?;
+        let variant = self
+            .gltf_variant
+            .as_deref()
+            .map(|v| {
+                v.parse()
+                    .map_err(|e: String| anyhow!("--gltf-variant: {e}"))
+            })
+            .transpose()?;
+        config.apply_gltf_variant(variant)?;
+        config
+            .validate()
+            .map_err(|e| anyhow!("--gltf-variant: {e}"))?;
         let load = self.load.options_for(&config)?;
         Ok(FitRequest {
             data: data.to_path_buf(),

@@ -21,6 +21,8 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
   metallic, roughness, anisotropy_strength, specular_factor, ior, sheen, sheen_roughness
                      gltf: glTF 2.0 metallic-roughness with KHR sheen (grey), anisotropy
                      (across the fibres), specular and ior; kd is the base colour
+  gltf_variant       gltf: khronos (the specification, default) or threejs (what three.js
+                     r187 renders: docs/web.md); a result's knobs.gltf_variant
   azimuth_spread_deg spread of the fibre directions around psi, [0, 180] degrees
                      (default 0: parallel; 180: isotropic, felt); fibre rungs
   azimuth_nodes      nodes of the spread's quadrature N_psi            (default 16)

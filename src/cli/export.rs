@@ -1,4 +1,4 @@
-//! `fibrefit export RESULT.json --shader wgsl|glsl|hlsl|msl --out FILE` and
+//! `fibrefit export RESULT.json --shader wgsl|glsl|glsl-es|hlsl|msl --out FILE` and
 //! `--gltf FILE.glb [--object ...]`: the fitted model as shader code a renderer runs, and as a
 //! glTF material for engines without custom shaders.
 
@@ -42,7 +42,9 @@ pub struct ExportArgs {
     /// Model id [default: the file's `model`]
     #[arg(long, value_name = "ID")]
     pub model: Option<String>,
-    /// Write the model as shader source in LANG: wgsl, glsl, hlsl or msl (needs --out)
+    /// Write the model as shader source in LANG: wgsl, glsl (4.50 core), glsl-es (3.00, WebGL2:
+    /// three.js's ShaderMaterial; its #version and precision lines first), hlsl or msl (needs
+    /// --out)
     #[arg(long, value_name = "LANG", requires = "out")]
     pub shader: Option<String>,
     /// The shader file to write

@@ -19,7 +19,7 @@ The config (TOML) names the rung (`model`), each parameter's `value`, `min`, `ma
 the residual `metric` (linear: additive noise, under a decade of range; log: ln(f + eps),
 eps = 1 % of the median, for measured BRDFs spanning decades; cosine: errors in shaded
 intensity), [knobs] (quadrature_order, histogram_bins,
-stride, fraction, topology_map), [optimizer] (max_iterations, tolerance, global_candidates
+stride, fraction, topology_map, gltf_variant), [optimizer] (max_iterations, tolerance, global_candidates
 [default 32 + 24 per free shape parameter], global_subsample [600], separable), `starts` [6]
 and `seed`, and how the lab's tables are written: [columns] (ours = \"theirs\", as --columns)
 and [data] angles = \"rad\" (as --angles; the flags override). Examples: configs/fit_*.toml.
@@ -112,6 +112,11 @@ pub struct FitArgs {
     /// arrays sharing a machine, jobs x threads = cores
     #[arg(long, value_name = "N")]
     pub threads: Option<usize>,
+    /// The gltf rung's variant: khronos (the Khronos specification and Sample Viewer) or
+    /// threejs (what stock three.js r187 renders; docs/web.md) [default:
+    /// the config's knobs.gltf_variant, else khronos]
+    #[arg(long, value_name = "khronos|threejs")]
+    pub gltf_variant: Option<String>,
     #[command(flatten)]
     pub load: LoadArgs,
 }
@@ -145,6 +150,7 @@ fn options(args: &FitArgs) -> Result<FitOptions> {
             (None, false) => Maps::None,
         },
         progress: crate::progress::Progress::new(args.quiet || args.json),
+        gltf_variant: args.gltf_variant.clone(),
     })
 }
 

@@ -235,6 +235,11 @@ pub fn result_from_value(
         topology_map: knob("topology_map")
             .and_then(|x| x.as_str())
             .map(PathBuf::from),
+        gltf_variant: match knob("gltf_variant") {
+            Some(x) => serde_json::from_value(x.clone())
+                .map_err(|_| at(&format!("knobs.gltf_variant = {x}: expected \"khronos\" or \"threejs\"")))?,
+            None => Default::default(),
+        },
         ..FitKnobs::default()
     };
     let cfg = FitConfig {
@@ -317,10 +322,12 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
             "histogram_bins",
             "azimuth_nodes",
             "topology_map",
+            "gltf_variant",
         ] {
             let used = model.is_none_or(|id| crate::model::params::uses(id, key));
             if let Some(x) = k.get(key).filter(|_| used) {
-                if key != "topology_map" && x.as_u64().is_none() {
+                let named = ["topology_map", "gltf_variant"].contains(&key);
+                if !named && x.as_u64().is_none() {
                     bail!("knobs.{key} = {x}: expected a whole number >= 1");
                 }
                 flat.insert(key.into(), x.clone());
@@ -464,6 +471,10 @@ pub struct Knobs {
     /// Why the fit used its metric (the data, the config, `--metric`).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub metric_reason: Option<String>,
+    /// The `gltf` rung's variant (`khronos` or `threejs`; only in `gltf` results; absent:
+    /// khronos).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gltf_variant: Option<String>,
 }
 
 #[derive(Clone, Debug, Serialize, Deserialize)]
@@ -658,6 +669,8 @@ pub fn knobs(cfg: &FitConfig, stride: usize, fraction: f64) -> Knobs {
         starts: cfg.starts,
         seed: cfg.seed,
         metric_reason: cfg.metric_reason.clone(),
+        gltf_variant: (cfg.model == crate::fit::config::ModelChoice::Rung(ModelId::Gltf))
+            .then(|| cfg.knobs.gltf_variant.to_string()),
     }
 }
 

@@ -45,6 +45,8 @@ pub struct ParamSet {
     /// No `substrate_albedo` listed: the substrate shares `kd` (the model default).
     pub substrate_tied: bool,
     pub channels: usize,
+    /// The `gltf` rung's variant (`knobs.gltf_variant`; the default for other rungs).
+    pub gltf_variant: crate::model::rungs::gltf::GltfVariant,
 }
 
 impl ParamSet {
@@ -86,6 +88,7 @@ impl ParamSet {
             albedos,
             substrate_tied,
             channels,
+            gltf_variant: cfg.knobs.gltf_variant,
         })
     }
 

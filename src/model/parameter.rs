@@ -48,6 +48,7 @@ pub enum Param {
     Ior,
     Sheen,
     SheenRoughness,
+    GltfVariant,
 }
 
 /// What a rung can do, declared in its own file ([`super::rung::Rung::abilities`]). A
@@ -242,7 +243,7 @@ use Kind::{Albedo as A, Knob, Shape};
 use Reader::{FuzzLayer, Rung as R};
 
 /// Every parameter and knob, in the order rungs list them (a fit's parameters keep this order).
-pub const TABLE: [ParamInfo; 32] = [
+pub const TABLE: [ParamInfo; 33] = [
     row(
         Param::RhoD,
         "rho_d",
@@ -573,6 +574,14 @@ pub const TABLE: [ParamInfo; 32] = [
     .absent(0.5)
     .start(At(0.5))
     .range(At(0.3), At(1.0)),
+    row(
+        Param::GltfVariant,
+        "gltf_variant",
+        "name",
+        "whose BRDF: khronos (the specification, default) or threejs (three.js r187)",
+        Knob,
+        R(GltfMaterial),
+    ),
 ];
 
 impl Param {

@@ -3,6 +3,7 @@
 
 use super::lambert::Preview;
 use super::parameter::{Ability, Param};
+use super::rungs::gltf::{threejs, GltfVariant};
 use super::topology::{max_elevation, max_height, Topology};
 use super::{Albedos, ModelId};
 use anyhow::{anyhow, bail, Result};
@@ -120,6 +121,9 @@ pub struct RawParams {
     /// `gltf`: KHR_materials_sheen roughness.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sheen_roughness: Option<f64>,
+    /// `gltf`: whose BRDF (`khronos`, the default, or `threejs`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub gltf_variant: Option<GltfVariant>,
 }
 
 pub const DEFAULT_QUADRATURE_ORDER: usize = 16;
@@ -215,6 +219,7 @@ impl RawParams {
             Param::Ior => self.ior.is_some(),
             Param::Sheen => self.sheen.is_some(),
             Param::SheenRoughness => self.sheen_roughness.is_some(),
+            Param::GltfVariant => self.gltf_variant.is_some(),
         }
     }
 }
@@ -238,7 +243,7 @@ impl ModelParams {
         let (mut albedos, alpha_x, alpha_y) = if id.has(Ability::WardLobe) {
             ward_albedos(raw)?
         } else if id.has(Ability::GltfMaterial) {
-            (gltf_albedos(raw)?, 1.0, 1.0)
+            (gltf_albedos(raw, raw.gltf_variant.unwrap_or_default())?, 1.0, 1.0)
         } else {
             (fibre_albedos(raw, id)?, 1.0, 1.0)
         };
@@ -313,6 +318,7 @@ fn unused_warnings(raw: &RawParams, id: ModelId) -> Vec<String> {
         Ior,
         Sheen,
         SheenRoughness,
+        GltfVariant,
     ];
     for p in order {
         if raw.gives(p) && !id.reads(p) {
@@ -459,8 +465,9 @@ fn ward_albedos(raw: &RawParams) -> Result<(Albedos, f64, f64)> {
 }
 
 /// The `gltf` rung's albedos: the base colour `kd` (diffuse column) and the layers' weight
-/// (specular column), 1 as glTF defines the material.
-fn gltf_albedos(raw: &RawParams) -> Result<Albedos> {
+/// (specular column), 1 as glTF defines the material; for the `threejs` variant, the substrate
+/// column (its c^2 term, `rungs::gltf::threejs`) takes kd^2.
+fn gltf_albedos(raw: &RawParams, variant: GltfVariant) -> Result<Albedos> {
     let kd = raw
         .kd
         .ok_or_else(|| anyhow!("model `gltf` needs `kd` (the base colour)"))?;
@@ -469,10 +476,14 @@ fn gltf_albedos(raw: &RawParams) -> Result<Albedos> {
     for c in layers.channels() {
         check_range(Param::GltfLayers, c, 1.0, 1.0)?;
     }
+    let substrate = match variant {
+        GltfVariant::Khronos => [0.0; 3],
+        GltfVariant::Threejs => kd.channels().map(|c| c * c),
+    };
     Ok(Albedos {
         diffuse: kd.channels(),
         specular: [1.0; 3],
-        substrate: [0.0; 3],
+        substrate,
         fuzz: [0.0; 3],
         rgb: kd.is_rgb(),
     })
@@ -496,6 +507,8 @@ pub struct GltfShape {
     pub sheen: f64,
     /// KHR_materials_sheen roughness.
     pub sheen_roughness: f64,
+    /// Whose BRDF (`gltf_variant`).
+    pub variant: GltfVariant,
 }
 
 impl Default for GltfShape {
@@ -516,6 +529,26 @@ impl GltfShape {
             ior: value(Param::Ior),
             sheen: value(Param::Sheen),
             sheen_roughness: value(Param::SheenRoughness),
+            variant: GltfVariant::Khronos,
+        }
+    }
+
+    /// This shape with variant `v`.
+    pub fn with_variant(self, variant: GltfVariant) -> Self {
+        Self { variant, ..self }
+    }
+
+    /// The roughness and sheen roughness the variant evaluates with: as given (Khronos), or
+    /// three.js's (`lights_physical_fragment`): max(roughness, 0.045) (a flat mesh adds no
+    /// normal variation) and clamp(sheen roughness, 1e-4, 1).
+    pub fn evaluated_roughnesses(&self) -> (f64, f64) {
+        match self.variant {
+            GltfVariant::Khronos => (self.roughness, self.sheen_roughness),
+            GltfVariant::Threejs => (
+                self.roughness.clamp(threejs::ROUGHNESS_FLOOR, 1.0),
+                self.sheen_roughness
+                    .clamp(threejs::SHEEN_ROUGHNESS_FLOOR, 1.0),
+            ),
         }
     }
 
@@ -546,7 +579,7 @@ impl GltfShape {
         });
         match err {
             Some(e) => Err(e),
-            None => Ok(shape),
+            None => Ok(shape.with_variant(raw.gltf_variant.unwrap_or_default())),
         }
     }
 }

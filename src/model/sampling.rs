@@ -262,7 +262,9 @@ impl Sampler {
             },
             LobeSampling::Ggx => {
                 let g = &p.gltf;
-                let (at, ab) = super::rungs::gltf::ggx_alphas(g.roughness, g.anisotropy);
+                // the lobe the variant evaluates (three.js floors the roughness)
+                let (roughness, _) = g.evaluated_roughnesses();
+                let (at, ab) = super::rungs::gltf::ggx_alphas(roughness, g.anisotropy);
                 Lobe::Ggx {
                     at,
                     ab,

@@ -131,6 +131,66 @@ function describe(m) {
   };
 }
 
+// Render `scene` seen from each pair's view (orthographic, along v) after `setLight(l)`, into the
+// float target; the mean RGB of the pixels and how many the scene covers, per pair.
+function measure(scene, pairs, setLight) {
+  const camera = new THREE.OrthographicCamera(-0.05, 0.05, 0.05, -0.05, 0.1, 100);
+  const out = [];
+  const px = new Float32Array(SIZE * SIZE * 4);
+  for (const [ti, pi, to, po] of pairs) {
+    const l = dir(ti, pi), v = dir(to, po);
+    setLight(l, v);
+    camera.position.copy(v).multiplyScalar(10);
+    camera.up.set(0, 0, 1);
+    if (Math.abs(v.z) > 0.99) camera.up.set(0, 1, 0);
+    camera.lookAt(0, 0, 0);
+    camera.updateMatrixWorld();
+    renderer.setRenderTarget(target);
+    renderer.setClearColor(0x000000, 0);
+    renderer.clear();
+    renderer.render(scene, camera);
+    renderer.readRenderTargetPixels(target, 0, 0, SIZE, SIZE, px);
+    const rgb = [0, 0, 0];
+    let covered = 0;
+    for (let i = 0; i < SIZE * SIZE; i++) {
+      if (px[4 * i + 3] > 0) covered++;
+      for (let c = 0; c < 3; c++) rgb[c] += px[4 * i + c] / (SIZE * SIZE);
+    }
+    out.push({ rgb, covered });
+  }
+  renderer.setRenderTarget(null);
+  return out;
+}
+
+// docs/web.md's ShaderMaterial recipe: `fibrefit export --shader glsl-es` (its first three lines,
+// #version and precisions, left out: three.js writes its own with glslVersion GLSL3) before a
+// main that shades a flat swatch (n = z, the fibres at psiDeg from x) under a light of E from L.
+window.fibrefitShaderRender = async function (lib, pairs, E, psiDeg) {
+  const psi = THREE.MathUtils.degToRad(psiDeg);
+  const material = new THREE.ShaderMaterial({
+    glslVersion: THREE.GLSL3,
+    uniforms: {
+      L: { value: new THREE.Vector3() }, V: { value: new THREE.Vector3() },
+      T: { value: new THREE.Vector3(Math.cos(psi), Math.sin(psi), 0) }, E: { value: E },
+    },
+    vertexShader: 'void main() { gl_Position = projectionMatrix * modelViewMatrix * vec4(position, 1.0); }',
+    fragmentShader: lib.split('\n').slice(3).join('\n') + `
+      uniform vec3 L; uniform vec3 V; uniform vec3 T; uniform float E;
+      out vec4 colour;
+      void main() {
+        vec3 n = vec3(0.0, 0.0, 1.0);
+        colour = vec4(fibrefit_brdf(L, V, n, T) * E * max(dot(n, L), 0.0), 1.0);
+      }`,
+  });
+  const scene = new THREE.Scene();
+  scene.add(new THREE.Mesh(new THREE.PlaneGeometry(1, 1), material));
+  const values = measure(scene, pairs, (l, v) => {
+    material.uniforms.L.value.copy(l);
+    material.uniforms.V.value.copy(v);
+  });
+  return { revision: THREE.REVISION, values };
+};
+
 window.fibrefitRender = async function (url, pairs, E, variant, sheenE) {
   const gltf = await load(url);
   const scene = new THREE.Scene();
@@ -159,33 +219,11 @@ window.fibrefitRender = async function (url, pairs, E, variant, sheenE) {
   }
   const light = new THREE.DirectionalLight(0xffffff, E);
   scene.add(light);
-  const camera = new THREE.OrthographicCamera(-0.05, 0.05, 0.05, -0.05, 0.1, 100);
-  const out = [];
-  const px = new Float32Array(SIZE * SIZE * 4);
-  for (const [ti, pi, to, po] of pairs) {
-    const l = dir(ti, pi), v = dir(to, po);
+  const out = measure(scene, pairs, (l) => {
     light.position.copy(l);
     light.target.position.set(0, 0, 0);
     light.target.updateMatrixWorld();
-    camera.position.copy(v).multiplyScalar(10);
-    camera.up.set(0, 0, 1);
-    if (Math.abs(v.z) > 0.99) camera.up.set(0, 1, 0);
-    camera.lookAt(0, 0, 0);
-    camera.updateMatrixWorld();
-    renderer.setRenderTarget(target);
-    renderer.setClearColor(0x000000, 0);
-    renderer.clear();
-    renderer.render(scene, camera);
-    renderer.readRenderTargetPixels(target, 0, 0, SIZE, SIZE, px);
-    const rgb = [0, 0, 0];
-    let covered = 0;
-    for (let i = 0; i < SIZE * SIZE; i++) {
-      if (px[4 * i + 3] > 0) covered++;
-      for (let c = 0; c < 3; c++) rgb[c] += px[4 * i + c] / (SIZE * SIZE);
-    }
-    out.push({ rgb, covered });
-  }
-  renderer.setRenderTarget(null);
+  });
   const d = describe(material);
   d.tangents = hasTangents;
   return { revision: THREE.REVISION, material: d, values: out };

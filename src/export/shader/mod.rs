@@ -25,6 +25,8 @@ const MASTER: &str = include_str!("fibrefit.wgsl");
 pub enum Language {
     Wgsl,
     Glsl,
+    /// GLSL ES 3.00 (WebGL2: three.js's `ShaderMaterial`), `#version` and precision lines first.
+    GlslEs,
     Hlsl,
     Msl,
 }
@@ -35,11 +37,12 @@ impl std::str::FromStr for Language {
         Ok(match s {
             "wgsl" => Language::Wgsl,
             "glsl" => Language::Glsl,
+            "glsl-es" => Language::GlslEs,
             "hlsl" => Language::Hlsl,
             "msl" => Language::Msl,
             _ => {
                 return Err(format!(
-                    "unknown shader language '{s}'; expected one of: wgsl, glsl, hlsl, msl"
+                    "unknown shader language '{s}'; expected one of: wgsl, glsl, glsl-es, hlsl, msl"
                 ))
             }
         })
@@ -51,6 +54,7 @@ impl Language {
         match self {
             Language::Wgsl => "wgsl",
             Language::Glsl => "glsl",
+            Language::GlslEs => "glsl-es",
             Language::Hlsl => "hlsl",
             Language::Msl => "msl",
         }
@@ -106,7 +110,8 @@ struct FibrefitParams {
     // x: base height H0, y: map scale s, z: H_max = sqrt(d^2 - 1) (fibre radii); w unused
     topology: vec4<f32>,
     // the gltf rung (zeros for the others): [0] metallic, GGX alpha along t, alpha along b (the anisotropy direction),
-    // specular factor; [1] dielectric F0 from the ior, sheen, sheen alpha, unused; [2..] the
+    // specular factor; [1] dielectric F0 from the ior, sheen, sheen alpha, variant (0 khronos,
+    // 1 threejs: three.js r187's BRDF, whose base colour squared's column is z); [2..] the
     // sheen's directional albedo E at N.v = k / 31, k = 0..31, four a row
     gltf: array<vec4<f32>, FIBREFIT_GLTF_ROWS>,
     // the spot's height distribution: x height H (fibre radii), y weight (summing to 1)
@@ -532,6 +537,7 @@ pub fn translate(wgsl: &str, lang: Language) -> Result<String> {
                 strip_glsl_anchor(&out)?
             )
         }
+        Language::GlslEs => return glsl_es(wgsl, &header),
         Language::Hlsl => {
             let (module, info) = validate(wgsl)?;
             let options = naga::back::hlsl::Options::default();
@@ -552,6 +558,71 @@ pub fn translate(wgsl: &str, lang: Language) -> Result<String> {
         Language::Wgsl => unreachable!(),
     };
     Ok(format!("{header}{body}"))
+}
+
+/// A fragment entry point calling every public function, for GLSL ES 3.00 (which has no compute
+/// shaders); removed from the translation afterwards.
+const FRAGMENT_ANCHOR: &str = "
+@fragment
+fn fibrefit_anchor_main(@location(0) a: vec4<f32>) -> @location(0) vec4<f32> {
+    let x = a.xyz;
+    let h = a.w;
+    return vec4<f32>(fibrefit_brdf(x, x, x, x) + fibrefit_brdf_at(x, x, x, x, h, h), h)
+        + fibrefit_basis(x, x, x, x) + fibrefit_basis_at(x, x, x, x, h, h)
+        + vec4<f32>(fibrefit_height_from_map(h));
+}
+";
+
+/// The first lines of a GLSL ES export: a WebGL2 fragment shader's `#version` and precisions
+/// (three.js's `ShaderMaterial` with `glslVersion: THREE.GLSL3` writes its own: leave these out
+/// there, [`GLSL_ES_PRELUDE`]'s line count says how many).
+pub const GLSL_ES_PRELUDE: &str = "#version 300 es\nprecision highp float;\nprecision highp int;\n";
+
+/// `wgsl` as GLSL ES 3.00 (WebGL2), validated by naga: [`GLSL_ES_PRELUDE`], then `header`
+/// (comments), then the library, without the anchor.
+fn glsl_es(wgsl: &str, header: &str) -> Result<String> {
+    let (module, info) = validate(&format!("{wgsl}{FRAGMENT_ANCHOR}"))?;
+    let options = naga::back::glsl::Options {
+        version: naga::back::glsl::Version::Embedded {
+            version: 300,
+            is_webgl: true,
+        },
+        ..Default::default()
+    };
+    let pipeline = naga::back::glsl::PipelineOptions {
+        shader_stage: naga::ShaderStage::Fragment,
+        entry_point: "fibrefit_anchor_main".into(),
+        multiview: None,
+    };
+    let mut out = String::new();
+    let mut w = naga::back::glsl::Writer::new(
+        &mut out,
+        &module,
+        &info,
+        &options,
+        &pipeline,
+        naga::proc::BoundsCheckPolicies::default(),
+    )
+    .map_err(|e| anyhow!("internal: GLSL ES translation: {e}"))?;
+    w.write()
+        .map_err(|e| anyhow!("internal: GLSL ES translation: {e}"))?;
+    // the anchor's varyings and output, and the writer's own version and precision lines
+    let kept: String = out
+        .lines()
+        .filter(|l| {
+            !(l.starts_with("precision ") || l.starts_with("smooth in ") || l.starts_with("in "))
+        })
+        .map(|l| format!("{l}\n"))
+        .collect();
+    let body = strip_glsl_anchor(&kept)?;
+    if body.contains("_vs2fs") || body.contains("_fs2p") {
+        bail!("internal: the GLSL ES translation still refers to the anchor's varyings");
+    }
+    Ok(format!(
+        "{GLSL_ES_PRELUDE}{header}// GLSL ES 3.00 (WebGL2). The first three lines are a fragment shader's \
+         #version and precisions: leave them out where the host writes its own (three.js's \
+         ShaderMaterial with glslVersion THREE.GLSL3).\n{body}"
+    ))
 }
 
 /// The GLSL writer's output without the anchor: no `#version`/`#extension` lines, no `layout`

@@ -3,6 +3,7 @@
 //! outside their bounds are errors that name the key.
 
 use crate::model::params::Albedo;
+use crate::model::rungs::gltf::GltfVariant;
 use crate::model::{ModelId, Param};
 use anyhow::{anyhow, bail, Result};
 use serde::{Deserialize, Serialize};
@@ -311,6 +312,57 @@ impl FitConfig {
                     });
             }
         }
+    }
+
+    /// The `gltf` rung's variant: `variant` when given (`--gltf-variant`, the Python `fit`'s
+    /// `gltf_variant`), else the config's `knobs.gltf_variant`. `threejs` fits only the `gltf`
+    /// rung. three.js tints its direct specular's multiple-scattering factor with F0 =
+    /// mix(F0, base colour, metallic), so its BRDF is quadratic in the base colour once
+    /// metallic > 0: the global fit solves that exactly (`FitProblem::solve_albedos`), the
+    /// per-texel maps' linear solves do not, so with `[maps]` a threejs fit holds `metallic` at 0
+    /// (a config giving it another value, or bounds, is refused).
+    pub fn apply_gltf_variant(&mut self, variant: Option<GltfVariant>) -> Result<()> {
+        if let Some(v) = variant {
+            self.knobs.gltf_variant = v;
+        }
+        let v = self.knobs.gltf_variant;
+        if v.is_khronos() {
+            return Ok(());
+        }
+        match self.model {
+            ModelChoice::Rung(ModelId::Gltf) => {}
+            ModelChoice::Auto => bail!(
+                "gltf_variant = {v}: fit it with --model gltf (auto compares the rungs with the \
+                 gltf rung as the Khronos specification defines it)"
+            ),
+            ModelChoice::Rung(id) => {
+                bail!("gltf_variant = {v} is a knob of the gltf rung; model `{id}` has no variant")
+            }
+        }
+        if self.maps.requested().is_empty() {
+            return Ok(());
+        }
+        let name = Param::Metallic.name();
+        if let Some(e) = self.parameters.get(name) {
+            let nonzero = e.value.is_some_and(|a| a.channels() != [0.0; 3]);
+            if nonzero || e.min.is_some() || e.max.is_some() {
+                bail!(
+                    "parameters.{name}: gltf_variant = {v} with [maps] holds metallic at 0 (three.js's \
+                     BRDF is quadratic in the base colour once metallic > 0, and the per-texel \
+                     maps solve the base colour linearly); remove `{name}` from [parameters], the \
+                     maps, or fit the khronos variant"
+                );
+            }
+        }
+        self.parameters.insert(
+            name.to_string(),
+            ParamEntry {
+                value: Some(Albedo::Grey(0.0)),
+                vary: Some(false),
+                ..Default::default()
+            },
+        );
+        Ok(())
     }
 
     /// `--model id` over a config written for another rung: drop the parameters `id` lacks, with

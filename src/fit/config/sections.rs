@@ -2,6 +2,7 @@
 //! components, selection, and their defaults.
 
 use super::*;
+use crate::model::rungs::gltf::GltfVariant;
 
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -29,6 +30,10 @@ pub struct Knobs {
     /// the config file. Image captures carry their own.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub topology_map: Option<PathBuf>,
+    /// The `gltf` rung's variant: `khronos` (the specification, default) or `threejs` (what
+    /// three.js r187 renders; with `[maps]` its fits hold metallic at 0).
+    #[serde(default, skip_serializing_if = "GltfVariant::is_khronos")]
+    pub gltf_variant: GltfVariant,
 }
 
 /// Texels of a capture's global fit by default (8 images: 262 144 pixel values).
@@ -48,6 +53,7 @@ impl Default for Knobs {
             azimuth_nodes: default_azimuth_nodes(),
             fit_texels: default_fit_texels(),
             topology_map: None,
+            gltf_variant: GltfVariant::Khronos,
         }
     }
 }

@@ -108,6 +108,36 @@ pub fn component_index(c: Component) -> usize {
     }
 }
 
+/// The c in [lo, hi] minimising g(c) = S_yy - 2 c S_yA - 2 c^2 S_yQ + c^2 S_AA + 2 c^3 S_AQ
+/// + c^4 S_QQ (the sums `m` = [S_yA, S_yQ, S_AA, S_AQ, S_QQ]; S_yy drops out): the best of 64
+/// points, then Newton on g'(c) = 0 from it, kept when it lowers g within the bounds.
+pub fn quartic_argmin(m: [f64; 5], lo: f64, hi: f64) -> f64 {
+    let [ya, yq, aa, aq, qq] = m;
+    let g = |c: f64| -2.0 * c * ya + c * c * (aa - 2.0 * yq) + 2.0 * c * c * c * aq + c.powi(4) * qq;
+    let dg = |c: f64| -2.0 * ya + 2.0 * c * (aa - 2.0 * yq) + 6.0 * c * c * aq + 4.0 * c.powi(3) * qq;
+    let ddg = |c: f64| 2.0 * (aa - 2.0 * yq) + 12.0 * c * aq + 12.0 * c * c * qq;
+    let mut best = (0..=64)
+        .map(|k| lo + (hi - lo) * k as f64 / 64.0)
+        .min_by(|a, b| g(*a).total_cmp(&g(*b)))
+        .unwrap_or(lo);
+    for _ in 0..50 {
+        let h = ddg(best);
+        if !(h > 0.0) {
+            break;
+        }
+        let next = (best - dg(best) / h).clamp(lo, hi);
+        if !(g(next) <= g(best)) {
+            break;
+        }
+        let done = (next - best).abs() <= 1e-15 * best.abs().max(1.0);
+        best = next;
+        if done {
+            break;
+        }
+    }
+    best
+}
+
 /// How a problem evaluates its model and residuals: the metric, the knobs, and whether the
 /// albedos are solved for each shape (separable; never with the log metric).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -561,6 +591,104 @@ impl<'a> FitProblem<'a> {
         for a in set.albedos.iter_mut().filter(|a| a.grey && a.vary) {
             a.value = [a.value[0]; 3];
         }
+        self.solve_threejs_base_colour(cols, set);
+    }
+
+    /// The `gltf` rung's `threejs` variant with metallic > 0: f = kd A + B + kd^2 Q
+    /// (`model::rungs::gltf::threejs`), so the base colour's least squares is a quartic in kd
+    /// per channel (grey: over every channel), g(c) = sum w (y - c A - c^2 Q)^2 with y the data
+    /// less the fixed albedos' terms; minimised over its bounds exactly: the best of a grid of
+    /// 64, then Newton on g' = 0, against the bounds. A no-op for every other set (Q = 0).
+    fn solve_threejs_base_colour(&self, cols: &[Columns], set: &mut ParamSet) {
+        use crate::model::rungs::gltf::GltfVariant;
+        let (d, q) = (
+            component_index(Component::Diffuse),
+            component_index(Component::Substrate),
+        );
+        let Some(kd) = set
+            .albedos
+            .iter()
+            .position(|a| a.component == Component::Diffuse && a.vary)
+        else {
+            return;
+        };
+        if set.gltf_variant != GltfVariant::Threejs
+            || self.sample_maps.is_some()
+            || cols.iter().all(|c| c[q] == 0.0)
+        {
+            return;
+        }
+        let ch = self.channels();
+        // sums per channel: [yA, yQ, AA, AQ, QQ]
+        let mut sums = [[0.0f64; 5]; 3];
+        for (i, (s, (col, sc))) in self.samples.iter().zip(cols.iter().zip(&self.scale)).enumerate() {
+            for (c, m) in sums.iter_mut().enumerate().take(ch) {
+                let w = sc[c] * sc[c];
+                let mut y = s.value[c];
+                for (k, alb) in set.albedos.iter().enumerate() {
+                    if k != kd {
+                        y -= self.albedo_at(component_index(alb.component), i, c, alb.value[c])
+                            * col[component_index(alb.component)];
+                    }
+                }
+                let (a, qq) = (col[d], col[q]);
+                for (j, v) in [y * a, y * qq, a * a, a * qq, qq * qq].into_iter().enumerate() {
+                    m[j] += w * v;
+                }
+            }
+        }
+        let (lo, hi) = (set.albedos[kd].min, set.albedos[kd].max);
+        let solve = |m: [f64; 5]| quartic_argmin(m, lo, hi);
+        if set.albedos[kd].grey || ch == 1 {
+            let mut total = [0.0; 5];
+            for m in &sums[..ch] {
+                for j in 0..5 {
+                    total[j] += m[j];
+                }
+            }
+            set.albedos[kd].value = [solve(total); 3];
+        } else {
+            for (c, m) in sums.iter().enumerate().take(ch) {
+                set.albedos[kd].value[c] = solve(*m);
+            }
+        }
+    }
+
+    /// The `gltf` rung's `threejs` variant's term in the base colour squared, kd^2 times the
+    /// substrate column (`model::rungs::gltf::threejs`), for sample `i`, channel `c`; 0 for
+    /// every other set.
+    fn base_colour_squared(&self, set: &ParamSet, i: usize, c: usize, col: &Columns) -> f64 {
+        if set.gltf_variant != crate::model::rungs::gltf::GltfVariant::Threejs {
+            return 0.0;
+        }
+        let k = component_index(Component::Diffuse);
+        set.albedos
+            .iter()
+            .find(|a| a.component == Component::Diffuse)
+            .map_or(0.0, |a| {
+                let kd = self.albedo_at(k, i, c, a.value[c]);
+                kd * kd * col[component_index(Component::Substrate)]
+            })
+    }
+
+    /// d/d kd of [`FitProblem::base_colour_squared`] for albedo `ai`: 2 kd Q when `ai` is the
+    /// threejs variant's base colour, else 0.
+    fn base_colour_squared_slope(
+        &self,
+        set: &ParamSet,
+        ai: usize,
+        i: usize,
+        c: usize,
+        col: &Columns,
+    ) -> f64 {
+        let a = &set.albedos[ai];
+        if set.gltf_variant != crate::model::rungs::gltf::GltfVariant::Threejs
+            || a.component != Component::Diffuse
+        {
+            return 0.0;
+        }
+        let kd = self.albedo_at(component_index(Component::Diffuse), i, c, a.value[c]);
+        2.0 * kd * col[component_index(Component::Substrate)]
     }
 
     /// Residual vector (sample-major, channel-minor) for columns and albedos.
@@ -582,7 +710,8 @@ impl<'a> FitProblem<'a> {
                 let m: f64 = comps
                     .iter()
                     .map(|(k, a)| self.albedo_at(*k, i, c, a[c]) * col[*k])
-                    .sum();
+                    .sum::<f64>()
+                    + self.base_colour_squared(set, i, c, col);
                 r[i * ch + c] = metric_residual(self.metric, sc[c], self.log_floor[c], s, c, m);
             }
         }
@@ -603,7 +732,8 @@ impl<'a> FitProblem<'a> {
                             let k = component_index(a.component);
                             self.albedo_at(k, i, c, a.value[c]) * col[k]
                         })
-                        .sum();
+                        .sum::<f64>()
+                        + self.base_colour_squared(set, i, c, col);
                 }
                 v
             })
@@ -675,15 +805,16 @@ impl<'a> FitProblem<'a> {
             for (i, (s, col)) in self.samples.iter().zip(cols).enumerate() {
                 for c in channels.clone() {
                     let sc = self.scale[i][c];
+                    let col_c = col[comp] + self.base_colour_squared_slope(set, ai, i, c, col);
                     j[(i * ch + c, off + k)] = match self.metric {
-                        Metric::Linear | Metric::Cosine => sc * col[comp],
+                        Metric::Linear | Metric::Cosine => sc * col_c,
                         Metric::Log => {
                             let eps = self.log_floor[c];
                             let kk = match s.sigma {
                                 Some(sig) => (s.value[c].max(0.0) + eps) / sig[c],
                                 None => s.weight.sqrt(),
                             };
-                            kk * col[comp] / (values[i][c].max(0.0) + eps)
+                            kk * col_c / (values[i][c].max(0.0) + eps)
                         }
                     };
                 }

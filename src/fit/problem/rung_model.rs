@@ -46,7 +46,8 @@ fn aligned_model_for(
         quadrature_order,
         histogram_bins,
         topology: &topology,
-        gltf: crate::model::params::GltfShape::of(|p| set.shape_value(p)),
+        gltf: crate::model::params::GltfShape::of(|p| set.shape_value(p))
+            .with_variant(set.gltf_variant),
     })
 }
 
@@ -60,6 +61,10 @@ pub fn albedos_of(set: &ParamSet) -> model::Albedos {
                 a.diffuse = p.value;
                 if set.substrate_tied {
                     a.substrate = p.value;
+                }
+                if set.gltf_variant == crate::model::rungs::gltf::GltfVariant::Threejs {
+                    // the threejs variant's c^2 column
+                    a.substrate = p.value.map(|c| c * c);
                 }
             }
             Component::Specular => a.specular = p.value,

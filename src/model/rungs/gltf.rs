@@ -66,12 +66,80 @@
 //! every rung's albedos) and B is the specular column, whose weight `gltf_layers` is 1 (held:
 //! glTF has no such weight). Reciprocal (|V.H| = |L.H|, V and D symmetric, the scaling takes
 //! the min over both directions) and invariant under T -> -T (D and V are even in T).
+//!
+//! # Variants
+//!
+//! `gltf_variant` (a knob: `fibrefit fit --gltf-variant`, `knobs.gltf_variant` of a config and
+//! of a result, `gltf_variant` of a parameter file) chooses whose BRDF the rung is:
+//! [`GltfVariant::Khronos`] (the default), the above, what the specification and its Sample
+//! Viewer define; [`GltfVariant::Threejs`], what stock three.js r187 renders for a direct
+//! light ([`threejs`], its own module: five departures and a roughness floor, each measured in
+//! docs/web.md), so that a fit with it is exact in three.js.
 
 use crate::model::parameter::{Ability::*, Param};
 use crate::model::params::GltfShape;
 use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
 use crate::model::{Basis, DirectionPair, Local, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
+
+pub mod threejs;
+
+/// Whose BRDF the rung evaluates (the knob `gltf_variant`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum GltfVariant {
+    /// The Khronos specification and Sample Viewer (exact in engines that follow them).
+    #[default]
+    Khronos,
+    /// Stock three.js r187's `MeshPhysicalMaterial` under direct light ([`threejs`]).
+    Threejs,
+}
+
+impl GltfVariant {
+    /// Every variant, in the order help texts list them.
+    pub const ALL: [GltfVariant; 2] = [GltfVariant::Khronos, GltfVariant::Threejs];
+
+    /// The name configs, results and the command line use.
+    pub fn as_str(self) -> &'static str {
+        match self {
+            GltfVariant::Khronos => "khronos",
+            GltfVariant::Threejs => "threejs",
+        }
+    }
+
+    /// The engine a GLB of this variant's fit is exact in, in words.
+    pub fn exact_in(self) -> &'static str {
+        match self {
+            GltfVariant::Khronos => {
+                "engines that follow the Khronos specification (the glTF Sample Viewer)"
+            }
+            GltfVariant::Threejs => {
+                "three.js r187 (MeshPhysicalMaterial via GLTFLoader), direct lights"
+            }
+        }
+    }
+
+    /// Whether this is the default.
+    pub fn is_khronos(&self) -> bool {
+        *self == GltfVariant::Khronos
+    }
+}
+
+impl std::fmt::Display for GltfVariant {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.as_str())
+    }
+}
+
+impl std::str::FromStr for GltfVariant {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        GltfVariant::ALL
+            .into_iter()
+            .find(|v| v.as_str() == s)
+            .ok_or_else(|| format!("unknown gltf variant `{s}`: expected khronos or threejs"))
+    }
+}
 
 /// The rung.
 pub static RUNG: Rung = Rung {
@@ -87,7 +155,7 @@ pub static RUNG: Rung = Rung {
         cone_from: None,
     },
     shader: ShaderSection::Sections {
-        sections: &["gltf"],
+        sections: &["gltf", "gltf_threejs"],
         body: "    return fibrefit_gltf(l, v, p);\n",
     },
     cost: Cost::ClosedForm,
@@ -112,7 +180,10 @@ pub const SHEEN_E_NODES: usize = 32;
 /// sheen's albedo table).
 #[derive(Clone, Debug)]
 pub struct Gltf {
+    variant: GltfVariant,
     metallic: f64,
+    /// The roughness the variant evaluates with (three.js: floored at 0.045).
+    roughness: f64,
     /// GGX alpha along the fibres (T) and across them (B, the anisotropy direction).
     alpha_t: f64,
     alpha_b: f64,
@@ -120,6 +191,8 @@ pub struct Gltf {
     /// The dielectric's F0 from the IOR.
     f0: f64,
     sheen: f64,
+    /// The sheen roughness the variant evaluates with (three.js: at least 1e-4).
+    sheen_roughness: f64,
     /// The Charlie alpha = sheen_roughness^2.
     sheen_alpha: f64,
     /// E at cos theta = k / (SHEEN_E_NODES - 1).
@@ -129,26 +202,35 @@ pub struct Gltf {
 impl Gltf {
     /// The material of `g`.
     pub fn new(g: &GltfShape) -> Self {
-        let (alpha_t, alpha_b) = ggx_alphas(g.roughness, g.anisotropy);
-        let sheen_alpha = g.sheen_roughness * g.sheen_roughness;
+        let (roughness, sheen_roughness) = g.evaluated_roughnesses();
+        let (alpha_t, alpha_b) = ggx_alphas(roughness, g.anisotropy);
+        let sheen_alpha = sheen_roughness * sheen_roughness;
         Self {
+            variant: g.variant,
             metallic: g.metallic,
+            roughness,
             alpha_t,
             alpha_b,
             specular: g.specular,
             f0: ior_f0(g.ior),
             sheen: g.sheen,
+            sheen_roughness,
             sheen_alpha,
             sheen_e: sheen_albedo_table(sheen_alpha),
         }
     }
 
     /// The rows the shader export bakes for this material (`FibrefitParams::gltf`): metallic,
-    /// alpha along T, alpha along B, specular; F0, sheen, sheen alpha, 0; then the E table, four a row.
+    /// alpha along T, alpha along B, specular; F0, sheen, sheen alpha, the variant (0 khronos,
+    /// 1 threejs); then the E table, four a row.
     pub fn shader_rows(&self) -> Vec<[f64; 4]> {
+        let variant = match self.variant {
+            GltfVariant::Khronos => 0.0,
+            GltfVariant::Threejs => 1.0,
+        };
         let mut rows = vec![
             [self.metallic, self.alpha_t, self.alpha_b, self.specular],
-            [self.f0, self.sheen, self.sheen_alpha, 0.0],
+            [self.f0, self.sheen, self.sheen_alpha, variant],
         ];
         rows.extend(
             self.sheen_e
@@ -306,6 +388,16 @@ impl ShadingModel for Gltf {
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
+        match self.variant {
+            GltfVariant::Khronos => self.khronos_basis(pair),
+            GltfVariant::Threejs => threejs::basis(self, pair),
+        }
+    }
+}
+
+impl Gltf {
+    /// The Khronos form's basis (the module's equations).
+    fn khronos_basis(&self, pair: &DirectionPair) -> Basis {
         let (l, v) = (&pair.l, &pair.v);
         let h = half_vector(l, v);
         let vh = (v.t * h.t + v.b * h.b + v.n * h.n).abs();
@@ -355,6 +447,7 @@ mod tests {
             ior: 1.5,
             sheen: 0.0,
             sheen_roughness: 0.5,
+            variant: GltfVariant::Khronos,
         });
         let (l, v) = (dir(30.0, 10.0), dir(50.0, 200.0));
         let b = g.basis_above_horizon(&DirectionPair { l, v });
