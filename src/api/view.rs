@@ -72,6 +72,22 @@ pub fn prepare(req: &ViewRequest) -> Result<ViewPage> {
     })
 }
 
+/// Build the page of `req` and write it to `out` (atomically), never onto a file it was built
+/// from: `out` is checked against the result and `--data` before the work (and its folder for
+/// being writable), and against every file read after it. Nothing is written on an error.
+pub fn write(req: &ViewRequest, out: &Path) -> Result<ViewPage> {
+    let mut first = vec![req.result.clone()];
+    first.extend(req.data.iter().cloned());
+    // a first check before the work (given up: it writes nothing)
+    crate::export::atomic::Outputs::new(&first).file(out, "--out")?;
+    let page = prepare(req)?;
+    let mut outs = crate::export::atomic::Outputs::new(&page.inputs);
+    let id = outs.file(out, "--out")?;
+    outs.put(id, page.html.as_bytes())?;
+    outs.commit()?;
+    Ok(page)
+}
+
 /// The page of a fit in memory (`fit --report`): its result (as it will be written) and the
 /// samples it fitted.
 pub fn fit_page(

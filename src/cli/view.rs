@@ -2,7 +2,6 @@
 //! written to a file and/or served on 127.0.0.1 and opened in the browser.
 
 use crate::api::view::{self as view_api, ViewRequest};
-use crate::export::atomic::Outputs;
 use anyhow::{anyhow, Result};
 use clap::Args;
 use std::io::{Read, Write};
@@ -48,17 +47,10 @@ pub fn run(args: &ViewArgs) -> Result<()> {
         data: args.data.clone(),
         progress: crate::progress::Progress::new(args.quiet),
     };
-    // the output checked before the work: never an input, its folder writable
-    let mut outs = Outputs::new(&[args.result.clone()]);
-    let id = out.as_ref().map(|p| outs.file(p, "--out")).transpose()?;
-    let page = view_api::prepare(&req)?;
-    for input in &page.inputs {
-        outs.add_input(input);
-    }
-    if let Some(id) = id {
-        outs.put(id, page.html.as_bytes())?;
-    }
-    outs.commit()?;
+    let page = match &out {
+        Some(path) => view_api::write(&req, path)?,
+        None => view_api::prepare(&req)?,
+    };
     if !args.quiet {
         let (shown, note) = &page.comparison;
         let what = if *shown { "measured against fitted: shown" } else { "measured against fitted: not shown" };

@@ -237,10 +237,10 @@ pub fn result_summary(v: &Value) -> Value {
         "verdict": v["quality"]["verdict"],
         "warnings": v["warnings"],
         "statistics": {
-            "samples": stats["samples"],
             "rmse": stats["rmse"],
             "relative_rmse": stats["relative_rmse"],
             "reduced_chi_square": stats["reduced_chi_square"],
+            "residual_variance": stats["residual_variance"],
         },
         "data": v["data"],
         "floor": v["quality"]["floor"],

@@ -93,7 +93,9 @@
     } else {
       const st = R.statistics;
       sec.append(el('p', { id: 'verdict', text: `verdict: ${R.verdict ?? 'none stated'}` }),
-        el('p', { text: `${st.samples} samples of ${R.data?.file ?? '?'}; RMS error ${fmt(st.rmse)} 1/sr, relative ${fmt(100 * st.relative_rmse)} %` +
+        el('p', { text: `${R.data?.samples ?? '?'} samples of ${R.data?.file ?? '?'} (${R.data?.kind ?? '?'}); RMS error ${fmt(st.rmse)} 1/sr, relative ${fmt(100 * st.relative_rmse)} %` +
+          (st.reduced_chi_square != null ? `; reduced chi-square ${fmt(st.reduced_chi_square)}` : '') +
+          (st.residual_variance != null ? `; residual variance ${fmt(st.residual_variance)}` : '') +
           (R.floor ? `; held-out error ${fmt(R.floor.heldout_error)}, ${fmt(R.floor.ratio)} x the floor ${fmt(R.floor.floor)}` : '') }));
       const t = el('table', { id: 'parameters' }, el('tr', {}, ...['parameter', 'value', 'standard error', 'state'].map((h) => el('th', { text: h }))));
       for (const p of R.parameters) {
