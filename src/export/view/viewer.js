@@ -322,6 +322,11 @@ void main() { o = vec4(uColour, 1.0); }
     });
     drawLight();
     drawComparison();
+    // the controls follow the state (set from the hash or window.fibrefitView.set too)
+    objectSel.value = S.object;
+    expo.value = Math.log2(S.exposure / D.exposure);
+    fill.value = S.fill;
+    fibres.checked = S.fibres;
     objectLabel.textContent = meshes[S.object].label;
     readout.textContent = `light theta ${S.light[0].toFixed(1)}, phi ${S.light[1].toFixed(1)}; camera theta ${S.camera[0].toFixed(1)}, phi ${S.camera[1].toFixed(1)} (deg)`;
     document.getElementById('exposure-out').textContent = ` ${fmt(S.exposure)}`;
@@ -399,13 +404,9 @@ void main() { o = vec4(uColour, 1.0); }
     S.camera = [Math.min(179, Math.max(0, S.camera[0] - 0.5 * (e.clientY - y0))), (S.camera[1] - 0.5 * (e.clientX - x0) + 360) % 360];
     draw();
   });
-  objectSel.value = S.object;
   objectSel.addEventListener('change', () => { S.object = objectSel.value; draw(); });
-  expo.value = Math.log2(S.exposure / D.exposure);
   expo.addEventListener('input', () => { S.exposure = D.exposure * 2 ** Number(expo.value); draw(); });
-  fill.value = S.fill;
   fill.addEventListener('input', () => { S.fill = Number(fill.value); draw(); });
-  fibres.checked = S.fibres;
   fibres.addEventListener('change', () => { S.fibres = fibres.checked; draw(); });
 
   // ---------- measured against fitted at the grid light nearest to the light
@@ -494,7 +495,7 @@ void main() { o = vec4(uColour, 1.0); }
   // ---------- start
   draw();
   timings.first_frame_ms = performance.now() - T0;
-  window.addEventListener('hashchange', () => { readHash(); objectSel.value = S.object; draw(); });
+  window.addEventListener('hashchange', () => { readHash(); draw(); });
   window.fibrefitView = {
     probe,
     state: () => ({ ...S }),
