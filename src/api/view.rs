@@ -1,8 +1,8 @@
-//! `view`: the viewer page of a fitted result ([`crate::export::view`]): the exact model through
-//! its exported shader beside the glTF route's material, the measured against the fitted BRDF,
-//! the parameter table. [`prepare`] loads the result (and the data it names) and builds the
-//! page in memory; the caller writes it. `fit --report` builds the same page from the fit in
-//! memory ([`fit_page`]).
+//! `view`: the viewer page of a fitted result (built by the export stage's `view`): the exact
+//! model through its exported shader beside the glTF route's material, the measured against the
+//! fitted BRDF, the parameter table. [`prepare`] loads the result (and the data it names) and
+//! builds the page in memory, [`write()`] writes it; `fit --report` builds the same page from the
+//! fit in memory ([`fit_page`]).
 
 use crate::export::shader::{self, Language};
 use crate::export::view::{self, compare, ViewContent, ViewMesh};
