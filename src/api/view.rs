@@ -350,3 +350,58 @@ fn gltf_values(base: [f64; 3], g: &GltfShape) -> Value {
         "sheenRoughnessFactor": g.sheen_roughness,
     })
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// The converted glTF material drawn as the `gltf` rung with its fibre tangent turned by
+    /// `azimuth_offset_rad` is the material `export --gltf` fits (its own BRDF, no sheen here).
+    #[test]
+    fn the_converted_material_is_the_gltf_rung_turned_by_the_offset() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("pf.toml");
+        std::fs::write(
+            &path,
+            "model = \"poulin-fournier\"\nkd = [0.55, 0.35, 0.30]\nks = 0.25\nexponent = 60\nspacing = 2.0\nfibre_azimuth_deg = 20\n",
+        )
+        .unwrap();
+        let raw = crate::export::result_json::read_params(&path).unwrap();
+        let (id, params, _) =
+            crate::export::result_json::checked_params(&raw, None, "pf.toml").unwrap();
+        let (p, route) = gltf_route(id, &params).unwrap();
+        assert_eq!(route["kind"], "converted");
+        let offset = route["azimuth_offset_rad"].as_f64().unwrap();
+        let fitted = gltf_material::fit(
+            model::build(id, &params).unwrap().as_ref(),
+            &params.albedos,
+            1,
+        )
+        .unwrap();
+        assert!(
+            fitted.material.sheen.is_none(),
+            "this material has no sheen"
+        );
+        let rung = model::build(ModelId::Gltf, &p).unwrap();
+        let (psi, turned) = (
+            FibreFrame::from_azimuth(params.fibre_azimuth),
+            FibreFrame::from_azimuth(params.fibre_azimuth + offset),
+        );
+        let mut worst: f64 = 0.0;
+        for (ti, pi, to, po) in [
+            (30.0, 10.0, 40.0, 200.0),
+            (60.0, 100.0, 20.0, 300.0),
+            (10.0, 250.0, 70.0, 80.0),
+        ] {
+            let d = |t: f64, p: f64| direction_from_angles(f64::to_radians(t), f64::to_radians(p));
+            let (l, v) = (d(ti, pi), d(to, po));
+            let want = gltf_material::pbr_brdf(&fitted.material, &DirectionPair::new(&psi, &l, &v));
+            let b = rung.basis(&DirectionPair::new(&turned, &l, &v));
+            for c in 0..3 {
+                let got = b.brdf(&p.albedos, c);
+                worst = worst.max((got - want[c]).abs() / want[c]);
+            }
+        }
+        assert!(worst < 1e-9, "worst relative difference {worst}");
+    }
+}
