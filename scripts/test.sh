@@ -1,9 +1,10 @@
 #!/usr/bin/env bash
 # Set up what the tests need on a fresh Debian or Ubuntu machine, then run every test: Rust
 # (cargo test), then the Python package (built with maturin into a virtual environment, tested
-# with pytest, Mitsuba 3 for the plugin's tests), then the browser tests (three.js and
-# <model-viewer> in headless Chromium, tests/browser). Safe to run again: it installs only what is
-# missing, and the virtual environment (.venv-test/) is kept between runs.
+# with pytest, Mitsuba 3 for the plugin's tests), then the browser tests (three.js,
+# <model-viewer> and `fibrefit view`'s page in headless Chromium, tests/browser). Safe to run
+# again: it installs only what is missing, and the virtual environment (.venv-test/) is kept
+# between runs.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 # where the time goes: each phase's wall seconds on stderr, and a summary at the end
@@ -66,4 +67,5 @@ fi
 phase "installing the browser tests' npm packages"
 # the fibrefit binary `cargo test` built for the Rust tests
 FIBREFIT="${CARGO_TARGET_DIR:-target}/debug/fibrefit" node tests/browser/run.mjs
-phase "running the browser tests (three.js, model-viewer)"
+FIBREFIT="${CARGO_TARGET_DIR:-target}/debug/fibrefit" node tests/browser/view.mjs
+phase "running the browser tests (three.js, model-viewer, fibrefit view)"

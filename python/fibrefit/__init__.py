@@ -16,6 +16,9 @@ Each function is a command of the command line, its keyword arguments the comman
   query CSV's directions, as ``fibrefit eval``.
 - ``export(result_json, shader=None, gltf=False, object="swatch", check=False, model=None) ->
   Exported``: shader source and a GLB preview, in memory, as ``fibrefit export``.
+- ``view(result_json, out=None, data=None) -> str``: the viewer page (one self-contained HTML
+  file: the exact model beside the glTF route in WebGL2, measured against fitted, the parameter
+  table), written as ``fibrefit view`` writes it; returns its path.
 - ``load_data(path, *, <loading flags>) -> dict``: a measurement's samples as numpy arrays.
 - ``fibrefit.mitsuba``: a Mitsuba 3 BSDF plugin backed by ``Material`` and the Mitsuba scene of a
   capture image.
@@ -64,6 +67,7 @@ __all__ = [
     "load",
     "load_data",
     "score",
+    "view",
     "__version__",
 ]
 
@@ -650,3 +654,30 @@ def export(
         progress=progress,
     )
     return Exported(**d)
+
+
+def view(
+    result_json: PathLike,
+    out: Optional[PathLike] = None,
+    data: Optional[PathLike] = None,
+    *,
+    progress: bool = False,
+) -> str:
+    """The viewer page of a fitted result (or parameter file), as ``fibrefit view RESULT --out
+    OUT [--data DATA]`` writes it: one self-contained HTML file with a WebGL2 viewer (the exact
+    model through its exported shader beside the glTF route's material), the measured against
+    the fitted BRDF at the light (for data with enough directions), the parameter table, the
+    verdict and the warnings (docs/guide/view.md).
+
+    ``out``: the page (default: ``result_json`` with the extension ``.html``; never an input);
+    ``data``: the measurements to compare with (default: the data file the result names, beside
+    it); ``progress``: notes and warnings on stderr. Returns the path written.
+    """
+    path = _native_call(
+        _native.view,
+        _os.fspath(result_json),
+        None if out is None else _os.fspath(out),
+        None if data is None else _os.fspath(data),
+        progress=progress,
+    )
+    return _os.fspath(path)

@@ -776,6 +776,29 @@ fn eval<'py>(
     ))
 }
 
+/// `fibrefit view`: the viewer page of `result` (a fitted result JSON or a parameter file)
+/// written to `out` (default: `result` with the extension `.html`), compared with `data` (default:
+/// the data file the result names, beside it). Returns the path written.
+#[pyfunction]
+#[pyo3(signature = (result, out=None, data=None, *, progress=false))]
+fn view(
+    py: Python<'_>,
+    result: PathBuf,
+    out: Option<PathBuf>,
+    data: Option<PathBuf>,
+    progress: bool,
+) -> PyResult<PathBuf> {
+    let out = out.unwrap_or_else(|| result.with_extension("html"));
+    let req = fibrefit::api::view::ViewRequest {
+        result,
+        data,
+        progress: fibrefit::Progress::new(!progress),
+    };
+    py.detach(|| fibrefit::api::view::write(&req, &out))
+        .map_err(err)?;
+    Ok(out)
+}
+
 /// The fitted model of the result JSON (or parameter file) `result` as `fibrefit export`
 /// builds it, in memory: a dict with `model`, `shader` (the source in `shader`'s language:
 /// wgsl, glsl, hlsl or msl; or None), `glb` (bytes of the GLB preview on `object` when `gltf`;
@@ -985,6 +1008,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(score, m)?)?;
     m.add_function(wrap_pyfunction!(eval, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(view, m)?)?;
     m.add_function(wrap_pyfunction!(image_scene, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(capture_geometry, m)?)?;

@@ -932,6 +932,17 @@ impl FitRun {
                 progress.alert(&w);
                 self.result.warnings.push(w);
                 files.discard(outs);
+            } else if let Err(e) = crate::api::view::fit_page(&self.result, &self.samples)
+                .and_then(|html| files.put_view(outs, &html))
+            {
+                // the viewer page is optional like the report: a warning, never the lost fit
+                let w = format!(
+                    "{}: the viewer page could not be written: {e:#}",
+                    dir.join("view.html").display()
+                );
+                progress.alert(&w);
+                self.result.warnings.push(w);
+                files.discard_view(outs);
             }
         }
         if let Some(id) = targets.json {

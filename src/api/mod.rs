@@ -12,6 +12,7 @@ pub mod material;
 pub mod render;
 pub mod score;
 pub mod tiles;
+pub mod view;
 
 pub use crate::export::atomic::Outputs;
 pub use crate::export::result_json::ResultFile;

@@ -87,7 +87,8 @@ pub struct FitArgs {
     /// (height, fibre_azimuth, kd, ks) and write them as EXRs into DIR
     #[arg(long, value_name = "DIR")]
     pub maps: Option<PathBuf>,
-    /// Also write a report (report.md with the fit report) into DIR
+    /// Also write a report (report.md with the fit report, its plots, and view.html: the
+    /// viewer page of `fibrefit view`) into DIR
     #[arg(long, value_name = "DIR")]
     pub report: Option<PathBuf>,
     /// No progress bar and no report on stdout

@@ -12,6 +12,7 @@ pub mod render;
 pub mod score;
 pub mod synth;
 pub mod tangents;
+pub mod view;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -51,6 +52,8 @@ pub enum Command {
     Export(export::ExportArgs),
     /// Principal curvature directions of a mesh (the tangent field of principal-curvature-aligned shading) as CSV or glTF.
     Tangents(tangents::TangentsArgs),
+    /// A self-contained HTML page with a WebGL2 viewer of a fitted result (exact model beside the glTF route, measured against fitted).
+    View(view::ViewArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),
 }
@@ -106,6 +109,7 @@ where
         Command::Render(args) => render::run(&args),
         Command::Tangents(args) => tangents::run(&args),
         Command::Export(args) => export::run(&args),
+        Command::View(args) => view::run(&args),
     }
 }
 

@@ -16,3 +16,4 @@ pub mod result_json;
 pub mod shader;
 pub mod summary_csv;
 pub mod tangent_field;
+pub mod view;

@@ -382,6 +382,8 @@ pub struct ReportFiles {
     slices: OutputId,
     hemispheres: OutputId,
     residuals: OutputId,
+    /// `view.html`: the viewer page (`api::view::fit_page`).
+    view: OutputId,
     maps: std::collections::BTreeMap<u32, OutputId>,
 }
 
@@ -391,11 +393,12 @@ impl ReportFiles {
     pub fn reserve(outs: &mut Outputs, dir: &std::path::Path) -> anyhow::Result<Self> {
         outs.dir(dir, "--report")?;
         let mut file = |name: &str| outs.file(&dir.join(name), "--report");
-        let (md, slices, hemispheres, residuals) = (
+        let (md, slices, hemispheres, residuals, view) = (
             file("report.md")?,
             file("slices.png")?,
             file("hemispheres.png")?,
             file("residuals.png")?,
+            file("view.html")?,
         );
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -403,6 +406,7 @@ impl ReportFiles {
             slices,
             hemispheres,
             residuals,
+            view,
             maps: Default::default(),
         })
     }
@@ -420,9 +424,19 @@ impl ReportFiles {
         Ok(())
     }
 
+    /// Write the viewer page `html` as `view.html`.
+    pub fn put_view(&self, outs: &mut Outputs, html: &str) -> anyhow::Result<()> {
+        outs.put(self.view, html.as_bytes())
+    }
+
+    /// Give the viewer page up (the old file stays as it was).
+    pub fn discard_view(&self, outs: &mut Outputs) {
+        outs.discard(self.view);
+    }
+
     /// Give the report up (the old files stay as they were).
     pub fn discard(&self, outs: &mut Outputs) {
-        for id in [self.md, self.slices, self.hemispheres, self.residuals]
+        for id in [self.md, self.slices, self.hemispheres, self.residuals, self.view]
             .into_iter()
             .chain(self.maps.values().copied())
         {

@@ -78,8 +78,13 @@ pub fn swatch(psi_deg: f64) -> Result<FramedMesh> {
 /// The unit sphere, fibres along the circles of latitude turned by `psi_deg` towards the
 /// meridians (as `render`'s sphere).
 pub fn sphere(psi_deg: f64) -> Result<FramedMesh> {
+    sphere_grid(psi_deg, 96, 48)
+}
+
+/// [`sphere`] tessellated by `nu` x `nv` quads.
+pub fn sphere_grid(psi_deg: f64, nu: usize, nv: usize) -> Result<FramedMesh> {
     let psi = psi_deg.to_radians();
-    grid(96, 48, |u, v| {
+    grid(nu, nv, |u, v| {
         let lon = (u - 0.5) * TAU;
         let lat = (v - 0.5) * std::f64::consts::PI;
         let n = Vec3::new(lat.cos() * lon.cos(), lat.cos() * lon.sin(), lat.sin());
@@ -91,13 +96,55 @@ pub fn sphere(psi_deg: f64) -> Result<FramedMesh> {
 
 /// Seed 001's torus (tube r = 0.375, R = 5r/3 about z), fibres wound round the tube.
 pub fn torus() -> Result<FramedMesh> {
-    grid(128, 64, |u, v| {
+    torus_grid(128, 64)
+}
+
+/// [`torus`] tessellated by `nu` x `nv` quads; the tube angle of grid row j is (j / nv - 1/2) 2 pi
+/// (0 on the outer side, as [`super::objects::torus_height`] takes it).
+pub fn torus_grid(nu: usize, nv: usize) -> Result<FramedMesh> {
+    grid(nu, nv, |u, v| {
         let (a, b) = ((u - 0.5) * TAU, (v - 0.5) * TAU);
         let dir = Vec3::new(a.cos(), a.sin(), 0.0);
         let n = dir * b.cos() + Vec3::z() * b.sin();
         let p = dir * TORUS_MAJOR + n * TORUS_TUBE;
         let t = Vec3::new(-b.sin() * a.cos(), -b.sin() * a.sin(), b.cos());
         (p, n, t)
+    })
+}
+
+/// A cloth draped over a sphere: the square [-1.2, 1.2]^2 (u, v in [0, 1]) whose height falls
+/// off smoothly from a rounded top, with three folds running down its sides, fibres along the
+/// warp (the u direction, turned by `psi_deg` towards v, projected on the surface). `nu` x `nv`
+/// quads.
+pub fn cloth(psi_deg: f64, nu: usize, nv: usize) -> Result<FramedMesh> {
+    let psi = psi_deg.to_radians();
+    // height z(x, y) and its gradient
+    let surface = |x: f64, y: f64| -> (f64, f64, f64) {
+        let r2 = x * x + y * y;
+        let r = r2.sqrt();
+        let a = y.atan2(x);
+        // a rounded dome, then the folds growing with the distance from the top
+        let dome = 0.9 * (-1.3 * r2).exp();
+        let fold = 0.06 * r2 * (3.0 * a).cos();
+        let z = dome + fold;
+        // d/dx, d/dy by the chain rule (r, a)
+        let ddome_dr = -2.6 * r * dome;
+        let dfold_dr = 0.12 * r * (3.0 * a).cos();
+        let dfold_da = -0.18 * r2 * (3.0 * a).sin();
+        let dz_dr = ddome_dr + dfold_dr;
+        let (c, s) = if r > 1e-12 { (x / r, y / r) } else { (1.0, 0.0) };
+        let inv_r = if r > 1e-12 { 1.0 / r } else { 0.0 };
+        let dzdx = dz_dr * c - dfold_da * s * inv_r;
+        let dzdy = dz_dr * s + dfold_da * c * inv_r;
+        (z, dzdx, dzdy)
+    };
+    grid(nu, nv, |u, v| {
+        let (x, y) = (2.4 * u - 1.2, 2.4 * v - 1.2);
+        let (z, zx, zy) = surface(x, y);
+        let n = Vec3::new(-zx, -zy, 1.0).normalize();
+        let warp = Vec3::new(psi.cos(), psi.sin(), zx * psi.cos() + zy * psi.sin());
+        let t = (warp - n * warp.dot(&n)).normalize();
+        (Vec3::new(x, y, z - 0.45), n, t)
     })
 }
 
