@@ -213,7 +213,7 @@ fn a_bad_curet_folder_is_refused_naming_file_and_line() {
         e.contains("table.txt, line 2") && e.contains("five numbers"),
         "{e}"
     );
-    fs::write(dir.path().join("abrdf_subset.dat"), "2 0.1 NaN\n").unwrap();
+    curet_folder(dir.path(), &g, &[(2, vec![0.1, f64::NAN])]);
     let e = format!("{:#}", curet::load_dir(dir.path()).unwrap_err());
     assert!(
         e.contains("line 1") && e.contains("'NaN' is not a BRDF value"),

@@ -10,6 +10,7 @@ use crate::fit::gltf_material;
 use crate::load::samples::Samples;
 use crate::model::frame::{direction_from_angles, FibreFrame, Vec3};
 use crate::model::params::GltfShape;
+use crate::model::rungs::gltf::GltfVariant;
 use crate::model::{self, Albedos, BrdfFn, DirectionPair, ModelId, ModelParams};
 use crate::render::preview_mesh;
 use anyhow::{anyhow, Context, Result};
@@ -306,6 +307,8 @@ fn gltf_route(id: ModelId, params: &ModelParams) -> Result<(ModelParams, Value)>
         ior: m.ior,
         sheen: m.sheen.map_or(0.0, |s| s.colour),
         sheen_roughness: m.sheen.map_or(0.5, |s| s.roughness),
+        // `export --gltf` fits the spec's material (what a GLB means), not three.js's
+        variant: GltfVariant::Khronos,
     };
     let mut p = params.clone();
     p.gltf = g;
