@@ -120,112 +120,133 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     }
     outs.commit()?;
     if !args.quiet {
-        if let (Some(lang), Some(path)) = (lang, &args.out) {
-            eprintln!(
-                "wrote {} ({} shader of model `{id}`)",
-                path.display(),
-                lang.as_str()
-            );
-        }
-        if let (Some((_, route)), Some(path)) = (&glb, &args.gltf) {
-            match route {
-                GltfRoute::Fitted { values, error } => {
-                    let g = &values.shape;
-                    eprintln!(
-                        "wrote {} ({}: the gltf fit written exactly: base colour {:.3?}, metallic {:.3}, roughness {:.3}, \
-                         anisotropy strength {:.3} rotation {:.1} deg, specular {:.3}, ior {:.3}, {})",
-                        path.display(),
-                        args.object,
-                        values.base_color,
-                        g.metallic,
-                        g.roughness,
-                        g.anisotropy,
-                        values.anisotropy_rotation.to_degrees(),
-                        g.specular,
-                        g.ior,
-                        if g.sheen > 0.0 {
-                            format!("sheen colour {:.3} roughness {:.3}", g.sheen, g.sheen_roughness)
-                        } else {
-                            "no sheen".to_string()
-                        }
-                    );
-                    eprintln!("  error against the data: {}", error.text());
-                }
-                GltfRoute::Converted {
-                    material: fitted,
-                    why,
-                    source_error,
-                } => {
-                    let m = &fitted.material;
-                    eprintln!(
-                        "wrote {} ({}: a glTF material converted from the `{id}` model: base colour {:.3?}, roughness {:.3}, anisotropy strength {:.2} rotation {:.0} deg, ior {:.2}, {}; \
-                         relative RMS error of f cos against the model {:.1} % over {} direction pairs; without anisotropy {:.1} %, with sheen {:.1} %, without {:.1} %)",
-                        path.display(),
-                        args.object,
-                        m.base_color,
-                        m.roughness,
-                        m.anisotropy_strength,
-                        m.anisotropy_rotation.to_degrees(),
-                        m.ior,
-                        m.sheen.map_or("no sheen".to_string(), |s| format!(
-                            "sheen colour {:.2} roughness {:.2}",
-                            s.colour, s.roughness
-                        )),
-                        100.0 * fitted.relative_rms_error,
-                        fitted.directions,
-                        100.0 * fitted.isotropic_relative_rms_error,
-                        100.0 * fitted.with_sheen_relative_rms_error,
-                        100.0 * fitted.without_sheen_relative_rms_error
-                    );
-                    if why.is_some() {
-                        eprintln!("  (converted: see the warning above)");
-                    }
-                    if source_error.is_known() {
-                        eprintln!(
-                            "  the `{id}` fit's own error against the data: {}",
-                            source_error.text()
-                        );
-                    }
-                }
-            }
-            if let Some(t) = &textures {
-                eprintln!(
-                    "  textures from the maps in {} ({}x{}): {}{}",
-                    t.directory.display(),
-                    t.width,
-                    t.height,
-                    t.names.join(", "),
-                    if t.height_nodes.is_empty() {
-                        String::new()
-                    } else {
-                        let (lo, hi) =
-                            t.height_nodes.iter().fold((1.0f64, 0.0f64), |(lo, hi), n| {
-                                (lo.min(n.roughness), hi.max(n.roughness))
-                            });
-                        format!(
-                            "; roughness {lo:.3}-{hi:.3} over heights {:.2}-{:.2} ({} nodes)",
-                            t.height_nodes[0].height,
-                            t.height_nodes[t.height_nodes.len() - 1].height,
-                            t.height_nodes.len()
-                        )
-                    }
-                );
-            }
-        }
-    }
-    if let Some((
-        _,
-        GltfRoute::Converted {
-            material: fitted, ..
-        },
-    )) = &glb
-    {
-        if fitted.relative_rms_error > 0.25 && !args.quiet {
-            eprintln!(
-                "warning: the glTF material matches the fibre model only to {:.0} % RMS: a preview for engines without custom shaders, not the model (use --shader for that)",
-                100.0 * fitted.relative_rms_error
-            );
+        for line in summary(args, lang, id, &glb, &textures) {
+            eprintln!("{line}");
         }
     }
     Ok(())
+}
+
+/// What was written, one line each, for stderr: the shader, the GLB's material (the fit itself
+/// or a conversion, with its errors), its textures, and a warning for a poor conversion.
+fn summary(
+    args: &ExportArgs,
+    lang: Option<Language>,
+    id: crate::model::ModelId,
+    glb: &Option<(Vec<u8>, GltfRoute)>,
+    textures: &Option<export_api::GlbTextures>,
+) -> Vec<String> {
+    let mut lines = Vec::new();
+    if let (Some(lang), Some(path)) = (lang, &args.out) {
+        lines.push(format!(
+            "wrote {} ({} shader of model `{id}`)",
+            path.display(),
+            lang.as_str()
+        ));
+    }
+    let (Some((_, route)), Some(path)) = (glb, &args.gltf) else {
+        return lines;
+    };
+    let (fitted, why, source_error) = match route {
+        GltfRoute::Fitted { values, error } => {
+            lines.push(format!("wrote {} ({}: {})", path.display(), args.object, fitted_text(values)));
+            lines.push(format!("  error against the data: {}", error.text()));
+            return with_textures(lines, textures);
+        }
+        GltfRoute::Converted { material, why, source_error } => (material, why, source_error),
+    };
+    lines.push(format!(
+        "wrote {} ({}: {})",
+        path.display(),
+        args.object,
+        converted_text(id, fitted)
+    ));
+    if why.is_some() {
+        lines.push("  (converted: see the warning above)".to_string());
+    }
+    if source_error.is_known() {
+        lines.push(format!(
+            "  the `{id}` fit's own error against the data: {}",
+            source_error.text()
+        ));
+    }
+    let mut lines = with_textures(lines, textures);
+    if fitted.relative_rms_error > 0.25 {
+        lines.push(format!(
+            "warning: the glTF material matches the fibre model only to {:.0} % RMS: a preview for engines without custom shaders, not the model (use --shader for that)",
+            100.0 * fitted.relative_rms_error
+        ));
+    }
+    lines
+}
+
+fn fitted_text(values: &crate::export::gltf_out::RungValues) -> String {
+    let g = &values.shape;
+    format!(
+        "the gltf fit written exactly: base colour {:.3?}, metallic {:.3}, roughness {:.3}, \
+         anisotropy strength {:.3} rotation {:.1} deg, specular {:.3}, ior {:.3}, {}",
+        values.base_color,
+        g.metallic,
+        g.roughness,
+        g.anisotropy,
+        values.anisotropy_rotation.to_degrees(),
+        g.specular,
+        g.ior,
+        if g.sheen > 0.0 {
+            format!("sheen colour {:.3} roughness {:.3}", g.sheen, g.sheen_roughness)
+        } else {
+            "no sheen".to_string()
+        }
+    )
+}
+
+fn converted_text(id: crate::model::ModelId, fitted: &crate::fit::gltf_material::FittedMaterial) -> String {
+    let m = &fitted.material;
+    format!(
+        "a glTF material converted from the `{id}` model: base colour {:.3?}, roughness {:.3}, anisotropy strength {:.2} rotation {:.0} deg, ior {:.2}, {}; \
+         relative RMS error of f cos against the model {:.1} % over {} direction pairs; without anisotropy {:.1} %, with sheen {:.1} %, without {:.1} %",
+        m.base_color,
+        m.roughness,
+        m.anisotropy_strength,
+        m.anisotropy_rotation.to_degrees(),
+        m.ior,
+        m.sheen.map_or("no sheen".to_string(), |s| format!(
+            "sheen colour {:.2} roughness {:.2}",
+            s.colour, s.roughness
+        )),
+        100.0 * fitted.relative_rms_error,
+        fitted.directions,
+        100.0 * fitted.isotropic_relative_rms_error,
+        100.0 * fitted.with_sheen_relative_rms_error,
+        100.0 * fitted.without_sheen_relative_rms_error
+    )
+}
+
+/// The textures line, where the GLB carries the maps.
+fn with_textures(mut lines: Vec<String>, textures: &Option<export_api::GlbTextures>) -> Vec<String> {
+    let Some(t) = textures else {
+        return lines;
+    };
+    let heights = if t.height_nodes.is_empty() {
+        String::new()
+    } else {
+        let (lo, hi) = t
+            .height_nodes
+            .iter()
+            .fold((1.0f64, 0.0f64), |(lo, hi), n| (lo.min(n.roughness), hi.max(n.roughness)));
+        format!(
+            "; roughness {lo:.3}-{hi:.3} over heights {:.2}-{:.2} ({} nodes)",
+            t.height_nodes[0].height,
+            t.height_nodes[t.height_nodes.len() - 1].height,
+            t.height_nodes.len()
+        )
+    };
+    lines.push(format!(
+        "  textures from the maps in {} ({}x{}): {}{heights}",
+        t.directory.display(),
+        t.width,
+        t.height,
+        t.names.join(", ")
+    ));
+    lines
 }
