@@ -184,64 +184,11 @@ pub fn result_from_value(
         .get("parameters")
         .and_then(|p| p.as_object())
         .ok_or_else(|| at("no `parameters`"))?;
-    let mut entries = BTreeMap::new();
-    let mut free = 0;
-    let mut rgb = false;
-    for (name, e) in params {
-        let value: Albedo = serde_json::from_value(e.get("value").cloned().unwrap_or_default())
-            .map_err(|_| {
-                at(&format!(
-                    "parameters.{name}.value is not a number or [r, g, b]"
-                ))
-            })?;
-        rgb |= value.is_rgb();
-        let fixed = e.get("fixed").and_then(|f| f.as_bool()).unwrap_or(true);
-        if !fixed {
-            // a grey fit of RGB data (ks) is one free parameter, its value repeated per channel
-            let grey = e.get("grey").and_then(|g| g.as_bool()).unwrap_or(false);
-            free += if value.is_rgb() && !grey { 3 } else { 1 };
-        }
-        // the fitted value only: the fit's bounds are checked against the fitted spacing
-        entries.insert(
-            name.clone(),
-            ParamEntry {
-                value: Some(value),
-                vary: Some(false),
-                ..Default::default()
-            },
-        );
-    }
+    let (entries, free, rgb) = fitted_entries(params, &at)?;
     if rgb && channels == 1 {
         bail!("{}: an RGB result cannot score grey data", name);
     }
-    let k = v.get("knobs");
-    let knob = |name: &str| k.and_then(|k| k.get(name));
-    let metric: Metric = match knob("metric") {
-        Some(m) => serde_json::from_value(m.clone())
-            .map_err(|_| at("knobs.metric is not linear, log or cosine"))?,
-        None => Metric::Linear,
-    };
-    let knobs = FitKnobs {
-        quadrature_order: knob("quadrature_order")
-            .and_then(|x| x.as_u64())
-            .unwrap_or(16) as usize,
-        histogram_bins: knob("histogram_bins")
-            .and_then(|x| x.as_u64())
-            .unwrap_or(16) as usize,
-        azimuth_nodes: knob("azimuth_nodes")
-            .and_then(|x| x.as_u64())
-            .unwrap_or(crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES as u64)
-            as usize,
-        topology_map: knob("topology_map")
-            .and_then(|x| x.as_str())
-            .map(PathBuf::from),
-        gltf_variant: match knob("gltf_variant") {
-            Some(x) => serde_json::from_value(x.clone())
-                .map_err(|_| at(&format!("knobs.gltf_variant = {x}: expected \"khronos\" or \"threejs\"")))?,
-            None => Default::default(),
-        },
-        ..FitKnobs::default()
-    };
+    let (metric, knobs) = knobs_of(v.get("knobs"), &at)?;
     let cfg = FitConfig {
         model: model
             .parse()
@@ -279,6 +226,77 @@ pub fn result_from_value(
         knobs,
         free_parameters: free,
     })
+}
+
+/// The result's parameters as fixed entries at their fitted values, the number of free
+/// parameters the fit had, and whether any is RGB.
+fn fitted_entries(
+    params: &serde_json::Map<String, serde_json::Value>,
+    at: &dyn Fn(&str) -> anyhow::Error,
+) -> Result<(BTreeMap<String, ParamEntry>, usize, bool)> {
+    let mut entries = BTreeMap::new();
+    let mut free = 0;
+    let mut rgb = false;
+    for (name, e) in params {
+        let value: Albedo = serde_json::from_value(e.get("value").cloned().unwrap_or_default())
+            .map_err(|_| {
+                at(&format!(
+                    "parameters.{name}.value is not a number or [r, g, b]"
+                ))
+            })?;
+        rgb |= value.is_rgb();
+        let fixed = e.get("fixed").and_then(|f| f.as_bool()).unwrap_or(true);
+        if !fixed {
+            // a grey fit of RGB data (ks) is one free parameter, its value repeated per channel
+            let grey = e.get("grey").and_then(|g| g.as_bool()).unwrap_or(false);
+            free += if value.is_rgb() && !grey { 3 } else { 1 };
+        }
+        // the fitted value only: the fit's bounds are checked against the fitted spacing
+        entries.insert(
+            name.clone(),
+            ParamEntry {
+                value: Some(value),
+                vary: Some(false),
+                ..Default::default()
+            },
+        );
+    }
+    Ok((entries, free, rgb))
+}
+
+/// The result's metric and knobs (defaults where a key is absent).
+fn knobs_of(
+    k: Option<&serde_json::Value>,
+    at: &dyn Fn(&str) -> anyhow::Error,
+) -> Result<(Metric, FitKnobs)> {
+    let knob = |name: &str| k.and_then(|k| k.get(name));
+    let metric: Metric = match knob("metric") {
+        Some(m) => serde_json::from_value(m.clone())
+            .map_err(|_| at("knobs.metric is not linear, log or cosine"))?,
+        None => Metric::Linear,
+    };
+    let knobs = FitKnobs {
+        quadrature_order: knob("quadrature_order")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(16) as usize,
+        histogram_bins: knob("histogram_bins")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(16) as usize,
+        azimuth_nodes: knob("azimuth_nodes")
+            .and_then(|x| x.as_u64())
+            .unwrap_or(crate::model::azimuth_spread::DEFAULT_AZIMUTH_NODES as u64)
+            as usize,
+        topology_map: knob("topology_map")
+            .and_then(|x| x.as_str())
+            .map(PathBuf::from),
+        gltf_variant: match knob("gltf_variant") {
+            Some(x) => serde_json::from_value(x.clone())
+                .map_err(|_| at(&format!("knobs.gltf_variant = {x}: expected \"khronos\" or \"threejs\"")))?,
+            None => Default::default(),
+        },
+        ..FitKnobs::default()
+    };
+    Ok((metric, knobs))
 }
 
 /// The parameters of a `fibrefit fit` result (schema `fibrefit-result/1`).
