@@ -71,6 +71,7 @@ macro_rules! stage {
 pub mod api;
 stage! {
     bench;
+    board;
     cli;
     export;
     fit;

@@ -2,6 +2,7 @@
 //! map to exit code 2 in `main`.
 
 pub mod bench;
+pub mod board;
 pub mod data;
 pub mod eval;
 pub mod export;
@@ -54,6 +55,8 @@ pub enum Command {
     Tangents(tangents::TangentsArgs),
     /// A self-contained HTML page with a WebGL2 viewer of a fitted result (exact model beside the glTF route, measured against fitted).
     View(view::ViewArgs),
+    /// A printable calibration board (markers, swatch window, grey patch, scale bar) for photos.
+    Board(board::BoardArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),
 }
@@ -110,6 +113,7 @@ where
         Command::Tangents(args) => tangents::run(&args),
         Command::Export(args) => export::run(&args),
         Command::View(args) => view::run(&args),
+        Command::Board(args) => board::run(&args),
     }
 }
 

@@ -1,6 +1,7 @@
 //! Loaders: files in, validated [`samples::Samples`] out. No model code here.
 
 pub mod arrays;
+pub mod board;
 pub mod bracket;
 pub mod capture;
 pub mod capture_store;
