@@ -72,6 +72,7 @@ pub mod api;
 stage! {
     bench;
     board;
+    calibrate;
     cli;
     export;
     fit;

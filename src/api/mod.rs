@@ -4,6 +4,7 @@
 
 pub mod batch;
 pub mod board;
+pub mod calibrate;
 pub mod capture;
 pub mod data;
 pub mod eval;

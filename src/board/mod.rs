@@ -5,6 +5,7 @@
 //! [`crate::load::board::BoardFile`]: AprilTag 36h11 markers on a grid around a square window
 //! where the swatch lies, a grey reference patch and a 100 mm scale bar below.
 
+pub mod camera;
 pub mod detect;
 pub mod draw;
 

@@ -3,6 +3,7 @@
 
 pub mod bench;
 pub mod board;
+pub mod calibrate;
 pub mod data;
 pub mod eval;
 pub mod export;
@@ -57,6 +58,8 @@ pub enum Command {
     View(view::ViewArgs),
     /// A printable calibration board (markers, swatch window, grey patch, scale bar) for photos.
     Board(board::BoardArgs),
+    /// Photos of a swatch on the printed board into a capture: markers, intrinsics, poses, rectified linear images.
+    Calibrate(calibrate::CalibrateArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),
 }
@@ -114,6 +117,7 @@ where
         Command::Export(args) => export::run(&args),
         Command::View(args) => view::run(&args),
         Command::Board(args) => board::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
     }
 }
 

@@ -13,6 +13,7 @@ pub mod input;
 pub mod merl;
 pub mod mesh;
 pub mod params_file;
+pub mod photo;
 pub mod queries;
 pub mod rgl;
 pub mod samples;

@@ -1,0 +1,237 @@
+//! The photo route end to end (issue 36): `fibrefit board`, 8 synthetic JPEG photos of a
+//! lambert swatch in its window (20-60 degrees of elevation, a flash 10 mm beside the lens,
+//! a different exposure each), `fibrefit calibrate`, then `fibrefit fit` on the capture it
+//! writes. Bad photos are refused by name with nothing written.
+
+use assert_cmd::Command;
+use fibrefit::api::board::{board, BoardRequest};
+use fibrefit::board::camera::{Intrinsics, Pose};
+use fibrefit::load::board::BoardFile;
+use fibrefit::model::params::{ModelParams, RawParams};
+use fibrefit::model::ModelId;
+use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use nalgebra::Vector3;
+use std::path::{Path, PathBuf};
+
+const TRUTH: Intrinsics = Intrinsics {
+    size_px: [1600, 1200],
+    focal_px: 1500.0,
+    principal_px: [805.0, 596.0],
+    k: [-0.08, 0.02],
+};
+const KD: [f64; 3] = [0.6, 0.45, 0.3];
+
+fn poses() -> Vec<Pose> {
+    (0..8)
+        .map(|i| {
+            let elev = (20.0 + 40.0 * (i % 4) as f64 / 3.0).to_radians();
+            let azim = (45.0 * i as f64 + 10.0).to_radians();
+            let eye =
+                Vector3::new(azim.cos() * elev.cos(), azim.sin() * elev.cos(), elev.sin()) * 300.0;
+            Pose::look_at(eye, Vector3::zeros())
+        })
+        .collect()
+}
+
+/// The board and 8 JPEG photos in `dir`.
+fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
+    board(&BoardRequest::default(), dir).unwrap();
+    let b = BoardFile::read(&dir.join("board.toml")).unwrap();
+    let picture = image::open(dir.join("board.png")).unwrap().to_luma8();
+    let raw: RawParams = toml::from_str(&format!("kd = {KD:?}")).unwrap();
+    let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
+    let model = fibrefit::model::build(ModelId::Lambert, &params).unwrap();
+    let scene = PhotoScene {
+        board: &b,
+        picture: &picture,
+        swatch: Some((model.as_ref(), &params)),
+        table_reflectance: 0.05,
+    };
+    let mut files = Vec::new();
+    for (k, pose) in poses().iter().enumerate() {
+        let shot = PhotoShot {
+            intrinsics: TRUTH,
+            pose: *pose,
+            light_mm: pose.position + pose.to_board_direction(&Vector3::new(10.0, 0.0, 0.0)),
+            intensity: 1.0,
+            exposure: 0.5 * std::f64::consts::PI * 0.09 * (1.0 + 0.1 * k as f64),
+            noise_relative: 0.01,
+            noise_floor: 0.002,
+            seed: k as u64,
+            supersample: 3,
+        };
+        let photo = scene.render(&shot).unwrap();
+        let path = dir.join(format!("photo_{k}.jpg"));
+        let mut f = std::fs::File::create(&path).unwrap();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut f, 95)
+            .encode_image(&photo)
+            .unwrap();
+        files.push(path);
+    }
+    (dir.join("board.toml"), files)
+}
+
+fn calibrate(board: &Path, photos: &[PathBuf], out: &Path) -> std::process::Output {
+    Command::cargo_bin("fibrefit")
+        .unwrap()
+        .arg("calibrate")
+        .arg("--board")
+        .arg(board)
+        .arg("--out")
+        .arg(out)
+        .args(["--texels", "64", "64", "-q"])
+        .args(photos)
+        .output()
+        .unwrap()
+}
+
+#[test]
+fn photos_become_a_capture_that_fits_the_truth() {
+    let dir = tempfile::tempdir().unwrap();
+    let (board_toml, photos) = shoot(dir.path());
+    // the calibration, through the API: cameras within 1 mm, RMS under 0.3 px
+    let req = fibrefit::api::calibrate::CalibrateRequest {
+        board: board_toml.clone(),
+        photos: photos.clone(),
+        flash_offset_mm: [10.0, 0.0, 0.0],
+        texels: [64, 64],
+        intrinsics: None,
+    };
+    let out = dir.path().join("cal");
+    let o = fibrefit::api::calibrate::calibrate(&req, &out, &fibrefit::progress::Progress::quiet())
+        .unwrap();
+    eprint!("{}", o.report);
+    let mut worst = 0.0f64;
+    for (i, (p, t)) in o.calibration.poses.iter().zip(poses()).enumerate() {
+        let err = (p.position - t.position).norm();
+        eprintln!("photo {i}: camera position error {err:.3} mm");
+        worst = worst.max(err);
+        assert!(
+            o.calibration.rms_px[i] < 0.3,
+            "photo {i}: {} px",
+            o.calibration.rms_px[i]
+        );
+    }
+    assert!(worst < 1.0, "worst camera position error {worst} mm");
+    for f in [
+        "capture.toml",
+        "mask.png",
+        "cam.toml",
+        "report/report.txt",
+        "report/overlay_000.png",
+        "img_007.exr",
+    ] {
+        assert!(out.join(f).exists(), "{f}");
+    }
+    // fit lambert on the capture, unchanged
+    let result = dir.path().join("lambert.json");
+    let f = Command::cargo_bin("fibrefit")
+        .unwrap()
+        .arg("fit")
+        .arg(out.join("capture.toml"))
+        .args(["--model", "lambert", "-q", "--out"])
+        .arg(&result)
+        .output()
+        .unwrap();
+    assert!(f.status.success(), "{}", String::from_utf8_lossy(&f.stderr));
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&result).unwrap()).unwrap();
+    let kd = &r["parameters"]["kd"];
+    for c in 0..3 {
+        let v = kd["value"][c].as_f64().unwrap();
+        let se = kd["std_error"][c].as_f64().unwrap();
+        eprintln!("kd[{c}] = {v:.4} +- {se:.4} (truth {})", KD[c]);
+        assert!(
+            (v - KD[c]).abs() < 3.0 * se.max(1e-3),
+            "kd[{c}] {v} +- {se}, truth {}",
+            KD[c]
+        );
+    }
+    // cam.toml is reused
+    let again = dir.path().join("again");
+    let o = Command::cargo_bin("fibrefit")
+        .unwrap()
+        .arg("calibrate")
+        .arg("--board")
+        .arg(&board_toml)
+        .arg("--intrinsics")
+        .arg(out.join("cam.toml"))
+        .arg("--out")
+        .arg(&again)
+        .args(["-q"])
+        .args(&photos[..3])
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+}
+
+#[test]
+fn bad_photos_are_refused_by_name_and_nothing_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    board(&BoardRequest::default(), d).unwrap();
+    let board_toml = d.join("board.toml");
+    // no markers: a blank grey picture
+    let blank = d.join("blank.png");
+    image::GrayImage::from_pixel(400, 300, image::Luma([128]))
+        .save(&blank)
+        .unwrap();
+    // a truncated JPEG
+    let trunc = d.join("trunc.jpg");
+    let mut bytes = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 90)
+        .encode_image(&image::RgbImage::from_pixel(
+            64,
+            48,
+            image::Rgb([200, 100, 50]),
+        ))
+        .unwrap();
+    std::fs::write(&trunc, &bytes[..bytes.len() / 3]).unwrap();
+    // not a JPEG at all
+    let junk = d.join("junk.jpg");
+    std::fs::write(&junk, b"this is not a photo").unwrap();
+    // too few markers: a crop of the board with one marker
+    let one = d.join("one.png");
+    let png = image::open(d.join("board.png")).unwrap().to_luma8();
+    let b = BoardFile::read(&board_toml).unwrap();
+    let m = &b.marker[0];
+    let [u0, v1] = b.mm_to_png(m.corners_mm[0][0], m.corners_mm[0][1]);
+    let [u1, v0] = b.mm_to_png(m.corners_mm[2][0], m.corners_mm[2][1]);
+    let pad = 30.0;
+    image::imageops::crop_imm(
+        &png,
+        (u0 - pad) as u32,
+        (v0 - pad) as u32,
+        (u1 - u0 + 2.0 * pad) as u32,
+        (v1 - v0 + 2.0 * pad) as u32,
+    )
+    .to_image()
+    .save(&one)
+    .unwrap();
+    // mixed sizes: the board itself and a half-size copy
+    let full = d.join("full.png");
+    png.save(&full).unwrap();
+    let half = d.join("half.png");
+    image::imageops::resize(
+        &png,
+        png.width() / 2,
+        png.height() / 2,
+        image::imageops::FilterType::Triangle,
+    )
+    .save(&half)
+    .unwrap();
+    let out = d.join("cal");
+    for (photos, name, what) in [
+        (vec![blank.clone()], "blank.png", "no markers"),
+        (vec![trunc.clone()], "trunc.jpg", ""),
+        (vec![junk.clone()], "junk.jpg", "JPEG"),
+        (vec![one.clone()], "one.png", "a pose needs at least 2"),
+        (vec![full.clone(), half.clone()], "half.png", "one size"),
+    ] {
+        let o = calibrate(&board_toml, &photos, &out);
+        let err = String::from_utf8_lossy(&o.stderr);
+        assert_eq!(o.status.code(), Some(2), "{name}: {err}");
+        assert!(err.contains(name) && err.contains(what), "{name}: {err}");
+        assert!(!out.exists(), "{name}: wrote {}", out.display());
+    }
+}
