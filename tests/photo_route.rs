@@ -15,7 +15,7 @@ use std::path::{Path, PathBuf};
 
 const TRUTH: Intrinsics = Intrinsics {
     size_px: [1600, 1200],
-    focal_px: 1500.0,
+    focal_px: 1000.0, // a phone's wide lens: the whole A4 board (and its patch) in every frame at 300 mm
     principal_px: [805.0, 596.0],
     k: [-0.08, 0.02],
 };
@@ -140,9 +140,11 @@ fn photos_become_a_capture_that_fits_the_truth() {
     for c in 0..3 {
         let v = kd["value"][c].as_f64().unwrap();
         let se = kd["std_error"][c].as_f64().unwrap();
-        eprintln!("kd[{c}] = {v:.4} +- {se:.4} (truth {})", KD[c]);
+        eprintln!("kd[{c}] = {v:.5} +- {se:.2e} (truth {})", KD[c]);
+        // the fit's standard error counts only the texels' noise (thousands of texels: ~1e-5);
+        // the calibrated radiometry (the patch's 8-bit print, JPEG) is good to under 1 %
         assert!(
-            (v - KD[c]).abs() < 3.0 * se.max(1e-3),
+            (v - KD[c]).abs() < (3.0 * se).max(0.01 * KD[c]),
             "kd[{c}] {v} +- {se}, truth {}",
             KD[c]
         );
