@@ -237,3 +237,67 @@ fn bad_photos_are_refused_by_name_and_nothing_is_written() {
         assert!(!out.exists(), "{name}: wrote {}", out.display());
     }
 }
+
+/// A JPEG with an EXIF block (exposure 1/60 s, f/1.8, ISO 200) written by hand.
+fn jpeg_with_exif() -> Vec<u8> {
+    let mut jpeg = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut jpeg, 90)
+        .encode_image(&image::RgbImage::from_pixel(
+            32,
+            24,
+            image::Rgb([120, 120, 120]),
+        ))
+        .unwrap();
+    let mut t: Vec<u8> = b"II\x2a\x00".to_vec();
+    t.extend(8u32.to_le_bytes());
+    let entry = |t: &mut Vec<u8>, tag: u16, kind: u16, value: u32| {
+        t.extend(tag.to_le_bytes());
+        t.extend(kind.to_le_bytes());
+        t.extend(1u32.to_le_bytes());
+        t.extend(value.to_le_bytes());
+    };
+    // IFD0: the Exif IFD's offset (26)
+    t.extend(1u16.to_le_bytes());
+    entry(&mut t, 0x8769, 4, 26);
+    t.extend(0u32.to_le_bytes());
+    // the Exif IFD: ExposureTime, FNumber (rationals at 68 and 76), ISO (inline)
+    t.extend(3u16.to_le_bytes());
+    entry(&mut t, 0x829a, 5, 68);
+    entry(&mut t, 0x829d, 5, 76);
+    entry(&mut t, 0x8827, 3, 200);
+    t.extend(0u32.to_le_bytes());
+    for (n, d) in [(1u32, 60u32), (18, 10)] {
+        t.extend(n.to_le_bytes());
+        t.extend(d.to_le_bytes());
+    }
+    let mut app1 = vec![0xff, 0xe1];
+    app1.extend(((2 + 6 + t.len()) as u16).to_be_bytes());
+    app1.extend(b"Exif\0\0");
+    app1.extend(t);
+    jpeg.splice(2..2, app1);
+    jpeg
+}
+
+#[test]
+fn a_photos_exif_exposure_is_read() {
+    let dir = tempfile::tempdir().unwrap();
+    let p = dir.path().join("exif.jpg");
+    std::fs::write(&p, jpeg_with_exif()).unwrap();
+    let photo = fibrefit::load::photo::Photo::read(&p).unwrap();
+    let e = photo.exif.expect("EXIF read");
+    assert_eq!(e.time_s, Some(1.0 / 60.0));
+    assert_eq!(e.f_number, Some(1.8));
+    assert_eq!(e.iso, Some(200.0));
+    let product = e.product().unwrap();
+    assert!((product - 200.0 / 60.0 / 3.24).abs() < 1e-12);
+    // a photo whose patch disagrees with its EXIF is named
+    let mut other = fibrefit::load::photo::Photo::read(&p).unwrap();
+    other.path = dir.path().join("odd.jpg");
+    let third = fibrefit::load::photo::Photo::read(&p).unwrap();
+    let w = fibrefit::api::calibrate::exif_disagreements(
+        &[photo, other, third],
+        &[[1.0; 3], [1.5; 3], [1.0; 3]],
+    );
+    assert_eq!(w.len(), 1, "{w:?}");
+    assert!(w[0].contains("odd.jpg") && w[0].contains("+50 %"), "{w:?}");
+}

@@ -8,7 +8,7 @@
 use crate::board::camera::Intrinsics;
 use crate::board::detect;
 use crate::calibrate::{self, overlay, rectify, Calibration, Corner, Views};
-use crate::export::atomic::Outputs;
+use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
 use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
 use crate::load::photo::Photo;
@@ -98,57 +98,15 @@ pub fn calibrate(
         );
     }
     let board = BoardFile::read(&req.board)?;
-    let fixed =
-        match &req.intrinsics {
-            Some(p) => {
-                let text = crate::load::input::read_text_as(p, "intrinsics file")?;
-                Some(toml::from_str::<Intrinsics>(&text).with_context(|| {
-                    format!("{}: not an intrinsics file (cam.toml)", p.display())
-                })?)
-            }
-            None => None,
-        };
+    let fixed = read_intrinsics(req)?;
     let mut inputs = vec![req.board.clone()];
     inputs.extend(req.photos.iter().cloned());
     inputs.extend(req.intrinsics.iter().cloned());
     let mut outs = Outputs::new(&inputs);
-    let dir = outs.dir(out, "--out")?;
-    let report_dir = outs.dir(&dir.join("report"), "--out")?;
     let n = req.photos.len();
-    let capture_id = outs.file(&dir.join("capture.toml"), "--out")?;
-    let mask_id = outs.file(&dir.join("mask.png"), "--out")?;
-    let cam_id = outs.file(&dir.join("cam.toml"), "--out")?;
-    let report_id = outs.file(&report_dir.join("report.txt"), "--out")?;
-    let img_ids = (0..n)
-        .map(|k| outs.file(&dir.join(format!("img_{k:03}.exr")), "--out"))
-        .collect::<Result<Vec<_>>>()?;
-    let overlay_ids = (0..n)
-        .map(|k| outs.file(&report_dir.join(format!("overlay_{k:03}.png")), "--out"))
-        .collect::<Result<Vec<_>>>()?;
+    let t = Targets::reserve(&mut outs, out, n)?;
 
-    // decode and find the markers, every photo of one size
-    let mut photos: Vec<Photo> = Vec::new();
-    let (mut corners, mut markers) = (Vec::new(), Vec::new());
-    for path in &req.photos {
-        let photo = Photo::read(path)?;
-        if let Some(first) = photos.first() {
-            if (photo.width, photo.height) != (first.width, first.height) {
-                bail!(
-                    "{}: {}x{} pixels, but {} is {}x{}: one set of intrinsics needs photos of one size (one camera, one zoom)",
-                    path.display(),
-                    photo.width,
-                    photo.height,
-                    first.path.display(),
-                    first.width,
-                    first.height
-                );
-            }
-        }
-        let (c, m) = corners_of(&board, &photo)?;
-        corners.push(c);
-        markers.push(m);
-        photos.push(photo);
-    }
+    let (photos, corners, markers) = read_photos(&board, &req.photos)?;
     let size_px = [photos[0].width as u32, photos[0].height as u32];
     if let Some(k) = &fixed {
         if k.size_px != size_px {
@@ -174,12 +132,135 @@ pub fn calibrate(
     let rect = rectify::rectify(&board, &cal, &photos, &lights, req.texels)?;
 
     // write
-    let w = board.window_mm;
-    let mut images = Vec::new();
     for k in 0..n {
-        let name = format!("img_{k:03}.exr");
-        images.push(ImageSpec {
-            file: Some(PathBuf::from(&name)),
+        let (file, name) = outs.file_and_name(t.images[k]);
+        crate::export::images::write_exr_into(
+            file,
+            name,
+            req.texels[0],
+            req.texels[1],
+            3,
+            &rect.images[k],
+        )?;
+        let pic = overlay::overlay(&board, &cal, k, &photos[k], &corner_pixels(&views, k));
+        outs.put(
+            t.overlays[k],
+            &png_bytes(image::DynamicImage::ImageRgb8(pic))?,
+        )?;
+    }
+    let capture = capture_file(&board, &cal, &lights);
+    let text = format!(
+        "# written by fibrefit calibrate from {n} photos of {} (board frame = swatch frame, mm)\n{}",
+        req.board.display(),
+        toml::to_string(&capture).context("capture.toml")?
+    );
+    outs.put(t.capture, text.as_bytes())?;
+    let mask = image::GrayImage::from_raw(
+        req.texels[0] as u32,
+        req.texels[1] as u32,
+        rect.mask.clone(),
+    )
+    .expect("texels");
+    outs.put(t.mask, &png_bytes(image::DynamicImage::ImageLuma8(mask))?)?;
+    let cam = format!(
+        "# fibrefit calibrate's intrinsics: reuse with --intrinsics (same camera, zoom, focus)\n{}",
+        toml::to_string(&cal.intrinsics).context("cam.toml")?
+    );
+    outs.put(t.cam, cam.as_bytes())?;
+    let report = report_text(&photos, &cal, &markers, &rect);
+    outs.put(t.report, report.as_bytes())?;
+    outs.commit()?;
+    Ok(CalibrateOutcome {
+        calibration: cal,
+        markers,
+        capture: t.dir.join("capture.toml"),
+        report,
+    })
+}
+
+/// The intrinsics file `--intrinsics` names, read.
+fn read_intrinsics(req: &CalibrateRequest) -> Result<Option<Intrinsics>> {
+    let Some(p) = &req.intrinsics else {
+        return Ok(None);
+    };
+    let text = crate::load::input::read_text_as(p, "intrinsics file")?;
+    let k: Intrinsics = toml::from_str(&text)
+        .with_context(|| format!("{}: not an intrinsics file (cam.toml)", p.display()))?;
+    if !(k.focal_px > 0.0 && k.focal_px.is_finite()) {
+        bail!("{}: focal_px = {}: expected > 0", p.display(), k.focal_px);
+    }
+    Ok(Some(k))
+}
+
+/// The outputs of a calibration, reserved before the work.
+struct Targets {
+    dir: PathBuf,
+    capture: OutputId,
+    mask: OutputId,
+    cam: OutputId,
+    report: OutputId,
+    images: Vec<OutputId>,
+    overlays: Vec<OutputId>,
+}
+
+impl Targets {
+    fn reserve(outs: &mut Outputs, out: &Path, n: usize) -> Result<Self> {
+        let dir = outs.dir(out, "--out")?;
+        let report_dir = outs.dir(&dir.join("report"), "--out")?;
+        let mut file = |p: PathBuf| outs.file(&p, "--out");
+        Ok(Self {
+            capture: file(dir.join("capture.toml"))?,
+            mask: file(dir.join("mask.png"))?,
+            cam: file(dir.join("cam.toml"))?,
+            report: file(report_dir.join("report.txt"))?,
+            images: (0..n)
+                .map(|k| file(dir.join(format!("img_{k:03}.exr"))))
+                .collect::<Result<_>>()?,
+            overlays: (0..n)
+                .map(|k| file(report_dir.join(format!("overlay_{k:03}.png"))))
+                .collect::<Result<_>>()?,
+            dir,
+        })
+    }
+}
+
+/// Every photo decoded, all of one size, with its markers' corners and how many markers.
+fn read_photos(
+    board: &BoardFile,
+    paths: &[PathBuf],
+) -> Result<(Vec<Photo>, Vec<Vec<Corner>>, Vec<usize>)> {
+    let mut photos: Vec<Photo> = Vec::new();
+    let (mut corners, mut markers) = (Vec::new(), Vec::new());
+    for path in paths {
+        let photo = Photo::read(path)?;
+        if let Some(first) = photos.first() {
+            if (photo.width, photo.height) != (first.width, first.height) {
+                bail!(
+                    "{}: {}x{} pixels, but {} is {}x{}: one set of intrinsics needs photos of one size (one camera, one zoom)",
+                    path.display(),
+                    photo.width,
+                    photo.height,
+                    first.path.display(),
+                    first.width,
+                    first.height
+                );
+            }
+        }
+        let (c, m) = corners_of(board, &photo)?;
+        corners.push(c);
+        markers.push(m);
+        photos.push(photo);
+    }
+    Ok((photos, corners, markers))
+}
+
+/// The capture: the window as the swatch, each photo's image with its pinhole camera and the
+/// flash as a point light of intensity 1 (the images are divided by the light x exposure).
+fn capture_file(board: &BoardFile, cal: &Calibration, lights: &[Vector3<f64>]) -> CaptureFile {
+    let w = board.window_mm;
+    let images = (0..lights.len())
+        .map(|k| ImageSpec {
+            file: Some(PathBuf::from(format!("img_{k:03}.exr"))),
             bracket: vec![],
             encoding: None,
             exposure: 1.0,
@@ -191,23 +272,9 @@ pub fn calibrate(
             camera: Camera::Pinhole {
                 position_mm: cal.poses[k].position.into(),
             },
-        });
-        let (file, name) = outs.file_and_name(img_ids[k]);
-        crate::export::images::write_exr_into(
-            file,
-            name,
-            req.texels[0],
-            req.texels[1],
-            3,
-            &rect.images[k],
-        )?;
-        let pic = overlay::overlay(&board, &cal, k, &photos[k], &corner_pixels(&views, k));
-        outs.put(
-            overlay_ids[k],
-            &png_bytes(image::DynamicImage::ImageRgb8(pic))?,
-        )?;
-    }
-    let capture = CaptureFile {
+        })
+        .collect();
+    CaptureFile {
         swatch: Swatch {
             size_mm: [w[2] - w[0], w[3] - w[1]],
             roi: None,
@@ -219,34 +286,7 @@ pub fn calibrate(
             fibre_azimuth_map: None,
         },
         images,
-    };
-    let text = format!(
-        "# written by fibrefit calibrate from {n} photos of {} (board frame = swatch frame, mm)\n{}",
-        req.board.display(),
-        toml::to_string(&capture).context("capture.toml")?
-    );
-    outs.put(capture_id, text.as_bytes())?;
-    let mask = image::GrayImage::from_raw(
-        req.texels[0] as u32,
-        req.texels[1] as u32,
-        rect.mask.clone(),
-    )
-    .expect("texels");
-    outs.put(mask_id, &png_bytes(image::DynamicImage::ImageLuma8(mask))?)?;
-    let cam = format!(
-        "# fibrefit calibrate's intrinsics: reuse with --intrinsics (same camera, zoom, focus)\n{}",
-        toml::to_string(&cal.intrinsics).context("cam.toml")?
-    );
-    outs.put(cam_id, cam.as_bytes())?;
-    let report = report_text(&req.photos, &cal, &markers, &rect);
-    outs.put(report_id, report.as_bytes())?;
-    outs.commit()?;
-    Ok(CalibrateOutcome {
-        calibration: cal,
-        markers,
-        capture: dir.join("capture.toml"),
-        report,
-    })
+    }
 }
 
 /// Photo `k`'s detected corners (px).
@@ -263,7 +303,7 @@ fn png_bytes(img: image::DynamicImage) -> Result<Vec<u8>> {
 
 /// The report: intrinsics, per photo markers, RMS, position and its standard error, scale.
 fn report_text(
-    photos: &[PathBuf],
+    photos: &[Photo],
     cal: &Calibration,
     markers: &[usize],
     rect: &rectify::Rectified,
@@ -279,12 +319,15 @@ fn report_text(
         s,
         "note: 8-bit photos are decoded as sRGB; a phone's JPEG tone curve is not exactly sRGB (RAW is better, and not read yet)"
     );
-    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen");
-    for (i, p) in photos.iter().enumerate() {
+    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen\texif_s\texif_iso\texif_f");
+    for (i, photo) in photos.iter().enumerate() {
+        let p = &photo.path;
+        let e = photo.exif.unwrap_or_default();
+        let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v}"));
         let (c, se, sc) = (cal.poses[i].position, cal.position_se_mm[i], rect.scale[i]);
         let _ = writeln!(
             s,
-            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}",
+            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}\t{}\t{}\t{}",
             p.display(),
             markers[i],
             cal.rms_px[i],
@@ -297,8 +340,14 @@ fn report_text(
             sc[0],
             sc[1],
             sc[2],
-            rect.seen[i]
+            rect.seen[i],
+            show(e.time_s),
+            show(e.iso),
+            show(e.f_number)
         );
+    }
+    for w in exif_disagreements(photos, &rect.scale) {
+        let _ = writeln!(s, "warning: {w}");
     }
     let masked = rect.mask.iter().filter(|&&m| m == 0).count();
     let _ = writeln!(
@@ -307,4 +356,32 @@ fn report_text(
         rect.mask.len()
     );
     s
+}
+
+/// Photos whose patch-derived exposure (green) disagrees by over 15 % with what their EXIF
+/// exposure (time x ISO / f-number^2) says relative to the others: another light than the
+/// flash, the patch in shadow, or a wrong EXIF.
+pub fn exif_disagreements(photos: &[Photo], scale: &[[f64; 3]]) -> Vec<String> {
+    let ratios: Vec<(usize, f64)> = photos
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| Some((k, scale[k][1] / p.exif?.product()?)))
+        .collect();
+    if ratios.len() < 2 {
+        return vec![];
+    }
+    let mut sorted: Vec<f64> = ratios.iter().map(|r| r.1).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    ratios
+        .iter()
+        .filter(|(_, r)| (r / median - 1.0).abs() > 0.15)
+        .map(|(k, r)| {
+            format!(
+                "{}: the reference patch reads {:+.0} % against its EXIF exposure (the other photos agree): another light, the patch in shadow, or a wrong EXIF",
+                photos[*k].path.display(),
+                100.0 * (r / median - 1.0)
+            )
+        })
+        .collect()
 }

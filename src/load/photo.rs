@@ -18,6 +18,51 @@ pub struct Photo {
     pub linear: Vec<f32>,
     /// Largest linear value of any channel of each pixel (clipping shows as 1).
     pub peak: Vec<f32>,
+    /// The exposure its EXIF gives, when it has one.
+    pub exif: Option<Exposure>,
+}
+
+/// A photo's exposure from its EXIF.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Exposure {
+    /// Exposure time (s).
+    pub time_s: Option<f64>,
+    /// ISO speed.
+    pub iso: Option<f64>,
+    /// f-number.
+    pub f_number: Option<f64>,
+}
+
+impl Exposure {
+    /// The relative exposure time x ISO / f-number^2 (None unless all three are known).
+    pub fn product(&self) -> Option<f64> {
+        Some(self.time_s? * self.iso? / (self.f_number? * self.f_number?))
+    }
+}
+
+/// The exposure in the EXIF of the photo at `path` (None: no EXIF, or none of its fields).
+fn read_exif(path: &Path) -> Result<Option<Exposure>> {
+    let bytes = super::input::read_input_as(path, super::MAX_INPUT_BYTES, "photo")?.bytes;
+    let Ok(exif) = exif::Reader::new().read_from_container(&mut std::io::Cursor::new(&bytes))
+    else {
+        return Ok(None);
+    };
+    let number = |tag: exif::Tag| -> Option<f64> {
+        let f = exif.get_field(tag, exif::In::PRIMARY)?;
+        let v = match &f.value {
+            exif::Value::Rational(r) => r.first()?.to_f64(),
+            exif::Value::Short(s) => *s.first()? as f64,
+            exif::Value::Long(l) => *l.first()? as f64,
+            _ => return None,
+        };
+        (v.is_finite() && v > 0.0).then_some(v)
+    };
+    let e = Exposure {
+        time_s: number(exif::Tag::ExposureTime),
+        iso: number(exif::Tag::PhotographicSensitivity),
+        f_number: number(exif::Tag::FNumber),
+    };
+    Ok((e != Exposure::default()).then_some(e))
 }
 
 impl Photo {
@@ -50,6 +95,7 @@ impl Photo {
             height,
             linear,
             peak,
+            exif: read_exif(path)?,
         })
     }
 
