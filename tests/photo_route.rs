@@ -301,3 +301,100 @@ fn a_photos_exif_exposure_is_read() {
     assert_eq!(w.len(), 1, "{w:?}");
     assert!(w[0].contains("odd.jpg") && w[0].contains("+50 %"), "{w:?}");
 }
+
+#[test]
+fn synth_photos_then_calibrate_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let run = |args: &[&std::ffi::OsStr]| {
+        let o = Command::cargo_bin("fibrefit")
+            .unwrap()
+            .args(args)
+            .output()
+            .unwrap();
+        assert_eq!(
+            o.status.code(),
+            Some(0),
+            "{args:?}: {}",
+            String::from_utf8_lossy(&o.stderr)
+        );
+    };
+    let os = |s: &str| std::ffi::OsString::from(s);
+    run(&[
+        &os("board"),
+        &os("-q"),
+        &os("--out"),
+        d.join("b").as_os_str(),
+    ]);
+    std::fs::write(
+        d.join("p.toml"),
+        "model = \"lambert\"\nkd = [0.5, 0.4, 0.2]\n",
+    )
+    .unwrap();
+    let shots = d.join("shots");
+    run(&[
+        &os("synth"),
+        &os("--photos"),
+        &os("-q"),
+        &os("--board"),
+        d.join("b/board.toml").as_os_str(),
+        &os("--params"),
+        d.join("p.toml").as_os_str(),
+        &os("--count"),
+        &os("4"),
+        &os("--out"),
+        shots.as_os_str(),
+    ]);
+    let truth: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(shots.join("truth.json")).unwrap()).unwrap();
+    assert_eq!(truth["photos"].as_array().unwrap().len(), 4);
+    assert_eq!(truth["intrinsics"]["focal_px"].as_f64(), Some(1000.0));
+    let cal = d.join("cal");
+    let mut args = vec![
+        os("calibrate"),
+        os("-q"),
+        os("--board"),
+        d.join("b/board.toml").into_os_string(),
+        os("--out"),
+        cal.clone().into_os_string(),
+        os("--texels"),
+        os("32"),
+        os("32"),
+    ];
+    for k in 0..4 {
+        args.push(shots.join(format!("photo_{k:03}.jpg")).into_os_string());
+    }
+    run(&args.iter().map(|a| a.as_os_str()).collect::<Vec<_>>());
+    let capture: toml::Value =
+        toml::from_str(&std::fs::read_to_string(cal.join("capture.toml")).unwrap()).unwrap();
+    let images = capture["images"].as_array().unwrap();
+    for (k, img) in images.iter().enumerate() {
+        let got: Vec<f64> = img["camera"]["position_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_float().unwrap())
+            .collect();
+        let want: Vec<f64> = truth["photos"][k]["position_mm"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        let err = (0..3)
+            .map(|i| (got[i] - want[i]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        eprintln!("synth --photos photo {k}: camera position error {err:.3} mm");
+        assert!(err < 1.0, "photo {k}: {err} mm");
+    }
+    // --photos needs its board and parameters
+    let o = Command::cargo_bin("fibrefit")
+        .unwrap()
+        .args(["synth", "--photos", "--out"])
+        .arg(d.join("x"))
+        .output()
+        .unwrap();
+    assert_eq!(o.status.code(), Some(2));
+    assert!(!d.join("x").exists());
+}

@@ -136,3 +136,134 @@ impl PhotoScene<'_> {
         Ok(RgbImage::from_raw(w, h, data).expect("w x h x 3 values"))
     }
 }
+
+/// What `fibrefit synth --photos` is asked.
+#[derive(Clone, Debug)]
+pub struct PhotoSetRequest {
+    /// `board.toml` (its `board.png` beside it is the paper's texture).
+    pub board: std::path::PathBuf,
+    /// The swatch's parameter file (TOML, JSON or a fitted result).
+    pub params: std::path::PathBuf,
+    /// The rung (default: the parameter file's `model`).
+    pub model: Option<String>,
+    /// How many photos (around the board, 20-60 degrees of elevation, 300 mm away).
+    pub count: usize,
+    /// Seed of the noise.
+    pub seed: u64,
+}
+
+/// The photo set's camera: a phone-like 1600 x 1200 sensor, f = 1000 px, barrel distortion.
+pub const SET_CAMERA: Intrinsics = Intrinsics {
+    size_px: [1600, 1200],
+    focal_px: 1000.0,
+    principal_px: [805.0, 596.0],
+    k: [-0.08, 0.02],
+};
+
+/// The flash's position in the camera frame (mm) of the photo set.
+pub const SET_FLASH_MM: [f64; 3] = [10.0, 0.0, 0.0];
+
+/// Photo `i` of `n`'s camera: 300 mm from the window's centre, elevations cycling through
+/// 20-60 degrees, azimuths all around.
+pub fn set_pose(i: usize, n: usize) -> Pose {
+    let elev = (20.0 + 40.0 * (i % 4) as f64 / 3.0).to_radians();
+    let azim = (360.0 * i as f64 / n.max(1) as f64 + 10.0).to_radians();
+    let eye = Vector3::new(azim.cos() * elev.cos(), azim.sin() * elev.cos(), elev.sin()) * 300.0;
+    Pose::look_at(eye, Vector3::zeros())
+}
+
+/// Render the set into `out`: `photo_NNN.jpg` and `truth.json` (intrinsics, each photo's
+/// camera position and rotation, its flash and exposure, the parameters), all or nothing.
+/// Returns the files written.
+pub fn write_photo_set(
+    req: &PhotoSetRequest,
+    out: &std::path::Path,
+    progress: &crate::progress::Progress,
+) -> Result<Vec<std::path::PathBuf>> {
+    if !(1..=64).contains(&req.count) {
+        bail!("--count {}: expected 1 to 64 photos", req.count);
+    }
+    let board = BoardFile::read(&req.board)?;
+    let png_path = req.board.with_file_name("board.png");
+    let picture = crate::load::image_io::decode_png(&png_path, "board picture")?.to_luma8();
+    if [picture.width(), picture.height()] != board.png_px {
+        bail!(
+            "{}: {}x{} pixels, but board.toml says {:?}",
+            png_path.display(),
+            picture.width(),
+            picture.height(),
+            board.png_px
+        );
+    }
+    let raw = crate::export::result_json::read_params(&req.params)?;
+    let (id, params, warnings) = crate::export::result_json::checked_params(
+        &raw,
+        req.model.as_deref(),
+        &req.params.display().to_string(),
+    )?;
+    for w in &warnings {
+        progress.warn(&format!("{}: {w}", req.params.display()));
+    }
+    let model = crate::model::build(id, &params)?;
+    let scene = PhotoScene {
+        board: &board,
+        picture: &picture,
+        swatch: Some((model.as_ref(), &params)),
+        table_reflectance: 0.05,
+    };
+    let inputs = [req.board.clone(), png_path, req.params.clone()];
+    let mut outs = crate::export::atomic::Outputs::new(&inputs);
+    let dir = outs.dir(out, "--out")?;
+    let mut files = Vec::new();
+    let mut cameras = Vec::new();
+    let bar = progress.bar(req.count as u64, "photos");
+    for i in 0..req.count {
+        let pose = set_pose(i, req.count);
+        let shot = PhotoShot {
+            intrinsics: SET_CAMERA,
+            pose,
+            light_mm: pose.position + pose.to_board_direction(&Vector3::from(SET_FLASH_MM)),
+            intensity: 1.0,
+            exposure: 0.5 * std::f64::consts::PI * 0.09 * (1.0 + 0.1 * (i % 5) as f64),
+            noise_relative: 0.01,
+            noise_floor: 0.002,
+            seed: req.seed.wrapping_add(i as u64),
+            supersample: 3,
+        };
+        let photo = scene.render(&shot)?;
+        let name = format!("photo_{i:03}.jpg");
+        let id_out = outs.file(&dir.join(&name), "--out")?;
+        let mut bytes = Vec::new();
+        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 95)
+            .encode_image(&photo)
+            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+        outs.put(id_out, &bytes)?;
+        let r = pose.rotation.matrix();
+        cameras.push(serde_json::json!({
+            "file": name,
+            "position_mm": [pose.position.x, pose.position.y, pose.position.z],
+            "rotation_rows": [[r[(0, 0)], r[(0, 1)], r[(0, 2)]], [r[(1, 0)], r[(1, 1)], r[(1, 2)]], [r[(2, 0)], r[(2, 1)], r[(2, 2)]]],
+            "light_mm": [shot.light_mm.x, shot.light_mm.y, shot.light_mm.z],
+            "light_x_exposure": shot.intensity * shot.exposure,
+        }));
+        files.push(dir.join(name));
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+    let truth = serde_json::json!({
+        "tool": "fibrefit synth --photos",
+        "board": req.board.display().to_string(),
+        "model": id.as_str(),
+        "parameters": raw,
+        "intrinsics": SET_CAMERA,
+        "flash_offset_mm": SET_FLASH_MM,
+        "noise": {"relative": 0.01, "floor": 0.002, "seed": req.seed},
+        "photos": cameras,
+    });
+    let truth_id = outs.file(&dir.join("truth.json"), "--out")?;
+    let text = serde_json::to_string_pretty(&truth).map_err(|e| anyhow::anyhow!("truth.json: {e}"))?;
+    outs.put(truth_id, text.as_bytes())?;
+    outs.commit()?;
+    files.push(dir.join("truth.json"));
+    Ok(files)
+}
