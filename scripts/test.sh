@@ -22,6 +22,9 @@ compgen -G "/usr/share/vulkan/icd.d/lvp_icd*.json" >/dev/null || need+=(mesa-vul
 command -v glslangValidator >/dev/null || need+=(glslang-tools)
 compgen -G "/usr/lib/*/libLLVM-19.so*" >/dev/null || compgen -G "/usr/lib/*/libLLVM.so.19*" >/dev/null || need+=(libllvm19)
 python3 -c "import venv, ensurepip" 2>/dev/null || need+=(python3-venv)
+# the calibration board's markers (fibrefit board, calibrate): the AprilTag library, linked
+# through pkg-config
+pkg-config --exists apriltag 2>/dev/null || need+=(libapriltag-dev pkg-config)
 # the browser tests (tests/browser): three.js and <model-viewer> in headless Chromium, driven by
 # node (playwright-core from npm)
 command -v chromium >/dev/null || need+=(chromium)

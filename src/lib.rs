@@ -71,6 +71,8 @@ macro_rules! stage {
 pub mod api;
 stage! {
     bench;
+    board;
+    calibrate;
     cli;
     export;
     fit;

@@ -47,7 +47,7 @@ import operator as _operator
 import os as _os
 import re as _re
 from dataclasses import dataclass as _dataclass, field as _field
-from typing import Any, Dict, List, Optional, Tuple, Union
+from typing import Any, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 
@@ -61,6 +61,8 @@ __all__ = [
     "Parameter",
     "Result",
     "Score",
+    "board",
+    "calibrate",
     "eval",
     "export",
     "fit",
@@ -681,3 +683,55 @@ def view(
         progress=progress,
     )
     return _os.fspath(path)
+
+
+def board(
+    out: PathLike,
+    *,
+    paper: str = "a4",
+    window_mm: float = 60.0,
+    dpi: int = 300,
+    patch_reflectance: float = 0.5,
+) -> List[str]:
+    """The printable calibration board, as ``fibrefit board --out OUT`` writes it:
+    ``board.png`` (print at 100 %, check the 100 mm scale bar) and ``board.toml`` (the
+    markers, window, reference patch and scale bar in mm in the board frame;
+    docs/guide/photograph.md). Returns the paths written."""
+    paths = _native_call(
+        _native.board,
+        _os.fspath(out),
+        paper=paper,
+        window_mm=window_mm,
+        dpi=dpi,
+        patch_reflectance=patch_reflectance,
+    )
+    return [_os.fspath(p) for p in paths]
+
+
+def calibrate(
+    board: PathLike,
+    photos: Sequence[PathLike],
+    out: PathLike,
+    *,
+    flash_offset_mm: Tuple[float, float, float] = (10.0, 0.0, 0.0),
+    texels: Tuple[int, int] = (128, 128),
+    intrinsics: Optional[PathLike] = None,
+    progress: bool = False,
+) -> Tuple[str, str]:
+    """Photos of a swatch on the printed board made into a capture, as ``fibrefit calibrate
+    --board BOARD --out OUT PHOTO...``: the markers found, the camera's intrinsics and every
+    photo's pose calibrated, the photos rectified onto the window's texels with absolute values
+    from the reference patch, and ``OUT/capture.toml`` written (``fit(OUT/capture.toml, ...)``
+    runs on it), with ``cam.toml`` (reuse as ``intrinsics``) and ``report/``. A bad photo raises
+    FibrefitError naming it, and nothing is written. Returns (the capture file, the report)."""
+    capture, report = _native_call(
+        _native.calibrate,
+        _os.fspath(board),
+        [_os.fspath(p) for p in photos],
+        _os.fspath(out),
+        flash_offset_mm=tuple(float(v) for v in flash_offset_mm),
+        texels=tuple(int(v) for v in texels),
+        intrinsics=_path(intrinsics),
+        progress=progress,
+    )
+    return _os.fspath(capture), report

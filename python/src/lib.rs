@@ -776,6 +776,60 @@ fn eval<'py>(
     ))
 }
 
+/// `fibrefit board`: the printable calibration board written into `out` (`board.png`,
+/// `board.toml`). Returns the paths written.
+#[pyfunction]
+#[pyo3(signature = (out, *, paper="a4", window_mm=60.0, dpi=300, patch_reflectance=0.5))]
+fn board(
+    py: Python<'_>,
+    out: PathBuf,
+    paper: &str,
+    window_mm: f64,
+    dpi: u32,
+    patch_reflectance: f64,
+) -> PyResult<Vec<PathBuf>> {
+    let req = fibrefit::api::board::BoardRequest {
+        paper: paper.to_string(),
+        window_mm,
+        dpi,
+        patch_reflectance,
+    };
+    let o = py
+        .detach(|| fibrefit::api::board::board(&req, &out))
+        .map_err(err)?;
+    Ok(o.files)
+}
+
+/// `fibrefit calibrate`: photos of a swatch on the board `board` (board.toml) made into a
+/// capture in `out`. Returns (the capture file's path, the report's text).
+#[pyfunction]
+#[pyo3(signature = (board, photos, out, *, flash_offset_mm=(10.0, 0.0, 0.0), texels=(128, 128), intrinsics=None, progress=false))]
+#[allow(clippy::too_many_arguments)]
+fn calibrate(
+    py: Python<'_>,
+    board: PathBuf,
+    photos: Vec<PathBuf>,
+    out: PathBuf,
+    flash_offset_mm: (f64, f64, f64),
+    texels: (usize, usize),
+    intrinsics: Option<PathBuf>,
+    progress: bool,
+) -> PyResult<(PathBuf, String)> {
+    let req = fibrefit::api::calibrate::CalibrateRequest {
+        board,
+        photos,
+        flash_offset_mm: [flash_offset_mm.0, flash_offset_mm.1, flash_offset_mm.2],
+        texels: [texels.0, texels.1],
+        intrinsics,
+    };
+    let o = py
+        .detach(|| {
+            fibrefit::api::calibrate::calibrate(&req, &out, &fibrefit::Progress::new(!progress))
+        })
+        .map_err(err)?;
+    Ok((o.capture, o.report))
+}
+
 /// `fibrefit view`: the viewer page of `result` (a fitted result JSON or a parameter file)
 /// written to `out` (default: `result` with the extension `.html`), compared with `data` (default:
 /// the data file the result names, beside it). Returns the path written.
@@ -1009,6 +1063,8 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(eval, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
     m.add_function(wrap_pyfunction!(view, m)?)?;
+    m.add_function(wrap_pyfunction!(board, m)?)?;
+    m.add_function(wrap_pyfunction!(calibrate, m)?)?;
     m.add_function(wrap_pyfunction!(image_scene, m)?)?;
     m.add_function(wrap_pyfunction!(version, m)?)?;
     m.add_function(wrap_pyfunction!(capture_geometry, m)?)?;

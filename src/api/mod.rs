@@ -3,6 +3,8 @@
 //! (load -> model -> fit -> export) and no argument parsing or printing of results.
 
 pub mod batch;
+pub mod board;
+pub mod calibrate;
 pub mod capture;
 pub mod data;
 pub mod eval;

@@ -2,6 +2,8 @@
 //! map to exit code 2 in `main`.
 
 pub mod bench;
+pub mod board;
+pub mod calibrate;
 pub mod data;
 pub mod eval;
 pub mod export;
@@ -54,6 +56,10 @@ pub enum Command {
     Tangents(tangents::TangentsArgs),
     /// A self-contained HTML page with a WebGL2 viewer of a fitted result (exact model beside the glTF route, measured against fitted).
     View(view::ViewArgs),
+    /// A printable calibration board (markers, swatch window, grey patch, scale bar) for photos.
+    Board(board::BoardArgs),
+    /// Photos of a swatch on the printed board into a capture: markers, intrinsics, poses, rectified linear images.
+    Calibrate(calibrate::CalibrateArgs),
     /// Assemble the per-texel map tiles of `fit --tile` into maps and a result JSON.
     MergeMaps(map_tiles::MergeMapsArgs),
 }
@@ -110,6 +116,8 @@ where
         Command::Tangents(args) => tangents::run(&args),
         Command::Export(args) => export::run(&args),
         Command::View(args) => view::run(&args),
+        Command::Board(args) => board::run(&args),
+        Command::Calibrate(args) => calibrate::run(&args),
     }
 }
 

@@ -12,8 +12,28 @@ topology.png / tangent.png when used, truth.json (the true parameters; usable as
 The config format is documented in docs/formats.md (\"Synth config\"); examples: configs/synth_*.toml.")]
 pub struct SynthArgs {
     /// Synthesis config (TOML)
+    #[arg(long, value_name = "FILE", required_unless_present = "photos")]
+    pub config: Option<PathBuf>,
+    /// Photos of a printed board (`fibrefit board`) with a swatch of --params in its window
+    /// instead: OUT/photo_NNN.jpg (1600x1200, f 1000 px, k1 -0.08, k2 0.02, 300 mm away at
+    /// 20-60 degrees all around, a flash 10 mm beside the lens, noise) and OUT/truth.json
+    #[arg(long, requires_all = ["board", "params"], conflicts_with = "config")]
+    pub photos: bool,
+    /// With --photos: the board (board.toml; board.png beside it)
     #[arg(long, value_name = "FILE")]
-    pub config: PathBuf,
+    pub board: Option<PathBuf>,
+    /// With --photos: the swatch's parameters (TOML, JSON or a fitted result)
+    #[arg(long, value_name = "FILE")]
+    pub params: Option<PathBuf>,
+    /// With --photos: the rung [default: the parameter file's `model`]
+    #[arg(long, value_name = "ID")]
+    pub model: Option<String>,
+    /// With --photos: how many photos
+    #[arg(long, default_value_t = 8, value_name = "N")]
+    pub count: usize,
+    /// With --photos: the noise's seed
+    #[arg(long, default_value_t = 0, value_name = "SEED")]
+    pub seed: u64,
     /// Output directory (created if missing)
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -26,8 +46,23 @@ pub struct SynthArgs {
 }
 
 pub fn run(args: &SynthArgs) -> Result<()> {
+    let progress = crate::progress::Progress::new(args.quiet);
+    let (Some(config), false) = (&args.config, args.photos) else {
+        let req = crate::synth::photo::PhotoSetRequest {
+            board: args.board.clone().expect("clap: --photos requires --board"),
+            params: args.params.clone().expect("clap: --photos requires --params"),
+            model: args.model.clone(),
+            count: args.count,
+            seed: args.seed,
+        };
+        let files = crate::synth::photo::write_photo_set(&req, &args.out, &progress)?;
+        if !args.quiet {
+            eprintln!("wrote {} photos and truth.json to {}", files.len() - 1, args.out.display());
+        }
+        return Ok(());
+    };
     let info = crate::synth::write_set(
-        &args.config,
+        config,
         &args.out,
         &crate::progress::Progress::new(args.quiet),
         args.force,

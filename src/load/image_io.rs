@@ -114,6 +114,13 @@ pub fn decode_png(path: &Path, what: &str) -> Result<image::DynamicImage> {
     decode_limited(path, what, bytes)
 }
 
+/// A JPEG at `path` (a `what`: a photo), its size checked from the header before decoding,
+/// decoded with [`MAX_DECODE_BYTES`] as the limit.
+pub fn decode_jpeg(path: &Path, what: &str) -> Result<image::DynamicImage> {
+    let bytes = read_with_magic(path, what, b"\xff\xd8\xff", "JPEG")?;
+    decode_limited(path, what, bytes)
+}
+
 /// A TIFF at `path` (a `what`; little- or big-endian, uncompressed, LZW or Deflate as raw
 /// converters write them), its size checked from the header before decoding, decoded with
 /// [`MAX_DECODE_BYTES`] as the limit.

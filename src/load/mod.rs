@@ -1,6 +1,7 @@
 //! Loaders: files in, validated [`samples::Samples`] out. No model code here.
 
 pub mod arrays;
+pub mod board;
 pub mod bracket;
 pub mod capture;
 pub mod capture_store;
@@ -12,6 +13,7 @@ pub mod input;
 pub mod merl;
 pub mod mesh;
 pub mod params_file;
+pub mod photo;
 pub mod queries;
 pub mod rgl;
 pub mod samples;

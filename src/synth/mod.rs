@@ -35,6 +35,7 @@ use std::io::Write;
 use std::path::{Path, PathBuf};
 
 mod capture;
+pub mod photo;
 mod gonio;
 
 #[derive(Clone, Debug, Deserialize)]

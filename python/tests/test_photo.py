@@ -1,0 +1,25 @@
+"""fibrefit.board and fibrefit.calibrate: the photo route's entry points as the command line's
+(the calibration itself is tested end to end in tests/photo_route.rs)."""
+
+import pytest
+
+import fibrefit
+
+
+def test_board_writes_the_png_and_its_geometry(tmp_path):
+    written = fibrefit.board(tmp_path / "b", paper="letter", window_mm=50)
+    assert sorted(p.rsplit("/", 1)[-1] for p in written) == ["board.png", "board.toml"]
+    text = (tmp_path / "b" / "board.toml").read_text()
+    assert 'family = "tag36h11"' in text and 'paper = "letter"' in text
+
+
+def test_a_bad_option_or_photo_is_refused_by_name_and_nothing_written(tmp_path):
+    with pytest.raises(fibrefit.FibrefitError, match="--paper"):
+        fibrefit.board(tmp_path / "x", paper="b5")
+    assert not (tmp_path / "x").exists()
+    fibrefit.board(tmp_path / "b")
+    junk = tmp_path / "junk.jpg"
+    junk.write_bytes(b"not a photo")
+    with pytest.raises(fibrefit.FibrefitError, match="junk.jpg"):
+        fibrefit.calibrate(tmp_path / "b" / "board.toml", [junk], tmp_path / "cal")
+    assert not (tmp_path / "cal").exists()

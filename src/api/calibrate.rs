@@ -1,0 +1,387 @@
+//! `fibrefit calibrate`: photos of a swatch on a printed board become a capture. The photos are
+//! decoded to linear values, the board's markers found, the camera's intrinsics and every
+//! photo's pose calibrated (`crate::calibrate`), each photo rectified onto the window's texel
+//! grid with absolute values from the reference patch, and `capture.toml` written with the
+//! pinhole cameras and the flash's point lights in the board frame, so that `fibrefit fit
+//! OUT/capture.toml` runs unchanged.
+
+use crate::board::camera::Intrinsics;
+use crate::board::detect;
+use crate::calibrate::{self, overlay, rectify, Calibration, Corner, Views};
+use crate::export::atomic::{OutputId, Outputs};
+use crate::load::board::BoardFile;
+use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
+use crate::load::photo::Photo;
+use crate::progress::Progress;
+use anyhow::{anyhow, bail, Context, Result};
+use nalgebra::Vector3;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+/// What `fibrefit calibrate` is asked.
+#[derive(Clone, Debug)]
+pub struct CalibrateRequest {
+    /// `board.toml` (from `fibrefit board`).
+    pub board: PathBuf,
+    /// The photos (JPEG or PNG, sRGB), one camera.
+    pub photos: Vec<PathBuf>,
+    /// The flash's position in the camera frame (mm; x right, y down, z along the view).
+    pub flash_offset_mm: [f64; 3],
+    /// The rectified images' size in texels [width, height].
+    pub texels: [usize; 2],
+    /// Intrinsics from a previous run's `cam.toml` (held, not calibrated).
+    pub intrinsics: Option<PathBuf>,
+}
+
+/// What a calibration found and wrote.
+#[derive(Clone, Debug)]
+pub struct CalibrateOutcome {
+    /// The calibration.
+    pub calibration: Calibration,
+    /// Markers found in each photo.
+    pub markers: Vec<usize>,
+    /// The capture file written.
+    pub capture: PathBuf,
+    /// The report (text) also written to `report/report.txt`.
+    pub report: String,
+}
+
+/// The markers of `photo`, refused when too few for a pose.
+fn corners_of(board: &BoardFile, photo: &Photo) -> Result<(Vec<Corner>, usize)> {
+    let found = detect::find(&photo.grey8(), photo.width, photo.height)?;
+    let found: Vec<_> = found
+        .into_iter()
+        .filter(|f| board.marker(f.id).is_some())
+        .collect();
+    if found.is_empty() {
+        bail!(
+            "{}: no markers of the board found (is the whole board in the picture, sharp and lit?)",
+            photo.path.display()
+        );
+    }
+    if found.len() < 2 {
+        bail!(
+            "{}: only {} marker of the board found; a pose needs at least 2",
+            photo.path.display(),
+            found.len()
+        );
+    }
+    let mut corners = Vec::new();
+    for f in &found {
+        let m = board.marker(f.id).expect("filtered");
+        for (c, mm) in f.corners.iter().zip(&m.corners_mm) {
+            corners.push(Corner {
+                board_mm: *mm,
+                pixel: *c,
+            });
+        }
+    }
+    Ok((corners, found.len()))
+}
+
+/// Calibrate the photos of `req` and write the capture into `out`: `capture.toml`,
+/// `img_NNN.exr`, `mask.png`, `cam.toml` and `report/` (overlays, `report.txt`); all or
+/// nothing.
+pub fn calibrate(
+    req: &CalibrateRequest,
+    out: &Path,
+    progress: &Progress,
+) -> Result<CalibrateOutcome> {
+    if req.photos.is_empty() {
+        bail!("no photos given");
+    }
+    if req.texels[0] < 2 || req.texels[1] < 2 || req.texels[0] * req.texels[1] > 4096 * 4096 {
+        bail!(
+            "--texels {} {}: expected 2 to 4096 each",
+            req.texels[0],
+            req.texels[1]
+        );
+    }
+    let board = BoardFile::read(&req.board)?;
+    let fixed = read_intrinsics(req)?;
+    let mut inputs = vec![req.board.clone()];
+    inputs.extend(req.photos.iter().cloned());
+    inputs.extend(req.intrinsics.iter().cloned());
+    let mut outs = Outputs::new(&inputs);
+    let n = req.photos.len();
+    let t = Targets::reserve(&mut outs, out, n)?;
+
+    let (photos, corners, markers) = read_photos(&board, &req.photos)?;
+    let size_px = [photos[0].width as u32, photos[0].height as u32];
+    if let Some(k) = &fixed {
+        if k.size_px != size_px {
+            bail!(
+                "--intrinsics: calibrated for {}x{} photos, these are {}x{}",
+                k.size_px[0],
+                k.size_px[1],
+                size_px[0],
+                size_px[1]
+            );
+        }
+    }
+    progress.line(&format!("{n} photos: markers found {markers:?}"));
+    let views = Views { size_px, corners };
+    let cal = calibrate::calibrate(&views, fixed.as_ref())
+        .map_err(|e| anyhow!("calibrating {n} photos: {e:#}"))?;
+    let offset = Vector3::from(req.flash_offset_mm);
+    let lights: Vec<Vector3<f64>> = cal
+        .poses
+        .iter()
+        .map(|p| p.position + p.to_board_direction(&offset))
+        .collect();
+    let rect = rectify::rectify(&board, &cal, &photos, &lights, req.texels)?;
+
+    // write
+    for k in 0..n {
+        let (file, name) = outs.file_and_name(t.images[k]);
+        crate::export::images::write_exr_into(
+            file,
+            name,
+            req.texels[0],
+            req.texels[1],
+            3,
+            &rect.images[k],
+        )?;
+        let pic = overlay::overlay(&board, &cal, k, &photos[k], &corner_pixels(&views, k));
+        outs.put(
+            t.overlays[k],
+            &png_bytes(image::DynamicImage::ImageRgb8(pic))?,
+        )?;
+    }
+    let capture = capture_file(&board, &cal, &lights);
+    let text = format!(
+        "# written by fibrefit calibrate from {n} photos of {} (board frame = swatch frame, mm)\n{}",
+        req.board.display(),
+        toml::to_string(&capture).context("capture.toml")?
+    );
+    outs.put(t.capture, text.as_bytes())?;
+    let mask = image::GrayImage::from_raw(
+        req.texels[0] as u32,
+        req.texels[1] as u32,
+        rect.mask.clone(),
+    )
+    .expect("texels");
+    outs.put(t.mask, &png_bytes(image::DynamicImage::ImageLuma8(mask))?)?;
+    let cam = format!(
+        "# fibrefit calibrate's intrinsics: reuse with --intrinsics (same camera, zoom, focus)\n{}",
+        toml::to_string(&cal.intrinsics).context("cam.toml")?
+    );
+    outs.put(t.cam, cam.as_bytes())?;
+    let report = report_text(&photos, &cal, &markers, &rect);
+    outs.put(t.report, report.as_bytes())?;
+    outs.commit()?;
+    Ok(CalibrateOutcome {
+        calibration: cal,
+        markers,
+        capture: t.dir.join("capture.toml"),
+        report,
+    })
+}
+
+/// The intrinsics file `--intrinsics` names, read.
+fn read_intrinsics(req: &CalibrateRequest) -> Result<Option<Intrinsics>> {
+    let Some(p) = &req.intrinsics else {
+        return Ok(None);
+    };
+    let text = crate::load::input::read_text_as(p, "intrinsics file")?;
+    let k: Intrinsics = toml::from_str(&text)
+        .with_context(|| format!("{}: not an intrinsics file (cam.toml)", p.display()))?;
+    if !(k.focal_px > 0.0 && k.focal_px.is_finite()) {
+        bail!("{}: focal_px = {}: expected > 0", p.display(), k.focal_px);
+    }
+    Ok(Some(k))
+}
+
+/// The outputs of a calibration, reserved before the work.
+struct Targets {
+    dir: PathBuf,
+    capture: OutputId,
+    mask: OutputId,
+    cam: OutputId,
+    report: OutputId,
+    images: Vec<OutputId>,
+    overlays: Vec<OutputId>,
+}
+
+impl Targets {
+    fn reserve(outs: &mut Outputs, out: &Path, n: usize) -> Result<Self> {
+        let dir = outs.dir(out, "--out")?;
+        let report_dir = outs.dir(&dir.join("report"), "--out")?;
+        let mut file = |p: PathBuf| outs.file(&p, "--out");
+        Ok(Self {
+            capture: file(dir.join("capture.toml"))?,
+            mask: file(dir.join("mask.png"))?,
+            cam: file(dir.join("cam.toml"))?,
+            report: file(report_dir.join("report.txt"))?,
+            images: (0..n)
+                .map(|k| file(dir.join(format!("img_{k:03}.exr"))))
+                .collect::<Result<_>>()?,
+            overlays: (0..n)
+                .map(|k| file(report_dir.join(format!("overlay_{k:03}.png"))))
+                .collect::<Result<_>>()?,
+            dir,
+        })
+    }
+}
+
+/// Every photo decoded, all of one size, with its markers' corners and how many markers.
+fn read_photos(
+    board: &BoardFile,
+    paths: &[PathBuf],
+) -> Result<(Vec<Photo>, Vec<Vec<Corner>>, Vec<usize>)> {
+    let mut photos: Vec<Photo> = Vec::new();
+    let (mut corners, mut markers) = (Vec::new(), Vec::new());
+    for path in paths {
+        let photo = Photo::read(path)?;
+        if let Some(first) = photos.first() {
+            if (photo.width, photo.height) != (first.width, first.height) {
+                bail!(
+                    "{}: {}x{} pixels, but {} is {}x{}: one set of intrinsics needs photos of one size (one camera, one zoom)",
+                    path.display(),
+                    photo.width,
+                    photo.height,
+                    first.path.display(),
+                    first.width,
+                    first.height
+                );
+            }
+        }
+        let (c, m) = corners_of(board, &photo)?;
+        corners.push(c);
+        markers.push(m);
+        photos.push(photo);
+    }
+    Ok((photos, corners, markers))
+}
+
+/// The capture: the window as the swatch, each photo's image with its pinhole camera and the
+/// flash as a point light of intensity 1 (the images are divided by the light x exposure).
+fn capture_file(board: &BoardFile, cal: &Calibration, lights: &[Vector3<f64>]) -> CaptureFile {
+    let w = board.window_mm;
+    let images = (0..lights.len())
+        .map(|k| ImageSpec {
+            file: Some(PathBuf::from(format!("img_{k:03}.exr"))),
+            bracket: vec![],
+            encoding: None,
+            exposure: 1.0,
+            saturation: None,
+            light: Light::Point {
+                position_mm: lights[k].into(),
+                intensity: 1.0,
+            },
+            camera: Camera::Pinhole {
+                position_mm: cal.poses[k].position.into(),
+            },
+        })
+        .collect();
+    CaptureFile {
+        swatch: Swatch {
+            size_mm: [w[2] - w[0], w[3] - w[1]],
+            roi: None,
+            mask: Some(PathBuf::from("mask.png")),
+            fibre_azimuth_deg: None,
+            tangent_map: None,
+            topology_map: None,
+            height_map: None,
+            fibre_azimuth_map: None,
+        },
+        images,
+    }
+}
+
+/// Photo `k`'s detected corners (px).
+fn corner_pixels(views: &Views, k: usize) -> Vec<[f64; 2]> {
+    views.corners[k].iter().map(|c| c.pixel).collect()
+}
+
+fn png_bytes(img: image::DynamicImage) -> Result<Vec<u8>> {
+    let mut bytes = Vec::new();
+    img.write_with_encoder(image::codecs::png::PngEncoder::new(&mut bytes))
+        .map_err(|e| anyhow!("PNG: {e}"))?;
+    Ok(bytes)
+}
+
+/// The report: intrinsics, per photo markers, RMS, position and its standard error, scale.
+fn report_text(
+    photos: &[Photo],
+    cal: &Calibration,
+    markers: &[usize],
+    rect: &rectify::Rectified,
+) -> String {
+    let k = &cal.intrinsics;
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "intrinsics: {}x{} px, focal {:.2} px, principal point ({:.2}, {:.2}) px, k1 {:.5}, k2 {:.5}",
+        k.size_px[0], k.size_px[1], k.focal_px, k.principal_px[0], k.principal_px[1], k.k[0], k.k[1]
+    );
+    let _ = writeln!(
+        s,
+        "note: 8-bit photos are decoded as sRGB; a phone's JPEG tone curve is not exactly sRGB (RAW is better, and not read yet)"
+    );
+    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen\texif_s\texif_iso\texif_f");
+    for (i, photo) in photos.iter().enumerate() {
+        let p = &photo.path;
+        let e = photo.exif.unwrap_or_default();
+        let show = |v: Option<f64>| v.map_or("-".to_string(), |v| format!("{v}"));
+        let (c, se, sc) = (cal.poses[i].position, cal.position_se_mm[i], rect.scale[i]);
+        let _ = writeln!(
+            s,
+            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}\t{}\t{}\t{}",
+            p.display(),
+            markers[i],
+            cal.rms_px[i],
+            c.x,
+            c.y,
+            c.z,
+            se[0],
+            se[1],
+            se[2],
+            sc[0],
+            sc[1],
+            sc[2],
+            rect.seen[i],
+            show(e.time_s),
+            show(e.iso),
+            show(e.f_number)
+        );
+    }
+    for w in exif_disagreements(photos, &rect.scale) {
+        let _ = writeln!(s, "warning: {w}");
+    }
+    let masked = rect.mask.iter().filter(|&&m| m == 0).count();
+    let _ = writeln!(
+        s,
+        "mask: {masked} of {} texels left out (out of frame, too oblique, clipped or at the window's edge in some photo)",
+        rect.mask.len()
+    );
+    s
+}
+
+/// Photos whose patch-derived exposure (green) disagrees by over 15 % with what their EXIF
+/// exposure (time x ISO / f-number^2) says relative to the others: another light than the
+/// flash, the patch in shadow, or a wrong EXIF.
+pub fn exif_disagreements(photos: &[Photo], scale: &[[f64; 3]]) -> Vec<String> {
+    let ratios: Vec<(usize, f64)> = photos
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| Some((k, scale[k][1] / p.exif?.product()?)))
+        .collect();
+    if ratios.len() < 2 {
+        return vec![];
+    }
+    let mut sorted: Vec<f64> = ratios.iter().map(|r| r.1).collect();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    ratios
+        .iter()
+        .filter(|(_, r)| (r / median - 1.0).abs() > 0.15)
+        .map(|(k, r)| {
+            format!(
+                "{}: the reference patch reads {:+.0} % against its EXIF exposure (the other photos agree): another light, the patch in shadow, or a wrong EXIF",
+                photos[*k].path.display(),
+                100.0 * (r / median - 1.0)
+            )
+        })
+        .collect()
+}
