@@ -510,28 +510,12 @@ pub fn translate(wgsl: &str, lang: Language) -> Result<String> {
         Language::Glsl => {
             // the GLSL writer writes what one entry point reaches: an anchor reaching everything,
             // removed again below
-            let (module, info) = validate(&format!("{wgsl}{ANCHOR}"))?;
-            let options = naga::back::glsl::Options {
-                version: naga::back::glsl::Version::Desktop(450),
-                ..Default::default()
-            };
-            let pipeline = naga::back::glsl::PipelineOptions {
-                shader_stage: naga::ShaderStage::Compute,
-                entry_point: "fibrefit_anchor_main".into(),
-                multiview: None,
-            };
-            let mut out = String::new();
-            let mut w = naga::back::glsl::Writer::new(
-                &mut out,
-                &module,
-                &info,
-                &options,
-                &pipeline,
-                naga::proc::BoundsCheckPolicies::default(),
-            )
-            .map_err(|e| anyhow!("internal: GLSL translation: {e}"))?;
-            w.write()
-                .map_err(|e| anyhow!("internal: GLSL translation: {e}"))?;
+            let out = glsl_of(
+                &format!("{wgsl}{ANCHOR}"),
+                naga::back::glsl::Version::Desktop(450),
+                naga::ShaderStage::Compute,
+                "GLSL",
+            )?;
             format!(
                 "// GLSL 4.50 core. No #version line: include this after your shader's own.\n{}",
                 strip_glsl_anchor(&out)?
@@ -560,6 +544,40 @@ pub fn translate(wgsl: &str, lang: Language) -> Result<String> {
     Ok(format!("{header}{body}"))
 }
 
+/// `source` (the library with an anchor entry point `fibrefit_anchor_main` of `stage`, which
+/// reaches every public function) validated and written by naga's GLSL writer at `version`;
+/// `what` names the dialect in errors.
+fn glsl_of(
+    source: &str,
+    version: naga::back::glsl::Version,
+    stage: naga::ShaderStage,
+    what: &str,
+) -> Result<String> {
+    let (module, info) = validate(source)?;
+    let options = naga::back::glsl::Options {
+        version,
+        ..Default::default()
+    };
+    let pipeline = naga::back::glsl::PipelineOptions {
+        shader_stage: stage,
+        entry_point: "fibrefit_anchor_main".into(),
+        multiview: None,
+    };
+    let mut out = String::new();
+    let mut w = naga::back::glsl::Writer::new(
+        &mut out,
+        &module,
+        &info,
+        &options,
+        &pipeline,
+        naga::proc::BoundsCheckPolicies::default(),
+    )
+    .map_err(|e| anyhow!("internal: {what} translation: {e}"))?;
+    w.write()
+        .map_err(|e| anyhow!("internal: {what} translation: {e}"))?;
+    Ok(out)
+}
+
 /// A fragment entry point calling every public function, for GLSL ES 3.00 (which has no compute
 /// shaders); removed from the translation afterwards.
 const FRAGMENT_ANCHOR: &str = "
@@ -581,31 +599,15 @@ pub const GLSL_ES_PRELUDE: &str = "#version 300 es\nprecision highp float;\nprec
 /// `wgsl` as GLSL ES 3.00 (WebGL2), validated by naga: [`GLSL_ES_PRELUDE`], then `header`
 /// (comments), then the library, without the anchor.
 fn glsl_es(wgsl: &str, header: &str) -> Result<String> {
-    let (module, info) = validate(&format!("{wgsl}{FRAGMENT_ANCHOR}"))?;
-    let options = naga::back::glsl::Options {
-        version: naga::back::glsl::Version::Embedded {
+    let out = glsl_of(
+        &format!("{wgsl}{FRAGMENT_ANCHOR}"),
+        naga::back::glsl::Version::Embedded {
             version: 300,
             is_webgl: true,
         },
-        ..Default::default()
-    };
-    let pipeline = naga::back::glsl::PipelineOptions {
-        shader_stage: naga::ShaderStage::Fragment,
-        entry_point: "fibrefit_anchor_main".into(),
-        multiview: None,
-    };
-    let mut out = String::new();
-    let mut w = naga::back::glsl::Writer::new(
-        &mut out,
-        &module,
-        &info,
-        &options,
-        &pipeline,
-        naga::proc::BoundsCheckPolicies::default(),
-    )
-    .map_err(|e| anyhow!("internal: GLSL ES translation: {e}"))?;
-    w.write()
-        .map_err(|e| anyhow!("internal: GLSL ES translation: {e}"))?;
+        naga::ShaderStage::Fragment,
+        "GLSL ES",
+    )?;
     // the anchor's varyings and output, and the writer's own version and precision lines
     let kept: String = out
         .lines()
