@@ -24,6 +24,7 @@ fn torus(c: &mut Criterion) {
         topology_map: None,
         texel_maps: None,
         fibre_azimuth_deg: 0.0,
+        lobe: params.gltf.lobe(),
         ward_curvature: None,
     };
     let lights = [Light::Directional {

@@ -212,8 +212,7 @@ pub struct GlbTextures {
     pub height_nodes: Vec<gltf_material::HeightNode>,
 }
 
-/// The map files of a maps directory that the textures may be made from.
-const MAP_FILES: [&str; 4] = ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"];
+use crate::load::texel_maps::MAP_FILES;
 
 /// Every file an export reads (none may be an output).
 pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
@@ -490,11 +489,13 @@ fn glb_preview(
 }
 
 /// The textures of a `gltf` fit's maps (one texel per map pixel, rows from the top, as
-/// [`map_textures`]): base colour (sRGB) from `kd.exr`, and KHR_materials_anisotropy's texture
-/// from `fibre_azimuth.exr` (RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's
-/// azimuth - `fibre_azimuth_deg`, B = 1 so the strength is the fit's). The rung's maps hold no
-/// roughness, so there is no metallic-roughness texture; a height or ks map (which a `gltf`
-/// fit does not write) is not read, with a warning. A texel without a value takes the global.
+/// [`map_textures`]): base colour (sRGB) from `kd.exr`; the metallic-roughness texture from
+/// `roughness.exr` (G = roughness, linear 8-bit, `roughnessFactor` 1; B = 1, R = 0); and
+/// KHR_materials_anisotropy's texture from `fibre_azimuth.exr` and `anisotropy_strength.exr`
+/// (RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's azimuth -
+/// `fibre_azimuth_deg`; B = the texel's strength with `anisotropyStrength` 1, or 1 so the
+/// strength is the fit's). A height or ks map (which a `gltf` fit does not write) is not read,
+/// with a warning. A texel without a value takes the global.
 fn rung_textures(
     params: &ModelParams,
     maps: &TexelMapsIn,
@@ -516,7 +517,10 @@ fn rung_textures(
             ));
         }
     }
-    if maps.kd.is_none() && maps.psi.is_none() {
+    if [&maps.kd, &maps.psi, &maps.roughness, &maps.anisotropy]
+        .iter()
+        .all(|m| m.is_none())
+    {
         return Ok(None);
     }
     let n = w
@@ -524,7 +528,8 @@ fn rung_textures(
         .and_then(|n| n.checked_mul(3))
         .ok_or_else(|| anyhow!("maps of {w}x{h} texels: too many for textures"))?;
     let psi_deg = params.fibre_azimuth.to_degrees();
-    let (mut base, mut aniso) = (vec![0u8; n], vec![0u8; n]);
+    let (mut base, mut rough, mut aniso) = (vec![0u8; n], vec![0u8; n], vec![0u8; n]);
+    let (strength, roughness) = (params.gltf.anisotropy, params.gltf.roughness);
     // the largest relative change 8-bit sRGB makes to a base colour channel above 0.01
     let mut worst_base: f64 = 0.0;
     for y in 0..h {
@@ -541,11 +546,19 @@ fn rung_textures(
             let turn = TexelMapsIn::at(&maps.psi, x, y, 0).map_or(0.0, |p| {
                 ((p - psi_deg + 90.0).rem_euclid(180.0) - 90.0).to_radians()
             });
+            let b = match &maps.anisotropy {
+                Some(_) => {
+                    gltf_out::unorm8(TexelMapsIn::at(&maps.anisotropy, x, y, 0).unwrap_or(strength))
+                }
+                None => 255,
+            };
             aniso[i..i + 3].copy_from_slice(&[
                 gltf_out::unorm8(0.5 * (turn.cos() + 1.0)),
                 gltf_out::unorm8(0.5 * (turn.sin() + 1.0)),
-                255,
+                b,
             ]);
+            let r = TexelMapsIn::at(&maps.roughness, x, y, 0).unwrap_or(roughness);
+            rough[i..i + 3].copy_from_slice(&[0, gltf_out::unorm8(r), 255]);
         }
     }
     let mut images = Vec::new();
@@ -563,9 +576,13 @@ fn rung_textures(
         .is_some()
         .then(|| add("base colour", "base_color", &base))
         .transpose()?;
-    let t_aniso = maps
-        .psi
+    let t_rough = maps
+        .roughness
         .is_some()
+        .then(|| add("metallic-roughness", "metallic_roughness", &rough))
+        .transpose()?;
+    let strength_mapped = maps.anisotropy.is_some();
+    let t_aniso = (maps.psi.is_some() || strength_mapped)
         .then(|| add("anisotropy", "anisotropy", &aniso))
         .transpose()?;
     let description = serde_json::json!({
@@ -577,9 +594,17 @@ fn rung_textures(
             100.0 * worst_base
         )),
         "anisotropy": t_aniso.map(|_| format!(
-            "RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's fibre azimuth - fibre_azimuth_deg {psi_deg}, turned further by anisotropyRotation (so across the texel's fibres); B = 1: the strength is anisotropyStrength"
+            "RG = (cos a, sin a) encoded [-1, 1] -> [0, 1], a = the texel's fibre azimuth - fibre_azimuth_deg {psi_deg} (0 without a fibre_azimuth map), turned further by anisotropyRotation (so across the texel's fibres); B = {}",
+            if strength_mapped {
+                "the texel's anisotropy strength (linear 8-bit; anisotropyStrength = 1)"
+            } else {
+                "1: the strength is anisotropyStrength"
+            }
         )),
-        "roughness": "no texture: a gltf fit's maps hold base colour and fibre direction; roughnessFactor is the global fit's",
+        "roughness": match t_rough {
+            Some(_) => "metallic-roughness texture: G = the texel's roughness (linear 8-bit, roughnessFactor = 1), B = 1 (metallicFactor is the fit's), R unused".to_string(),
+            None => "no texture: roughnessFactor is the global fit's (no roughness map)".to_string(),
+        },
     });
     Ok(Some((
         GlbTextures {
@@ -592,7 +617,9 @@ fn rung_textures(
         images,
         gltf_out::RungTextures {
             base_color: t_base,
+            metallic_roughness: t_rough,
             anisotropy: t_aniso,
+            strength_mapped,
             description,
         },
     )))

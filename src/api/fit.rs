@@ -821,6 +821,12 @@ fn per_texel_names(req: &crate::fit::config::MapsConfig) -> Vec<&'static str> {
     if req.ks {
         v.extend([Param::Ks, Param::RhoS]);
     }
+    if req.roughness {
+        v.push(Param::Roughness);
+    }
+    if req.anisotropy_strength {
+        v.push(Param::AnisotropyStrength);
+    }
     v.into_iter().map(Param::name).collect()
 }
 

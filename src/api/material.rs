@@ -181,6 +181,8 @@ impl Material {
             psi: None,
             kd: None,
             ks: None,
+            roughness: None,
+            anisotropy: None,
             width: size.0,
             rows: size.1,
         });
@@ -227,6 +229,7 @@ impl Material {
             texel_maps: self.texel_maps.as_ref(),
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             ward_curvature: None,
+            lobe: p.gltf.lobe(),
         }
     }
 

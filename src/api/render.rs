@@ -96,7 +96,7 @@ impl Render {
         inputs.extend(scene.inputs.iter().cloned());
         let maps = maps_dir(req.maps.as_deref(), &req.params, &req.progress)?;
         if let Some(dir) = &maps {
-            for f in ["height.exr", "fibre_azimuth.exr", "kd.exr", "ks.exr"] {
+            for f in crate::load::texel_maps::MAP_FILES {
                 inputs.push(dir.join(f));
             }
         }
@@ -150,6 +150,7 @@ impl Render {
             texel_maps: self.texel_maps.as_ref(),
             fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
             ward_curvature: self.ward_curvature_alpha,
+            lobe: params.gltf.lobe(),
         };
         let scene = &self.scene;
         let bar = self.progress.bar(scene.camera.height as u64, "render");
@@ -384,6 +385,7 @@ pub fn paper_figures(
             texel_maps: None,
             fibre_azimuth_deg: 0.0,
             ward_curvature: None,
+            lobe: params.gltf.lobe(),
         };
         for lights in &lightings {
             let camera = Camera {

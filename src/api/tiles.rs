@@ -342,6 +342,8 @@ fn maps_config(tile: &TileFile) -> crate::fit::config::MapsConfig {
         fibre_azimuth: tile.maps.iter().any(|m| m == "fibre_azimuth"),
         kd: tile.maps.iter().any(|m| m == "kd"),
         ks: tile.maps.iter().any(|m| m == "ks"),
+        roughness: tile.maps.iter().any(|m| m == "roughness"),
+        anisotropy_strength: tile.maps.iter().any(|m| m == "anisotropy_strength"),
         smoothness: tile.smoothness,
         ..Default::default()
     }

@@ -357,9 +357,14 @@ pub struct RungValues {
 pub struct RungTextures {
     /// sRGB base colour, the `kd` map: `baseColorFactor` becomes 1.
     pub base_color: Option<usize>,
+    /// The metallic-roughness texture, the `roughness` map: G = roughness, B = 1
+    /// (`roughnessFactor` becomes 1, `metallicFactor` stays the fit's).
+    pub metallic_roughness: Option<usize>,
     /// KHR_materials_anisotropy's texture: RG the fibre map's direction relative to the global
-    /// one, B = 1 (`anisotropyStrength` stays the fit's).
+    /// one, B = 1 (`anisotropyStrength` stays the fit's) or, with `strength_mapped`, the
+    /// `anisotropy_strength` map (`anisotropyStrength` becomes 1).
     pub anisotropy: Option<usize>,
+    pub strength_mapped: bool,
     pub description: Value,
 }
 
@@ -401,9 +406,18 @@ pub fn gltf_rung_material(v: &RungValues, textures: Option<&RungTextures>, extra
             material["pbrMetallicRoughness"]["baseColorTexture"] =
                 json!({ "index": i, "texCoord": 0 });
         }
+        if let Some(i) = tx.metallic_roughness {
+            material["pbrMetallicRoughness"]["roughnessFactor"] = json!(1.0);
+            material["pbrMetallicRoughness"]["metallicRoughnessTexture"] =
+                json!({ "index": i, "texCoord": 0 });
+        }
         if let Some(i) = tx.anisotropy {
             material["extensions"]["KHR_materials_anisotropy"]["anisotropyTexture"] =
                 json!({ "index": i, "texCoord": 0 });
+            if tx.strength_mapped {
+                material["extensions"]["KHR_materials_anisotropy"]["anisotropyStrength"] =
+                    json!(1.0);
+            }
         }
         material["extras"]["fibrefit"]["textures"] = tx.description.clone();
     }

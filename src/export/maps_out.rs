@@ -3,7 +3,8 @@
 //! error map for each and the residual map; a description for the result JSON.
 //!
 //! Files: `height.exr` (H, fibre radii), `fibre_azimuth.exr` (psi, degrees in [-90, 90)),
-//! `kd.exr`, `ks.exr` (albedos, one channel per colour channel), `<name>_std_error.exr`, and
+//! `kd.exr`, `ks.exr` (albedos, one channel per colour channel), `roughness.exr` and
+//! `anisotropy_strength.exr` (the `gltf` rung's lobe), `<name>_std_error.exr`, and
 //! `residual.exr` (RMS relative residual per texel), and a picture of each (`<name>.png`,
 //! `<name>_std_error.png`, `residual.png`: the map at the capture's resolution, one panel per
 //! channel, with a colour bar; grey where no texel is). All are reserved in the run's outputs
@@ -31,7 +32,14 @@ fn layout(name: &str, channels: usize) -> (&'static str, usize, Getter) {
             channels,
             |v, c| v.kd[c],
         ),
-        _ => ("weight of the specular lobe (ks)", channels, |v, c| v.ks[c]),
+        "ks" => ("weight of the specular lobe (ks)", channels, |v, c| v.ks[c]),
+        "roughness" => ("unitless (the lobe's roughness, glTF's)", 1, |v, _| v.roughness),
+        "anisotropy_strength" => (
+            "unitless in [0, 1] (KHR_materials_anisotropy's strength)",
+            1,
+            |v, _| v.anisotropy,
+        ),
+        other => unreachable!("no map `{other}`"),
     }
 }
 
@@ -111,6 +119,8 @@ fn bar_label(name: &str) -> (&'static str, &'static str) {
         "height" => ("height H", "fibre radii"),
         "fibre_azimuth" => ("fibre azimuth psi", "deg"),
         "kd" => ("kd", "albedo"),
+        "roughness" => ("roughness", "unitless"),
+        "anisotropy_strength" => ("anisotropy strength", "unitless"),
         _ => ("ks", "weight"),
     }
 }

@@ -1,17 +1,32 @@
 //! Per-texel maps as `fit --maps` writes them, read back as inputs (`synth` renders a capture
 //! from them, `render` shows them on an object): `height.exr` (fibre radii),
-//! `fibre_azimuth.exr` (degrees), `kd.exr`, `ks.exr` (grey or R, G, B); those present are used,
-//! NaN texels take the global value.
+//! `fibre_azimuth.exr` (degrees), `kd.exr`, `ks.exr` (grey or R, G, B), and for the `gltf`
+//! rung `roughness.exr` and `anisotropy_strength.exr`; those present are used, NaN texels take
+//! the global value.
 
 use super::image_io::{self, LinearImage};
 use anyhow::{bail, Result};
 use std::path::Path;
+
+/// The files of a maps directory, in the order `fit --maps` lists them.
+pub const MAP_FILES: [&str; 6] = [
+    "height.exr",
+    "fibre_azimuth.exr",
+    "kd.exr",
+    "ks.exr",
+    "roughness.exr",
+    "anisotropy_strength.exr",
+];
 
 pub struct TexelMapsIn {
     pub height: Option<LinearImage>,
     pub psi: Option<LinearImage>,
     pub kd: Option<LinearImage>,
     pub ks: Option<LinearImage>,
+    /// The lobe's roughness (`gltf`: glTF's roughness).
+    pub roughness: Option<LinearImage>,
+    /// The lobe's anisotropy strength (`gltf`: KHR_materials_anisotropy's).
+    pub anisotropy: Option<LinearImage>,
     pub width: usize,
     pub rows: usize,
 }
@@ -46,12 +61,16 @@ impl TexelMapsIn {
             read("kd.exr")?,
             read("ks.exr")?,
         );
-        let Some((width, rows)) =
-            want.filter(|_| height.is_some() || psi.is_some() || kd.is_some() || ks.is_some())
-        else {
+        let (roughness, anisotropy) = (read("roughness.exr")?, read("anisotropy_strength.exr")?);
+        let Some((width, rows)) = want.filter(|_| {
+            [&height, &psi, &kd, &ks, &roughness, &anisotropy]
+                .iter()
+                .any(|m| m.is_some())
+        }) else {
             bail!(
-                "{}: no height.exr, fibre_azimuth.exr, kd.exr or ks.exr in it",
-                dir.display()
+                "{}: no map in it ({})",
+                dir.display(),
+                MAP_FILES.join(", ")
             );
         };
         Ok(Self {
@@ -59,6 +78,8 @@ impl TexelMapsIn {
             psi,
             kd,
             ks,
+            roughness,
+            anisotropy,
             width,
             rows,
         })
@@ -70,6 +91,17 @@ impl TexelMapsIn {
         let px = m.pixel(x, y);
         let v = px[c.min(px.len() - 1)] as f64;
         (!v.is_nan()).then_some(v)
+    }
+
+    /// The lobe a model at the global `lobe` has at texel (x, y): the maps' roughness and
+    /// anisotropy strength where they give them. `None` where neither map does.
+    pub fn lobe_at(&self, x: usize, y: usize, lobe: crate::model::Lobe) -> Option<crate::model::Lobe> {
+        let r = Self::at(&self.roughness, x, y, 0);
+        let a = Self::at(&self.anisotropy, x, y, 0);
+        (r.is_some() || a.is_some()).then(|| crate::model::Lobe {
+            roughness: r.unwrap_or(lobe.roughness),
+            anisotropy: a.unwrap_or(lobe.anisotropy),
+        })
     }
 
     /// The texel under surface coordinates (u, v) in [0, 1] (v up the image).

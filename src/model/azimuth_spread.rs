@@ -153,6 +153,15 @@ impl ShadingModel for AzimuthSpread {
         self.inner.rung()
     }
 
+    fn with_lobe(&self, lobe: super::Lobe) -> Option<Box<dyn ShadingModel>> {
+        Some(Box::new(Self {
+            inner: self.inner.with_lobe(lobe)?,
+            sigma: self.sigma,
+            nodes: self.nodes.clone(),
+            adaptive: self.adaptive,
+        }))
+    }
+
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
         if self.adaptive {
             return self.exact(pair, |p| self.inner.basis(p));

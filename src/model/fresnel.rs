@@ -37,6 +37,7 @@ pub fn cos_half(pair: &DirectionPair) -> f64 {
 }
 
 /// Schlick's factor at l.h on the specular component.
+#[derive(Clone)]
 pub struct FresnelFactor {
     ior: f64,
 }

@@ -55,6 +55,7 @@ pub fn layer(pair: &DirectionPair, depth: f64, g: f64) -> (f64, f64) {
 }
 
 /// The layer's attenuation of the rung and its own single-scattering column.
+#[derive(Clone)]
 pub struct FuzzFactor {
     depth: f64,
     asymmetry: f64,

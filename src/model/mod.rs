@@ -123,6 +123,14 @@ pub trait ShadingModel: Send + Sync {
     /// The basis for a pair with both directions strictly above the horizon.
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis;
 
+    /// This model with its lobe's `roughness` and `anisotropy` strength replaced (one texel of
+    /// a roughness or anisotropy map), everything else as it is; `None` for rungs without such
+    /// a lobe ([`Ability::GltfMaterial`]'s `roughness` and `anisotropy_strength`). Cheap: what
+    /// the lobe does not touch (tables, layers) is kept.
+    fn with_lobe(&self, _lobe: Lobe) -> Option<Box<dyn ShadingModel>> {
+        None
+    }
+
     /// The basis with the fibre topology fixed at one height H (one texel), for models that have
     /// a topology; `None` otherwise.
     fn basis_at_height_above_horizon(&self, _pair: &DirectionPair, _height: f64) -> Option<Basis> {
@@ -180,6 +188,14 @@ pub trait ShadingModel: Send + Sync {
     }
 }
 
+/// A lobe's per-texel shape ([`ShadingModel::with_lobe`]): GGX roughness and anisotropy
+/// strength, in the units of the parameters `roughness` and `anisotropy_strength`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Lobe {
+    pub roughness: f64,
+    pub anisotropy: f64,
+}
+
 /// A BRDF per channel (1/sr) as a function of the swatch-frame directions (l, v); `None` where
 /// it is not defined (outside a measured file's range). Fitted models and measured files alike.
 pub type BrdfFn = Box<dyn Fn(&Vec3, &Vec3) -> Option<[f64; 3]> + Sync>;
@@ -212,9 +228,14 @@ impl<T: BasisTransform> Transformed<T> {
     }
 }
 
-impl<T: BasisTransform> ShadingModel for Transformed<T> {
+impl<T: BasisTransform + Clone + 'static> ShadingModel for Transformed<T> {
     fn rung(&self) -> &'static Rung {
         self.inner.rung()
+    }
+
+    fn with_lobe(&self, lobe: Lobe) -> Option<Box<dyn ShadingModel>> {
+        let inner = self.inner.with_lobe(lobe)?;
+        Some(Box::new(Transformed::with(inner, self.transform.clone())))
     }
 
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {

@@ -538,6 +538,14 @@ impl GltfShape {
         Self { variant, ..self }
     }
 
+    /// The lobe's roughness and anisotropy strength as given.
+    pub fn lobe(&self) -> crate::model::Lobe {
+        crate::model::Lobe {
+            roughness: self.roughness,
+            anisotropy: self.anisotropy,
+        }
+    }
+
     /// The roughness and sheen roughness the variant evaluates with: as given (Khronos), or
     /// three.js's (`lights_physical_fragment`): max(roughness, 0.045) (a flat mesh adds no
     /// normal variation) and clamp(sheen roughness, 1e-4, 1).

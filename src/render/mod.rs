@@ -19,7 +19,7 @@ pub mod scene;
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{FibreFrame, Vec3};
 use crate::model::topology::{max_height, TopologyMap};
-use crate::model::{Albedos, Basis, DirectionPair, ShadingModel};
+use crate::model::{Albedos, Basis, DirectionPair, Lobe, ShadingModel};
 use objects::{Object, Ray};
 use rayon::prelude::*;
 
@@ -177,6 +177,9 @@ pub struct Material<'a> {
     pub texel_maps: Option<&'a TexelMapsIn>,
     /// The parameters' fibre azimuth psi, degrees.
     pub fibre_azimuth_deg: f64,
+    /// The parameters' lobe (roughness, anisotropy strength), which the texel maps' roughness
+    /// and anisotropy strength replace texel by texel ([`ShadingModel::with_lobe`]).
+    pub lobe: Lobe,
     /// Ward only: alpha_x = f |k1|, alpha_y = f |k2| (clamped to [0.01, 1]) where the hit has
     /// curvatures (seed 004); the plain Ward lobe there.
     pub ward_curvature: Option<f64>,
@@ -247,6 +250,15 @@ impl Material<'_> {
         }
     }
 
+    /// The texel maps' lobe at a hit, where they give a roughness or anisotropy strength there
+    /// and the model has such a lobe.
+    fn lobe_at(&self, hit: &objects::Hit) -> Option<Lobe> {
+        let m = self.texel_maps?;
+        let (x, y) = m.texel(hit.uv);
+        m.lobe_at(x, y, self.lobe)
+            .filter(|_| self.model.rung().has(crate::model::Ability::GltfMaterial))
+    }
+
     /// What shades a hit: its fibre frame (the texel maps' azimuth applied), albedos and height.
     pub fn point(&self, hit: &objects::Hit) -> ShadingPoint {
         let hit = &self.mapped(hit);
@@ -258,6 +270,7 @@ impl Material<'_> {
             n,
             albedos: self.albedos_at(hit),
             height: self.height_at(hit),
+            lobe: self.lobe_at(hit),
             ward_alphas: self.ward_curvature.zip(hit.curvature).map(|(f, [k1, k2])| {
                 let alpha = |k: f64| (f * k).clamp(0.01, 1.0);
                 (alpha(k1), alpha(k2))
@@ -267,6 +280,9 @@ impl Material<'_> {
 
     /// The basis at a shading point for a pair in its fibre frame.
     pub fn basis(&self, sp: &ShadingPoint, pair: &DirectionPair) -> Basis {
+        if let Some(m) = sp.lobe.and_then(|l| self.model.with_lobe(l)) {
+            return m.basis(pair);
+        }
         match (sp.height, sp.ward_alphas) {
             (_, Some((ax, ay))) => crate::model::ward::Ward::new(ax, ay).basis(pair),
             (Some(h), None) => self.model.basis_at_height(pair, h).unwrap_or_default(),
@@ -316,6 +332,8 @@ pub struct ShadingPoint {
     pub albedos: Albedos,
     pub height: Option<f64>,
     pub ward_alphas: Option<(f64, f64)>,
+    /// The texel's own lobe (roughness and anisotropy maps), where it has one.
+    pub lobe: Option<Lobe>,
 }
 
 impl ShadingPoint {

@@ -163,6 +163,14 @@ impl<'a> CaptureScene<'a> {
             None => None,
         };
         if let Some(m) = &unit_maps {
+            let lobe_maps = m.roughness.is_some() || m.anisotropy.is_some();
+            if lobe_maps && req.shading.with_lobe(p.gltf.lobe()).is_none() {
+                bail!(
+                    "capture.maps = {}: roughness.exr or anisotropy_strength.exr, but model `{}` has no such lobe (the gltf rung has)",
+                    c.maps.as_ref().expect("loaded from it").display(),
+                    req.shading.id()
+                );
+            }
             if m.psi.is_some() && c.tangent.is_some() {
                 bail!("give capture.tangent or a fibre_azimuth.exr in capture.maps, not both");
             }
@@ -221,8 +229,13 @@ impl<'a> CaptureScene<'a> {
             .topo_map
             .as_ref()
             .map(|m| p.topology.texel_height(m.texel(x, y), p.spacing)));
-        let basis = match height {
-            Some(hh) if shading.rung().has(crate::model::Ability::Topology) => {
+        // a texel's own roughness and anisotropy strength (gltf's lobe maps)
+        let lobe = um
+            .and_then(|m| m.lobe_at(x, y, p.gltf.lobe()))
+            .and_then(|l| shading.with_lobe(l));
+        let basis = match (height, lobe) {
+            (_, Some(m)) => m.basis(&pair),
+            (Some(hh), None) if shading.rung().has(crate::model::Ability::Topology) => {
                 shading.basis_at_height(&pair, hh).unwrap_or_default()
             }
             _ => shading.basis(&pair),

@@ -148,6 +148,12 @@ pub struct MapsConfig {
     /// Per-texel specular weight ks (Ward: rho_s), per channel.
     #[serde(default)]
     pub ks: bool,
+    /// Per-texel lobe roughness (`gltf`: glTF's roughness), unitless.
+    #[serde(default)]
+    pub roughness: bool,
+    /// Per-texel anisotropy strength (`gltf`: KHR_materials_anisotropy's), unitless in [0, 1].
+    #[serde(default)]
+    pub anisotropy_strength: bool,
     /// Alternations of (global fit given the maps, per-texel fits given the globals) at most;
     /// they stop earlier when the total cost falls by less than 1e-6 of itself.
     #[serde(default = "default_map_rounds")]
@@ -177,6 +183,8 @@ impl Default for MapsConfig {
             fibre_azimuth: false,
             kd: false,
             ks: false,
+            roughness: false,
+            anisotropy_strength: false,
             rounds: default_map_rounds(),
             global_texels: default_global_texels(),
             smoothness: 0.0,
@@ -192,6 +200,8 @@ impl MapsConfig {
             ("fibre_azimuth", self.fibre_azimuth),
             ("kd", self.kd),
             ("ks", self.ks),
+            ("roughness", self.roughness),
+            ("anisotropy_strength", self.anisotropy_strength),
         ]
         .into_iter()
         .filter(|x| x.1)

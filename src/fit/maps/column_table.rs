@@ -83,7 +83,7 @@ impl ColumnTable {
         for j in 0..nh {
             for k in 0..np {
                 let (h, psi) = Self::node(nh, np, g, start, j, k);
-                cols.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi));
+                cols.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi, None));
             }
         }
         Self {

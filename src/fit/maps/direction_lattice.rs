@@ -184,6 +184,8 @@ impl DirectionLattice {
                     psi: true,
                     kd: false,
                     ks: false,
+                    roughness: false,
+                    anisotropy: false,
                 };
                 dirs.map(|d| Arc::new(ColumnTable::build_for(&d, free, g, &TexelValues::default())))
             })
@@ -371,12 +373,12 @@ pub fn blend_error(
                 rng.random_range(0..PSI_GRID) * TABLE_PSI_PER_GRID,
             );
             let (h, psi) = ColumnTable::node(th, tp, &g, &TexelValues::default(), j, k);
-            push(&mut grid, &blend.at(j, k), &texel.columns(&g, h, psi));
+            push(&mut grid, &blend.at(j, k), &texel.columns_at(&g, h, psi));
             let (h, psi) = (
                 rng.random_range(0.0..=g.h_max),
                 rng.random_range(-90.0..90.0),
             );
-            let exact = texel.columns(&g, h, psi);
+            let exact = texel.columns_at(&g, h, psi);
             push(&mut between, &blend.interpolate(&g, h, psi), &exact);
             push(&mut own, &own_table.interpolate(&g, h, psi), &exact);
         }
@@ -479,6 +481,8 @@ mod tests {
         psi: true,
         kd: false,
         ks: false,
+        roughness: false,
+        anisotropy: false,
     };
 
     /// The relative error of the modelled value (kd 0.4, ks 0.3: the columns weighted as the
@@ -536,13 +540,13 @@ mod tests {
             for j in (0..th).step_by(TABLE_H_PER_GRID) {
                 for k in (0..tp).step_by(TABLE_PSI_PER_GRID) {
                     let (h, psi) = ColumnTable::node(th, tp, &g, &TexelValues::default(), j, k);
-                    grid_worst = grid_worst.max(error(&blend.at(j, k), &t.columns(&g, h, psi)));
+                    grid_worst = grid_worst.max(error(&blend.at(j, k), &t.columns_at(&g, h, psi)));
                 }
             }
             let own = ColumnTable::build(&t, &g, &TexelValues::default());
             for _ in 0..100 {
                 let (h, psi) = (uniform() * g.h_max, -90.0 + 180.0 * uniform());
-                let exact = t.columns(&g, h, psi);
+                let exact = t.columns_at(&g, h, psi);
                 between_worst = between_worst.max(error(&blend.interpolate(&g, h, psi), &exact));
                 own_worst = own_worst.max(error(&own.interpolate(&g, h, psi), &exact));
             }

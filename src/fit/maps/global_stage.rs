@@ -273,7 +273,7 @@ pub(super) fn mapped_samples(
     free: Free,
 ) -> (Vec<Sample>, SampleMaps) {
     let mut out = Vec::new();
-    let (mut hs, mut kd, mut ks) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut hs, mut kd, mut ks, mut lobes) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for &t in texel_ids {
         for &i in &members[t] {
             let mut s = samples.samples[i].clone();
@@ -284,9 +284,16 @@ pub(super) fn mapped_samples(
             hs.push(values[t].height);
             kd.push(values[t].kd);
             ks.push(values[t].ks);
+            lobes.push(crate::model::Lobe {
+                roughness: values[t].roughness,
+                anisotropy: values[t].anisotropy,
+            });
         }
     }
     let mut maps = SampleMaps::default();
+    if free.lobe() {
+        maps.lobe = Some(lobes);
+    }
     if free.height {
         maps.height = Some(hs);
     }
@@ -395,7 +402,7 @@ fn texel_costs(problems: &[Texel], g: &Globals, candidates: &[&[TexelValues]]) -
                 .iter()
                 .map(|vs| {
                     let v = &vs[t];
-                    let cols = p.columns(g, v.height, v.psi);
+                    let cols = p.columns(g, v);
                     p.residuals(g, &cols, v).iter().map(|x| x * x).sum()
                 })
                 .collect()
@@ -428,15 +435,23 @@ fn moved_globals(set: &ParamSet, delta: &[f64]) -> ParamSet {
 }
 
 /// A texel's values moved by `delta` (its unknowns in [`Texel::jacobian`]'s order), within
-/// their bounds (H in [0, `h_max`], psi wrapped, albedos in [0, 1]).
-fn moved_texel(v: &TexelValues, which: &[(u8, usize)], delta: &[f64], h_max: f64) -> TexelValues {
+/// their bounds (H in [0, `h_max`], psi wrapped, albedos and anisotropy strength in [0, 1],
+/// roughness in `roughness`).
+fn moved_texel(
+    v: &TexelValues,
+    which: &[(u8, usize)],
+    delta: &[f64],
+    (h_max, roughness): (f64, [f64; 2]),
+) -> TexelValues {
     let mut w = *v;
     for (&(kind, c), d) in which.iter().zip(delta) {
         match kind {
             0 => w.height = (w.height + d).clamp(0.0, h_max),
             1 => w.psi = wrap_azimuth(w.psi + d),
             2 => w.kd[c] = (w.kd[c] + d).clamp(0.0, 1.0),
-            _ => w.ks[c] = (w.ks[c] + d).clamp(0.0, 1.0),
+            3 => w.ks[c] = (w.ks[c] + d).clamp(0.0, 1.0),
+            4 => w.roughness = (w.roughness + d).clamp(roughness[0], roughness[1]),
+            _ => w.anisotropy = (w.anisotropy + d).clamp(0.0, 1.0),
         }
     }
     w
@@ -494,7 +509,7 @@ impl JointSystem {
             .map(|(p, v)| {
                 let jg = p.global_jacobian(g, side, v);
                 let n = jg.nrows();
-                let cols = p.columns(g, v.height, v.psi);
+                let cols = p.columns(g, v);
                 let r = DVector::from_vec(p.residuals(g, &cols, v)[..n].to_vec());
                 let (jcols, which) = p.jacobian(g, v);
                 let jt = DMatrix::from_fn(n, jcols.len(), |i, k| jcols[k][i]);
@@ -538,13 +553,13 @@ impl JointSystem {
         Some(JointStep { dg, factored })
     }
 
-    /// Each texel's `values` moved by its own part of `step`, within its bounds at H_max
-    /// `h_max`.
+    /// Each texel's `values` moved by its own part of `step`, within its bounds (H_max and the
+    /// roughness's: `bounds`).
     fn moved_values(
         &self,
         values: &[TexelValues],
         step: &JointStep,
-        h_max: f64,
+        bounds: (f64, [f64; 2]),
     ) -> Vec<TexelValues> {
         let dg = &step.dg;
         self.terms
@@ -553,7 +568,7 @@ impl JointSystem {
             .zip(values)
             .map(|((t, f), v)| {
                 let dx = -f.solve(&(&t.gt + t.b.transpose() * dg));
-                moved_texel(v, &t.which, dx.as_slice(), h_max)
+                moved_texel(v, &t.which, dx.as_slice(), bounds)
             })
             .collect()
     }
@@ -596,7 +611,8 @@ impl Sampled<'_> {
                 };
                 let new_set = moved_globals(&set, step.dg.as_slice());
                 let h_max = max_height(new_set.shape_value(Param::Spacing));
-                let new_values = system.moved_values(&values, &step, h_max);
+                let bounds = (h_max, roughness_range(&new_set));
+                let new_values = system.moved_values(&values, &step, bounds);
                 let (new_values, new_cost) =
                     self.better_of(&problems, &new_set, new_values, &values);
                 if new_cost < cost {

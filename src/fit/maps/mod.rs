@@ -1,6 +1,6 @@
 //! Per-texel map recovery from image captures (`fibrefit fit CAPTURE --maps DIR`): the topology
-//! (height H), the fibre direction psi and the albedos kd, ks per texel, beside the shared
-//! global parameters.
+//! (height H), the fibre direction psi, the albedos kd, ks and, for the `gltf` rung, the lobe's
+//! roughness and anisotropy strength per texel, beside the shared global parameters.
 //!
 //! Two stages:
 //! 1. [`global_stage`]: on a seeded sample of texels (`[maps] global_texels`), alternate (a) per
@@ -74,6 +74,9 @@ pub const TEXEL_STARTS: usize = 3;
 pub const HEIGHT_GRID: usize = 17;
 /// Azimuths of the per-texel grid, every 15 degrees from -90.
 pub const PSI_GRID: usize = 12;
+/// The lobe's grid per texel (roughness and anisotropy strength maps): roughness values over
+/// its bounds x anisotropy strengths over [0, 1], evenly spaced.
+pub const LOBE_GRID: [usize; 2] = [9, 6];
 /// Other minima are kept up to this many times the ambiguity margin of the expected variance.
 pub const MINIMA_MARGIN: f64 = 16.0;
 /// Compass search of a texel: every candidate to steps of this fraction of half the grid's
@@ -93,6 +96,11 @@ pub struct TexelValues {
     pub psi: f64,
     pub kd: [f64; 3],
     pub ks: [f64; 3],
+    /// The lobe's roughness and anisotropy strength (the `gltf` rung's; 0 for other rungs).
+    #[serde(default)]
+    pub roughness: f64,
+    #[serde(default)]
+    pub anisotropy: f64,
 }
 
 /// The recovered maps over the capture's pixel grid (texels without pixels are absent).
@@ -139,13 +147,22 @@ struct Free {
     psi: bool,
     kd: bool,
     ks: bool,
+    roughness: bool,
+    anisotropy: bool,
+}
+
+impl Free {
+    /// Whether the texels have a lobe of their own (a roughness or anisotropy map).
+    fn lobe(&self) -> bool {
+        self.roughness || self.anisotropy
+    }
 }
 
 /// Check that the rung of `cfg` can honour every requested map.
 pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
     let id = cfg.model_id()?;
     if req.requested().is_empty() {
-        bail!("--maps: [maps] in the config requests no map; set height, fibre_azimuth, kd or ks = true");
+        bail!("--maps: [maps] in the config requests no map; set height, fibre_azimuth, kd, ks, roughness or anisotropy_strength = true");
     }
     if req.height && !id.has_topology() {
         bail!("[maps] height = true: model `{id}` has no fibre topology (use varying-topology or reference)");
@@ -155,6 +172,14 @@ pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
     }
     if req.ks && !(id.reads(Param::Ks) || id.reads(Param::RhoS)) {
         bail!("[maps] ks = true: model `{id}` has no specular lobe");
+    }
+    for (on, key, param) in [
+        (req.roughness, "roughness", Param::Roughness),
+        (req.anisotropy_strength, "anisotropy_strength", Param::AnisotropyStrength),
+    ] {
+        if on && !id.reads(param) {
+            bail!("[maps] {key} = true: model `{id}` has no such lobe (the gltf rung has)");
+        }
     }
     if req.ks && !cfg.components.specular {
         bail!("[maps] ks = true, but [components] specular = false switches the lobe off");
@@ -209,6 +234,8 @@ fn fix_mapped(set: &ParamSet, req: &MapsConfig) -> ParamSet {
         let mapped = match sh.kind {
             Param::Height | Param::MapScale => req.height,
             Param::Azimuth => req.fibre_azimuth,
+            Param::Roughness => req.roughness,
+            Param::AnisotropyStrength => req.anisotropy_strength,
             _ => false,
         };
         if mapped {
@@ -321,6 +348,8 @@ fn start_value(s: &Sample, set: &ParamSet) -> TexelValues {
             .unwrap_or(set.shape_value(Param::Azimuth)),
         kd: galb[0],
         ks: galb[1],
+        roughness: set.shape_value(Param::Roughness),
+        anisotropy: set.shape_value(Param::AnisotropyStrength),
     }
 }
 
@@ -355,6 +384,8 @@ fn free_of(req: &MapsConfig) -> Free {
         psi: req.fibre_azimuth,
         kd: req.kd,
         ks: req.ks,
+        roughness: req.roughness,
+        anisotropy: req.anisotropy_strength,
     }
 }
 
@@ -362,5 +393,7 @@ fn free_of(req: &MapsConfig) -> Free {
 fn per_texel_unknowns(free: Free, channels: usize) -> usize {
     usize::from(free.height)
         + usize::from(free.psi)
+        + usize::from(free.roughness)
+        + usize::from(free.anisotropy)
         + channels * (usize::from(free.kd) + usize::from(free.ks))
 }

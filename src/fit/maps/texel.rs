@@ -4,12 +4,15 @@
 
 use super::*;
 use crate::model::frame::Vec3;
+use crate::model::Lobe;
 
 /// Everything a per-texel fit needs from the globals.
 pub(super) struct Globals<'m> {
     pub(super) model: &'m dyn ShadingModel,
     pub(super) has_topology: bool,
     pub(super) h_max: f64,
+    /// Bounds of the lobe's roughness (the parameter's), for a roughness map.
+    pub(super) roughness_range: [f64; 2],
     pub(super) tied: bool,
     pub(super) channels: usize,
     /// Global albedo per component index and channel (0 where absent).
@@ -20,6 +23,23 @@ pub(super) struct Globals<'m> {
     /// Column tables over the image for texels with directions of their own (pinhole
     /// cameras, point lights): [`Globals::with_lattice`].
     pub(super) lattice: Option<DirectionLattice>,
+}
+
+/// The bounds of the roughness in `set` (the parameter's range where the set has none).
+pub(super) fn roughness_range(set: &ParamSet) -> [f64; 2] {
+    set.shapes
+        .iter()
+        .find(|s| s.kind == Param::Roughness)
+        .map_or([0.0, 1.0], |s| [s.min, s.max])
+}
+
+/// A nonlinear value of a texel.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum Nonlinear {
+    Height,
+    Psi,
+    Roughness,
+    Anisotropy,
 }
 
 /// The rung at the globals `set` with the knobs of `cfg` (no map: texels carry their height).
@@ -39,6 +59,7 @@ impl<'m> Globals<'m> {
             model,
             has_topology: set.rung.has_topology(),
             h_max: max_height(set.shape_value(Param::Spacing)),
+            roughness_range: roughness_range(set),
             tied: set.substrate_tied,
             channels,
             albedo: globals_albedo(set),
@@ -70,12 +91,14 @@ impl<'m> Globals<'m> {
 }
 
 /// Columns [diffuse, specular, substrate, fuzz] (diffuse + substrate in the first where tied)
-/// of observations with light and view directions `dirs` at (H, psi), one model batch.
+/// of observations with light and view directions `dirs` at (H, psi) and, where given, the
+/// texel's own lobe (roughness and anisotropy maps), one model batch.
 pub(super) fn model_columns<'a>(
     g: &Globals,
     dirs: impl Iterator<Item = (&'a Vec3, &'a Vec3)>,
     h: f64,
     psi: f64,
+    lobe: Option<Lobe>,
 ) -> Vec<[f64; 4]> {
     let frame = FibreFrame::from_azimuth(psi.to_radians());
     let pairs: Vec<DirectionPair> = dirs
@@ -83,7 +106,13 @@ pub(super) fn model_columns<'a>(
         .collect();
     // one texel is one pattern seen in every image: one batch
     let mut bases = vec![Basis::default(); pairs.len()];
-    if !(g.has_topology
+    if let Some(lobe) = lobe {
+        let m = g
+            .model
+            .with_lobe(lobe)
+            .expect("checked by check_request: the rung has a lobe");
+        m.basis_many(&pairs, &mut bases);
+    } else if !(g.has_topology
         && g.model
             .basis_many_at_height(&pairs, h.clamp(0.0, g.h_max), &mut bases))
     {
@@ -139,9 +168,30 @@ impl Texel {
         key
     }
 
-    /// Columns of every observation at (H, psi).
-    pub(super) fn columns(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
-        model_columns(g, self.obs.iter().map(|s| (&s.l, &s.v)), h, psi)
+    /// Columns of every observation at the texel's values `v` (H, psi and its lobe).
+    pub(super) fn columns(&self, g: &Globals, v: &TexelValues) -> Vec<[f64; 4]> {
+        model_columns(
+            g,
+            self.obs.iter().map(|s| (&s.l, &s.v)),
+            v.height,
+            v.psi,
+            self.lobe_of(v),
+        )
+    }
+
+    /// Columns of every observation at (H, psi), the lobe the globals' (a table's nodes:
+    /// there are none where the lobe is mapped).
+    pub(super) fn columns_at(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
+        debug_assert!(!self.free.lobe());
+        model_columns(g, self.obs.iter().map(|s| (&s.l, &s.v)), h, psi, None)
+    }
+
+    /// The texel's own lobe where it is mapped.
+    pub(super) fn lobe_of(&self, v: &TexelValues) -> Option<Lobe> {
+        self.free.lobe().then_some(Lobe {
+            roughness: v.roughness,
+            anisotropy: v.anisotropy,
+        })
     }
 
     /// Albedos of the texel (mapped ones solved linearly, bounded to [0, 1]) and the weighted
@@ -234,7 +284,8 @@ impl Texel {
         (r.iter().map(|x| x * x).sum(), v)
     }
 
-    /// `base` with the nonlinear values `u` (H clamped to [0, H_max], psi wrapped).
+    /// `base` with the nonlinear values `u` (H clamped to [0, H_max], psi wrapped, the lobe's
+    /// roughness and anisotropy strength clamped to their bounds).
     pub(super) fn at_nonlinear(&self, g: &Globals, base: &TexelValues, u: &[f64]) -> TexelValues {
         let mut v = *base;
         let mut k = 0;
@@ -244,6 +295,14 @@ impl Texel {
         }
         if self.free.psi {
             v.psi = wrap_azimuth(u[k]);
+            k += 1;
+        }
+        if self.free.roughness {
+            v.roughness = u[k].clamp(g.roughness_range[0], g.roughness_range[1]);
+            k += 1;
+        }
+        if self.free.anisotropy {
+            v.anisotropy = u[k].clamp(0.0, 1.0);
         }
         v
     }
@@ -256,7 +315,7 @@ impl Texel {
         u: &[f64],
     ) -> (Vec<f64>, TexelValues) {
         let mut v = self.at_nonlinear(g, base, u);
-        let cols = self.columns(g, v.height, v.psi);
+        let cols = self.columns(g, &v);
         (self.solve(g, &cols, &mut v), v)
     }
 
@@ -268,7 +327,27 @@ impl Texel {
         if self.free.psi {
             u.push(v.psi);
         }
+        if self.free.roughness {
+            u.push(v.roughness);
+        }
+        if self.free.anisotropy {
+            u.push(v.anisotropy);
+        }
         u
+    }
+
+    /// What each nonlinear value is, in [`Texel::nonlinear`]'s order.
+    pub(super) fn nonlinear_kinds(&self) -> Vec<Nonlinear> {
+        [
+            (Nonlinear::Height, self.free.height),
+            (Nonlinear::Psi, self.free.psi),
+            (Nonlinear::Roughness, self.free.roughness),
+            (Nonlinear::Anisotropy, self.free.anisotropy),
+        ]
+        .into_iter()
+        .filter(|x| x.1)
+        .map(|x| x.0)
+        .collect()
     }
 
     /// Fit the texel from `start`: a grid over the nonlinear values (17 heights x 12 azimuths),
@@ -293,6 +372,17 @@ impl Texel {
         candidates.push((v0, c0));
         candidates.sort_by(|a, b| a.1.total_cmp(&b.1));
         candidates.truncate(TEXEL_STARTS);
+        // the lobe's own grid at the best candidate, whose local minima are searched too: one
+        // value at a time, the compass stalls in the valley where roughness and anisotropy
+        // strength trade off, and sparse directions leave a sharp and a broad lobe apart
+        let lobe_grids: Vec<LobeGrid> = if self.free.lobe() {
+            vec![self.lobe_grid(g, start, &candidates[0].0)]
+        } else {
+            vec![]
+        };
+        for l in &lobe_grids {
+            candidates.extend(l.local_minima());
+        }
         let mut minima = self.searched(g, start, candidates, table.as_ref());
         minima.sort_by(|a, b| a.1.total_cmp(&b.1));
         let (best, best_cost) = minima.remove(0);
@@ -302,6 +392,9 @@ impl Texel {
         // where it has no separate minimum
         let profiles = minima.len();
         grid.push_profiles(&mut minima);
+        for l in &lobe_grids {
+            l.push_profiles(&mut minima);
+        }
         // a blended table is the model only to within its blend: the profile's costs that could
         // make the texel ambiguous are the model's own
         if table.as_ref().is_some_and(|t| !t.exact_at_nodes()) {
@@ -310,10 +403,40 @@ impl Texel {
         (best, best_cost, minima)
     }
 
+    /// The lobe's grid ([`LOBE_GRID`]: roughness over its bounds x anisotropy strength over
+    /// [0, 1], of those mapped) at `v`'s other values.
+    fn lobe_grid(&self, g: &Globals, start: &TexelValues, v: &TexelValues) -> LobeGrid {
+        let [lo, hi] = g.roughness_range;
+        let (nr, na) = (
+            if self.free.roughness { LOBE_GRID[0] } else { 1 },
+            if self.free.anisotropy { LOBE_GRID[1] } else { 1 },
+        );
+        let at = |k: usize, n: usize| k as f64 / (n - 1).max(1) as f64;
+        let mut points = Vec::with_capacity(nr * na);
+        for i in 0..nr {
+            for j in 0..na {
+                let mut w = *v;
+                if self.free.roughness {
+                    w.roughness = lo + (hi - lo) * at(i, nr);
+                }
+                if self.free.anisotropy {
+                    w.anisotropy = at(j, na);
+                }
+                let (c, w) = self.cost_at(g, start, &self.nonlinear(&w));
+                points.push((w, c));
+            }
+        }
+        LobeGrid { na, points }
+    }
+
     /// Where the texel's grid and coarse searches read their columns: the lattice's blend for a
     /// texel with directions of its own where there is a lattice; else the table shared by the
-    /// texels with its directions (none for a direction set met once).
+    /// texels with its directions (none for a direction set met once, nor where the lobe is
+    /// mapped: the tables hold the globals' lobe).
     fn table(&self, g: &Globals, start: &TexelValues) -> Option<Tabled> {
+        if self.free.lobe() {
+            return None;
+        }
         match g.lattice.as_ref().and_then(|l| l.blend(self, g)) {
             Some(b) => Some(Tabled::Blend(b)),
             None => g
@@ -355,7 +478,7 @@ impl Texel {
                         self.solve(g, &t.at(j, l), &mut v)
                     }
                     None => {
-                        let cols = self.columns(g, v.height, v.psi);
+                        let cols = self.columns(g, &v);
                         self.solve(g, &cols, &mut v)
                     }
                 };
@@ -365,11 +488,13 @@ impl Texel {
         Grid { nh, np, points }
     }
 
-    /// Whether `w` and `v` are one minimum: H within 2% of H_max and psi within a degree (of
-    /// those mapped).
+    /// Whether `w` and `v` are one minimum: H within 2% of H_max, psi within a degree, the
+    /// lobe's roughness and anisotropy strength within 0.02 (of those mapped).
     fn same(&self, g: &Globals, w: &TexelValues, v: &TexelValues) -> bool {
         (!self.free.height || (w.height - v.height).abs() <= 0.02 * g.h_max.max(1e-9))
             && (!self.free.psi || wrap_azimuth(w.psi - v.psi).abs() <= 1.0)
+            && (!self.free.roughness || (w.roughness - v.roughness).abs() <= 0.02)
+            && (!self.free.anisotropy || (w.anisotropy - v.anisotropy).abs() <= 0.02)
     }
 
     /// The distinct minima from `candidates`: each searched to a coarse step (on `table` where
@@ -401,9 +526,12 @@ impl Texel {
         }
         // searched on to the end: every minimum that could still be the best (coarse cost
         // within twice the lowest: a coarse step costs well under one noise variance, the
-        // ambiguity margin is nine)
+        // ambiguity margin is nine); with the lobe mapped, every one: its valleys (roughness and
+        // anisotropy strength trading off) are narrower than a coarse step where the images are
+        // sharp
         let lowest = minima.iter().map(|m| m.1).fold(f64::INFINITY, f64::min);
-        for m in minima.iter_mut().filter(|m| m.1 <= 2.0 * lowest) {
+        let reach = if self.free.lobe() { f64::INFINITY } else { 2.0 };
+        for m in minima.iter_mut().filter(|m| m.1 <= reach * lowest) {
             let (v, c) = self.compass(g, start, m.0, m.1, (COMPASS_COARSE, COMPASS_FINE), None);
             *m = self.gauss_newton(g, start, v, c);
         }
@@ -443,13 +571,14 @@ impl Texel {
     ) -> (TexelValues, f64) {
         let (mut best, mut best_cost) = (v, c);
         let mut best_u = self.nonlinear(&best);
-        let unit: Vec<f64> = (0..best_u.len())
-            .map(|k| {
-                if self.free.height && k == 0 {
-                    g.h_max / 32.0
-                } else {
-                    3.75
-                }
+        let unit: Vec<f64> = self
+            .nonlinear_kinds()
+            .iter()
+            .map(|k| match k {
+                Nonlinear::Height => g.h_max / 32.0,
+                Nonlinear::Psi => 3.75,
+                // a 32nd of the range, as H's
+                Nonlinear::Roughness | Nonlinear::Anisotropy => 1.0 / 32.0,
             })
             .collect();
         let mut scale = from;
@@ -495,16 +624,19 @@ impl Texel {
         let n = best_u.len();
         let (mut r0, _) = self.residuals_at(g, start, &best_u);
         let mut lambda = 1e-3;
+        let kinds = self.nonlinear_kinds();
         for _ in 0..30 {
             let mut jac = DMatrix::zeros(r0.len(), n);
             for k in 0..n {
                 let mut u = best_u.clone();
-                let mut step = if self.free.height && k == 0 {
-                    1e-4 * g.h_max.max(1e-3)
-                } else {
-                    1e-3
+                let (mut step, upper) = match kinds[k] {
+                    Nonlinear::Height => (1e-4 * g.h_max.max(1e-3), g.h_max),
+                    Nonlinear::Psi => (1e-3, f64::INFINITY),
+                    Nonlinear::Roughness => (1e-4, g.roughness_range[1]),
+                    Nonlinear::Anisotropy => (1e-4, 1.0),
                 };
-                if self.free.height && k == 0 && u[0] + step > g.h_max {
+                // a one-sided difference inside the bounds
+                if u[k] + step > upper {
                     step = -step;
                 }
                 u[k] += step;
@@ -548,7 +680,7 @@ impl Texel {
 
     /// RMS relative residual over the texel's pixels and channels.
     pub(super) fn relative_residual(&self, g: &Globals, v: &TexelValues) -> f64 {
-        let cols = self.columns(g, v.height, v.psi);
+        let cols = self.columns(g, v);
         let (mut s, mut n) = (0.0, 0.0);
         for (o, col) in self.obs.iter().zip(&cols) {
             for c in 0..g.channels {
@@ -567,6 +699,64 @@ struct Grid {
     nh: usize,
     np: usize,
     points: Vec<(f64, TexelValues)>,
+}
+
+/// A texel's lobe grid: roughness x anisotropy strength (`na` of them), row-major by
+/// roughness, with each point's values and cost.
+struct LobeGrid {
+    na: usize,
+    points: Vec<(TexelValues, f64)>,
+}
+
+impl LobeGrid {
+    /// Grid points no 4-neighbour undercuts, the best [`TEXEL_STARTS`] of them, best first.
+    fn local_minima(&self) -> Vec<(TexelValues, f64)> {
+        let na = self.na;
+        let nr = self.points.len() / na;
+        let c = |i: usize, j: usize| self.points[i * na + j].1;
+        let mut local: Vec<(TexelValues, f64)> = Vec::new();
+        for i in 0..nr {
+            for j in 0..na {
+                let mut nb = Vec::new();
+                if i > 0 {
+                    nb.push(c(i - 1, j));
+                }
+                if i + 1 < nr {
+                    nb.push(c(i + 1, j));
+                }
+                if j > 0 {
+                    nb.push(c(i, j - 1));
+                }
+                if j + 1 < na {
+                    nb.push(c(i, j + 1));
+                }
+                if nb.iter().all(|&x| x >= c(i, j)) {
+                    local.push(self.points[i * na + j]);
+                }
+            }
+        }
+        local.sort_by(|a, b| a.1.total_cmp(&b.1));
+        local.truncate(TEXEL_STARTS);
+        local
+    }
+
+    /// The grid's profiles onto `minima`: the best point at each roughness, then at each
+    /// anisotropy strength (a flat profile is a value the images leave undetermined).
+    fn push_profiles(&self, minima: &mut Vec<(TexelValues, f64)>) {
+        let na = self.na;
+        let nr = self.points.len() / na;
+        let best_of = |ks: &mut dyn Iterator<Item = usize>| {
+            ks.map(|k| self.points[k])
+                .min_by(|a, b| a.1.total_cmp(&b.1))
+                .expect("a row has points")
+        };
+        for i in 0..nr {
+            minima.push(best_of(&mut (i * na..(i + 1) * na)));
+        }
+        for j in 0..na {
+            minima.push(best_of(&mut (0..nr).map(|i| i * na + j)));
+        }
+    }
 }
 
 impl Grid {

@@ -27,6 +27,10 @@ pub struct TexelPart {
     /// Other minima of each texel: (cost above the best, |dH|, |dpsi| in degrees), those
     /// costing less than `minima_below` above the best (all when `None`).
     pub other_minima: Vec<Vec<[f64; 3]>>,
+    /// Other minima of each texel in its lobe: (cost above the best, |d roughness|,
+    /// |d anisotropy strength|), kept as `other_minima` are (empty without lobe maps).
+    #[serde(default)]
+    pub other_lobe_minima: Vec<Vec<[f64; 3]>>,
     #[serde(default)]
     pub minima_below: Option<f64>,
     pub residual: Vec<f64>,
@@ -108,6 +112,10 @@ pub fn texel_stage(
             .iter()
             .map(|&t| std::mem::take(&mut swept.fits[t - t0].2))
             .collect(),
+        other_lobe_minima: keep
+            .iter()
+            .map(|&t| std::mem::take(&mut swept.fits[t - t0].3))
+            .collect(),
         residual: details.iter().map(|d| d.1).collect(),
         globals_in_errors: schur.is_some(),
         minima_below,
@@ -138,7 +146,9 @@ fn check_schur(s: &GlobalSchur, steps: &GlobalSteps) -> Result<()> {
 }
 
 /// A texel's fit in the texel stage: best values, cost, other minima (pruned: [`prune_minima`]).
-type BandFit = (TexelValues, f64, Vec<[f64; 3]>);
+/// A texel's fit in the texel stage: best values, cost, other minima in (H, psi) and in the
+/// lobe (pruned: [`prune_minima`]).
+type BandFit = (TexelValues, f64, Vec<[f64; 3]>, Vec<[f64; 3]>);
 
 /// What the sweeps of a band leave: per texel of the band, the last sweep's values and fits.
 struct Swept {
@@ -251,12 +261,16 @@ impl<'a> Band<'a> {
                     let (v, cost, others) =
                         self.problem(t, &values, smoothness).fit(g, &start[t - t0]);
                     bar.inc(1);
-                    let others = if last && self.kept(t) {
-                        prune_minima(&v, cost, &others, minima_below.unwrap_or(f64::INFINITY))
+                    let (shape, lobe) = if last && self.kept(t) {
+                        let below = minima_below.unwrap_or(f64::INFINITY);
+                        (
+                            prune_minima(&v, cost, &others, below, shape_distance),
+                            prune_minima(&v, cost, &others, below, lobe_distance),
+                        )
                     } else {
-                        vec![]
+                        (vec![], vec![])
                     };
-                    (v, cost, others)
+                    (v, cost, shape, lobe)
                 })
                 .collect();
             for (k, f) in fits.iter().enumerate() {
@@ -324,26 +338,37 @@ fn freed(set: &ParamSet, schur: Option<&GlobalSchur>) -> ParamSet {
     out
 }
 
+/// (|dH|, |dpsi| in degrees) between two texel values.
+pub(super) fn shape_distance(w: &TexelValues, v: &TexelValues) -> [f64; 2] {
+    [(w.height - v.height).abs(), wrap_azimuth(w.psi - v.psi).abs()]
+}
+
+/// (|d roughness|, |d anisotropy strength|) between two texel values.
+pub(super) fn lobe_distance(w: &TexelValues, v: &TexelValues) -> [f64; 2] {
+    [
+        (w.roughness - v.roughness).abs(),
+        (w.anisotropy - v.anisotropy).abs(),
+    ]
+}
+
 /// The other minima of a texel fitted to `v` at `cost`, those at most `below` above it, as
-/// (cost above the best, |dH|, |dpsi| in degrees), keeping only those no other one dominates
-/// (as good or better in cost and as far or farther in both H and psi): [`finish_maps`] widens
-/// the standard errors by the farthest minimum within a cost margin, which the kept ones give
-/// for any margin.
+/// (cost above the best, the two `distance`s: [`shape_distance`] or [`lobe_distance`]),
+/// keeping only those no other one dominates (as good or better in cost and as far or farther
+/// in both): [`finish_maps`] widens the standard errors by the farthest minimum within a cost
+/// margin, which the kept ones give for any margin.
 pub(super) fn prune_minima(
     v: &TexelValues,
     cost: f64,
     others: &[(TexelValues, f64)],
     below: f64,
+    distance: fn(&TexelValues, &TexelValues) -> [f64; 2],
 ) -> Vec<[f64; 3]> {
     let all: Vec<[f64; 3]> = others
         .iter()
         .filter(|(_, c)| c - cost <= below)
         .map(|(w, c)| {
-            [
-                c - cost,
-                (w.height - v.height).abs(),
-                wrap_azimuth(w.psi - v.psi).abs(),
-            ]
+            let [a, b] = distance(w, v);
+            [c - cost, a, b]
         })
         .collect();
     let mut kept: Vec<[f64; 3]> = Vec::new();
@@ -468,9 +493,10 @@ fn scaled_maps(
             .minima_below
             .is_some_and(|b| b < AMBIGUITY_DELTA * variance);
         for k in 0..p.texels.len() {
+            let lobe = p.other_lobe_minima.get(k).map_or(&[][..], |m| &m[..]);
             let (se, amb) = widened(
                 &p.unscaled_std_errors[k],
-                &p.other_minima[k],
+                [&p.other_minima[k], lobe],
                 (scale, variance),
                 free,
             );
@@ -486,11 +512,12 @@ fn scaled_maps(
 }
 
 /// A texel's standard errors: `unscaled` times `scale` (the residual variance's square root),
-/// H and psi widened to the farthest of its other minima (as [`prune_minima`] keeps them)
-/// within [`AMBIGUITY_DELTA`] x `variance` of the best; and whether there was one.
+/// H and psi, and the lobe's roughness and anisotropy strength, widened to the farthest of its
+/// other minima (`others`: in (H, psi) and in the lobe, as [`prune_minima`] keeps them) within
+/// [`AMBIGUITY_DELTA`] x `variance` of the best; and whether there was one.
 fn widened(
     unscaled: &TexelValues,
-    others: &[[f64; 3]],
+    [others, lobe]: [&[[f64; 3]]; 2],
     (scale, variance): (f64, f64),
     free: Free,
 ) -> (TexelValues, bool) {
@@ -500,6 +527,8 @@ fn widened(
         psi: u.psi * scale,
         kd: u.kd.map(|x| x * scale),
         ks: u.ks.map(|x| x * scale),
+        roughness: u.roughness * scale,
+        anisotropy: u.anisotropy * scale,
     };
     let mut amb = false;
     for &[dc, dh, dp] in others {
@@ -510,6 +539,17 @@ fn widened(
             }
             if free.psi {
                 se.psi = se.psi.max(dp);
+            }
+        }
+    }
+    for &[dc, dr, da] in lobe {
+        if dc <= AMBIGUITY_DELTA * variance {
+            amb = true;
+            if free.roughness {
+                se.roughness = se.roughness.max(dr);
+            }
+            if free.anisotropy {
+                se.anisotropy = se.anisotropy.max(da);
             }
         }
     }
@@ -556,6 +596,18 @@ fn finish_warnings(
             undetermined(|e| e.psi, 45.0),
             "45 deg",
         ),
+        (
+            free.roughness,
+            "roughness",
+            undetermined(|e| e.roughness, 0.5),
+            "0.5",
+        ),
+        (
+            free.anisotropy,
+            "anisotropy strength",
+            undetermined(|e| e.anisotropy, 0.5),
+            "0.5",
+        ),
     ] {
         if on && count > 0 {
             warnings.push(format!(
@@ -584,6 +636,10 @@ fn plan_tables(
     // keys in parallel, a chunk at a time, met in order; stops once the plan is full
     const CHUNK: usize = 4096;
     let mut plan = TablePlan::default();
+    if free.lobe() {
+        // the tables hold the globals' lobe: texels with their own evaluate the model
+        return plan;
+    }
     let n = store.texels().len();
     for lo in (0..n).step_by(CHUNK) {
         let keys: Vec<Option<Vec<u64>>> = (lo..(lo + CHUNK).min(n))

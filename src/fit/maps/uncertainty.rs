@@ -298,7 +298,9 @@ impl Texel {
                 0 => se.height = s,
                 1 => se.psi = s,
                 2 => se.kd[ch] = s,
-                _ => se.ks[ch] = s,
+                3 => se.ks[ch] = s,
+                4 => se.roughness = s,
+                _ => se.anisotropy = s,
             }
         }
         se
@@ -344,22 +346,26 @@ impl Texel {
     ) -> DMatrix<f64> {
         let ch = g.channels;
         let n = self.obs.len() * ch;
-        let cols0 = self.columns(g, v.height, v.psi);
+        let cols0 = self.columns(g, v);
         let r0 = self.residuals(g, &cols0, v);
         let steps = side.steps;
         let mut j = DMatrix::zeros(n, steps.len());
         for (k, ((set_k, h), gk)) in steps.shapes.iter().zip(&side.stepped).enumerate() {
             let mut w = *v;
-            if !self.free.height || !self.free.psi {
-                let s = start_value(&self.obs[0], set_k);
-                if !self.free.height {
-                    w.height = s.height;
-                }
-                if !self.free.psi {
-                    w.psi = s.psi;
-                }
+            let s = start_value(&self.obs[0], set_k);
+            if !self.free.height {
+                w.height = s.height;
             }
-            let cols = self.columns(gk, w.height, w.psi);
+            if !self.free.psi {
+                w.psi = s.psi;
+            }
+            if !self.free.roughness {
+                w.roughness = s.roughness;
+            }
+            if !self.free.anisotropy {
+                w.anisotropy = s.anisotropy;
+            }
+            let cols = self.columns(gk, &w);
             let r = self.residuals(gk, &cols, &w);
             for i in 0..n {
                 j[(i, k)] = (r[i] - r0[i]) / h;
@@ -376,23 +382,30 @@ impl Texel {
 
     /// The Jacobian of the texel's residuals (its pixels' rows, then any prior rows) over its
     /// unknowns (nonlinear by differences, albedos analytic), one column each, with what each
-    /// column is: (0 height | 1 psi | 2 kd | 3 ks, channel).
+    /// column is: (0 height | 1 psi | 2 kd | 3 ks | 4 roughness | 5 anisotropy, channel).
     pub(super) fn jacobian(
         &self,
         g: &Globals,
         v: &TexelValues,
     ) -> (Vec<Vec<f64>>, Vec<(u8, usize)>) {
-        let cols = self.columns(g, v.height, v.psi);
+        let cols = self.columns(g, v);
         let r0 = self.residuals(g, &cols, v);
         let mut jcols: Vec<Vec<f64>> = Vec::new();
         let mut which: Vec<(u8, usize)> = Vec::new();
-        let diff = |h: f64, psi: f64, step: f64| -> Vec<f64> {
-            let mut w = *v;
-            w.height = h;
-            w.psi = psi;
-            let c = self.columns(g, h, psi);
+        let diff_of = |w: TexelValues, step: f64| -> Vec<f64> {
+            let c = self.columns(g, &w);
             let r = self.residuals(g, &c, &w);
             r.iter().zip(&r0).map(|(a, b)| (a - b) / step).collect()
+        };
+        let diff = |h: f64, psi: f64, step: f64| -> Vec<f64> {
+            diff_of(
+                TexelValues {
+                    height: h,
+                    psi,
+                    ..*v
+                },
+                step,
+            )
         };
         if self.free.height {
             let step = 1e-5
@@ -408,6 +421,26 @@ impl Texel {
         if self.free.psi {
             jcols.push(diff(v.height, v.psi + 1e-4, 1e-4));
             which.push((1, 0));
+        }
+        // the lobe's values one-sided inside their bounds
+        let inside = |x: f64, hi: f64| if x + 1e-5 > hi { -1e-5 } else { 1e-5 };
+        if self.free.roughness {
+            let step = inside(v.roughness, g.roughness_range[1]);
+            let w = TexelValues {
+                roughness: v.roughness + step,
+                ..*v
+            };
+            jcols.push(diff_of(w, step));
+            which.push((4, 0));
+        }
+        if self.free.anisotropy {
+            let step = inside(v.anisotropy, 1.0);
+            let w = TexelValues {
+                anisotropy: v.anisotropy + step,
+                ..*v
+            };
+            jcols.push(diff_of(w, step));
+            which.push((5, 0));
         }
         for (kind, comp, on) in [(2u8, 0usize, self.free.kd), (3, 1, self.free.ks)] {
             if !on {

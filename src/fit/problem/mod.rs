@@ -41,6 +41,8 @@ pub type Columns = [f64; 4];
 #[derive(Clone, Debug, Default)]
 pub struct SampleMaps {
     pub height: Option<Vec<f64>>,
+    /// Each sample's own lobe (roughness and anisotropy maps: [`ShadingModel::with_lobe`]).
+    pub lobe: Option<Vec<crate::model::Lobe>>,
     pub albedo: [Option<Vec<[f64; 3]>>; 4],
 }
 
@@ -443,6 +445,7 @@ impl<'a> FitProblem<'a> {
             .as_ref()
             .and_then(|m| m.height.as_deref())
             .filter(|_| has_topology);
+        let lobes = self.sample_maps.as_ref().and_then(|m| m.lobe.as_deref());
         let h_max = crate::model::topology::max_height(d);
         let index: Vec<usize> = (0..self.samples.len()).collect();
         let cols: Vec<Columns> = self
@@ -458,7 +461,15 @@ impl<'a> FitProblem<'a> {
                     })
                     .collect();
                 let mut bases = vec![Basis::default(); chunk.len()];
-                if let Some(hs) = heights {
+                if let Some(ls) = lobes {
+                    // each sample at its texel's lobe
+                    for ((b, p), &i) in bases.iter_mut().zip(&pairs).zip(ids) {
+                        *b = m
+                            .with_lobe(ls[i])
+                            .expect("checked by the maps' request: the rung has a lobe")
+                            .basis(p);
+                    }
+                } else if let Some(hs) = heights {
                     let hts: Vec<f64> = ids.iter().map(|&i| hs[i].clamp(0.0, h_max)).collect();
                     model::bases_at_heights(m.as_ref(), &pairs, &hts, &mut bases);
                 } else if has_topology

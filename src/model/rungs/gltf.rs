@@ -79,7 +79,7 @@
 use crate::model::parameter::{Ability::*, Param};
 use crate::model::params::GltfShape;
 use crate::model::rung::{Cost, LobeAlbedo, LobeSampling, Rung, Sampling, ShaderSection};
-use crate::model::{Basis, DirectionPair, Local, ShadingModel};
+use crate::model::{Basis, DirectionPair, Lobe, Local, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
 
 pub mod threejs;
@@ -387,6 +387,16 @@ impl ShadingModel for Gltf {
         &RUNG
     }
 
+    fn with_lobe(&self, lobe: Lobe) -> Option<Box<dyn ShadingModel>> {
+        let mut g = self.clone();
+        g.roughness = match self.variant {
+            GltfVariant::Khronos => lobe.roughness,
+            GltfVariant::Threejs => lobe.roughness.clamp(threejs::ROUGHNESS_FLOOR, 1.0),
+        };
+        (g.alpha_t, g.alpha_b) = ggx_alphas(g.roughness, lobe.anisotropy);
+        Some(Box::new(g))
+    }
+
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis {
         match self.variant {
             GltfVariant::Khronos => self.khronos_basis(pair),
@@ -463,6 +473,34 @@ mod tests {
         let want = (1.0 - fr) * c / PI + fr * vis * d;
         let got = c * b.diffuse + b.specular;
         assert!((got - want).abs() < 1e-12 * want, "{got} vs {want}");
+    }
+
+    #[test]
+    fn with_lobe_is_the_material_built_with_that_lobe() {
+        for variant in GltfVariant::ALL {
+            let shape = |roughness, anisotropy| GltfShape {
+                roughness,
+                anisotropy,
+                sheen: 0.4,
+                variant,
+                ..GltfShape::default()
+            };
+            let swapped = Gltf::new(&shape(0.5, 0.2))
+                .with_lobe(Lobe {
+                    roughness: 0.02,
+                    anisotropy: 0.7,
+                })
+                .expect("the gltf rung has a lobe");
+            let built = Gltf::new(&shape(0.02, 0.7));
+            for (a, b) in [(20.0, 0.0), (45.0, 70.0), (80.0, 170.0)] {
+                let pair = DirectionPair {
+                    l: dir(a, b),
+                    v: dir(30.0, 200.0),
+                };
+                let (x, y) = (swapped.basis(&pair), built.basis(&pair));
+                assert_eq!((x.diffuse, x.specular), (y.diffuse, y.specular), "{variant}");
+            }
+        }
     }
 
     #[test]
