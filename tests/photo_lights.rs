@@ -82,10 +82,20 @@ fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>, PathBuf) {
             seed,
             supersample: 2,
         };
-        let (lit, off) = (dir.join(format!("p{k}.tif")), dir.join(format!("p{k}_off.tif")));
+        let (lit, off) = (
+            dir.join(format!("p{k}.tif")),
+            dir.join(format!("p{k}_off.tif")),
+        );
         write_tiff(&lit, &scene.render_linear(&shot(1.0, k as u64)).unwrap());
-        write_tiff(&off, &scene.render_linear(&shot(0.0, 100 + k as u64)).unwrap());
-        write!(lights, "[[photo]]\nfile = \"p{k}.tif\"\nambient = \"p{k}_off.tif\"\n").unwrap();
+        write_tiff(
+            &off,
+            &scene.render_linear(&shot(0.0, 100 + k as u64)).unwrap(),
+        );
+        write!(
+            lights,
+            "[[photo]]\nfile = \"p{k}.tif\"\nambient = \"p{k}_off.tif\"\n"
+        )
+        .unwrap();
         if k == 0 {
             lights.push_str("flash = true\n");
         }
@@ -119,9 +129,13 @@ fn lamps_ambient_frames_and_linear_tiffs_make_a_capture_that_fits_the_truth() {
     assert!(stderr.contains("lamp at (150, -100, 400) mm") && stderr.contains("flash"));
 
     // the capture's lights: the lamp where the file puts it, photo 0's flash beside its lens
-    let cap: toml::Value = toml::from_str(&std::fs::read_to_string(out.join("capture.toml")).unwrap()).unwrap();
+    let cap: toml::Value =
+        toml::from_str(&std::fs::read_to_string(out.join("capture.toml")).unwrap()).unwrap();
     let b = BoardFile::read(&board_toml).unwrap();
-    let side = [b.window_mm[2] - b.window_mm[0], b.window_mm[3] - b.window_mm[1]];
+    let side = [
+        b.window_mm[2] - b.window_mm[0],
+        b.window_mm[3] - b.window_mm[1],
+    ];
     let images = cap["images"].as_array().unwrap();
     for (k, img) in images.iter().enumerate() {
         let at: Vec<f64> = img["light"]["position_mm"]
@@ -138,20 +152,36 @@ fn lamps_ambient_frames_and_linear_tiffs_make_a_capture_that_fits_the_truth() {
             }
             _ => LAMP,
         };
-        let err = (0..3).map(|c| (at[c] - want[c]).powi(2)).sum::<f64>().sqrt();
-        assert!(err < if k == 0 { 1.5 } else { 1e-9 }, "photo {k}: light at {at:?}, truth {want:?}");
+        let err = (0..3)
+            .map(|c| (at[c] - want[c]).powi(2))
+            .sum::<f64>()
+            .sqrt();
+        assert!(
+            err < if k == 0 { 1.5 } else { 1e-9 },
+            "photo {k}: light at {at:?}, truth {want:?}"
+        );
         // --px-per-mm 1: one texel per millimetre of the window
         let im = image_io::read(&out.join(format!("img_{k:03}.exr")), None, None).unwrap();
         assert_eq!([im.width as f64, im.height as f64], side.map(f64::round));
     }
-    // each photo's own mask: the grazing photos leave some texels out (NaN) that others keep
-    let masked: usize = (0..6)
+    // each photo's own mask (NaN texels) covers the capture's mask, and a texel no photo sees
+    // is in the capture's mask
+    let mask = image::open(out.join("mask.png")).unwrap().to_luma8();
+    let nan: Vec<Vec<bool>> = (0..6)
         .map(|k| {
             let im = image_io::read(&out.join(format!("img_{k:03}.exr")), None, None).unwrap();
-            im.data.iter().filter(|v| v.is_nan()).count() / 3
+            im.data.chunks(3).map(|p| p[0].is_nan()).collect()
         })
-        .sum();
-    eprintln!("NaN texels over the 6 images: {masked}");
+        .collect();
+    for (i, m) in mask.pixels().enumerate() {
+        let unseen = nan.iter().all(|n| n[i]);
+        assert_eq!(
+            m[0] == 0,
+            unseen,
+            "texel {i}: mask {} but NaN in every photo: {unseen}",
+            m[0]
+        );
+    }
 
     // lambert on the capture: the ambient light taken off, the albedo absolute
     let result = d.join("lambert.json");
@@ -164,11 +194,16 @@ fn lamps_ambient_frames_and_linear_tiffs_make_a_capture_that_fits_the_truth() {
         .output()
         .unwrap();
     assert!(f.status.success(), "{}", String::from_utf8_lossy(&f.stderr));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&result).unwrap()).unwrap();
+    let r: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&result).unwrap()).unwrap();
     for c in 0..3 {
         let v = r["parameters"]["kd"]["value"][c].as_f64().unwrap();
         eprintln!("kd[{c}] = {v:.5} (truth {})", KD[c]);
-        assert!((v - KD[c]).abs() < 0.01 * KD[c], "kd[{c}] {v}, truth {}", KD[c]);
+        assert!(
+            (v - KD[c]).abs() < 0.01 * KD[c],
+            "kd[{c}] {v}, truth {}",
+            KD[c]
+        );
     }
 }
 
@@ -201,7 +236,10 @@ fn an_ambient_frame_at_another_exposure_or_size_is_refused_by_name() {
         .unwrap();
     assert_eq!(run.status.code(), Some(2));
     let err = String::from_utf8_lossy(&run.stderr);
-    assert!(err.contains("small_off.png") && err.contains("same pose"), "{err}");
+    assert!(
+        err.contains("small_off.png") && err.contains("same pose"),
+        "{err}"
+    );
     assert!(!out.join("capture.toml").exists());
 }
 

@@ -281,7 +281,8 @@ fn a_photos_exif_exposure_is_read() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("exif.jpg");
     std::fs::write(&p, jpeg_with_exif()).unwrap();
-    let photo = fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
+    let photo =
+        fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     let e = photo.exif.expect("EXIF read");
     assert_eq!(e.time_s, Some(1.0 / 60.0));
     assert_eq!(e.f_number, Some(1.8));
@@ -289,9 +290,11 @@ fn a_photos_exif_exposure_is_read() {
     let product = e.product().unwrap();
     assert!((product - 200.0 / 60.0 / 3.24).abs() < 1e-12);
     // a photo whose patch disagrees with its EXIF is named
-    let mut other = fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
+    let mut other =
+        fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     other.path = dir.path().join("odd.jpg");
-    let third = fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
+    let third =
+        fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     let w = fibrefit::api::calibrate::exif_disagreements(
         &[photo, other, third],
         &[[1.0; 3], [1.5; 3], [1.0; 3]],

@@ -165,7 +165,14 @@ pub fn calibrate(
     // write
     for k in 0..n {
         let (file, name) = outs.file_and_name(t.images[k]);
-        crate::export::images::write_exr_into(file, name, texels[0], texels[1], 3, &rect.images[k])?;
+        crate::export::images::write_exr_into(
+            file,
+            name,
+            texels[0],
+            texels[1],
+            3,
+            &rect.images[k],
+        )?;
         let pic = overlay::overlay(&board, &cal, k, &photos[k], &corner_pixels(&views, k));
         outs.put(
             t.overlays[k],
@@ -187,7 +194,13 @@ pub fn calibrate(
         toml::to_string(&cal.intrinsics).context("cam.toml")?
     );
     outs.put(t.cam, cam.as_bytes())?;
-    let report = report_text(&photos, &cal, &markers, &rect, &lights_of(&kinds, &req.lights));
+    let report = report_text(
+        &photos,
+        &cal,
+        &markers,
+        &rect,
+        &lights_of(&kinds, &req.lights),
+    );
     outs.put(t.report, report.as_bytes())?;
     outs.commit()?;
     Ok(CalibrateOutcome {
@@ -204,10 +217,17 @@ fn texel_grid(req: &CalibrateRequest, board: &BoardFile) -> Result<[usize; 2]> {
     let (texels, what) = match req.px_per_mm {
         Some(d) if d.is_finite() && d > 0.0 => (
             [(w[2] - w[0]) * d, (w[3] - w[1]) * d].map(|x| x.round().max(0.0) as usize),
-            format!("--px-per-mm {d} (the window is {} x {} mm)", w[2] - w[0], w[3] - w[1]),
+            format!(
+                "--px-per-mm {d} (the window is {} x {} mm)",
+                w[2] - w[0],
+                w[3] - w[1]
+            ),
         ),
         Some(d) => bail!("--px-per-mm {d}: expected texels per millimetre > 0"),
-        None => (req.texels, format!("--texels {} {}", req.texels[0], req.texels[1])),
+        None => (
+            req.texels,
+            format!("--texels {} {}", req.texels[0], req.texels[1]),
+        ),
     };
     if texels.iter().any(|&x| !(2..=4096).contains(&x)) {
         bail!(
@@ -226,7 +246,13 @@ fn lights_of(kinds: &[PhotoLight], file: &Option<PathBuf>) -> Vec<String> {
         .map(|l| match (l, file) {
             (PhotoLight::Flash, _) => "flash".to_string(),
             (PhotoLight::Lamp(p), Some(f)) => {
-                format!("lamp at ({}, {}, {}) mm ({})", p[0], p[1], p[2], f.display())
+                format!(
+                    "lamp at ({}, {}, {}) mm ({})",
+                    p[0],
+                    p[1],
+                    p[2],
+                    f.display()
+                )
             }
             (PhotoLight::Lamp(p), None) => format!("lamp at ({}, {}, {}) mm", p[0], p[1], p[2]),
         })
