@@ -53,6 +53,7 @@ fn eight_photos_give_the_cameras_within_a_millimetre() {
     let mut corners = Vec::new();
     for (k, pose) in truth.iter().enumerate() {
         let shot = PhotoShot {
+            room_light: None,
             intrinsics: TRUTH,
             pose: *pose,
             light_mm: pose.position + pose.to_board_direction(&Vector3::new(10.0, 0.0, 0.0)),

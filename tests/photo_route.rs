@@ -50,6 +50,7 @@ fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
     let mut files = Vec::new();
     for (k, pose) in poses().iter().enumerate() {
         let shot = PhotoShot {
+            room_light: None,
             intrinsics: TRUTH,
             pose: *pose,
             light_mm: pose.position + pose.to_board_direction(&Vector3::new(10.0, 0.0, 0.0)),
@@ -91,11 +92,8 @@ fn photos_become_a_capture_that_fits_the_truth() {
     let (board_toml, photos) = shoot(dir.path());
     // the calibration, through the API: cameras within 1 mm, RMS under 0.3 px
     let req = fibrefit::api::calibrate::CalibrateRequest {
-        board: board_toml.clone(),
-        photos: photos.clone(),
-        flash_offset_mm: [10.0, 0.0, 0.0],
         texels: [64, 64],
-        intrinsics: None,
+        ..fibrefit::api::calibrate::CalibrateRequest::new(board_toml.clone(), photos.clone())
     };
     let out = dir.path().join("cal");
     let o = fibrefit::api::calibrate::calibrate(&req, &out, &fibrefit::progress::Progress::quiet())
@@ -283,7 +281,8 @@ fn a_photos_exif_exposure_is_read() {
     let dir = tempfile::tempdir().unwrap();
     let p = dir.path().join("exif.jpg");
     std::fs::write(&p, jpeg_with_exif()).unwrap();
-    let photo = fibrefit::load::photo::Photo::read(&p).unwrap();
+    let photo =
+        fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     let e = photo.exif.expect("EXIF read");
     assert_eq!(e.time_s, Some(1.0 / 60.0));
     assert_eq!(e.f_number, Some(1.8));
@@ -291,9 +290,11 @@ fn a_photos_exif_exposure_is_read() {
     let product = e.product().unwrap();
     assert!((product - 200.0 / 60.0 / 3.24).abs() < 1e-12);
     // a photo whose patch disagrees with its EXIF is named
-    let mut other = fibrefit::load::photo::Photo::read(&p).unwrap();
+    let mut other =
+        fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     other.path = dir.path().join("odd.jpg");
-    let third = fibrefit::load::photo::Photo::read(&p).unwrap();
+    let third =
+        fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     let w = fibrefit::api::calibrate::exif_disagreements(
         &[photo, other, third],
         &[[1.0; 3], [1.5; 3], [1.0; 3]],

@@ -42,6 +42,7 @@ fn detected_corners_are_the_true_cameras_projections() {
         let eye = Vector3::new(a.cos() * e.cos(), a.sin() * e.cos(), e.sin()) * 300.0;
         let pose = Pose::look_at(eye, Vector3::zeros());
         let shot = PhotoShot {
+            room_light: None,
             intrinsics,
             pose,
             light_mm: eye + pose.to_board_direction(&Vector3::new(10.0, 0.0, 0.0)),

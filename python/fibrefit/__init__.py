@@ -714,15 +714,21 @@ def calibrate(
     out: PathLike,
     *,
     flash_offset_mm: Tuple[float, float, float] = (10.0, 0.0, 0.0),
-    texels: Tuple[int, int] = (128, 128),
+    texels: Optional[Tuple[int, int]] = None,
+    px_per_mm: Optional[float] = None,
     intrinsics: Optional[PathLike] = None,
+    lights: Optional[PathLike] = None,
+    encoding: str = "srgb",
     progress: bool = False,
 ) -> Tuple[str, str]:
     """Photos of a swatch on the printed board made into a capture, as ``fibrefit calibrate
     --board BOARD --out OUT PHOTO...``: the markers found, the camera's intrinsics and every
     photo's pose calibrated, the photos rectified onto the window's texels with absolute values
     from the reference patch, and ``OUT/capture.toml`` written (``fit(OUT/capture.toml, ...)``
-    runs on it), with ``cam.toml`` (reuse as ``intrinsics``) and ``report/``. A bad photo raises
+    runs on it), with ``cam.toml`` (reuse as ``intrinsics``) and ``report/``. ``texels`` (default
+    128 x 128) or ``px_per_mm`` (texels per millimetre of the window) set the grid; ``lights``
+    is the ``--lights`` TOML (lamps at measured positions, ambient frames to subtract);
+    ``encoding`` is "srgb" or "linear" for PNG and TIFF photos. A bad photo raises
     FibrefitError naming it, and nothing is written. Returns (the capture file, the report)."""
     capture, report = _native_call(
         _native.calibrate,
@@ -730,8 +736,11 @@ def calibrate(
         [_os.fspath(p) for p in photos],
         _os.fspath(out),
         flash_offset_mm=tuple(float(v) for v in flash_offset_mm),
-        texels=tuple(int(v) for v in texels),
+        texels=None if texels is None else tuple(int(v) for v in texels),
+        px_per_mm=None if px_per_mm is None else float(px_per_mm),
         intrinsics=_path(intrinsics),
+        lights=_path(lights),
+        encoding=encoding,
         progress=progress,
     )
     return _os.fspath(capture), report

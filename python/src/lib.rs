@@ -803,7 +803,7 @@ fn board(
 /// `fibrefit calibrate`: photos of a swatch on the board `board` (board.toml) made into a
 /// capture in `out`. Returns (the capture file's path, the report's text).
 #[pyfunction]
-#[pyo3(signature = (board, photos, out, *, flash_offset_mm=(10.0, 0.0, 0.0), texels=(128, 128), intrinsics=None, progress=false))]
+#[pyo3(signature = (board, photos, out, *, flash_offset_mm=(10.0, 0.0, 0.0), texels=None, px_per_mm=None, intrinsics=None, lights=None, encoding="srgb", progress=false))]
 #[allow(clippy::too_many_arguments)]
 fn calibrate(
     py: Python<'_>,
@@ -811,16 +811,36 @@ fn calibrate(
     photos: Vec<PathBuf>,
     out: PathBuf,
     flash_offset_mm: (f64, f64, f64),
-    texels: (usize, usize),
+    texels: Option<(usize, usize)>,
+    px_per_mm: Option<f64>,
     intrinsics: Option<PathBuf>,
+    lights: Option<PathBuf>,
+    encoding: &str,
     progress: bool,
 ) -> PyResult<(PathBuf, String)> {
+    if texels.is_some() && px_per_mm.is_some() {
+        return Err(FibrefitError::new_err(
+            "give texels or px_per_mm, not both".to_string(),
+        ));
+    }
+    let encoding = match encoding {
+        "srgb" => fibrefit::load::image_io::Encoding::Srgb,
+        "linear" => fibrefit::load::image_io::Encoding::Linear,
+        other => {
+            return Err(FibrefitError::new_err(format!(
+                "encoding = {other:?}: expected \"srgb\" or \"linear\""
+            )))
+        }
+    };
+    let texels = texels.unwrap_or((128, 128));
     let req = fibrefit::api::calibrate::CalibrateRequest {
-        board,
-        photos,
         flash_offset_mm: [flash_offset_mm.0, flash_offset_mm.1, flash_offset_mm.2],
         texels: [texels.0, texels.1],
+        px_per_mm,
         intrinsics,
+        lights,
+        encoding,
+        ..fibrefit::api::calibrate::CalibrateRequest::new(board, photos)
     };
     let o = py
         .detach(|| {

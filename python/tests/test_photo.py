@@ -23,3 +23,21 @@ def test_a_bad_option_or_photo_is_refused_by_name_and_nothing_written(tmp_path):
     with pytest.raises(fibrefit.FibrefitError, match="junk.jpg"):
         fibrefit.calibrate(tmp_path / "b" / "board.toml", [junk], tmp_path / "cal")
     assert not (tmp_path / "cal").exists()
+
+
+def test_the_lights_file_and_grid_options_are_checked_like_the_command_lines(tmp_path):
+    fibrefit.board(tmp_path / "b")
+    board = tmp_path / "b" / "board.toml"
+    photo = tmp_path / "p0.jpg"
+    photo.write_bytes(b"not read: the options are refused first")
+    with pytest.raises(fibrefit.FibrefitError, match="not both"):
+        fibrefit.calibrate(board, [photo], tmp_path / "cal", texels=(64, 64), px_per_mm=2.0)
+    with pytest.raises(fibrefit.FibrefitError, match="encoding"):
+        fibrefit.calibrate(board, [photo], tmp_path / "cal", encoding="gamma")
+    lights = tmp_path / "lights.toml"
+    lights.write_text('[[photo]]\nfile = "other.jpg"\nflash = true\n')
+    with pytest.raises(fibrefit.FibrefitError, match="names none of the photos"):
+        fibrefit.calibrate(board, [photo], tmp_path / "cal", lights=lights)
+    with pytest.raises(fibrefit.FibrefitError, match="px-per-mm"):
+        fibrefit.calibrate(board, [photo], tmp_path / "cal", px_per_mm=1000.0)
+    assert not (tmp_path / "cal").exists()

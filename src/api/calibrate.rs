@@ -2,8 +2,8 @@
 //! decoded to linear values, the board's markers found, the camera's intrinsics and every
 //! photo's pose calibrated (`crate::calibrate`), each photo rectified onto the window's texel
 //! grid with absolute values from the reference patch, and `capture.toml` written with the
-//! pinhole cameras and the flash's point lights in the board frame, so that `fibrefit fit
-//! OUT/capture.toml` runs unchanged.
+//! pinhole cameras and the point lights (the flash, or lamps from `--lights`) in the board
+//! frame, so that `fibrefit fit OUT/capture.toml` runs unchanged.
 
 use crate::board::camera::Intrinsics;
 use crate::board::detect;
@@ -11,7 +11,9 @@ use crate::calibrate::{self, overlay, rectify, Calibration, Corner, Views};
 use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
 use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
+use crate::load::image_io::Encoding;
 use crate::load::photo::Photo;
+use crate::load::photo_lights::{PhotoLight, PhotoLights};
 use crate::progress::Progress;
 use anyhow::{anyhow, bail, Context, Result};
 use nalgebra::Vector3;
@@ -23,14 +25,38 @@ use std::path::{Path, PathBuf};
 pub struct CalibrateRequest {
     /// `board.toml` (from `fibrefit board`).
     pub board: PathBuf,
-    /// The photos (JPEG or PNG, sRGB), one camera.
+    /// The photos (JPEG, PNG or TIFF), one camera.
     pub photos: Vec<PathBuf>,
     /// The flash's position in the camera frame (mm; x right, y down, z along the view).
     pub flash_offset_mm: [f64; 3],
-    /// The rectified images' size in texels [width, height].
+    /// The rectified images' size in texels [width, height] (unless `px_per_mm`).
     pub texels: [usize; 2],
+    /// Texels per millimetre of the window instead of `texels`: the grid is the window's size
+    /// times it, rounded.
+    pub px_per_mm: Option<f64>,
     /// Intrinsics from a previous run's `cam.toml` (held, not calibrated).
     pub intrinsics: Option<PathBuf>,
+    /// The lights file (which photos a lamp lit, ambient frames: [`PhotoLights`]); without it
+    /// the flash lit every photo.
+    pub lights: Option<PathBuf>,
+    /// How PNG and TIFF photos' code values relate to light (JPEGs are sRGB).
+    pub encoding: Encoding,
+}
+
+impl CalibrateRequest {
+    /// The request with its defaults: the flash 10 mm beside the lens, 128 x 128 texels, sRGB.
+    pub fn new(board: PathBuf, photos: Vec<PathBuf>) -> Self {
+        Self {
+            board,
+            photos,
+            flash_offset_mm: [10.0, 0.0, 0.0],
+            texels: [128, 128],
+            px_per_mm: None,
+            intrinsics: None,
+            lights: None,
+            encoding: Encoding::Srgb,
+        }
+    }
 }
 
 /// What a calibration found and wrote.
@@ -90,23 +116,23 @@ pub fn calibrate(
     if req.photos.is_empty() {
         bail!("no photos given");
     }
-    if req.texels[0] < 2 || req.texels[1] < 2 || req.texels[0] * req.texels[1] > 4096 * 4096 {
-        bail!(
-            "--texels {} {}: expected 2 to 4096 each",
-            req.texels[0],
-            req.texels[1]
-        );
-    }
     let board = BoardFile::read(&req.board)?;
+    let texels = texel_grid(req, &board)?;
     let fixed = read_intrinsics(req)?;
+    let lights = match &req.lights {
+        Some(p) => PhotoLights::read(p, &req.photos)?,
+        None => PhotoLights::flash(req.photos.len()),
+    };
     let mut inputs = vec![req.board.clone()];
     inputs.extend(req.photos.iter().cloned());
     inputs.extend(req.intrinsics.iter().cloned());
+    inputs.extend(req.lights.iter().cloned());
+    inputs.extend(lights.ambient.iter().flatten().cloned());
     let mut outs = Outputs::new(&inputs);
     let n = req.photos.len();
     let t = Targets::reserve(&mut outs, out, n)?;
 
-    let (photos, corners, markers) = read_photos(&board, &req.photos)?;
+    let (photos, corners, markers) = read_photos(&board, req, &lights)?;
     let size_px = [photos[0].width as u32, photos[0].height as u32];
     if let Some(k) = &fixed {
         if k.size_px != size_px {
@@ -124,12 +150,17 @@ pub fn calibrate(
     let cal = calibrate::calibrate(&views, fixed.as_ref())
         .map_err(|e| anyhow!("calibrating {n} photos: {e:#}"))?;
     let offset = Vector3::from(req.flash_offset_mm);
+    let kinds = lights.light.clone();
     let lights: Vec<Vector3<f64>> = cal
         .poses
         .iter()
-        .map(|p| p.position + p.to_board_direction(&offset))
+        .zip(&kinds)
+        .map(|(p, l)| match l {
+            PhotoLight::Flash => p.position + p.to_board_direction(&offset),
+            PhotoLight::Lamp(at) => Vector3::from(*at),
+        })
         .collect();
-    let rect = rectify::rectify(&board, &cal, &photos, &lights, req.texels)?;
+    let rect = rectify::rectify(&board, &cal, &photos, &lights, texels)?;
 
     // write
     for k in 0..n {
@@ -137,8 +168,8 @@ pub fn calibrate(
         crate::export::images::write_exr_into(
             file,
             name,
-            req.texels[0],
-            req.texels[1],
+            texels[0],
+            texels[1],
             3,
             &rect.images[k],
         )?;
@@ -155,19 +186,21 @@ pub fn calibrate(
         toml::to_string(&capture).context("capture.toml")?
     );
     outs.put(t.capture, text.as_bytes())?;
-    let mask = image::GrayImage::from_raw(
-        req.texels[0] as u32,
-        req.texels[1] as u32,
-        rect.mask.clone(),
-    )
-    .expect("texels");
+    let mask = image::GrayImage::from_raw(texels[0] as u32, texels[1] as u32, rect.mask.clone())
+        .expect("texels");
     outs.put(t.mask, &png_bytes(image::DynamicImage::ImageLuma8(mask))?)?;
     let cam = format!(
         "# fibrefit calibrate's intrinsics: reuse with --intrinsics (same camera, zoom, focus)\n{}",
         toml::to_string(&cal.intrinsics).context("cam.toml")?
     );
     outs.put(t.cam, cam.as_bytes())?;
-    let report = report_text(&photos, &cal, &markers, &rect);
+    let report = report_text(
+        &photos,
+        &cal,
+        &markers,
+        &rect,
+        &lights_of(&kinds, &req.lights),
+    );
     outs.put(t.report, report.as_bytes())?;
     outs.commit()?;
     Ok(CalibrateOutcome {
@@ -176,6 +209,54 @@ pub fn calibrate(
         capture: t.dir.join("capture.toml"),
         report,
     })
+}
+
+/// The rectified grid: `texels`, or the window's size times `px_per_mm`; 2 to 4096 a side.
+fn texel_grid(req: &CalibrateRequest, board: &BoardFile) -> Result<[usize; 2]> {
+    let w = board.window_mm;
+    let (texels, what) = match req.px_per_mm {
+        Some(d) if d.is_finite() && d > 0.0 => (
+            [(w[2] - w[0]) * d, (w[3] - w[1]) * d].map(|x| x.round().max(0.0) as usize),
+            format!(
+                "--px-per-mm {d} (the window is {} x {} mm)",
+                w[2] - w[0],
+                w[3] - w[1]
+            ),
+        ),
+        Some(d) => bail!("--px-per-mm {d}: expected texels per millimetre > 0"),
+        None => (
+            req.texels,
+            format!("--texels {} {}", req.texels[0], req.texels[1]),
+        ),
+    };
+    if texels.iter().any(|&x| !(2..=4096).contains(&x)) {
+        bail!(
+            "{what}: gives {} x {} texels; expected 2 to 4096 a side",
+            texels[0],
+            texels[1]
+        );
+    }
+    Ok(texels)
+}
+
+/// Each photo's light in words, for the report.
+fn lights_of(kinds: &[PhotoLight], file: &Option<PathBuf>) -> Vec<String> {
+    kinds
+        .iter()
+        .map(|l| match (l, file) {
+            (PhotoLight::Flash, _) => "flash".to_string(),
+            (PhotoLight::Lamp(p), Some(f)) => {
+                format!(
+                    "lamp at ({}, {}, {}) mm ({})",
+                    p[0],
+                    p[1],
+                    p[2],
+                    f.display()
+                )
+            }
+            (PhotoLight::Lamp(p), None) => format!("lamp at ({}, {}, {}) mm", p[0], p[1], p[2]),
+        })
+        .collect()
 }
 
 /// The intrinsics file `--intrinsics` names, read.
@@ -224,15 +305,17 @@ impl Targets {
     }
 }
 
-/// Every photo decoded, all of one size, with its markers' corners and how many markers.
+/// Every photo decoded, all of one size, with its markers' corners (found in the lit photo)
+/// and how many markers; less its ambient frame where `lights` gives one.
 fn read_photos(
     board: &BoardFile,
-    paths: &[PathBuf],
+    req: &CalibrateRequest,
+    lights: &PhotoLights,
 ) -> Result<(Vec<Photo>, Vec<Vec<Corner>>, Vec<usize>)> {
     let mut photos: Vec<Photo> = Vec::new();
     let (mut corners, mut markers) = (Vec::new(), Vec::new());
-    for path in paths {
-        let photo = Photo::read(path)?;
+    for (path, ambient) in req.photos.iter().zip(&lights.ambient) {
+        let photo = Photo::read(path, req.encoding)?;
         if let Some(first) = photos.first() {
             if (photo.width, photo.height) != (first.width, first.height) {
                 bail!(
@@ -247,6 +330,10 @@ fn read_photos(
             }
         }
         let (c, m) = corners_of(board, &photo)?;
+        let photo = match ambient {
+            Some(a) => photo.less_ambient(&Photo::read(a, req.encoding)?)?,
+            None => photo,
+        };
         corners.push(c);
         markers.push(m);
         photos.push(photo);
@@ -254,8 +341,9 @@ fn read_photos(
     Ok((photos, corners, markers))
 }
 
-/// The capture: the window as the swatch, each photo's image with its pinhole camera and the
-/// flash as a point light of intensity 1 (the images are divided by the light x exposure).
+/// The capture: the window as the swatch, each photo's image with its pinhole camera and its
+/// light (the flash or a lamp) as a point light of intensity 1 (the images are divided by the
+/// light x exposure).
 fn capture_file(board: &BoardFile, cal: &Calibration, lights: &[Vector3<f64>]) -> CaptureFile {
     let w = board.window_mm;
     let images = (0..lights.len())
@@ -307,6 +395,7 @@ fn report_text(
     cal: &Calibration,
     markers: &[usize],
     rect: &rectify::Rectified,
+    lights: &[String],
 ) -> String {
     let k = &cal.intrinsics;
     let mut s = String::new();
@@ -317,9 +406,14 @@ fn report_text(
     );
     let _ = writeln!(
         s,
-        "note: 8-bit photos are decoded as sRGB; a phone's JPEG tone curve is not exactly sRGB (RAW is better, and not read yet)"
+        "note: 8-bit photos are decoded as sRGB; a phone's JPEG tone curve is not exactly sRGB (a linear 16-bit TIFF from the RAW, --encoding linear, is better)"
     );
-    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen\texif_s\texif_iso\texif_f");
+    let _ = writeln!(
+        s,
+        "texels: {} x {} over the window; a photo's NaN texels are those it does not see well (out of frame, too oblique, clipped): its own mask",
+        rect.size[0], rect.size[1]
+    );
+    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen\texif_s\texif_iso\texif_f\tlight");
     for (i, photo) in photos.iter().enumerate() {
         let p = &photo.path;
         let e = photo.exif.unwrap_or_default();
@@ -327,7 +421,7 @@ fn report_text(
         let (c, se, sc) = (cal.poses[i].position, cal.position_se_mm[i], rect.scale[i]);
         let _ = writeln!(
             s,
-            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}\t{}\t{}\t{}",
+            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}\t{}\t{}\t{}\t{}",
             p.display(),
             markers[i],
             cal.rms_px[i],
@@ -343,7 +437,8 @@ fn report_text(
             rect.seen[i],
             show(e.time_s),
             show(e.iso),
-            show(e.f_number)
+            show(e.f_number),
+            lights[i]
         );
     }
     for w in exif_disagreements(photos, &rect.scale) {
@@ -352,7 +447,7 @@ fn report_text(
     let masked = rect.mask.iter().filter(|&&m| m == 0).count();
     let _ = writeln!(
         s,
-        "mask: {masked} of {} texels left out (out of frame, too oblique, clipped or at the window's edge in some photo)",
+        "mask: {masked} of {} texels left out (no photo sees them well, or at the window's edge)",
         rect.mask.len()
     );
     s

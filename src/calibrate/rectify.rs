@@ -16,9 +16,11 @@ pub struct Rectified {
     /// Texels across and down the window.
     pub size: [usize; 2],
     /// Each photo's linear RGB texels (row 0 at the window's top), in units where the point
-    /// light has intensity 1.
+    /// light has intensity 1; NaN where that photo does not see the texel well (out of frame,
+    /// too oblique, clipped): the photo's own mask, which the capture's loader honours.
     pub images: Vec<Vec<f32>>,
-    /// 255 where every photo sees the texel well, 0 elsewhere.
+    /// 255 where some photo sees the texel well and it is not at the window's edge, 0
+    /// elsewhere.
     pub mask: Vec<u8>,
     /// Each photo's light x exposure product per channel from the reference patch.
     pub scale: Vec<[f64; 3]>,
@@ -46,12 +48,13 @@ pub fn rectify(
     let size_mm = [w[2] - w[0], w[3] - w[1]];
     let centre = Vector3::new(0.5 * (w[0] + w[2]), 0.5 * (w[1] + w[3]), 0.0);
     let n = size[0] * size[1];
-    let mut mask = vec![255u8; n];
+    // a texel is in the capture's mask when some photo sees it (and it is off the edge)
+    let mut mask = vec![0u8; n];
     let (mut images, mut scale, mut seen) = (Vec::new(), Vec::new(), Vec::new());
     for (k, photo) in photos.iter().enumerate() {
         let pose = &cal.poses[k];
         let s = patch_scale(board, cal, k, photo, &lights[k])?;
-        let mut img = vec![0f32; 3 * n];
+        let mut img = vec![f32::NAN; 3 * n];
         let mut good = 0usize;
         for y in 0..size[1] {
             for x in 0..size[0] {
@@ -65,18 +68,16 @@ pub fn rectify(
                 let value = cal
                     .intrinsics
                     .project(&pose.to_camera(&p))
-                    .and_then(|[u, v]| photo.sample(u, v));
+                    .and_then(|[u, v]| Some((photo.sample(u, v)?, photo.peak_near(u, v)?)));
                 match value {
-                    Some(rgb) if !near_edge && view_cos > MIN_VIEW_COS => {
-                        if rgb.iter().any(|&c| c >= CLIPPED) {
-                            mask[i] = 0;
-                        }
+                    Some((rgb, peak)) if !near_edge && view_cos > MIN_VIEW_COS && peak < CLIPPED => {
                         for c in 0..3 {
                             img[3 * i + c] = (rgb[c] as f64 / s[c]) as f32;
                         }
+                        mask[i] = 255;
                         good += 1;
                     }
-                    _ => mask[i] = 0,
+                    _ => {}
                 }
             }
         }

@@ -14,6 +14,7 @@ pub mod merl;
 pub mod mesh;
 pub mod params_file;
 pub mod photo;
+pub mod photo_lights;
 pub mod queries;
 pub mod rgl;
 pub mod samples;

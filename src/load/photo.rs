@@ -1,8 +1,9 @@
-//! Photos of a calibration board (`fibrefit calibrate`): JPEG (8-bit sRGB) or PNG (8 or 16 bit,
-//! sRGB-encoded), decoded to linear RGB, with the linear grey picture the marker detector reads.
-//! A phone's JPEG tone curve is not exactly sRGB: RAW (DNG) is not read yet.
+//! Photos of a calibration board (`fibrefit calibrate`): JPEG (8-bit sRGB), PNG or TIFF (8 or 16
+//! bit, sRGB-encoded or linear: [`Encoding`], as a raw converter writes them), decoded to linear
+//! RGB, with the linear grey picture the marker detector reads. A phone's JPEG tone curve is not
+//! exactly sRGB: a linear 16-bit TIFF from the RAW is better; RAW (DNG) itself is not read yet.
 
-use super::image_io::{decode_jpeg, decode_png, srgb_to_linear};
+use super::image_io::{decode_jpeg, decode_png, decode_tiff, srgb_to_linear, Encoding};
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
 
@@ -66,25 +67,39 @@ fn read_exif(path: &Path) -> Result<Option<Exposure>> {
 }
 
 impl Photo {
-    /// Read and decode the photo at `path` (refused: another format, a corrupt or truncated
-    /// file, more pixels than a capture image may have).
-    pub fn read(path: &Path) -> Result<Self> {
+    /// Read and decode the photo at `path`, its code values `encoding` (a JPEG is always sRGB;
+    /// refused: another format, a corrupt or truncated file, more pixels than a capture image
+    /// may have).
+    pub fn read(path: &Path, encoding: Encoding) -> Result<Self> {
         let ext = path
             .extension()
             .and_then(|e| e.to_str())
             .map(|e| e.to_ascii_lowercase())
             .unwrap_or_default();
-        let img = match ext.as_str() {
-            "jpg" | "jpeg" => decode_jpeg(path, "photo")?,
-            "png" => decode_png(path, "photo")?,
+        let (img, encoding) = match ext.as_str() {
+            "jpg" | "jpeg" => {
+                if encoding == Encoding::Linear {
+                    bail!(
+                        "{}: a JPEG is sRGB-encoded; --encoding linear is for 16-bit PNG or TIFF",
+                        path.display()
+                    );
+                }
+                (decode_jpeg(path, "photo")?, Encoding::Srgb)
+            }
+            "png" => (decode_png(path, "photo")?, encoding),
+            "tif" | "tiff" => (decode_tiff(path, "photo")?, encoding),
             _ => bail!(
-                "{}: photos must be .jpg/.jpeg or .png (sRGB); RAW/DNG is not read yet",
+                "{}: photos must be .jpg/.jpeg, .png or .tif/.tiff; RAW/DNG is not read yet (convert it to a linear 16-bit TIFF)",
                 path.display()
             ),
         };
         let rgb = img.to_rgb32f();
         let (width, height) = (rgb.width() as usize, rgb.height() as usize);
-        let linear: Vec<f32> = rgb.into_raw().into_iter().map(srgb_to_linear).collect();
+        let decode = match encoding {
+            Encoding::Srgb => srgb_to_linear,
+            Encoding::Linear => |c: f32| c,
+        };
+        let linear: Vec<f32> = rgb.into_raw().into_iter().map(decode).collect();
         let peak = linear
             .chunks_exact(3)
             .map(|p| p[0].max(p[1]).max(p[2]))
@@ -99,6 +114,36 @@ impl Photo {
         })
     }
 
+    /// This photo less `ambient` (the same pose with its light off), pixel by pixel, at least
+    /// 0; `peak` stays the lit photo's (clipping is the sensor's). Refused when the sizes
+    /// differ, or the EXIF exposures (when both have them) by more than 2 %.
+    pub fn less_ambient(mut self, ambient: &Photo) -> Result<Self> {
+        if (ambient.width, ambient.height) != (self.width, self.height) {
+            bail!(
+                "{}: {}x{} pixels, but its photo {} is {}x{}: an ambient frame is the same pose and camera with the light off",
+                ambient.path.display(),
+                ambient.width,
+                ambient.height,
+                self.path.display(),
+                self.width,
+                self.height
+            );
+        }
+        let products = self.exif.and_then(|e| e.product()).zip(ambient.exif.and_then(|e| e.product()));
+        if let Some((lit, off)) = products.filter(|(lit, off)| (off / lit - 1.0).abs() > 0.02) {
+            bail!(
+                "{}: its EXIF exposure (time x ISO / f-number^2) is {:.3} times its photo {}'s: an ambient frame must be taken at the photo's exposure to be subtracted",
+                ambient.path.display(),
+                off / lit,
+                self.path.display()
+            );
+        }
+        for (v, a) in self.linear.iter_mut().zip(&ambient.linear) {
+            *v = (*v - a).max(0.0);
+        }
+        Ok(self)
+    }
+
     /// The linear luminance (Rec. 709 weights) as 8 bits: what the marker detector reads.
     pub fn grey8(&self) -> Vec<u8> {
         self.linear
@@ -108,6 +153,19 @@ impl Photo {
                 (y * 255.0).round().clamp(0.0, 255.0) as u8
             })
             .collect()
+    }
+
+    /// The largest [`Photo::peak`] of the pixels [`Photo::sample`] blends at `(u, v)` (the lit
+    /// photo's, before any ambient frame is taken off); None outside the picture.
+    pub fn peak_near(&self, u: f64, v: f64) -> Option<f32> {
+        let (x, y) = (u - 0.5, v - 0.5);
+        if x < 0.0 || y < 0.0 || x > (self.width - 1) as f64 || y > (self.height - 1) as f64 {
+            return None;
+        }
+        let (x0, y0) = (x.floor() as usize, y.floor() as usize);
+        let (x1, y1) = ((x0 + 1).min(self.width - 1), (y0 + 1).min(self.height - 1));
+        let at = |xx: usize, yy: usize| self.peak[yy * self.width + xx];
+        Some(at(x0, y0).max(at(x1, y0)).max(at(x0, y1)).max(at(x1, y1)))
     }
 
     /// The linear RGB at pixel position `(u, v)` (pixel edges at integers), bilinear; None

@@ -39,6 +39,9 @@ pub struct PhotoShot {
     pub light_mm: Vector3<f64>,
     /// The light's intensity (as a capture's point light: irradiance at 1 m).
     pub intensity: f64,
+    /// A second point light lit in the photo besides it (mm, board frame; intensity), e.g. the
+    /// room's lamp an ambient frame records.
+    pub room_light: Option<(Vector3<f64>, f64)>,
     /// Linear pixel value per unit radiance.
     pub exposure: f64,
     /// Noise: standard deviation of a linear value v, `sqrt(floor^2 + (relative v)^2)`.
@@ -73,10 +76,28 @@ impl PhotoScene<'_> {
 
     /// The radiance (RGB) leaving board point `p` towards the camera at `eye` under `shot`.
     fn radiance(&self, shot: &PhotoShot, p: &Vector3<f64>, eye: &Vector3<f64>) -> [f64; 3] {
-        let d = shot.light_mm - p;
+        let mut out = self.radiance_from(shot.light_mm, shot.intensity, p, eye);
+        if let Some((at, intensity)) = shot.room_light {
+            let more = self.radiance_from(at, intensity, p, eye);
+            for c in 0..3 {
+                out[c] += more[c];
+            }
+        }
+        out
+    }
+
+    /// The radiance (RGB) leaving board point `p` towards `eye` under one point light.
+    fn radiance_from(
+        &self,
+        light_mm: Vector3<f64>,
+        intensity: f64,
+        p: &Vector3<f64>,
+        eye: &Vector3<f64>,
+    ) -> [f64; 3] {
+        let d = light_mm - p;
         let r_m = d.norm() / 1000.0;
         let l = d.normalize();
-        let e = shot.intensity / (r_m * r_m) * l.z.max(0.0);
+        let e = intensity / (r_m * r_m) * l.z.max(0.0);
         let w = self.board.window_mm;
         let in_window = p.x > w[0] && p.x < w[2] && p.y > w[1] && p.y < w[3];
         match self.swatch {
@@ -92,13 +113,25 @@ impl PhotoScene<'_> {
 
     /// The photo `shot` takes: linear RGB per pixel, noised, encoded as 8-bit sRGB.
     pub fn render(&self, shot: &PhotoShot) -> Result<RgbImage> {
+        let [w, h] = shot.intrinsics.size_px;
+        let data: Vec<u8> = self
+            .render_linear(shot)?
+            .into_iter()
+            .map(|v| (linear_to_srgb(v) * 255.0).round().clamp(0.0, 255.0) as u8)
+            .collect();
+        Ok(RgbImage::from_raw(w, h, data).expect("w x h x 3 values"))
+    }
+
+    /// The photo `shot` takes as linear RGB values (row-major, interleaved), noised and clipped
+    /// to [0, 1]: what a raw converter's linear output holds.
+    pub fn render_linear(&self, shot: &PhotoShot) -> Result<Vec<f32>> {
         let k = &shot.intrinsics;
         let [w, h] = k.size_px;
         if w == 0 || h == 0 || shot.supersample == 0 {
             bail!("a photo needs pixels and at least 1 supersample");
         }
         let n = shot.supersample;
-        let rows: Vec<Vec<u8>> = (0..h)
+        let rows: Vec<Vec<f32>> = (0..h)
             .into_par_iter()
             .map(|y| {
                 let mut rng = rand::rngs::StdRng::seed_from_u64(
@@ -125,15 +158,13 @@ impl PhotoScene<'_> {
                         let value = s / (n * n) as f64 * shot.exposure;
                         let sigma = shot.noise_floor.hypot(shot.noise_relative * value);
                         let noisy = value + sigma * unit.sample(&mut rng);
-                        let e = linear_to_srgb(noisy.clamp(0.0, 1.0) as f32);
-                        row.push((e * 255.0).round().clamp(0.0, 255.0) as u8);
+                        row.push(noisy.clamp(0.0, 1.0) as f32);
                     }
                 }
                 row
             })
             .collect();
-        let data: Vec<u8> = rows.into_iter().flatten().collect();
-        Ok(RgbImage::from_raw(w, h, data).expect("w x h x 3 values"))
+        Ok(rows.into_iter().flatten().collect())
     }
 }
 
@@ -220,6 +251,7 @@ pub fn write_photo_set(
     for i in 0..req.count {
         let pose = set_pose(i, req.count);
         let shot = PhotoShot {
+            room_light: None,
             intrinsics: SET_CAMERA,
             pose,
             light_mm: pose.position + pose.to_board_direction(&Vector3::from(SET_FLASH_MM)),
