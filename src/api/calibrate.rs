@@ -36,7 +36,7 @@ pub struct CalibrateRequest {
     pub px_per_mm: Option<f64>,
     /// Intrinsics from a previous run's `cam.toml` (held, not calibrated).
     pub intrinsics: Option<PathBuf>,
-    /// The lights file (which photos a lamp lit, ambient frames: [`PhotoLights`]); without it
+    /// The lights file (which photos a lamp lit, ambient frames: `crate::load::photo_lights`); without it
     /// the flash lit every photo.
     pub lights: Option<PathBuf>,
     /// How PNG and TIFF photos' code values relate to light (JPEGs are sRGB).
