@@ -99,6 +99,8 @@ fn photos_become_a_capture_that_fits_the_truth() {
     let o = fibrefit::api::calibrate::calibrate(&req, &out, &fibrefit::progress::Progress::quiet())
         .unwrap();
     eprint!("{}", o.report);
+    // eight photos from all around at 20-60 deg: nothing left undetermined
+    assert!(!o.report.contains("warning"), "{}", o.report);
     let mut worst = 0.0f64;
     for (i, (p, t)) in o.calibration.poses.iter().zip(poses()).enumerate() {
         let err = (p.position - t.position).norm();
@@ -117,6 +119,7 @@ fn photos_become_a_capture_that_fits_the_truth() {
         "cam.toml",
         "report/report.txt",
         "report/overlay_000.png",
+        "report/coverage.png",
         "img_007.exr",
     ] {
         assert!(out.join(f).exists(), "{f}");

@@ -7,7 +7,7 @@
 
 use crate::board::camera::Intrinsics;
 use crate::board::detect;
-use crate::calibrate::{self, overlay, rectify, Calibration, Corner, Views};
+use crate::calibrate::{self, coverage, overlay, rectify, Calibration, Corner, Views};
 use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
 use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
@@ -194,12 +194,23 @@ pub fn calibrate(
         toml::to_string(&cal.intrinsics).context("cam.toml")?
     );
     outs.put(t.cam, cam.as_bytes())?;
+    let cameras: Vec<Vector3<f64>> = cal.poses.iter().map(|p| p.position).collect();
+    let dirs = coverage::directions(&cameras, &lights);
+    let mut warnings = coverage::warnings(&dirs);
+    warnings.extend(rms_outliers(&photos, &cal));
+    warnings.extend(exif_disagreements(&photos, &rect.scale));
+    crate::export::coverage_plot::coverage(
+        crate::export::atomic::Sink::Staged(&mut outs, t.coverage),
+        &dirs,
+        &warnings,
+    )?;
     let report = report_text(
         &photos,
         &cal,
         &markers,
         &rect,
-        &lights_of(&kinds, &req.lights),
+        (&lights_of(&kinds, &req.lights), &dirs),
+        &warnings,
     );
     outs.put(t.report, report.as_bytes())?;
     outs.commit()?;
@@ -280,6 +291,7 @@ struct Targets {
     mask: OutputId,
     cam: OutputId,
     report: OutputId,
+    coverage: OutputId,
     images: Vec<OutputId>,
     overlays: Vec<OutputId>,
 }
@@ -294,6 +306,7 @@ impl Targets {
             mask: file(dir.join("mask.png"))?,
             cam: file(dir.join("cam.toml"))?,
             report: file(report_dir.join("report.txt"))?,
+            coverage: file(report_dir.join("coverage.png"))?,
             images: (0..n)
                 .map(|k| file(dir.join(format!("img_{k:03}.exr"))))
                 .collect::<Result<_>>()?,
@@ -395,7 +408,8 @@ fn report_text(
     cal: &Calibration,
     markers: &[usize],
     rect: &rectify::Rectified,
-    lights: &[String],
+    (lights, dirs): (&[String], &[[[f64; 2]; 3]]),
+    warnings: &[String],
 ) -> String {
     let k = &cal.intrinsics;
     let mut s = String::new();
@@ -413,7 +427,7 @@ fn report_text(
         "texels: {} x {} over the window; a photo's NaN texels are those it does not see well (out of frame, too oblique, clipped): its own mask",
         rect.size[0], rect.size[1]
     );
-    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen\texif_s\texif_iso\texif_f\tlight");
+    let _ = writeln!(s, "photo\tmarkers\trms_px\tx_mm\ty_mm\tz_mm\tse_x_mm\tse_y_mm\tse_z_mm\tscale_r\tscale_g\tscale_b\tseen\texif_s\texif_iso\texif_f\tlight_theta\tlight_phi\tview_theta\tview_phi\tlight");
     for (i, photo) in photos.iter().enumerate() {
         let p = &photo.path;
         let e = photo.exif.unwrap_or_default();
@@ -421,7 +435,7 @@ fn report_text(
         let (c, se, sc) = (cal.poses[i].position, cal.position_se_mm[i], rect.scale[i]);
         let _ = writeln!(
             s,
-            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}\t{}\t{}\t{}\t{}",
+            "{}\t{}\t{:.3}\t{:.2}\t{:.2}\t{:.2}\t{:.3}\t{:.3}\t{:.3}\t{:.4}\t{:.4}\t{:.4}\t{:.2}\t{}\t{}\t{}\t{:.1}\t{:.1}\t{:.1}\t{:.1}\t{}",
             p.display(),
             markers[i],
             cal.rms_px[i],
@@ -438,10 +452,14 @@ fn report_text(
             show(e.time_s),
             show(e.iso),
             show(e.f_number),
+            dirs[i][0][0],
+            dirs[i][0][1],
+            dirs[i][1][0],
+            dirs[i][1][1],
             lights[i]
         );
     }
-    for w in exif_disagreements(photos, &rect.scale) {
+    for w in warnings {
         let _ = writeln!(s, "warning: {w}");
     }
     let masked = rect.mask.iter().filter(|&&m| m == 0).count();
@@ -451,6 +469,25 @@ fn report_text(
         rect.mask.len()
     );
     s
+}
+
+/// Photos whose reprojection RMS is over 0.5 px and three times the median's: blurred, the board
+/// not flat there, or a marker misread.
+fn rms_outliers(photos: &[Photo], cal: &Calibration) -> Vec<String> {
+    let mut sorted = cal.rms_px.clone();
+    sorted.sort_by(f64::total_cmp);
+    let median = sorted[sorted.len() / 2];
+    cal.rms_px
+        .iter()
+        .enumerate()
+        .filter(|(_, &r)| r > 0.5 && r > 3.0 * median)
+        .map(|(k, r)| {
+            format!(
+                "{}: reprojection RMS {r:.2} px against the photos' median {median:.2} px: blurred, the board not flat, or a marker misread (see its overlay)",
+                photos[k].path.display()
+            )
+        })
+        .collect()
 }
 
 /// Photos whose patch-derived exposure (green) disagrees by over 15 % with what their EXIF

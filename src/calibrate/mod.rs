@@ -8,6 +8,7 @@
 //! 22(11).
 
 pub mod bundle;
+pub mod coverage;
 pub mod homography;
 pub mod overlay;
 pub mod rectify;
