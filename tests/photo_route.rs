@@ -299,7 +299,7 @@ fn a_photos_exif_exposure_is_read() {
     let third =
         fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     let w = fibrefit::api::calibrate::exif_disagreements(
-        &[photo, other, third],
+        &[photo.info(), other.info(), third.info()],
         &[[1.0; 3], [1.5; 3], [1.0; 3]],
     );
     assert_eq!(w.len(), 1, "{w:?}");
