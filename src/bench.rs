@@ -12,6 +12,7 @@
 pub mod camera;
 pub mod felt;
 pub mod maps;
+pub mod photos;
 pub mod real;
 pub mod report;
 pub mod robustness;

@@ -140,3 +140,31 @@ fn fit_report_has_its_pictures() {
         assert!(img.width() > 500 && img.height() > 500, "{png}");
     }
 }
+
+#[test]
+fn bench_photos_quick_measures_calibrate_and_says_it_is_not_the_goals_size() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = Command::cargo_bin("fibrefit")
+        .unwrap()
+        .args(["bench", "photos", "--quick", "-q", "--out"])
+        .arg(dir.path())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let md = std::fs::read_to_string(dir.path().join("photo_speed.md")).unwrap();
+    assert!(
+        md.contains("fibrefit bench photos --quick") && md.contains("| 4 | 1600 x 1200 |"),
+        "{md}"
+    );
+    assert!(md.contains("not the goal's size"), "{md}");
+    let csv = std::fs::read_to_string(dir.path().join("photo_speed.csv")).unwrap();
+    let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
+    let (wall, peak, worst): (f64, f64, f64) = (
+        row[3].parse().unwrap(),
+        row[5].parse().unwrap(),
+        row[6].parse().unwrap(),
+    );
+    assert!(wall > 0.0 && peak > 0.0, "{csv}");
+    // the calibration itself is right: cameras within a millimetre
+    assert!(worst < 1.0, "{csv}");
+}

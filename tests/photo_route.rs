@@ -223,8 +223,22 @@ fn bad_photos_are_refused_by_name_and_nothing_is_written() {
     )
     .save(&half)
     .unwrap();
+    // a decompression bomb: a tiny PNG whose header claims 60000 x 60000 pixels
+    let bomb = d.join("bomb.png");
+    std::fs::write(&bomb, png_claiming(60_000, 60_000)).unwrap();
+    // a JPEG whose header claims 65000 x 65000 pixels
+    let jbomb = d.join("jbomb.jpg");
+    let mut j = Vec::new();
+    image::codecs::jpeg::JpegEncoder::new_with_quality(&mut j, 90)
+        .encode_image(&image::RgbImage::from_pixel(16, 8, image::Rgb([9, 9, 9])))
+        .unwrap();
+    let sof = j.windows(2).position(|w| w == [0xff, 0xc0]).unwrap();
+    j[sof + 5..sof + 9].copy_from_slice(&[0xfd, 0xe8, 0xfd, 0xe8]);
+    std::fs::write(&jbomb, &j).unwrap();
     let out = d.join("cal");
     for (photos, name, what) in [
+        (vec![bomb.clone()], "bomb.png", "pixels"),
+        (vec![jbomb.clone()], "jbomb.jpg", "pixels"),
         (vec![blank.clone()], "blank.png", "no markers"),
         (vec![trunc.clone()], "trunc.jpg", ""),
         (vec![junk.clone()], "junk.jpg", "JPEG"),
@@ -237,6 +251,45 @@ fn bad_photos_are_refused_by_name_and_nothing_is_written() {
         assert!(err.contains(name) && err.contains(what), "{name}: {err}");
         assert!(!out.exists(), "{name}: wrote {}", out.display());
     }
+}
+
+/// A PNG of one grey pixel row whose header claims `w` x `h` pixels (CRCs right).
+fn png_claiming(w: u32, h: u32) -> Vec<u8> {
+    fn crc32(bytes: &[u8]) -> u32 {
+        let mut c = !0u32;
+        for &b in bytes {
+            c ^= b as u32;
+            for _ in 0..8 {
+                c = if c & 1 != 0 {
+                    0xedb8_8320 ^ (c >> 1)
+                } else {
+                    c >> 1
+                };
+            }
+        }
+        !c
+    }
+    let chunk = |out: &mut Vec<u8>, kind: &[u8], data: &[u8]| {
+        out.extend((data.len() as u32).to_be_bytes());
+        let mut body = kind.to_vec();
+        body.extend(data);
+        out.extend(&body);
+        out.extend(crc32(&body).to_be_bytes());
+    };
+    let mut png = b"\x89PNG\r\n\x1a\n".to_vec();
+    let mut ihdr = Vec::new();
+    ihdr.extend(w.to_be_bytes());
+    ihdr.extend(h.to_be_bytes());
+    ihdr.extend([8, 0, 0, 0, 0]);
+    chunk(&mut png, b"IHDR", &ihdr);
+    // a zlib stream of nothing much: the decoder must refuse before inflating
+    chunk(
+        &mut png,
+        b"IDAT",
+        &[0x78, 0x9c, 0x03, 0x00, 0x00, 0x00, 0x00, 0x01],
+    );
+    chunk(&mut png, b"IEND", &[]);
+    png
 }
 
 /// A JPEG with an EXIF block (exposure 1/60 s, f/1.8, ISO 200) written by hand.
@@ -299,7 +352,7 @@ fn a_photos_exif_exposure_is_read() {
     let third =
         fibrefit::load::photo::Photo::read(&p, fibrefit::load::image_io::Encoding::Srgb).unwrap();
     let w = fibrefit::api::calibrate::exif_disagreements(
-        &[photo, other, third],
+        &[photo.info(), other.info(), third.info()],
         &[[1.0; 3], [1.5; 3], [1.0; 3]],
     );
     assert_eq!(w.len(), 1, "{w:?}");

@@ -12,7 +12,7 @@ use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
 use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
 use crate::load::image_io::Encoding;
-use crate::load::photo::Photo;
+use crate::load::photo::{Photo, PhotoInfo};
 use crate::load::photo_lights::{PhotoLight, PhotoLights};
 use crate::progress::Progress;
 use anyhow::{anyhow, bail, Context, Result};
@@ -150,7 +150,8 @@ pub fn calibrate(
     let cal = calibrate::calibrate(&views, fixed.as_ref())
         .map_err(|e| anyhow!("calibrating {n} photos: {e:#}"))?;
     let offset = Vector3::from(req.flash_offset_mm);
-    let kinds = lights.light.clone();
+    let lights_file = lights;
+    let kinds = lights_file.light.clone();
     let lights: Vec<Vector3<f64>> = cal
         .poses
         .iter()
@@ -160,25 +161,21 @@ pub fn calibrate(
             PhotoLight::Lamp(at) => Vector3::from(*at),
         })
         .collect();
-    let rect = rectify::rectify(&board, &cal, &photos, &lights, texels)?;
-
-    // write
+    // each photo decoded again, rectified and written, one at a time
+    let mut rectifier = rectify::Rectifier::new(&board, &cal, texels);
     for k in 0..n {
+        progress.line(&format!("rectifying {}", req.photos[k].display()));
+        let photo = lit_photo(req, &lights_file, k)?;
+        let img = rectifier.photo(k, &photo, &lights[k])?;
         let (file, name) = outs.file_and_name(t.images[k]);
-        crate::export::images::write_exr_into(
-            file,
-            name,
-            texels[0],
-            texels[1],
-            3,
-            &rect.images[k],
-        )?;
-        let pic = overlay::overlay(&board, &cal, k, &photos[k], &corner_pixels(&views, k));
+        crate::export::images::write_exr_into(file, name, texels[0], texels[1], 3, &img)?;
+        let pic = overlay::overlay(&board, &cal, k, &photo, &corner_pixels(&views, k));
         outs.put(
             t.overlays[k],
             &png_bytes(image::DynamicImage::ImageRgb8(pic))?,
         )?;
     }
+    let rect = rectifier.finish();
     let capture = capture_file(&board, &cal, &lights);
     let text = format!(
         "# written by fibrefit calibrate from {n} photos of {} (board frame = swatch frame, mm)\n{}",
@@ -318,14 +315,24 @@ impl Targets {
     }
 }
 
-/// Every photo decoded, all of one size, with its markers' corners (found in the lit photo)
-/// and how many markers; less its ambient frame where `lights` gives one.
+/// Photo `k` decoded, less its ambient frame where `lights` gives one.
+fn lit_photo(req: &CalibrateRequest, lights: &PhotoLights, k: usize) -> Result<Photo> {
+    let photo = Photo::read(&req.photos[k], req.encoding)?;
+    match &lights.ambient[k] {
+        Some(a) => photo.less_ambient(&Photo::read(a, req.encoding)?),
+        None => Ok(photo),
+    }
+}
+
+/// Every photo decoded in turn (its pixels dropped once read), all of one size, with its
+/// markers' corners (found in the lit photo) and how many markers; its ambient frame, where
+/// `lights` gives one, checked against it.
 fn read_photos(
     board: &BoardFile,
     req: &CalibrateRequest,
     lights: &PhotoLights,
-) -> Result<(Vec<Photo>, Vec<Vec<Corner>>, Vec<usize>)> {
-    let mut photos: Vec<Photo> = Vec::new();
+) -> Result<(Vec<PhotoInfo>, Vec<Vec<Corner>>, Vec<usize>)> {
+    let mut photos: Vec<PhotoInfo> = Vec::new();
     let (mut corners, mut markers) = (Vec::new(), Vec::new());
     for (path, ambient) in req.photos.iter().zip(&lights.ambient) {
         let photo = Photo::read(path, req.encoding)?;
@@ -343,13 +350,13 @@ fn read_photos(
             }
         }
         let (c, m) = corners_of(board, &photo)?;
-        let photo = match ambient {
-            Some(a) => photo.less_ambient(&Photo::read(a, req.encoding)?)?,
-            None => photo,
-        };
+        let info = photo.info();
+        if let Some(a) = ambient {
+            photo.less_ambient(&Photo::read(a, req.encoding)?)?;
+        }
         corners.push(c);
         markers.push(m);
-        photos.push(photo);
+        photos.push(info);
     }
     Ok((photos, corners, markers))
 }
@@ -404,7 +411,7 @@ fn png_bytes(img: image::DynamicImage) -> Result<Vec<u8>> {
 
 /// The report: intrinsics, per photo markers, RMS, position and its standard error, scale.
 fn report_text(
-    photos: &[Photo],
+    photos: &[PhotoInfo],
     cal: &Calibration,
     markers: &[usize],
     rect: &rectify::Rectified,
@@ -473,7 +480,7 @@ fn report_text(
 
 /// Photos whose reprojection RMS is over 0.5 px and three times the median's: blurred, the board
 /// not flat there, or a marker misread.
-fn rms_outliers(photos: &[Photo], cal: &Calibration) -> Vec<String> {
+fn rms_outliers(photos: &[PhotoInfo], cal: &Calibration) -> Vec<String> {
     let mut sorted = cal.rms_px.clone();
     sorted.sort_by(f64::total_cmp);
     let median = sorted[sorted.len() / 2];
@@ -493,7 +500,7 @@ fn rms_outliers(photos: &[Photo], cal: &Calibration) -> Vec<String> {
 /// Photos whose patch-derived exposure (green) disagrees by over 15 % with what their EXIF
 /// exposure (time x ISO / f-number^2) says relative to the others: another light than the
 /// flash, the patch in shadow, or a wrong EXIF.
-pub fn exif_disagreements(photos: &[Photo], scale: &[[f64; 3]]) -> Vec<String> {
+pub fn exif_disagreements(photos: &[PhotoInfo], scale: &[[f64; 3]]) -> Vec<String> {
     let ratios: Vec<(usize, f64)> = photos
         .iter()
         .enumerate()

@@ -11,14 +11,10 @@ use crate::load::photo::Photo;
 use anyhow::{bail, Result};
 use nalgebra::Vector3;
 
-/// The rectified capture.
+/// What rectifying every photo leaves besides the images (each written as it is made).
 pub struct Rectified {
     /// Texels across and down the window.
     pub size: [usize; 2],
-    /// Each photo's linear RGB texels (row 0 at the window's top), in units where the point
-    /// light has intensity 1; NaN where that photo does not see the texel well (out of frame,
-    /// too oblique, clipped): the photo's own mask, which the capture's loader honours.
-    pub images: Vec<Vec<f32>>,
     /// 255 where some photo sees the texel well and it is not at the window's edge, 0
     /// elsewhere.
     pub mask: Vec<u8>,
@@ -35,25 +31,42 @@ const CLIPPED: f32 = 0.98;
 /// Texels this close to the window's edge (mm) are masked (the swatch's edge, the outline).
 const EDGE_MM: f64 = 1.0;
 
-/// Rectify `photos` (calibrated by `cal`, lit by point lights at `lights`, mm) onto a
-/// `size` texel grid over `board`'s window.
-pub fn rectify(
-    board: &BoardFile,
-    cal: &Calibration,
-    photos: &[Photo],
-    lights: &[Vector3<f64>],
-    size: [usize; 2],
-) -> Result<Rectified> {
-    let w = board.window_mm;
-    let size_mm = [w[2] - w[0], w[3] - w[1]];
-    let centre = Vector3::new(0.5 * (w[0] + w[2]), 0.5 * (w[1] + w[3]), 0.0);
-    let n = size[0] * size[1];
-    // a texel is in the capture's mask when some photo sees it (and it is off the edge)
-    let mut mask = vec![0u8; n];
-    let (mut images, mut scale, mut seen) = (Vec::new(), Vec::new(), Vec::new());
-    for (k, photo) in photos.iter().enumerate() {
+/// Rectifies calibrated photos one at a time onto a texel grid over the board's window, so
+/// that only one photo's pixels need be held.
+pub struct Rectifier<'a> {
+    board: &'a BoardFile,
+    cal: &'a Calibration,
+    done: Rectified,
+}
+
+impl<'a> Rectifier<'a> {
+    /// A `size` texel grid over `board`'s window for the photos `cal` calibrated.
+    pub fn new(board: &'a BoardFile, cal: &'a Calibration, size: [usize; 2]) -> Self {
+        Self {
+            board,
+            cal,
+            done: Rectified {
+                size,
+                mask: vec![0u8; size[0] * size[1]],
+                scale: Vec::new(),
+                seen: Vec::new(),
+            },
+        }
+    }
+
+    /// Photo `k` (lit by a point light at `light`, mm) rectified: its linear RGB texels (row 0
+    /// at the window's top) in units where the point light has intensity 1; NaN where that
+    /// photo does not see the texel well (out of frame, too oblique, clipped): the photo's own
+    /// mask, which the capture's loader honours. Photos come in order, from 0.
+    pub fn photo(&mut self, k: usize, photo: &Photo, light: &Vector3<f64>) -> Result<Vec<f32>> {
+        let (board, cal, size) = (self.board, self.cal, self.done.size);
+        assert_eq!(k, self.done.scale.len(), "photos are rectified in order");
+        let w = board.window_mm;
+        let size_mm = [w[2] - w[0], w[3] - w[1]];
+        let centre = Vector3::new(0.5 * (w[0] + w[2]), 0.5 * (w[1] + w[3]), 0.0);
+        let n = size[0] * size[1];
         let pose = &cal.poses[k];
-        let s = patch_scale(board, cal, k, photo, &lights[k])?;
+        let s = patch_scale(board, cal, k, photo, light)?;
         let mut img = vec![f32::NAN; 3 * n];
         let mut good = 0usize;
         for y in 0..size[1] {
@@ -74,24 +87,22 @@ pub fn rectify(
                         for c in 0..3 {
                             img[3 * i + c] = (rgb[c] as f64 / s[c]) as f32;
                         }
-                        mask[i] = 255;
+                        self.done.mask[i] = 255;
                         good += 1;
                     }
                     _ => {}
                 }
             }
         }
-        images.push(img);
-        scale.push(s);
-        seen.push(good as f64 / n as f64);
+        self.done.scale.push(s);
+        self.done.seen.push(good as f64 / n as f64);
+        Ok(img)
     }
-    Ok(Rectified {
-        size,
-        images,
-        mask,
-        scale,
-        seen,
-    })
+
+    /// What the photos left: the mask, each one's scale and share seen.
+    pub fn finish(self) -> Rectified {
+        self.done
+    }
 }
 
 /// Photo `k`'s light x exposure product per channel: the patch's mean value over the mean of

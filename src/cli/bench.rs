@@ -15,6 +15,7 @@ STUDIES (each writes its tables, CSV and plots into OUT and says the command tha
   felt FILE    every rung on a real measured felt (OUT/felt.*)
   maps         per-texel map recovery on synthetic captures (OUT/maps_accuracy.*)
   camera [N]   captures at camera resolution, 8 images x N x N (OUT/camera_resolution.*)
+  photos       `calibrate` on 12 synthetic photos of 12 Mpx: time and memory (OUT/photo_speed.*)
   shader       the exported shader's cost per rung on this machine's GPU driver (OUT/shader_cost.*)
   sampling     the importance sampler against cosine sampling (OUT/sampling.*)
   selection FILE  `--model auto` on sparse subsets of a felt and on synthetic fabrics
@@ -65,6 +66,17 @@ pub enum Study {
         /// Image size N (pixels per side)
         #[arg(value_name = "N", default_value_t = 1024)]
         size: usize,
+    },
+    /// The photo route's speed and memory: `fibrefit calibrate` on synthetic JPEG photos of
+    /// the board (a child process; wall time, CPU time, peak memory): writes OUT/photo_speed.md
+    /// and .csv
+    Photos {
+        /// Photos
+        #[arg(long, default_value_t = 12)]
+        count: usize,
+        /// Pixels across each photo (4:3; 4000 = 12 Mpx)
+        #[arg(long, default_value_t = 4000)]
+        width: u32,
     },
     /// The exported shader's cost per rung (evaluations per second on this machine's GPU
     /// driver against the Rust model on the CPU, SPIR-V instruction counts): writes
@@ -289,6 +301,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         Study::Sampling => sampling(args),
         Study::Camera { size } => camera(args, size),
         Study::Shader => shader(args),
+        Study::Photos { count, width } => photos(args, count, width),
         Study::Maps => maps(args),
         Study::Selection(sel) => selection(args, &sel),
         Study::Felt(f) => felt(args, &f),
@@ -323,6 +336,36 @@ fn camera(args: &BenchArgs, size: usize) -> Result<()> {
             );
         }
         eprintln!("wrote {}", args.out.join("camera_resolution.md").display());
+    }
+    Ok(())
+}
+
+fn photos(args: &BenchArgs, count: usize, width: u32) -> Result<()> {
+    let (count, width) = if args.quick { (4, 1600) } else { (count, width) };
+    if !(3..=64).contains(&count) || !(400..=12000).contains(&width) {
+        bail!("bench photos --count {count} --width {width}: expected 3 to 64 photos, 400 to 12000 px");
+    }
+    let t = Instant::now();
+    let progress = crate::progress::Progress::new(args.quiet);
+    let scratch = tempfile::tempdir()?;
+    let exe = std::env::current_exe()?;
+    let run = crate::bench::photos::run(&exe, scratch.path(), count, width, &progress)?;
+    let command = match (args.quick, count, width) {
+        (true, ..) => "fibrefit bench photos --quick".to_string(),
+        (false, 12, 4000) => "fibrefit bench photos".to_string(),
+        _ => format!("fibrefit bench photos --count {count} --width {width}"),
+    };
+    crate::bench::photos::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        eprintln!(
+            "calibrate, {count} photos of {}x{}: {:.1} s wall, {:.1} s CPU, {:.0} MB peak; wrote {}",
+            run.size_px[0],
+            run.size_px[1],
+            run.cost.wall_seconds,
+            run.cost.cpu_seconds,
+            run.cost.peak_mb,
+            args.out.join("photo_speed.md").display()
+        );
     }
     Ok(())
 }

@@ -23,6 +23,20 @@ pub struct Photo {
     pub exif: Option<Exposure>,
 }
 
+/// What a photo is without its pixels: kept for every photo while only one's pixels are held
+/// (12 photos of 12 Mpx as linear f32 would take 2 GB).
+#[derive(Clone, Debug)]
+pub struct PhotoInfo {
+    /// Where it was read.
+    pub path: PathBuf,
+    /// Size in pixels.
+    pub width: usize,
+    /// Size in pixels.
+    pub height: usize,
+    /// The exposure its EXIF gives, when it has one.
+    pub exif: Option<Exposure>,
+}
+
 /// A photo's exposure from its EXIF.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct Exposure {
@@ -142,6 +156,16 @@ impl Photo {
             *v = (*v - a).max(0.0);
         }
         Ok(self)
+    }
+
+    /// The photo without its pixels.
+    pub fn info(&self) -> PhotoInfo {
+        PhotoInfo {
+            path: self.path.clone(),
+            width: self.width,
+            height: self.height,
+            exif: self.exif,
+        }
     }
 
     /// The linear luminance (Rec. 709 weights) as 8 bits: what the marker detector reads.
