@@ -824,8 +824,8 @@ fn calibrate(
         ));
     }
     let encoding = match encoding {
-        "srgb" => fibrefit::load::image_io::Encoding::Srgb,
-        "linear" => fibrefit::load::image_io::Encoding::Linear,
+        "srgb" => fibrefit::api::calibrate::Encoding::Srgb,
+        "linear" => fibrefit::api::calibrate::Encoding::Linear,
         other => {
             return Err(FibrefitError::new_err(format!(
                 "encoding = {other:?}: expected \"srgb\" or \"linear\""

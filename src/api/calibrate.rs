@@ -11,7 +11,7 @@ use crate::calibrate::{self, coverage, overlay, rectify, Calibration, Corner, Vi
 use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
 use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
-use crate::load::image_io::Encoding;
+pub use crate::load::image_io::Encoding;
 use crate::load::photo::{Photo, PhotoInfo};
 use crate::load::photo_lights::{PhotoLight, PhotoLights};
 use crate::progress::Progress;

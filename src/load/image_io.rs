@@ -270,7 +270,9 @@ pub fn header(path: &Path) -> Result<(usize, usize, usize)> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq, serde::Deserialize, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Encoding {
+    /// Code values proportional to light (a raw converter's linear output).
     Linear,
+    /// sRGB-encoded code values (IEC 61966-2-1), decoded to linear.
     Srgb,
 }
 
