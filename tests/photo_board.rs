@@ -138,3 +138,41 @@ fn refused_options_name_the_option_and_write_nothing() {
     );
     assert!(out.join("board.png").exists() && out.join("board.toml").exists());
 }
+
+#[test]
+fn board_pdf_is_the_png_on_a_page_of_its_printed_size() {
+    let (dir, b, png) = make("a4", 60.0, 300);
+    let pdf = std::fs::read(dir.path().join("board.pdf")).unwrap();
+    assert!(pdf.starts_with(b"%PDF-"));
+    let text = String::from_utf8_lossy(&pdf);
+    // the page: the picture's size in points (1/72 inch), so "actual size" prints it at scale
+    let at = text.find("/MediaBox [").expect("a media box") + "/MediaBox [".len();
+    let nums: Vec<f64> = text[at..text[at..].find(']').unwrap() + at]
+        .split_whitespace()
+        .map(|v| v.parse().unwrap())
+        .collect();
+    let p = b.paper_mm;
+    let want = [(p[2] - p[0]) / 25.4 * 72.0, (p[3] - p[1]) / 25.4 * 72.0];
+    assert!(
+        (nums[2] - want[0]).abs() < 0.01 && (nums[3] - want[1]).abs() < 0.01,
+        "{nums:?} against {want:?} pt"
+    );
+    // the image: the PNG's own pixels
+    for key in [
+        format!("/Width {}", png.width()),
+        format!("/Height {}", png.height()),
+    ] {
+        assert!(text.contains(&key), "{key}");
+    }
+    let start = pdf.windows(7).position(|w| w == b"stream\n").unwrap() + 7;
+    let end = start
+        + pdf[start..]
+            .windows(10)
+            .position(|w| w == b"\nendstream")
+            .unwrap();
+    let pixels = miniz_oxide::inflate::decompress_to_vec_zlib(&pdf[start..end]).unwrap();
+    assert!(
+        pixels == *png.as_raw(),
+        "the PDF's image differs from board.png"
+    );
+}

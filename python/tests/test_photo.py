@@ -8,7 +8,7 @@ import fibrefit
 
 def test_board_writes_the_png_and_its_geometry(tmp_path):
     written = fibrefit.board(tmp_path / "b", paper="letter", window_mm=50)
-    assert sorted(p.rsplit("/", 1)[-1] for p in written) == ["board.png", "board.toml"]
+    assert sorted(p.rsplit("/", 1)[-1] for p in written) == ["board.pdf", "board.png", "board.toml"]
     text = (tmp_path / "b" / "board.toml").read_text()
     assert 'family = "tag36h11"' in text and 'paper = "letter"' in text
 

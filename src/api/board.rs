@@ -34,7 +34,7 @@ impl Default for BoardRequest {
 /// What was written.
 #[derive(Clone, Debug)]
 pub struct BoardOutcome {
-    /// `DIR/board.png` and `DIR/board.toml`.
+    /// `DIR/board.png`, `DIR/board.pdf` and `DIR/board.toml`.
     pub files: Vec<PathBuf>,
     /// How many markers the board has.
     pub markers: usize,
@@ -42,8 +42,9 @@ pub struct BoardOutcome {
     pub window_mm: [f64; 4],
 }
 
-/// Lay out the board and write `out/board.png` and `out/board.toml` together (nothing is
-/// written when the request is refused).
+/// Lay out the board and write `out/board.png`, `out/board.pdf` (the same picture as a page of
+/// its printed size) and `out/board.toml` together (nothing is written when the request is
+/// refused).
 pub fn board(req: &BoardRequest, out: &Path) -> Result<BoardOutcome> {
     let spec = BoardSpec {
         paper: Paper::parse(&req.paper)?,
@@ -53,18 +54,23 @@ pub fn board(req: &BoardRequest, out: &Path) -> Result<BoardOutcome> {
     };
     let layout = BoardLayout::new(&spec)?;
     let file = layout.file();
-    let png = draw::png_bytes(&draw::picture(&layout)?, spec.dpi)?;
+    let picture = draw::picture(&layout)?;
+    let png = draw::png_bytes(&picture, spec.dpi)?;
+    let pdf = draw::pdf_bytes(&picture, spec.dpi);
     let toml = file.to_toml()?;
     let mut outs = Outputs::new(&[]);
     let dir = outs.dir(out, "--out")?;
     let (png_path, toml_path) = (dir.join("board.png"), dir.join("board.toml"));
+    let pdf_path = dir.join("board.pdf");
     let png_id = outs.file(&png_path, "--out")?;
+    let pdf_id = outs.file(&pdf_path, "--out")?;
     let toml_id = outs.file(&toml_path, "--out")?;
     outs.put(png_id, &png)?;
+    outs.put(pdf_id, &pdf)?;
     outs.put(toml_id, toml.as_bytes())?;
     outs.commit()?;
     Ok(BoardOutcome {
-        files: vec![png_path, toml_path],
+        files: vec![png_path, pdf_path, toml_path],
         markers: file.marker.len(),
         window_mm: file.window_mm,
     })

@@ -108,6 +108,43 @@ pub fn png_bytes(img: &GrayImage, dpi: u32) -> Result<Vec<u8>> {
     Ok(bytes)
 }
 
+/// `img` as a one-page PDF whose page is the picture at `dpi` exactly (its size in points =
+/// pixels / dpi x 72), so that printing at "actual size" gives the board's scale: one grey image
+/// XObject, Flate-compressed, drawn over the whole page.
+pub fn pdf_bytes(img: &GrayImage, dpi: u32) -> Vec<u8> {
+    use pdf_writer::{Content, Filter, Finish, Name, Pdf, Rect, Ref};
+    let (w, h) = (img.width(), img.height());
+    let points = |px: u32| px as f32 / dpi as f32 * 72.0;
+    let (wp, hp) = (points(w), points(h));
+    let (catalog, tree, page_id, image_id, content_id) =
+        (Ref::new(1), Ref::new(2), Ref::new(3), Ref::new(4), Ref::new(5));
+    let name = Name(b"Board");
+    let mut pdf = Pdf::new();
+    pdf.catalog(catalog).pages(tree);
+    pdf.pages(tree).kids([page_id]).count(1);
+    let mut page = pdf.page(page_id);
+    page.media_box(Rect::new(0.0, 0.0, wp, hp));
+    page.parent(tree);
+    page.contents(content_id);
+    page.resources().x_objects().pair(name, image_id);
+    page.finish();
+    let data = miniz_oxide::deflate::compress_to_vec_zlib(img.as_raw(), 6);
+    let mut image = pdf.image_xobject(image_id, &data);
+    image.filter(Filter::FlateDecode);
+    image.width(w as i32);
+    image.height(h as i32);
+    image.color_space().device_gray();
+    image.bits_per_component(8);
+    image.finish();
+    let mut content = Content::new();
+    content.save_state();
+    content.transform([wp, 0.0, 0.0, hp, 0.0, 0.0]);
+    content.x_object(name);
+    content.restore_state();
+    pdf.stream(content_id, &content.finish());
+    pdf.finish()
+}
+
 /// CRC-32 (ISO 3309, as PNG chunks use).
 fn crc32(data: &[u8]) -> u32 {
     let mut crc = 0xffff_ffffu32;

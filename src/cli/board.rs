@@ -6,8 +6,9 @@ use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
-Writes DIR/board.png (print it at 100 %, no scaling, and check the 100 mm scale bar with a
-ruler) and DIR/board.toml: in mm in the board frame (origin at the window's centre, x right, y up
+Writes DIR/board.png and DIR/board.pdf (the same picture, the page its printed size: print
+either at 100 % / actual size, no scaling, and check the 100 mm scale bar with a ruler) and
+DIR/board.toml: in mm in the board frame (origin at the window's centre, x right, y up
 the page, z out of the paper), the paper's and the window's rectangles, every tag36h11 marker's
 id and corners, the reference patch (rectangle and linear reflectance: edit it after measuring
 the print) and the scale bar. Lay the swatch in the window; `fibrefit calibrate` reads the
@@ -44,7 +45,7 @@ pub fn run(args: &BoardArgs) -> Result<()> {
     if !args.quiet {
         let w = outcome.window_mm;
         eprintln!(
-            "wrote {} ({} markers, window {:.1} x {:.1} mm): print board.png at 100 %",
+            "wrote {} ({} markers, window {:.1} x {:.1} mm): print board.pdf or board.png at 100 %",
             outcome
                 .files
                 .iter()
