@@ -54,6 +54,11 @@ def test_a_directory_given_as_a_result_is_named_as_one(tmp_path):
 
 
 def _interrupt_after(seconds):
+    # Python's own Ctrl-C handler, whatever the process inherited: a shell that starts the
+    # tests in the background (nohup, `&` without job control) hands them SIGINT ignored,
+    # and Python then leaves it ignored
+    signal.signal(signal.SIGINT, signal.default_int_handler)
+
     def fire():
         time.sleep(seconds)
         os.kill(os.getpid(), signal.SIGINT)
