@@ -6,6 +6,7 @@
 pub mod atomic;
 pub mod brdf_plots;
 pub mod coverage_plot;
+pub mod dng;
 pub mod eval_table;
 pub mod gltf_out;
 pub mod images;

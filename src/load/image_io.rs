@@ -129,6 +129,54 @@ pub fn decode_tiff(path: &Path, what: &str) -> Result<image::DynamicImage> {
     decode_limited(path, what, bytes)
 }
 
+/// A camera RAW / DNG at `path` (a `what`) decoded by `flashraw` to linear RGB (sRGB
+/// primaries, f32 interleaved, sensor orientation): black and white levels applied, demosaiced
+/// (bilinear), white-balanced as shot and converted by the file's colour matrix; negative
+/// values (noise about the black level) clamped to 0 as a camera's JPEG would. Its size is
+/// checked from the header before decoding; a truncated or corrupt file is refused, not
+/// patched. Returns (width, height, values).
+pub fn decode_raw(path: &Path, what: &str) -> Result<(usize, usize, Vec<f32>)> {
+    let name = path.display();
+    let bytes = super::input::read_input_as(path, super::input::MAX_INPUT_BYTES, what)?.bytes;
+    let limits = flashraw::Limits::default()
+        .with_max_samples(3 * MAX_IMAGE_PIXELS)
+        .with_max_dimension(1 << 20);
+    let raw = flashraw::FlashRaw::open_with(&bytes[..], limits)
+        .map_err(|e| anyhow!("{name}: cannot read {what} as camera RAW / DNG: {e}"))?;
+    let info = raw.frame_info();
+    let (w, h) = (info.width as u64, info.height as u64);
+    check_pixels(path, what, w, h)?;
+    check_image_memory(path, what, (w, h), 3, 4)?;
+    let mut opts = flashraw::DecodeOptions::default();
+    opts.output = flashraw::OutputFormat::LinearRgbF32;
+    opts.limits = limits;
+    opts.corruption_policy = flashraw::CorruptionPolicy::Strict;
+    let frame = raw
+        .decode(opts)
+        .map_err(|e| anyhow!("{name}: cannot decode {what} (camera RAW / DNG): {e}"))?;
+    if frame.is_incomplete() {
+        bail!(
+            "{name}: {what} is incomplete (camera RAW / DNG): {:?}",
+            frame.warnings()
+        );
+    }
+    let (fw, fh) = (frame.width() as usize, frame.height() as usize);
+    let Some(values) = frame.as_f32() else {
+        bail!("{name}: {what}: the RAW decoder gave no linear RGB");
+    };
+    if values.len() != 3 * fw * fh {
+        bail!(
+            "{name}: {what}: the RAW decoder gave {} values for {fw}x{fh} RGB pixels",
+            values.len()
+        );
+    }
+    let values = values
+        .iter()
+        .map(|&v| if v.is_finite() { v.max(0.0) } else { 0.0 })
+        .collect();
+    Ok((fw, fh, values))
+}
+
 /// `bytes` of an image (a `what` at `path`) decoded by the `image` crate, its size taken from
 /// the header first.
 fn decode_limited(path: &Path, what: &str, bytes: Vec<u8>) -> Result<image::DynamicImage> {

@@ -1,11 +1,15 @@
 //! Photos of a calibration board (`fibrefit calibrate`): JPEG (8-bit sRGB), PNG or TIFF (8 or 16
 //! bit, sRGB-encoded or linear: [`Encoding`], as a raw converter writes them), decoded to linear
 //! RGB, with the linear grey picture the marker detector reads. A phone's JPEG tone curve is not
-//! exactly sRGB: a linear 16-bit TIFF from the RAW is better; RAW (DNG) itself is not read yet.
+//! exactly sRGB: the camera's RAW (DNG and the makers' formats, decoded to linear values by
+//! [`super::image_io::decode_raw`]) or a linear 16-bit TIFF from it is better.
 
-use super::image_io::{decode_jpeg, decode_png, decode_tiff, srgb_to_linear, Encoding};
+use super::image_io::{decode_jpeg, decode_png, decode_raw, decode_tiff, srgb_to_linear, Encoding};
 use anyhow::{bail, Result};
 use std::path::{Path, PathBuf};
+
+/// Camera RAW files read as photos (lower case): DNG and the makers' own formats.
+pub const RAW_EXTENSIONS: [&str; 10] = ["dng", "cr2", "cr3", "nef", "arw", "raf", "rw2", "orf", "pef", "srw"];
 
 /// A decoded photo.
 pub struct Photo {
@@ -90,6 +94,10 @@ impl Photo {
             .and_then(|e| e.to_str())
             .map(|e| e.to_ascii_lowercase())
             .unwrap_or_default();
+        if RAW_EXTENSIONS.contains(&ext.as_str()) {
+            let (width, height, linear) = decode_raw(path, "photo")?;
+            return Self::from_linear(path, width, height, linear);
+        }
         let (img, encoding) = match ext.as_str() {
             "jpg" | "jpeg" => {
                 if encoding == Encoding::Linear {
@@ -103,8 +111,9 @@ impl Photo {
             "png" => (decode_png(path, "photo")?, encoding),
             "tif" | "tiff" => (decode_tiff(path, "photo")?, encoding),
             _ => bail!(
-                "{}: photos must be .jpg/.jpeg, .png or .tif/.tiff; RAW/DNG is not read yet (convert it to a linear 16-bit TIFF)",
-                path.display()
+                "{}: photos must be .jpg/.jpeg, .png, .tif/.tiff or camera RAW ({})",
+                path.display(),
+                RAW_EXTENSIONS.map(|e| format!(".{e}")).join(", ")
             ),
         };
         let rgb = img.to_rgb32f();
@@ -114,6 +123,11 @@ impl Photo {
             Encoding::Linear => |c: f32| c,
         };
         let linear: Vec<f32> = rgb.into_raw().into_iter().map(decode).collect();
+        Self::from_linear(path, width, height, linear)
+    }
+
+    /// The photo at `path` from its decoded linear RGB.
+    fn from_linear(path: &Path, width: usize, height: usize, linear: Vec<f32>) -> Result<Self> {
         let peak = linear
             .chunks_exact(3)
             .map(|p| p[0].max(p[1]).max(p[2]))
