@@ -214,6 +214,7 @@ fn best_case(
         dropped: Dropped::default(),
         skipped_examples: vec![],
         image_size: None,
+        scale_rel_se: None,
     };
     let cfg: FitConfig = toml::from_str(&format!(
         "model = \"{rung}\"\nstarts = 2\n[optimizer]\nglobal_candidates = 16\n"

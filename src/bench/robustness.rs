@@ -202,6 +202,7 @@ pub fn case_samples(case: &Case, map: Option<&Path>, n: usize, seed: u64) -> Res
         dropped: Dropped::default(),
         skipped_examples: vec![],
         image_size: None,
+        scale_rel_se: None,
     })
 }
 

@@ -58,7 +58,10 @@ pub fn finish(
     warnings.extend(errors.degeneracies.iter().map(|d| d.note.clone()));
     // values at a bound, held or along which the cost is flat are warned about as undetermined
     // (`determined::apply`, below)
-    let records = records(full, &set, &errors, &at_bound, ch);
+    let mut records = records(full, &set, &errors, &at_bound, ch);
+    if let Some(rel) = samples.scale_rel_se {
+        include_scale_uncertainty(&mut records, &set, rel);
+    }
     let names = &errors.names;
     let correlations = errors
         .cov
@@ -101,6 +104,22 @@ pub fn finish(
     };
     super::determined::apply(&mut outcome);
     Ok(outcome)
+}
+
+/// Add the data's common-scale uncertainty (relative standard error `rel` per channel) to the
+/// albedos' standard errors in quadrature: the model is linear in its albedos, so scaling
+/// every value by (1 + e) scales every albedo by (1 + e) and leaves the shapes as they are.
+fn include_scale_uncertainty(records: &mut [ParamRecord], set: &ParamSet, rel: [f64; 3]) {
+    for r in records.iter_mut() {
+        if !set.albedos.iter().any(|a| a.name == r.name) {
+            continue;
+        }
+        for (c, se) in r.std_error.iter_mut().enumerate() {
+            if let Some(e) = se {
+                *e = e.hypot(r.value[c] * rel[c.min(2)]);
+            }
+        }
+    }
 }
 
 /// Per free column of the full parameter vector (shapes, then albedos): on a bound?

@@ -103,6 +103,7 @@ pub fn fit(
         dropped: Dropped::default(),
         skipped_examples: vec![],
         image_size: None,
+        scale_rel_se: None,
     };
     let psi = super::wrap_azimuth(psi_deg);
     let text = format!(

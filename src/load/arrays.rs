@@ -81,6 +81,7 @@ pub fn samples(a: &Arrays, name: &str) -> Result<Samples> {
         dropped: Dropped::default(),
         skipped_examples: Vec::new(),
         image_size: None,
+        scale_rel_se: None,
     })
 }
 

@@ -56,6 +56,18 @@ pub struct ImageNoise {
 }
 
 impl ImageNoise {
+    /// The noise an image gives itself (`noise = { var0, gain }`), one frame saturating at
+    /// `clip`.
+    pub fn given(n: &super::capture::NoiseSpec, clip: f32) -> Self {
+        Self {
+            frames: vec![(1.0, clip)],
+            var0: n.var0,
+            gain: n.gain,
+            weights: [(0.0, 1.0); 3],
+            pairs: 0,
+        }
+    }
+
     /// The variance of one frame's value `c` in channel `ch`.
     fn variance(&self, ch: usize, c: f64) -> f64 {
         self.var0[ch] + self.gain[ch] * c.max(0.0)

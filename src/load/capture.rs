@@ -19,6 +19,11 @@ use std::path::{Path, PathBuf};
 #[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct CaptureFile {
+    /// The relative standard error (R, G, B) of the values' common scale, when the capture's
+    /// radiometry was calibrated (`fibrefit calibrate`: the reference patch pooled over the
+    /// photos): the fitted albedos' standard errors include it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub scale_rel_se: Option<[f64; 3]>,
     pub swatch: Swatch,
     pub images: Vec<ImageSpec>,
 }
@@ -74,8 +79,24 @@ pub struct ImageSpec {
     /// EXR only: values at or above this are saturated (PNG: the top code always is).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub saturation: Option<f32>,
+    /// The image's noise, when known (e.g. estimated by `fibrefit calibrate`): the variance of
+    /// a pixel value v is `var0 + gain v`, per channel, in the image's own value units. The
+    /// fit's sigmas come from it. A bracket estimates its own instead.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub noise: Option<NoiseSpec>,
     pub light: Light,
     pub camera: Camera,
+}
+
+/// An image's camera noise (Poissonian-Gaussian): variance `var0 + gain x value` per channel
+/// (R, G, B; a grey image uses the first).
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct NoiseSpec {
+    /// The variance at value 0 (read noise), value units squared.
+    pub var0: [f64; 3],
+    /// The variance per unit value (shot noise), value units.
+    pub gain: [f64; 3],
 }
 
 fn one() -> f64 {
@@ -319,6 +340,19 @@ pub(crate) fn check_image_spec(name: &str, k: usize, spec: &ImageSpec) -> Result
         Ok(())
     };
     positive("exposure", spec.exposure)?;
+    if let Some(n) = &spec.noise {
+        if !spec.bracket.is_empty() {
+            bail!("{at}: a bracket estimates its own noise from its frames: give `noise` for a single `file` only");
+        }
+        for (what, v) in [("var0", n.var0), ("gain", n.gain)] {
+            if v.iter().any(|x| !(x.is_finite() && *x >= 0.0)) {
+                bail!("{at}: noise.{what} = {v:?} must be three finite numbers >= 0");
+            }
+        }
+        if (0..3).any(|c| n.var0[c] == 0.0 && n.gain[c] == 0.0) {
+            bail!("{at}: noise = var0 {:?}, gain {:?} gives a channel no noise at all; leave `noise` out when it is unknown", n.var0, n.gain);
+        }
+    }
     match &spec.light {
         Light::Directional {
             theta_deg,

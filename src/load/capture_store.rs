@@ -104,7 +104,8 @@ impl CaptureStore {
         let read = store.read_values(&base, first, subsample, &mut dropped)?;
         store.keep_sampled_texels(&name, read.values, &dropped)?;
         store.dropped = dropped;
-        store.noise = capture_noise(&name, read.noise, &read.noise_rows)?;
+        let given: Vec<bool> = store.desc.images.iter().map(|s| s.noise.is_some()).collect();
+        store.noise = capture_noise(&name, read.noise, &read.noise_rows, &given)?;
         Ok(store)
     }
 
@@ -377,6 +378,7 @@ impl CaptureStore {
             dropped: self.dropped.clone(),
             skipped_examples: vec![],
             image_size: Some((self.width, self.height)),
+            scale_rel_se: self.desc.scale_rel_se,
         }
     }
 
@@ -391,6 +393,7 @@ impl CaptureStore {
             dropped: self.dropped.clone(),
             skipped_examples: vec![],
             image_size: Some((self.width, self.height)),
+            scale_rel_se: self.desc.scale_rel_se,
         }
     }
 
@@ -649,9 +652,10 @@ pub(crate) fn read_image(base: &Path, spec: &ImageSpec) -> Result<ReadImage> {
         let full = resolve(base, frames[0].0);
         let image = image_io::read(&full, spec.encoding, spec.saturation)?;
         check_no_negatives(&full, &image)?;
+        let noise = spec.noise.as_ref().map(|n| ImageNoise::given(n, image.clip));
         return Ok(ReadImage {
             image,
-            noise: None,
+            noise,
             rows: None,
         });
     }
@@ -689,16 +693,31 @@ pub(crate) fn read_image(base: &Path, spec: &ImageSpec) -> Result<ReadImage> {
     })
 }
 
-/// Every image's noise model once the brackets are read (with each image's saturation level),
-/// from the pixel pairs of all the capture's brackets pooled (one camera): none when no image
-/// is a bracket; images without a bracket get the model with one frame.
+/// Every image's noise model once the brackets are read (with each image's saturation level):
+/// an image's own `noise` where it gives one (`given`); otherwise from the pixel pairs of all
+/// the capture's brackets pooled (one camera), images without a bracket getting the model with
+/// one frame. None when no image has either; refused when some images have a noise model and
+/// others cannot get one.
 fn capture_noise(
     name: &str,
     noise: Vec<(Option<ImageNoise>, f32)>,
     rows: &[Vec<[f64; 9]>],
+    given: &[bool],
 ) -> Result<Vec<ImageNoise>> {
     if noise.iter().all(|(n, _)| n.is_none()) {
         return Ok(vec![]);
+    }
+    if rows.iter().all(|r| r.is_empty()) {
+        // no brackets: every image must give its own
+        if let Some(k) = noise.iter().position(|(n, _)| n.is_none()) {
+            let j = given.iter().position(|g| *g).unwrap_or(0);
+            bail!(
+                "{name}: [[images]] {} gives `noise` but [[images]] {} does not: give every image's noise or none",
+                j + 1,
+                k + 1
+            );
+        }
+        return Ok(noise.into_iter().map(|(n, _)| n.expect("checked")).collect());
     }
     let mut var0 = [0.0; 3];
     let mut gain = [0.0; 3];
@@ -722,7 +741,11 @@ fn capture_noise(
     }
     Ok(noise
         .into_iter()
-        .map(|(n, clip)| {
+        .zip(given)
+        .map(|((n, clip), given)| {
+            if *given {
+                return n.expect("an image's own noise");
+            }
             let (frames, weights) = n.map_or((vec![(1.0, clip)], [(0.0, 1.0); 3]), |n| {
                 (n.frames, n.weights)
             });
@@ -742,6 +765,11 @@ fn capture_noise(
 fn check_description(name: &str, desc: &CaptureFile, subsample: Subsample) -> Result<()> {
     if desc.images.is_empty() {
         bail!("{name}: no [[images]]");
+    }
+    if let Some(r) = desc.scale_rel_se {
+        if r.iter().any(|x| !(x.is_finite() && (0.0..1.0).contains(x))) {
+            bail!("{name}: scale_rel_se = {r:?} must be three relative standard errors in [0, 1)");
+        }
     }
     let [w_mm, h_mm] = desc.swatch.size_mm;
     if !(w_mm > 0.0 && h_mm > 0.0 && w_mm.is_finite() && h_mm.is_finite()) {

@@ -96,6 +96,7 @@ pub fn load_dir(dir: &Path) -> Result<Vec<(u32, Samples)>> {
                 dropped,
                 skipped_examples: Vec::new(),
                 image_size: None,
+                scale_rel_se: None,
             },
         ));
     }

@@ -206,6 +206,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
         dropped,
         skipped_examples: vec![],
         image_size: None,
+        scale_rel_se: None,
     })
 }
 

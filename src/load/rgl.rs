@@ -613,6 +613,7 @@ pub fn load(path: &Path, opts: MeasuredOptions) -> Result<Samples> {
         dropped: Dropped::default(),
         skipped_examples: vec![],
         image_size: None,
+        scale_rel_se: None,
     })
 }
 

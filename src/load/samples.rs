@@ -101,6 +101,10 @@ pub struct Samples {
     pub skipped_examples: Vec<String>,
     /// Image captures: the images' size (width, height) in pixels, the texel grid of maps.
     pub image_size: Option<(usize, usize)>,
+    /// The relative standard error (per channel) of the values' common scale, when the data
+    /// state it (a calibrated capture's absolute radiometry): every albedo's standard error
+    /// includes it, since scaling all values scales every albedo alike and nothing else.
+    pub scale_rel_se: Option<[f64; 3]>,
 }
 
 /// The largest BRDF value a measured file (RGL `.bsdf`, MERL `.binary`) may give, in 1/sr: a

@@ -309,6 +309,7 @@ impl<'a> CaptureScene<'a> {
             encoding,
             exposure,
             saturation: None,
+            noise: None,
             light: img.light.clone(),
             camera: img.camera.clone(),
         };
@@ -339,6 +340,7 @@ impl<'a> CaptureScene<'a> {
         let height_map = copy_map("height.exr")?;
         let fibre_azimuth_map = copy_map("fibre_azimuth.exr")?;
         let capture_file = CaptureFile {
+            scale_rel_se: None,
             swatch: Swatch {
                 size_mm: c.size_mm,
                 roi: None,

@@ -357,6 +357,7 @@ pub(super) fn final_global(
         dropped: samples.dropped.clone(),
         skipped_examples: samples.skipped_examples.clone(),
         image_size: samples.image_size,
+        scale_rel_se: samples.scale_rel_se,
     };
     let cost = {
         let cols = p.columns(set)?;

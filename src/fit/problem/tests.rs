@@ -238,6 +238,7 @@ mod nan_tests {
             dropped: Default::default(),
             skipped_examples: vec![],
             image_size: None,
+            scale_rel_se: None,
         };
         assert!(crate::fit::fit(&data, &cfg, &crate::progress::Progress::quiet()).is_err());
     }

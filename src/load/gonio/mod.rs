@@ -395,6 +395,7 @@ impl ParseState {
             dropped,
             skipped_examples: examples,
             image_size: None,
+            scale_rel_se: None,
         })
     }
 }
