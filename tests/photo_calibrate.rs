@@ -59,7 +59,7 @@ fn eight_photos_give_the_cameras_within_a_millimetre() {
             light_mm: pose.position + pose.to_board_direction(&Vector3::new(10.0, 0.0, 0.0)),
             intensity: 1.0,
             exposure: 0.6 * std::f64::consts::PI * 0.09,
-            noise_relative: 0.01,
+            noise_gain: 3e-5,
             noise_floor: 0.002,
             seed: k as u64,
             supersample: 3,

@@ -48,7 +48,7 @@ fn detected_corners_are_the_true_cameras_projections() {
             light_mm: eye + pose.to_board_direction(&Vector3::new(10.0, 0.0, 0.0)),
             intensity: 1.0,
             exposure: 0.6 * std::f64::consts::PI * 0.09,
-            noise_relative: 0.01,
+            noise_gain: 3e-5,
             noise_floor: 0.002,
             seed: k as u64,
             supersample: 3,

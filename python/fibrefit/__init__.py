@@ -728,7 +728,10 @@ def calibrate(
     runs on it), with ``cam.toml`` (reuse as ``intrinsics``) and ``report/``. ``texels`` (default
     128 x 128) or ``px_per_mm`` (texels per millimetre of the window) set the grid; ``lights``
     is the ``--lights`` TOML (lamps at measured positions, ambient frames to subtract);
-    ``encoding`` is "srgb" or "linear" for PNG and TIFF photos. A bad photo raises
+    ``encoding`` is "srgb" or "linear" for PNG and TIFF photos; camera RAW photos (DNG, CR2,
+    NEF, ARW, ...) are decoded to linear values. The camera's noise is estimated from the
+    board (each image's ``noise``: the fit's sigmas), and with EXIF exposures the patch is
+    pooled over the photos of one light (``scale_rel_se``). A bad photo raises
     FibrefitError naming it, and nothing is written. Returns (the capture file, the report)."""
     capture, report = _native_call(
         _native.calibrate,

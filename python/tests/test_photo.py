@@ -23,6 +23,12 @@ def test_a_bad_option_or_photo_is_refused_by_name_and_nothing_written(tmp_path):
     with pytest.raises(fibrefit.FibrefitError, match="junk.jpg"):
         fibrefit.calibrate(tmp_path / "b" / "board.toml", [junk], tmp_path / "cal")
     assert not (tmp_path / "cal").exists()
+    # a RAW file that is not one: the same message as the command line's
+    raw = tmp_path / "IMG_0001.dng"
+    raw.write_bytes(b"II*\0" + b"\0" * 60)
+    with pytest.raises(fibrefit.FibrefitError, match="IMG_0001.dng: cannot read photo as camera RAW / DNG"):
+        fibrefit.calibrate(tmp_path / "b" / "board.toml", [raw], tmp_path / "cal")
+    assert not (tmp_path / "cal").exists()
 
 
 def test_the_lights_file_and_grid_options_are_checked_like_the_command_lines(tmp_path):

@@ -7,10 +7,10 @@
 
 use crate::board::camera::Intrinsics;
 use crate::board::detect;
-use crate::calibrate::{self, coverage, overlay, rectify, Calibration, Corner, Views};
+use crate::calibrate::{self, coverage, noise, overlay, rectify, Calibration, Corner, Views};
 use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
-use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, Swatch};
+use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, NoiseSpec, Swatch};
 pub use crate::load::image_io::Encoding;
 use crate::load::photo::{Photo, PhotoInfo};
 use crate::load::photo_lights::{PhotoLight, PhotoLights};
@@ -70,6 +70,9 @@ pub struct CalibrateOutcome {
     pub capture: PathBuf,
     /// The report (text) also written to `report/report.txt`.
     pub report: String,
+    /// The camera's noise estimated from the board's flat stretches (photo value units); None
+    /// when the photos show too little of them.
+    pub noise: Option<noise::CameraNoise>,
 }
 
 /// The markers of `photo`, refused when too few for a pose.
@@ -161,22 +164,64 @@ pub fn calibrate(
             PhotoLight::Lamp(at) => Vector3::from(*at),
         })
         .collect();
-    // each photo decoded again, rectified and written, one at a time
-    let mut rectifier = rectify::Rectifier::new(&board, &cal, texels);
+    // each photo decoded again: its overlay, its patch's reading, the board's flat stretches
+    // (the camera's noise)
+    let mut flat = noise::FlatBlocks::default();
+    let w = board.window_mm;
+    let step_mm = [
+        (w[2] - w[0]) / texels[0] as f64,
+        (w[3] - w[1]) / texels[1] as f64,
+    ];
+    let mut patch = Vec::with_capacity(n);
     for k in 0..n {
-        progress.line(&format!("rectifying {}", req.photos[k].display()));
+        progress.line(&format!(
+            "reading the patch and the board in {}",
+            req.photos[k].display()
+        ));
         let photo = lit_photo(req, &lights_file, k)?;
-        let img = rectifier.photo(k, &photo, &lights[k])?;
-        let (file, name) = outs.file_and_name(t.images[k]);
-        crate::export::images::write_exr_into(file, name, texels[0], texels[1], 3, &img)?;
+        patch.push(rectify::patch_scale(&board, &cal, k, &photo, &lights[k])?);
+        flat.add(&board, &cal, k, &photo, step_mm);
         let pic = overlay::overlay(&board, &cal, k, &photo, &corner_pixels(&views, k));
         outs.put(
             t.overlays[k],
             &png_bytes(image::DynamicImage::ImageRgb8(pic))?,
         )?;
     }
+    let readings: Vec<[f64; 3]> = patch.iter().map(|p| p.scale).collect();
+    let disagree = exif_disagreements(&photos, &readings);
+    let apart: Vec<bool> = photos
+        .iter()
+        .map(|p| disagree.iter().any(|(j, _)| photos[*j].path == p.path))
+        .collect();
+    let group: Vec<u64> = kinds
+        .iter()
+        .map(|l| match l {
+            PhotoLight::Flash => 0,
+            PhotoLight::Lamp(at) => {
+                1 + at
+                    .iter()
+                    .fold(17u64, |h, v| h.wrapping_mul(31) ^ v.to_bits())
+            }
+        })
+        .collect();
+    let exposure: Vec<Option<f64>> = photos
+        .iter()
+        .map(|p| p.exif.and_then(|e| e.product()))
+        .collect();
+    let (scales, scale_rel_se, pooled) = rectify::pool_scales(&patch, &exposure, &group, &apart);
+    // each photo decoded once more, rectified and written, one at a time
+    let mut rectifier = rectify::Rectifier::new(&board, &cal, texels);
+    for k in 0..n {
+        progress.line(&format!("rectifying {}", req.photos[k].display()));
+        let photo = lit_photo(req, &lights_file, k)?;
+        let img = rectifier.photo(k, &photo, scales[k])?;
+        let (file, name) = outs.file_and_name(t.images[k]);
+        crate::export::images::write_exr_into(file, name, texels[0], texels[1], 3, &img)?;
+    }
     let rect = rectifier.finish();
-    let capture = capture_file(&board, &cal, &lights);
+    let camera_noise = flat.fit();
+    let mut capture = capture_file(&board, &cal, &lights, camera_noise.as_ref(), &rect.scale);
+    capture.scale_rel_se = Some(scale_rel_se);
     let text = format!(
         "# written by fibrefit calibrate from {n} photos of {} (board frame = swatch frame, mm)\n{}",
         req.board.display(),
@@ -194,18 +239,24 @@ pub fn calibrate(
     let cameras: Vec<Vector3<f64>> = cal.poses.iter().map(|p| p.position).collect();
     let dirs = coverage::directions(&cameras, &lights);
     let mut warnings = coverage::warnings(&dirs);
+    if camera_noise.is_none() {
+        warnings.push(format!(
+            "too few flat stretches of board outside the window (at least {} blocks of 5 x 5 texels per channel, unclipped) to estimate the camera's noise: the capture gives the fit no sigmas",
+            noise::MIN_BLOCKS
+        ));
+    }
     warnings.extend(rms_outliers(&photos, &cal));
-    warnings.extend(exif_disagreements(&photos, &rect.scale));
+    warnings.extend(disagree.into_iter().map(|(_, w)| w));
     crate::export::coverage_plot::coverage(
         crate::export::atomic::Sink::Staged(&mut outs, t.coverage),
         &dirs,
         &warnings,
     )?;
     let report = report_text(
-        &photos,
+        (&photos, req.encoding),
         &cal,
         &markers,
-        &rect,
+        (&rect, camera_noise.as_ref(), (&patch, scale_rel_se, pooled)),
         (&lights_of(&kinds, &req.lights), &dirs),
         &warnings,
     );
@@ -216,6 +267,7 @@ pub fn calibrate(
         markers,
         capture: t.dir.join("capture.toml"),
         report,
+        noise: camera_noise,
     })
 }
 
@@ -363,11 +415,22 @@ fn read_photos(
 
 /// The capture: the window as the swatch, each photo's image with its pinhole camera and its
 /// light (the flash or a lamp) as a point light of intensity 1 (the images are divided by the
-/// light x exposure).
-fn capture_file(board: &BoardFile, cal: &Calibration, lights: &[Vector3<f64>]) -> CaptureFile {
+/// light x exposure, `scale`), and the camera's noise in each image's units when known.
+fn capture_file(
+    board: &BoardFile,
+    cal: &Calibration,
+    lights: &[Vector3<f64>],
+    noise: Option<&noise::CameraNoise>,
+    scale: &[[f64; 3]],
+) -> CaptureFile {
     let w = board.window_mm;
     let images = (0..lights.len())
         .map(|k| ImageSpec {
+            // a texel is the photo's value over the scale s: variance var0 / s^2 + gain / s x t
+            noise: noise.map(|n| NoiseSpec {
+                var0: [0, 1, 2].map(|c| n.var0[c] / (scale[k][c] * scale[k][c])),
+                gain: [0, 1, 2].map(|c| n.gain[c] / scale[k][c]),
+            }),
             file: Some(PathBuf::from(format!("img_{k:03}.exr"))),
             bracket: vec![],
             encoding: None,
@@ -383,6 +446,7 @@ fn capture_file(board: &BoardFile, cal: &Calibration, lights: &[Vector3<f64>]) -
         })
         .collect();
     CaptureFile {
+        scale_rel_se: None,
         swatch: Swatch {
             size_mm: [w[2] - w[0], w[3] - w[1]],
             roi: None,
@@ -411,10 +475,14 @@ fn png_bytes(img: image::DynamicImage) -> Result<Vec<u8>> {
 
 /// The report: intrinsics, per photo markers, RMS, position and its standard error, scale.
 fn report_text(
-    photos: &[PhotoInfo],
+    (photos, encoding): (&[PhotoInfo], Encoding),
     cal: &Calibration,
     markers: &[usize],
-    rect: &rectify::Rectified,
+    (rect, camera_noise, (patch, scale_rel_se, pooled)): (
+        &rectify::Rectified,
+        Option<&noise::CameraNoise>,
+        (&[rectify::PatchScale], [f64; 3], usize),
+    ),
     (lights, dirs): (&[String], &[[[f64; 2]; 3]]),
     warnings: &[String],
 ) -> String {
@@ -425,10 +493,50 @@ fn report_text(
         "intrinsics: {}x{} px, focal {:.2} px, principal point ({:.2}, {:.2}) px, k1 {:.5}, k2 {:.5}",
         k.size_px[0], k.size_px[1], k.focal_px, k.principal_px[0], k.principal_px[1], k.k[0], k.k[1]
     );
+    let srgb = photos.iter().any(|p| {
+        let ext = p
+            .path
+            .extension()
+            .and_then(|e| e.to_str())
+            .unwrap_or("")
+            .to_ascii_lowercase();
+        ext == "jpg" || ext == "jpeg" || (encoding == Encoding::Srgb && ext != "dng")
+    });
+    if srgb {
+        let _ = writeln!(
+            s,
+            "note: JPEGs (and PNG/TIFF under --encoding srgb) are decoded as sRGB; a phone's JPEG tone curve is not exactly sRGB (the RAW/DNG itself, or a linear 16-bit TIFF from it with --encoding linear, is better)"
+        );
+    }
     let _ = writeln!(
         s,
-        "note: 8-bit photos are decoded as sRGB; a phone's JPEG tone curve is not exactly sRGB (a linear 16-bit TIFF from the RAW, --encoding linear, is better)"
+        "radiometry: {}; the common scale's relative standard error is {:.2} % / {:.2} % / {:.2} % (R / G / B): the fitted albedos' standard errors include it",
+        match pooled {
+            0 => "each photo's light x exposure from its own view of the reference patch (no EXIF exposure to pool them by)".to_string(),
+            p if p == patch.len() => format!("the reference patch pooled over all {p} photos by their EXIF exposure (one light, one scale)"),
+            p => format!("the reference patch pooled over the {p} photos whose EXIF exposure is known, by light; the others each from their own view of it"),
+        },
+        100.0 * scale_rel_se[0],
+        100.0 * scale_rel_se[1],
+        100.0 * scale_rel_se[2]
     );
+    match camera_noise {
+        Some(n) => {
+            let _ = writeln!(
+                s,
+                "camera noise (linear photo values, variance = var0 + gain x value; from {} flat blocks of board per channel): var0 [{:.3e}, {:.3e}, {:.3e}], gain [{:.3e}, {:.3e}, {:.3e}]; at value 0.2 that is {:.2} % / {:.2} % / {:.2} %: the capture gives the fit these sigmas",
+                n.blocks,
+                n.var0[0], n.var0[1], n.var0[2],
+                n.gain[0], n.gain[1], n.gain[2],
+                100.0 * n.sigma(0, 0.2) / 0.2,
+                100.0 * n.sigma(1, 0.2) / 0.2,
+                100.0 * n.sigma(2, 0.2) / 0.2,
+            );
+        }
+        None => {
+            let _ = writeln!(s, "camera noise: not estimated (see the warnings)");
+        }
+    }
     let _ = writeln!(
         s,
         "texels: {} x {} over the window; a photo's NaN texels are those it does not see well (out of frame, too oblique, clipped): its own mask",
@@ -500,7 +608,7 @@ fn rms_outliers(photos: &[PhotoInfo], cal: &Calibration) -> Vec<String> {
 /// Photos whose patch-derived exposure (green) disagrees by over 15 % with what their EXIF
 /// exposure (time x ISO / f-number^2) says relative to the others: another light than the
 /// flash, the patch in shadow, or a wrong EXIF.
-pub fn exif_disagreements(photos: &[PhotoInfo], scale: &[[f64; 3]]) -> Vec<String> {
+pub fn exif_disagreements(photos: &[PhotoInfo], scale: &[[f64; 3]]) -> Vec<(usize, String)> {
     let ratios: Vec<(usize, f64)> = photos
         .iter()
         .enumerate()
@@ -516,11 +624,11 @@ pub fn exif_disagreements(photos: &[PhotoInfo], scale: &[[f64; 3]]) -> Vec<Strin
         .iter()
         .filter(|(_, r)| (r / median - 1.0).abs() > 0.15)
         .map(|(k, r)| {
-            format!(
-                "{}: the reference patch reads {:+.0} % against its EXIF exposure (the other photos agree): another light, the patch in shadow, or a wrong EXIF",
+            (*k, format!(
+                "{}: the reference patch reads {:+.0} % against its EXIF exposure (the other photos agree): another light, the patch in shadow, or a wrong EXIF; its own reading is used",
                 photos[*k].path.display(),
                 100.0 * (r / median - 1.0)
-            )
+            ))
         })
         .collect()
 }

@@ -68,7 +68,7 @@ fn shoot(dir: &Path, n: usize, width: u32) -> Result<(PathBuf, Vec<PathBuf>)> {
             intensity: 1.0,
             room_light: None,
             exposure: 0.5 * std::f64::consts::PI * 0.09,
-            noise_relative: 0.01,
+            noise_gain: 3e-5,
             noise_floor: 0.002,
             seed: i as u64,
             supersample: 1,

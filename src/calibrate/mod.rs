@@ -10,6 +10,7 @@
 pub mod bundle;
 pub mod coverage;
 pub mod homography;
+pub mod noise;
 pub mod overlay;
 pub mod rectify;
 

@@ -18,7 +18,7 @@ pub struct Rectified {
     /// 255 where some photo sees the texel well and it is not at the window's edge, 0
     /// elsewhere.
     pub mask: Vec<u8>,
-    /// Each photo's light x exposure product per channel from the reference patch.
+    /// Each photo's light x exposure product per channel (its images are divided by it).
     pub scale: Vec<[f64; 3]>,
     /// Each photo's fraction of window texels it sees well.
     pub seen: Vec<f64>,
@@ -54,11 +54,11 @@ impl<'a> Rectifier<'a> {
         }
     }
 
-    /// Photo `k` (lit by a point light at `light`, mm) rectified: its linear RGB texels (row 0
-    /// at the window's top) in units where the point light has intensity 1; NaN where that
-    /// photo does not see the texel well (out of frame, too oblique, clipped): the photo's own
-    /// mask, which the capture's loader honours. Photos come in order, from 0.
-    pub fn photo(&mut self, k: usize, photo: &Photo, light: &Vector3<f64>) -> Result<Vec<f32>> {
+    /// Photo `k` rectified: its linear RGB texels (row 0 at the window's top) divided by `s`,
+    /// its light x exposure product per channel (so that its light has intensity 1); NaN
+    /// where that photo does not see the texel well (out of frame, too oblique, clipped): the
+    /// photo's own mask, which the capture's loader honours. Photos come in order, from 0.
+    pub fn photo(&mut self, k: usize, photo: &Photo, s: [f64; 3]) -> Result<Vec<f32>> {
         let (board, cal, size) = (self.board, self.cal, self.done.size);
         assert_eq!(k, self.done.scale.len(), "photos are rectified in order");
         let w = board.window_mm;
@@ -66,7 +66,6 @@ impl<'a> Rectifier<'a> {
         let centre = Vector3::new(0.5 * (w[0] + w[2]), 0.5 * (w[1] + w[3]), 0.0);
         let n = size[0] * size[1];
         let pose = &cal.poses[k];
-        let s = patch_scale(board, cal, k, photo, light)?;
         let mut img = vec![f32::NAN; 3 * n];
         let mut good = 0usize;
         for y in 0..size[1] {
@@ -105,48 +104,163 @@ impl<'a> Rectifier<'a> {
     }
 }
 
-/// Photo `k`'s light x exposure product per channel: the patch's mean value over the mean of
-/// what a unit light gives there (reflectance / pi x cos(theta_i) / r^2, r in metres).
-fn patch_scale(
+/// What the reference patch says of one photo's light x exposure product.
+#[derive(Clone, Copy, Debug)]
+pub struct PatchScale {
+    /// Per channel: the product.
+    pub scale: [f64; 3],
+    /// Per channel: its relative standard error, from the scatter of the patch's points
+    /// (counted as a quarter as many independent ones: neighbouring points share pixels).
+    pub rel_se: [f64; 3],
+}
+
+/// Photo `k`'s light x exposure product per channel (lit by a point light at `light`, mm):
+/// the patch's value over what a unit light gives there (reflectance / pi x cos(theta_i) / r^2, r in metres), on a fine grid of the
+/// patch. Points nearer than [`PATCH_CLEAR_PX`] pixels to the patch's outline (as the photo
+/// shows it) are left out, and so are points whose value strays from the others' median by
+/// more than 4 of their median absolute deviations: a photo that sees the patch obliquely or
+/// small would otherwise blend the paper around it in (demosaicing and resampling reach a pixel
+/// or two), and a speck or a glint on the patch would count.
+pub fn patch_scale(
     board: &BoardFile,
     cal: &Calibration,
     k: usize,
     photo: &Photo,
     light: &Vector3<f64>,
-) -> Result<[f64; 3]> {
+) -> Result<PatchScale> {
     let r = board.patch.rect_mm;
     let pose = &cal.poses[k];
-    let (mut sum, mut unit, mut count) = ([0.0; 3], 0.0, 0usize);
-    let steps = 12;
-    for j in 0..steps {
-        for i in 0..steps {
-            // the patch's middle, 2 mm in from its edges
-            let x = r[0] + 2.0 + (r[2] - r[0] - 4.0) * (i as f64 + 0.5) / steps as f64;
-            let y = r[1] + 2.0 + (r[3] - r[1] - 4.0) * (j as f64 + 0.5) / steps as f64;
-            let p = Vector3::new(x, y, 0.0);
-            let Some(rgb) = cal
-                .intrinsics
-                .project(&pose.to_camera(&p))
-                .and_then(|[u, v]| photo.sample(u, v))
-            else {
-                continue;
-            };
-            let d = light - p;
-            let r_m = d.norm() / 1000.0;
-            let g = board.patch.reflectance / std::f64::consts::PI * (d.z / d.norm()).max(0.0)
-                / (r_m * r_m);
-            for c in 0..3 {
-                sum[c] += rgb[c] as f64;
+    let project = |p: &Vector3<f64>| cal.intrinsics.project(&pose.to_camera(p));
+    let corners: Vec<[f64; 2]> = [(r[0], r[1]), (r[2], r[1]), (r[2], r[3]), (r[0], r[3])]
+        .iter()
+        .filter_map(|&(x, y)| project(&Vector3::new(x, y, 0.0)))
+        .collect();
+    let mut ratios: Vec<[f64; 3]> = Vec::new();
+    let steps = 32;
+    if corners.len() == 4 {
+        for j in 0..steps {
+            for i in 0..steps {
+                let x = r[0] + (r[2] - r[0]) * (i as f64 + 0.5) / steps as f64;
+                let y = r[1] + (r[3] - r[1]) * (j as f64 + 0.5) / steps as f64;
+                let p = Vector3::new(x, y, 0.0);
+                let Some(at) = project(&p) else { continue };
+                let clear = (0..4).all(|e| {
+                    segment_distance(at, corners[e], corners[(e + 1) % 4]) >= PATCH_CLEAR_PX
+                });
+                let rgb = photo.sample(at[0], at[1]);
+                let (true, Some(rgb)) = (clear, rgb) else {
+                    continue;
+                };
+                let d = light - p;
+                let r_m = d.norm() / 1000.0;
+                let g = board.patch.reflectance / std::f64::consts::PI
+                    * (d.z / d.norm()).max(0.0)
+                    / (r_m * r_m);
+                if g > 0.0 {
+                    ratios.push(rgb.map(|v| v as f64 / g));
+                }
             }
-            unit += g;
-            count += 1;
         }
     }
-    if count < steps * steps / 2 || unit <= 0.0 || sum.iter().any(|&s| s <= 0.0) {
+    let mut out = [0.0; 3];
+    let mut rel_se = [0.0; 3];
+    let mut kept = usize::MAX;
+    for c in 0..3 {
+        let mut v: Vec<f64> = ratios.iter().map(|q| q[c]).collect();
+        v.sort_by(f64::total_cmp);
+        let median = v.get(v.len() / 2).copied().unwrap_or(0.0);
+        let mut dev: Vec<f64> = v.iter().map(|x| (x - median).abs()).collect();
+        dev.sort_by(f64::total_cmp);
+        let mad = dev.get(dev.len() / 2).copied().unwrap_or(0.0);
+        let inliers: Vec<f64> = v
+            .into_iter()
+            .filter(|x| (x - median).abs() <= 4.0 * mad.max(1e-6 * median.abs()))
+            .collect();
+        kept = kept.min(inliers.len());
+        let n = inliers.len().max(2) as f64;
+        out[c] = inliers.iter().sum::<f64>() / n;
+        let var = inliers.iter().map(|x| (x - out[c]).powi(2)).sum::<f64>() / (n - 1.0);
+        rel_se[c] = (var / (n / 4.0).max(1.0)).sqrt() / out[c].abs().max(1e-300);
+    }
+    if kept < MIN_PATCH_SAMPLES || out.iter().any(|&s| !(s > 0.0)) {
         bail!(
-            "{}: the reference patch is not in the picture (or not lit): frame the whole board",
-            photo.path.display()
+            "{}: the reference patch is not in the picture, too small or too oblique in it ({} points of it at least {PATCH_CLEAR_PX} px inside its outline; at least {MIN_PATCH_SAMPLES} needed), or not lit: frame the whole board, nearer",
+            photo.path.display(),
+            kept.min(ratios.len())
         );
     }
-    Ok(sum.map(|s| s / unit))
+    Ok(PatchScale { scale: out, rel_se })
+}
+
+/// The distance (px) from `p` to the segment `a`-`b`.
+fn segment_distance(p: [f64; 2], a: [f64; 2], b: [f64; 2]) -> f64 {
+    let (dx, dy) = (b[0] - a[0], b[1] - a[1]);
+    let len2 = dx * dx + dy * dy;
+    let t = if len2 > 0.0 {
+        (((p[0] - a[0]) * dx + (p[1] - a[1]) * dy) / len2).clamp(0.0, 1.0)
+    } else {
+        0.0
+    };
+    (p[0] - a[0] - t * dx).hypot(p[1] - a[1] - t * dy)
+}
+
+/// How far (px, in the photo) a patch sample keeps from the patch's edge.
+const PATCH_CLEAR_PX: f64 = 4.0;
+/// Fewest patch samples a photo's scale rests on.
+const MIN_PATCH_SAMPLES: usize = 64;
+
+/// The photos' light x exposure products, pooled where the exposure is known: photos lit by
+/// one light (equal `group`) whose EXIF gives their exposure product `exposure[k]` (time x ISO
+/// / f-number^2) share one scale S per channel, `s_k = S x exposure[k]`, S the inverse-variance
+/// weighted mean of the patch's `s_k / exposure[k]`: the patch's noise averages over the
+/// photos instead of tilting each photo against the others. A photo without EXIF, alone in its
+/// group, or marked in `apart` (its patch disagrees with its exposure) keeps its own reading.
+/// Returns every photo's scale, per channel the relative standard error of the common scale
+/// (the largest over the groups), and how many photos were pooled.
+pub fn pool_scales(
+    patch: &[PatchScale],
+    exposure: &[Option<f64>],
+    group: &[u64],
+    apart: &[bool],
+) -> (Vec<[f64; 3]>, [f64; 3], usize) {
+    let n = patch.len();
+    let mut out: Vec<[f64; 3]> = patch.iter().map(|p| p.scale).collect();
+    let mut rel_se = [0.0f64; 3];
+    let mut pooled = 0;
+    let mut done = vec![false; n];
+    for k in 0..n {
+        if done[k] {
+            continue;
+        }
+        let members: Vec<usize> = (k..n)
+            .filter(|&j| group[j] == group[k] && !apart[j] && exposure[j].is_some())
+            .collect();
+        if members.len() < 2 {
+            done[k] = true;
+            for c in 0..3 {
+                rel_se[c] = rel_se[c].max(patch[k].rel_se[c]);
+            }
+            continue;
+        }
+        for c in 0..3 {
+            let (mut sw, mut swx) = (0.0, 0.0);
+            for &j in &members {
+                let x = patch[j].scale[c] / exposure[j].expect("member");
+                let w = 1.0 / (x * patch[j].rel_se[c]).powi(2).max(1e-300);
+                sw += w;
+                swx += w * x;
+            }
+            let s = swx / sw;
+            for &j in &members {
+                out[j][c] = s * exposure[j].expect("member");
+            }
+            rel_se[c] = rel_se[c].max(1.0 / sw.sqrt() / s);
+        }
+        for &j in &members {
+            done[j] = true;
+        }
+        pooled += members.len();
+        done[k] = true;
+    }
+    (out, rel_se, pooled)
 }

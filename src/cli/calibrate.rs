@@ -15,8 +15,11 @@ that photo does not see a texel well: out of frame, too oblique, clipped), mask.
 photo sees well), cam.toml (the intrinsics: reuse with --intrinsics) and report/ (report.txt:
 intrinsics, per photo markers, reprojection RMS, camera position and its standard error, the
 patch's light x exposure, the light; overlay_NNN.png: detected corners green, reprojected red,
-window blue). Photos: JPEG (sRGB), PNG or TIFF (8/16-bit, --encoding), one camera and zoom, the
-whole board in each. The flash lights every photo unless --lights says a lamp at a measured
+window blue). Photos: camera RAW (DNG, CR2, CR3, NEF, ARW, RAF, RW2, ORF, PEF, SRW: linear, best),
+JPEG (sRGB), PNG or TIFF (8/16-bit, --encoding), one camera and zoom, the whole board in each.
+The camera's noise is estimated from the board's flat stretches (each image's `noise` in
+capture.toml: the fit's sigmas); with EXIF exposures the patch is pooled over the photos of one
+light (`scale_rel_se`: the albedos' standard errors include it). The flash lights every photo unless --lights says a lamp at a measured
 position did, and gives ambient frames (same pose, light off) to subtract:
 
   lamp_mm = [150, -100, 400]          # optional: photos not listed are lit by this lamp (mm)
@@ -48,7 +51,7 @@ pub struct CalibrateArgs {
     #[arg(long, value_name = "FILE")]
     pub lights: Option<PathBuf>,
     /// How PNG and TIFF photos' code values relate to light: srgb, or linear (a raw
-    /// converter's linear 16-bit TIFF); JPEGs are sRGB
+    /// converter's linear 16-bit TIFF); JPEGs are sRGB, RAW files linear
     #[arg(long, value_name = "ENC", default_value = "srgb", value_parser = ["srgb", "linear"])]
     pub encoding: String,
     /// Intrinsics from a previous run (cam.toml): held, not calibrated

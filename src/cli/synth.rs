@@ -15,8 +15,9 @@ pub struct SynthArgs {
     #[arg(long, value_name = "FILE", required_unless_present = "photos")]
     pub config: Option<PathBuf>,
     /// Photos of a printed board (`fibrefit board`) with a swatch of --params in its window
-    /// instead: OUT/photo_NNN.jpg (1600x1200, f 1000 px, k1 -0.08, k2 0.02, 300 mm away at
-    /// 20-60 degrees all around, a flash 10 mm beside the lens, noise) and OUT/truth.json
+    /// instead: OUT/photo_NNN.jpg or .dng (1600x1200, f 1000 px, k1 -0.08, k2 0.02, 300 mm
+    /// away at 20-60 degrees all around, a flash 10 mm beside the lens, camera noise:
+    /// variance 0.002^2 + 3e-5 x linear value) and OUT/truth.json
     #[arg(long, requires_all = ["board", "params"], conflicts_with = "config")]
     pub photos: bool,
     /// With --photos: the board (board.toml; board.png beside it)
@@ -34,6 +35,10 @@ pub struct SynthArgs {
     /// With --photos: the noise's seed
     #[arg(long, default_value_t = 0, value_name = "SEED")]
     pub seed: u64,
+    /// With --photos: jpeg (8-bit sRGB, as a phone's camera app writes) or dng (a Bayer
+    /// mosaic with black and white levels, as a camera's RAW mode writes)
+    #[arg(long, default_value = "jpeg", value_name = "FORMAT", value_parser = ["jpeg", "dng"])]
+    pub format: String,
     /// Output directory (created if missing)
     #[arg(long, value_name = "DIR")]
     pub out: PathBuf,
@@ -54,6 +59,10 @@ pub fn run(args: &SynthArgs) -> Result<()> {
             model: args.model.clone(),
             count: args.count,
             seed: args.seed,
+            format: match args.format.as_str() {
+                "dng" => crate::synth::photo::PhotoFormat::Dng,
+                _ => crate::synth::photo::PhotoFormat::Jpeg,
+            },
         };
         let files = crate::synth::photo::write_photo_set(&req, &args.out, &progress)?;
         if !args.quiet {

@@ -44,9 +44,10 @@ pub struct PhotoShot {
     pub room_light: Option<(Vector3<f64>, f64)>,
     /// Linear pixel value per unit radiance.
     pub exposure: f64,
-    /// Noise: standard deviation of a linear value v, `sqrt(floor^2 + (relative v)^2)`.
-    pub noise_relative: f64,
-    /// Noise floor (linear).
+    /// Noise as a camera's (Poissonian-Gaussian): a linear value v has variance
+    /// `floor^2 + gain v`; `gain` is the shot noise's variance per unit value.
+    pub noise_gain: f64,
+    /// Noise floor: the standard deviation at value 0 (read noise, linear).
     pub noise_floor: f64,
     /// Seed of the photo's noise.
     pub seed: u64,
@@ -156,7 +157,7 @@ impl PhotoScene<'_> {
                     }
                     for s in sum {
                         let value = s / (n * n) as f64 * shot.exposure;
-                        let sigma = shot.noise_floor.hypot(shot.noise_relative * value);
+                        let sigma = (shot.noise_floor * shot.noise_floor + shot.noise_gain * value.max(0.0)).sqrt();
                         let noisy = value + sigma * unit.sample(&mut rng);
                         row.push(noisy.clamp(0.0, 1.0) as f32);
                     }
@@ -181,6 +182,19 @@ pub struct PhotoSetRequest {
     pub count: usize,
     /// Seed of the noise.
     pub seed: u64,
+    /// How the photos are written.
+    pub format: PhotoFormat,
+}
+
+/// How synthetic photos are written.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
+pub enum PhotoFormat {
+    /// 8-bit sRGB JPEG (quality 95), as a phone's camera app writes.
+    #[default]
+    Jpeg,
+    /// A Bayer-mosaic DNG (16-bit codes, black and white levels), as a camera's RAW mode
+    /// writes: `crate::export::dng`.
+    Dng,
 }
 
 /// The photo set's camera: a phone-like 1600 x 1200 sensor, f = 1000 px, barrel distortion.
@@ -190,6 +204,11 @@ pub const SET_CAMERA: Intrinsics = Intrinsics {
     principal_px: [805.0, 596.0],
     k: [-0.08, 0.02],
 };
+
+/// The photo set's shot noise: variance per unit linear value (1 % at a value of 0.3).
+pub const SET_NOISE_GAIN: f64 = 3e-5;
+/// The photo set's read noise: standard deviation at value 0 (linear).
+pub const SET_NOISE_FLOOR: f64 = 0.002;
 
 /// The flash's position in the camera frame (mm) of the photo set.
 pub const SET_FLASH_MM: [f64; 3] = [10.0, 0.0, 0.0];
@@ -257,18 +276,34 @@ pub fn write_photo_set(
             light_mm: pose.position + pose.to_board_direction(&Vector3::from(SET_FLASH_MM)),
             intensity: 1.0,
             exposure: 0.5 * std::f64::consts::PI * 0.09 * (1.0 + 0.1 * (i % 5) as f64),
-            noise_relative: 0.01,
-            noise_floor: 0.002,
+            noise_gain: SET_NOISE_GAIN,
+            noise_floor: SET_NOISE_FLOOR,
             seed: req.seed.wrapping_add(i as u64),
             supersample: 3,
         };
-        let photo = scene.render(&shot)?;
-        let name = format!("photo_{i:03}.jpg");
+        let (name, bytes) = match req.format {
+            PhotoFormat::Jpeg => {
+                let photo = scene.render(&shot)?;
+                let name = format!("photo_{i:03}.jpg");
+                let mut bytes = Vec::new();
+                image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 95)
+                    .encode_image(&photo)
+                    .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
+                (name, bytes)
+            }
+            PhotoFormat::Dng => {
+                let linear = scene.render_linear(&shot)?;
+                let [w, h] = shot.intrinsics.size_px;
+                let exposure = crate::export::dng::DngExposure {
+                    time_s: 0.01 * (1.0 + 0.1 * (i % 5) as f64),
+                    iso: 100,
+                    f_number: 2.0,
+                };
+                let name = format!("photo_{i:03}.dng");
+                (name, crate::export::dng::dng_bytes(w, h, &linear, exposure)?)
+            }
+        };
         let id_out = outs.file(&dir.join(&name), "--out")?;
-        let mut bytes = Vec::new();
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut bytes, 95)
-            .encode_image(&photo)
-            .map_err(|e| anyhow::anyhow!("{name}: {e}"))?;
         outs.put(id_out, &bytes)?;
         let r = pose.rotation.matrix();
         cameras.push(serde_json::json!({
@@ -289,7 +324,7 @@ pub fn write_photo_set(
         "parameters": raw,
         "intrinsics": SET_CAMERA,
         "flash_offset_mm": SET_FLASH_MM,
-        "noise": {"relative": 0.01, "floor": 0.002, "seed": req.seed},
+        "noise": {"gain": SET_NOISE_GAIN, "floor": SET_NOISE_FLOOR, "variance": "floor^2 + gain x linear value", "seed": req.seed},
         "photos": cameras,
     });
     let truth_id = outs.file(&dir.join("truth.json"), "--out")?;
