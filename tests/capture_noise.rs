@@ -47,7 +47,12 @@ const NOISE: &str = "{ var0 = [1e-4, 1e-4, 4e-4], gain = [1e-3, 1e-3, 0.0] }";
 #[test]
 fn an_images_noise_gives_its_samples_their_sigmas() {
     let dir = tempfile::tempdir().unwrap();
-    let path = capture(dir.path(), NOISE, NOISE, "scale_rel_se = [0.01, 0.01, 0.02]");
+    let path = capture(
+        dir.path(),
+        NOISE,
+        NOISE,
+        "scale_rel_se = [0.01, 0.01, 0.02]",
+    );
     let store = CaptureStore::load(&path, Subsample::default()).unwrap();
     let samples = store.to_samples();
     assert_eq!(samples.scale_rel_se, Some([0.01, 0.01, 0.02]));
@@ -56,7 +61,11 @@ fn an_images_noise_gives_its_samples_their_sigmas() {
         // light and view at the normal, irradiance 1: the BRDF value is pixel / (E cos
         // theta_i) = the pixel, and its sigma the pixel's standard deviation
         let v = s.value[0];
-        let want = [(1e-4 + 1e-3 * v).sqrt(), (1e-4 + 1e-3 * v).sqrt(), 4e-4f64.sqrt()];
+        let want = [
+            (1e-4 + 1e-3 * v).sqrt(),
+            (1e-4 + 1e-3 * v).sqrt(),
+            4e-4f64.sqrt(),
+        ];
         for c in 0..3 {
             assert!((sigma[c] / want[c] - 1.0).abs() < 1e-5, "{sigma:?} for {v}");
         }
@@ -68,7 +77,10 @@ fn noise_given_for_some_images_or_a_bad_scale_is_refused_by_name() {
     let dir = tempfile::tempdir().unwrap();
     let path = capture(dir.path(), NOISE, "", "");
     let e = refusal(&path);
-    assert!(e.contains("[[images]] 1 gives `noise` but [[images]] 2 does not"), "{e}");
+    assert!(
+        e.contains("[[images]] 1 gives `noise` but [[images]] 2 does not"),
+        "{e}"
+    );
     let path = capture(
         dir.path(),
         "{ var0 = [-1.0, 0.0, 0.0], gain = [1.0, 1.0, 1.0] }",
@@ -76,7 +88,10 @@ fn noise_given_for_some_images_or_a_bad_scale_is_refused_by_name() {
         "",
     );
     let e = refusal(&path);
-    assert!(e.contains("[[images]] 1") && e.contains("noise.var0"), "{e}");
+    assert!(
+        e.contains("[[images]] 1") && e.contains("noise.var0"),
+        "{e}"
+    );
     let path = capture(dir.path(), NOISE, NOISE, "scale_rel_se = [0.5, 2.0, 0.0]");
     let e = refusal(&path);
     assert!(e.contains("scale_rel_se"), "{e}");

@@ -239,6 +239,15 @@ pub fn calibrate(
     let cameras: Vec<Vector3<f64>> = cal.poses.iter().map(|p| p.position).collect();
     let dirs = coverage::directions(&cameras, &lights);
     let mut warnings = coverage::warnings(&dirs);
+    for (k, &c) in rect.clipped.iter().enumerate() {
+        if c > CLIPPED_WARNING {
+            warnings.push(format!(
+                "{}: {:.0} % of the window's texels are clipped (left out): a glint the exposure cannot hold; lower the exposure or the flash, or add a darker photo of that pose",
+                req.photos[k].display(),
+                100.0 * c
+            ));
+        }
+    }
     if camera_noise.is_none() {
         warnings.push(format!(
             "too few flat stretches of board outside the window (at least {} blocks of 5 x 5 texels per channel, unclipped) to estimate the camera's noise: the capture gives the fit no sigmas",
@@ -270,6 +279,9 @@ pub fn calibrate(
         noise: camera_noise,
     })
 }
+
+/// A photo showing more of the window clipped than this is warned about.
+const CLIPPED_WARNING: f64 = 0.05;
 
 /// The rectified grid: `texels`, or the window's size times `px_per_mm`; 2 to 4096 a side.
 fn texel_grid(req: &CalibrateRequest, board: &BoardFile) -> Result<[usize; 2]> {

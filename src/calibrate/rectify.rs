@@ -22,6 +22,8 @@ pub struct Rectified {
     pub scale: Vec<[f64; 3]>,
     /// Each photo's fraction of window texels it sees well.
     pub seen: Vec<f64>,
+    /// Each photo's fraction of window texels it shows clipped (left out).
+    pub clipped: Vec<f64>,
 }
 
 /// Views more oblique than this (cosine to the normal) are masked.
@@ -50,6 +52,7 @@ impl<'a> Rectifier<'a> {
                 mask: vec![0u8; size[0] * size[1]],
                 scale: Vec::new(),
                 seen: Vec::new(),
+                clipped: Vec::new(),
             },
         }
     }
@@ -67,7 +70,7 @@ impl<'a> Rectifier<'a> {
         let n = size[0] * size[1];
         let pose = &cal.poses[k];
         let mut img = vec![f32::NAN; 3 * n];
-        let mut good = 0usize;
+        let (mut good, mut clipped) = (0usize, 0usize);
         for y in 0..size[1] {
             for x in 0..size[0] {
                 let p = centre + pixel_position(size_mm, size[0], size[1], x, y);
@@ -89,12 +92,14 @@ impl<'a> Rectifier<'a> {
                         self.done.mask[i] = 255;
                         good += 1;
                     }
+                    Some((_, peak)) if !near_edge && peak >= CLIPPED => clipped += 1,
                     _ => {}
                 }
             }
         }
         self.done.scale.push(s);
         self.done.seen.push(good as f64 / n as f64);
+        self.done.clipped.push(clipped as f64 / n as f64);
         Ok(img)
     }
 
@@ -263,4 +268,62 @@ pub fn pool_scales(
         done[k] = true;
     }
     (out, rel_se, pooled)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::board::camera::{Intrinsics, Pose};
+
+    /// A photo from straight above: texels under a glint are left out and counted as clipped,
+    /// the others divided by the scale.
+    #[test]
+    fn clipped_texels_are_left_out_and_counted() {
+        let dir = tempfile::tempdir().unwrap();
+        crate::api::board::board(&crate::api::board::BoardRequest::default(), dir.path()).unwrap();
+        let board = BoardFile::read(&dir.path().join("board.toml")).unwrap();
+        let intrinsics = Intrinsics {
+            size_px: [800, 600],
+            focal_px: 1000.0,
+            principal_px: [400.0, 300.0],
+            k: [0.0, 0.0],
+        };
+        let pose = Pose::look_at(Vector3::new(0.0, 1.0, 300.0), Vector3::zeros());
+        let cal = Calibration {
+            intrinsics,
+            poses: vec![pose],
+            rms_px: vec![0.1],
+            position_se_mm: vec![[0.0; 3]],
+        };
+        // 0.4 everywhere, 1.0 (clipped) within 60 px of the centre
+        let (w, h) = (800usize, 600usize);
+        let mut linear = vec![0.4f32; 3 * w * h];
+        for y in 0..h {
+            for x in 0..w {
+                if (x as f64 - 400.0).hypot(y as f64 - 300.0) < 60.0 {
+                    linear[3 * (y * w + x)..3 * (y * w + x) + 3].fill(1.0);
+                }
+            }
+        }
+        let peak = linear.chunks_exact(3).map(|p| p[0]).collect();
+        let photo = Photo {
+            path: "glint.png".into(),
+            width: w,
+            height: h,
+            linear,
+            peak,
+            exif: None,
+        };
+        let mut r = Rectifier::new(&board, &cal, [32, 32]);
+        let img = r.photo(0, &photo, [0.2, 0.2, 0.4]).unwrap();
+        let done = r.finish();
+        // the disc covers 36 mm of the window's diameter at 300 mm (f 1000 px: 3.33 px/mm)
+        assert!(done.clipped[0] > 0.05 && done.clipped[0] < 0.4, "{}", done.clipped[0]);
+        let kept: Vec<f32> = img.iter().copied().filter(|v| v.is_finite()).collect();
+        assert!(!kept.is_empty());
+        for (i, v) in kept.iter().enumerate() {
+            let want = if i % 3 == 2 { 1.0 } else { 2.0 };
+            assert!((v - want).abs() < 1e-5, "{v}");
+        }
+    }
 }
