@@ -153,18 +153,24 @@ fn bench_photos_quick_measures_calibrate_and_says_it_is_not_the_goals_size() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let md = std::fs::read_to_string(dir.path().join("photo_speed.md")).unwrap();
     assert!(
-        md.contains("fibrefit bench photos --quick") && md.contains("| 4 | 1600 x 1200 |"),
+        md.contains("fibrefit bench photos --quick")
+            && md.contains("| 4 | jpeg |")
+            && md.contains("| 4 | dng |")
+            && md.contains("RAW against JPEG"),
         "{md}"
     );
     assert!(md.contains("not the goal's size"), "{md}");
     let csv = std::fs::read_to_string(dir.path().join("photo_speed.csv")).unwrap();
-    let row: Vec<&str> = csv.lines().nth(1).unwrap().split(',').collect();
-    let (wall, peak, worst): (f64, f64, f64) = (
-        row[3].parse().unwrap(),
-        row[5].parse().unwrap(),
-        row[6].parse().unwrap(),
-    );
-    assert!(wall > 0.0 && peak > 0.0, "{csv}");
-    // the calibration itself is right: cameras within a millimetre
-    assert!(worst < 1.0, "{csv}");
+    for (line, format) in [(1, "jpeg"), (2, "dng")] {
+        let row: Vec<&str> = csv.lines().nth(line).unwrap().split(',').collect();
+        assert_eq!(row[1], format, "{csv}");
+        let (wall, peak, worst): (f64, f64, f64) = (
+            row[5].parse().unwrap(),
+            row[7].parse().unwrap(),
+            row[8].parse().unwrap(),
+        );
+        assert!(wall > 0.0 && peak > 0.0, "{csv}");
+        // the calibration itself is right: cameras within a millimetre
+        assert!(worst < 1.0, "{csv}");
+    }
 }

@@ -1,5 +1,5 @@
 //! `fibrefit bench photos`: the photo route's speed and memory. A board and a set of synthetic
-//! JPEG photos of a lambert swatch on it (the phone-like camera of `synth --photos` scaled to
+//! photos of a lambert swatch on it, as JPEGs and as RAW (Bayer DNGs), side by side (the phone-like camera of `synth --photos` scaled to
 //! the size asked, 300 mm away, 20-60 deg all around, a flash), then `fibrefit calibrate` as a
 //! child process, its wall time, CPU time and peak resident memory read from `/proc`
 //! ([`super::camera::measure`]). Goal (issue 36): 12 photos of 12 Mpx in at most 30 s on 2
@@ -11,7 +11,7 @@ use crate::board::camera::Intrinsics;
 use crate::load::board::BoardFile;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::ModelId;
-use crate::synth::photo::{set_pose, PhotoScene, PhotoShot, SET_CAMERA, SET_FLASH_MM};
+use crate::synth::photo::{set_pose, PhotoFormat, PhotoScene, PhotoShot, SET_CAMERA, SET_FLASH_MM};
 use anyhow::{Context, Result};
 use nalgebra::Vector3;
 use std::fmt::Write as _;
@@ -24,9 +24,12 @@ pub const GOAL_MB: f64 = 1536.0;
 
 /// What the study measured.
 pub struct PhotoRun {
+    /// `jpeg` or `dng`.
+    pub format: &'static str,
     pub photos: usize,
     pub size_px: [u32; 2],
-    pub jpeg_mb: f64,
+    /// The photos' files, MB in all.
+    pub files_mb: f64,
     pub cost: Cost,
     /// The calibration's worst camera position error against the truth (mm).
     pub worst_position_mm: f64,
@@ -43,8 +46,9 @@ fn camera(width: u32) -> Intrinsics {
     }
 }
 
-/// Write the board and `n` JPEG photos of `width` pixels across into `dir`.
-fn shoot(dir: &Path, n: usize, width: u32) -> Result<(PathBuf, Vec<PathBuf>)> {
+/// Write the board and `n` photos of `width` pixels across into `dir`, as JPEGs (quality 92)
+/// or DNGs.
+fn shoot(dir: &Path, n: usize, width: u32, format: PhotoFormat) -> Result<(PathBuf, Vec<PathBuf>)> {
     board(&BoardRequest::default(), dir)?;
     let b = BoardFile::read(&dir.join("board.toml"))?;
     let picture = image::open(dir.join("board.png"))?.to_luma8();
@@ -73,33 +77,73 @@ fn shoot(dir: &Path, n: usize, width: u32) -> Result<(PathBuf, Vec<PathBuf>)> {
             seed: i as u64,
             supersample: 1,
         };
-        let photo = scene.render(&shot)?;
-        let path = dir.join(format!("photo_{i:02}.jpg"));
-        let mut f = std::fs::File::create(&path)?;
-        image::codecs::jpeg::JpegEncoder::new_with_quality(&mut f, 92)
-            .encode_image(&photo)
-            .with_context(|| format!("{}", path.display()))?;
+        let path = match format {
+            PhotoFormat::Jpeg => {
+                let photo = scene.render(&shot)?;
+                let path = dir.join(format!("photo_{i:02}.jpg"));
+                let mut f = std::fs::File::create(&path)?;
+                image::codecs::jpeg::JpegEncoder::new_with_quality(&mut f, 92)
+                    .encode_image(&photo)
+                    .with_context(|| format!("{}", path.display()))?;
+                path
+            }
+            PhotoFormat::Dng => {
+                let linear = scene.render_linear(&shot)?;
+                let path = dir.join(format!("photo_{i:02}.dng"));
+                let exposure = crate::export::dng::DngExposure {
+                    time_s: 0.01,
+                    iso: 100,
+                    f_number: 2.0,
+                };
+                std::fs::write(
+                    &path,
+                    crate::export::dng::dng_bytes(k.size_px[0], k.size_px[1], &linear, exposure)?,
+                )?;
+                path
+            }
+        };
         files.push(path);
     }
     Ok((dir.join("board.toml"), files))
 }
 
-/// Shoot `n` photos `width` pixels across in `scratch` and calibrate them with `exe`.
+/// Shoot `n` photos `width` pixels across in `scratch`, as JPEGs then as DNGs, and calibrate
+/// each set with `exe`.
 pub fn run(
     exe: &Path,
     scratch: &Path,
     n: usize,
     width: u32,
     progress: &crate::progress::Progress,
+) -> Result<Vec<PhotoRun>> {
+    let mut out = Vec::new();
+    for (format, name) in [(PhotoFormat::Jpeg, "jpeg"), (PhotoFormat::Dng, "dng")] {
+        let dir = scratch.join(name);
+        std::fs::create_dir_all(&dir)?;
+        out.push(run_one(exe, &dir, n, width, (format, name), progress)?);
+        // the set's files go before the next is written (12 DNGs of 12 Mpx are 290 MB)
+        std::fs::remove_dir_all(&dir)?;
+    }
+    Ok(out)
+}
+
+/// One set of photos, calibrated.
+fn run_one(
+    exe: &Path,
+    scratch: &Path,
+    n: usize,
+    width: u32,
+    (format, name): (PhotoFormat, &'static str),
+    progress: &crate::progress::Progress,
 ) -> Result<PhotoRun> {
-    progress.line(&format!("rendering {n} photos of {width} px across"));
-    let (board_toml, files) = shoot(scratch, n, width)?;
-    let jpeg_mb = files
+    progress.line(&format!("rendering {n} {name} photos of {width} px across"));
+    let (board_toml, files) = shoot(scratch, n, width, format)?;
+    let files_mb = files
         .iter()
         .map(|f| std::fs::metadata(f).map(|m| m.len()).unwrap_or(0) as f64)
         .sum::<f64>()
         / 1e6;
-    progress.line("calibrating");
+    progress.line(&format!("calibrating the {name} photos"));
     let mut cmd = Command::new(exe);
     cmd.arg("calibrate")
         .arg("--board")
@@ -125,27 +169,26 @@ pub fn run(
         worst = worst.max(err);
     }
     Ok(PhotoRun {
+        format: name,
         photos: n,
         size_px: camera(width).size_px,
-        jpeg_mb,
+        files_mb,
         cost,
         worst_position_mm: worst,
     })
 }
 
 /// Write `out/photo_speed.md` and `.csv`.
-pub fn write(out: &Path, r: &PhotoRun, command: &str, total_s: f64) -> Result<()> {
+pub fn write(out: &Path, runs: &[PhotoRun], command: &str, total_s: f64) -> Result<()> {
     std::fs::create_dir_all(out)?;
+    let r = &runs[0];
     let mpx = r.size_px[0] as f64 * r.size_px[1] as f64 / 1e6;
-    let full = r.photos >= 12 && mpx >= 11.9;
-    let met = r.cost.wall_seconds <= GOAL_SECONDS && r.cost.peak_mb <= GOAL_MB;
     let mut md = String::new();
     writeln!(md, "# The photo route's speed and memory (`fibrefit calibrate`)\n")?;
     writeln!(
         md,
-        "Generated by `{command}` in {total_s:.0} s (CSV: `photo_speed.csv`). {} synthetic JPEG photos (quality 92, {:.1} MB in all) of {} x {} pixels ({mpx:.1} Mpx) of the default board with a lambert swatch, taken by `synth --photos`'s camera scaled to that size (the same field of view and distortion) from 300 mm at 20-60 deg all around with a flash; `fibrefit calibrate --board board.toml --out cal PHOTO...` (128 x 128 texels) runs as a child process, its wall and CPU time and peak resident memory (VmHWM) read from /proc. Each photo is decoded twice (markers, then rectification) so that only one photo's pixels are held. Goal (issue 36): 12 photos of 12 Mpx in at most {GOAL_SECONDS:.0} s on 2 cores and {:.1} GB.\n",
+        "Generated by `{command}` in {total_s:.0} s (CSV: `photo_speed.csv`). {} synthetic photos of {} x {} pixels ({mpx:.1} Mpx) of the default board with a lambert swatch, taken by `synth --photos`'s camera scaled to that size (the same field of view and distortion) from 300 mm at 20-60 deg all around with a flash, written as JPEGs (quality 92) and as RAW (Bayer DNGs, 16-bit, uncompressed); `fibrefit calibrate --board board.toml --out cal PHOTO...` (128 x 128 texels) runs as a child process on each set, its wall and CPU time and peak resident memory (VmHWM) read from /proc. Each photo is decoded three times (markers; the patch, the board's noise and the overlay; rectification) so that only one photo's pixels are held. Goal (issue 36): 12 photos of 12 Mpx in at most {GOAL_SECONDS:.0} s on 2 cores and {:.1} GB.\n",
         r.photos,
-        r.jpeg_mb,
         r.size_px[0],
         r.size_px[1],
         GOAL_MB / 1024.0
@@ -159,36 +202,56 @@ pub fn write(out: &Path, r: &PhotoRun, command: &str, total_s: f64) -> Result<()
             "release"
         }
     )?;
-    writeln!(md, "| photos | size | wall [s] | CPU [s] | peak [MB] | worst camera position error [mm] | goal |")?;
-    writeln!(md, "|---|---|---|---|---|---|---|")?;
-    let goal = match (full, met) {
-        (false, _) => "- (not the goal's size)",
-        (true, true) => "met",
-        (true, false) => "**missed**",
-    };
-    writeln!(
-        md,
-        "| {} | {} x {} | {:.1} | {:.1} | {:.0} | {:.3} | {goal} |",
-        r.photos,
-        r.size_px[0],
-        r.size_px[1],
-        r.cost.wall_seconds,
-        r.cost.cpu_seconds,
-        r.cost.peak_mb,
-        r.worst_position_mm
-    )?;
-    std::fs::write(out.join("photo_speed.md"), md)?;
-    let csv = format!(
-        "photos,width_px,height_px,wall_s,cpu_s,peak_mb,worst_position_mm,goal_met\n{},{},{},{:.3},{:.3},{:.1},{:.4},{}\n",
-        r.photos,
-        r.size_px[0],
-        r.size_px[1],
-        r.cost.wall_seconds,
-        r.cost.cpu_seconds,
-        r.cost.peak_mb,
-        r.worst_position_mm,
-        full && met
+    writeln!(md, "| photos | format | files [MB] | size | wall [s] | CPU [s] | peak [MB] | worst camera position error [mm] | goal |")?;
+    writeln!(md, "|---|---|---|---|---|---|---|---|---|")?;
+    let mut csv = String::from(
+        "photos,format,files_mb,width_px,height_px,wall_s,cpu_s,peak_mb,worst_position_mm,goal_met\n",
     );
+    for r in runs {
+        let full = r.photos >= 12 && mpx >= 11.9;
+        let met = r.cost.wall_seconds <= GOAL_SECONDS && r.cost.peak_mb <= GOAL_MB;
+        let goal = match (full, met) {
+            (false, _) => "- (not the goal's size)",
+            (true, true) => "met",
+            (true, false) => "**missed**",
+        };
+        writeln!(
+            md,
+            "| {} | {} | {:.1} | {} x {} | {:.1} | {:.1} | {:.0} | {:.3} | {goal} |",
+            r.photos,
+            r.format,
+            r.files_mb,
+            r.size_px[0],
+            r.size_px[1],
+            r.cost.wall_seconds,
+            r.cost.cpu_seconds,
+            r.cost.peak_mb,
+            r.worst_position_mm
+        )?;
+        writeln!(
+            csv,
+            "{},{},{:.2},{},{},{:.3},{:.3},{:.1},{:.4},{}",
+            r.photos,
+            r.format,
+            r.files_mb,
+            r.size_px[0],
+            r.size_px[1],
+            r.cost.wall_seconds,
+            r.cost.cpu_seconds,
+            r.cost.peak_mb,
+            r.worst_position_mm,
+            full && met
+        )?;
+    }
+    if runs.len() == 2 {
+        writeln!(
+            md,
+            "\nRAW against JPEG, same photos: wall {:.2}x, peak memory {:.2}x.",
+            runs[1].cost.wall_seconds / runs[0].cost.wall_seconds,
+            runs[1].cost.peak_mb / runs[0].cost.peak_mb
+        )?;
+    }
+    std::fs::write(out.join("photo_speed.md"), md)?;
     std::fs::write(out.join("photo_speed.csv"), csv)?;
     Ok(())
 }

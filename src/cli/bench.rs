@@ -15,7 +15,7 @@ STUDIES (each writes its tables, CSV and plots into OUT and says the command tha
   felt FILE    every rung on a real measured felt (OUT/felt.*)
   maps         per-texel map recovery on synthetic captures (OUT/maps_accuracy.*)
   camera [N]   captures at camera resolution, 8 images x N x N (OUT/camera_resolution.*)
-  photos       `calibrate` on 12 synthetic photos of 12 Mpx: time and memory (OUT/photo_speed.*)
+  photos       `calibrate` on 12 synthetic photos of 12 Mpx, JPEG and RAW: time and memory (OUT/photo_speed.*)
   shader       the exported shader's cost per rung on this machine's GPU driver (OUT/shader_cost.*)
   sampling     the importance sampler against cosine sampling (OUT/sampling.*)
   selection FILE  `--model auto` on sparse subsets of a felt and on synthetic fabrics
@@ -349,23 +349,26 @@ fn photos(args: &BenchArgs, count: usize, width: u32) -> Result<()> {
     let progress = crate::progress::Progress::new(args.quiet);
     let scratch = tempfile::tempdir()?;
     let exe = std::env::current_exe()?;
-    let run = crate::bench::photos::run(&exe, scratch.path(), count, width, &progress)?;
+    let runs = crate::bench::photos::run(&exe, scratch.path(), count, width, &progress)?;
     let command = match (args.quick, count, width) {
         (true, ..) => "fibrefit bench photos --quick".to_string(),
         (false, 12, 4000) => "fibrefit bench photos".to_string(),
         _ => format!("fibrefit bench photos --count {count} --width {width}"),
     };
-    crate::bench::photos::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
+    crate::bench::photos::write(&args.out, &runs, &command, t.elapsed().as_secs_f64())?;
     if !args.quiet {
-        eprintln!(
-            "calibrate, {count} photos of {}x{}: {:.1} s wall, {:.1} s CPU, {:.0} MB peak; wrote {}",
-            run.size_px[0],
-            run.size_px[1],
-            run.cost.wall_seconds,
-            run.cost.cpu_seconds,
-            run.cost.peak_mb,
-            args.out.join("photo_speed.md").display()
-        );
+        for run in &runs {
+            eprintln!(
+                "calibrate, {count} {} photos of {}x{}: {:.1} s wall, {:.1} s CPU, {:.0} MB peak",
+                run.format,
+                run.size_px[0],
+                run.size_px[1],
+                run.cost.wall_seconds,
+                run.cost.cpu_seconds,
+                run.cost.peak_mb,
+            );
+        }
+        eprintln!("wrote {}", args.out.join("photo_speed.md").display());
     }
     Ok(())
 }
