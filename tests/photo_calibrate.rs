@@ -63,6 +63,7 @@ fn eight_photos_give_the_cameras_within_a_millimetre() {
             noise_floor: 0.002,
             seed: k as u64,
             supersample: 3,
+            blur_px: 0.0,
         };
         let photo = scene.render(&shot).unwrap();
         let grey = detect::linear_grey(&photo);

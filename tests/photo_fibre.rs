@@ -80,6 +80,7 @@ fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
             noise_floor: 0.002,
             seed: 100 + k as u64,
             supersample: 2,
+            blur_px: 0.0,
         };
         let linear = scene.render_linear(&shot).unwrap();
         let exposure = fibrefit::export::dng::DngExposure {

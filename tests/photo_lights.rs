@@ -81,6 +81,7 @@ fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>, PathBuf) {
             noise_floor: 0.0005,
             seed,
             supersample: 2,
+            blur_px: 0.0,
         };
         let (lit, off) = (
             dir.join(format!("p{k}.tif")),
@@ -268,6 +269,7 @@ fn shoot_two(dir: &Path) -> (PathBuf, Vec<PathBuf>, ()) {
                 noise_floor: 0.0005,
                 seed: k as u64,
                 supersample: 1,
+                blur_px: 0.0,
             };
             let path = dir.join(format!("p{k}.png"));
             scene.render(&shot).unwrap().save(&path).unwrap();

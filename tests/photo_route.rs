@@ -60,6 +60,7 @@ fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
             noise_floor: 0.002,
             seed: k as u64,
             supersample: 3,
+            blur_px: 0.0,
         };
         let photo = scene.render(&shot).unwrap();
         let path = dir.join(format!("photo_{k}.jpg"));

@@ -52,6 +52,7 @@ fn detected_corners_are_the_true_cameras_projections() {
             noise_floor: 0.002,
             seed: k as u64,
             supersample: 3,
+            blur_px: 0.0,
         };
         let photo = scene.render(&shot).unwrap();
         let grey = detect::linear_grey(&photo);

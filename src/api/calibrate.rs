@@ -7,7 +7,7 @@
 
 use crate::board::camera::Intrinsics;
 use crate::board::detect;
-use crate::calibrate::{self, coverage, noise, overlay, rectify, Calibration, Corner, Views};
+use crate::calibrate::{self, blur, coverage, noise, overlay, rectify, Calibration, Corner, Views};
 use crate::export::atomic::{OutputId, Outputs};
 use crate::load::board::BoardFile;
 use crate::load::capture::{Camera, CaptureFile, ImageSpec, Light, NoiseSpec, Swatch};
@@ -173,6 +173,16 @@ pub fn calibrate(
         (w[3] - w[1]) / texels[1] as f64,
     ];
     let mut patch = Vec::with_capacity(n);
+    let mut blur = Vec::with_capacity(n);
+    // the board as printed (board.png beside board.toml): what the photos' blur is measured
+    // against; without it, blur is not measured (the report says so)
+    let picture = req
+        .board
+        .parent()
+        .map(|d| d.join("board.png"))
+        .filter(|p| p.is_file())
+        .and_then(|p| crate::load::image_io::decode_png(&p, "board picture").ok())
+        .map(|i| i.to_luma8());
     for k in 0..n {
         progress.line(&format!(
             "reading the patch and the board in {}",
@@ -181,6 +191,10 @@ pub fn calibrate(
         let photo = lit_photo(req, &lights_file, k)?;
         patch.push(rectify::patch_scale(&board, &cal, k, &photo, &lights[k])?);
         flat.add(&board, &cal, k, &photo, step_mm);
+        blur.push(match &picture {
+            Some(pic) => blur::BlurField::measure(&board, pic, &cal, k, &photo, &lights[k]),
+            None => blur::BlurField::default(),
+        });
         let pic = overlay::overlay(&board, &cal, k, &photo, &corner_pixels(&views, k));
         outs.put(
             t.overlays[k],
@@ -214,7 +228,7 @@ pub fn calibrate(
     for k in 0..n {
         progress.line(&format!("rectifying {}", req.photos[k].display()));
         let photo = lit_photo(req, &lights_file, k)?;
-        let img = rectifier.photo(k, &photo, scales[k])?;
+        let img = rectifier.photo(k, &photo, scales[k], &blur[k])?;
         let (file, name) = outs.file_and_name(t.images[k]);
         crate::export::images::write_exr_into(file, name, texels[0], texels[1], 3, &img)?;
     }
@@ -239,6 +253,23 @@ pub fn calibrate(
     let cameras: Vec<Vector3<f64>> = cal.poses.iter().map(|p| p.position).collect();
     let dirs = coverage::directions(&cameras, &lights);
     let mut warnings = coverage::warnings(&dirs);
+    if picture.is_none() {
+        warnings.push(format!(
+            "no board.png beside {}: the photos' blur was not measured (blurred texels are not left out)",
+            req.board.display()
+        ));
+    }
+    for (k, &b) in rect.blurred.iter().enumerate() {
+        if b > 0.0 {
+            warnings.push(format!(
+                "{}: blurred (a Gaussian of {:.1} px at its median marker, up to {:.1} px; a sharp photo's is 0.3-1 px): {:.0} % of the window's texels left out where the blur spans more than a texel; refocus, steady the camera, or use fewer texels",
+                req.photos[k].display(),
+                blur[k].median(),
+                blur[k].worst(),
+                100.0 * b
+            ));
+        }
+    }
     for (k, &c) in rect.clipped.iter().enumerate() {
         if c > CLIPPED_WARNING {
             warnings.push(format!(

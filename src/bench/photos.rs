@@ -76,6 +76,7 @@ fn shoot(dir: &Path, n: usize, width: u32, format: PhotoFormat) -> Result<(PathB
             noise_floor: 0.002,
             seed: i as u64,
             supersample: 1,
+            blur_px: 0.0,
         };
         let path = match format {
             PhotoFormat::Jpeg => {

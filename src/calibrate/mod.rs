@@ -7,6 +7,7 @@
 //! Reference: Z. Zhang (2000), "A flexible new technique for camera calibration", IEEE PAMI
 //! 22(11).
 
+pub mod blur;
 pub mod bundle;
 pub mod coverage;
 pub mod homography;

@@ -1,5 +1,5 @@
 //! Rectifying calibrated photos onto the window's texel grid (undistorted, resampled
-//! bilinearly) and making their values absolute from the reference patch: per photo and
+//! bilinearly; texels out of frame, too oblique, clipped or blurred left out) and making their values absolute from the reference patch: per photo and
 //! channel, the light-intensity x exposure product that makes the patch read its known
 //! reflectance, so the capture's point lights have intensity 1 and its albedos come out
 //! absolute (white balance included).
@@ -24,6 +24,8 @@ pub struct Rectified {
     pub seen: Vec<f64>,
     /// Each photo's fraction of window texels it shows clipped (left out).
     pub clipped: Vec<f64>,
+    /// Each photo's fraction of window texels it shows blurred (left out).
+    pub blurred: Vec<f64>,
 }
 
 /// Views more oblique than this (cosine to the normal) are masked.
@@ -53,6 +55,7 @@ impl<'a> Rectifier<'a> {
                 scale: Vec::new(),
                 seen: Vec::new(),
                 clipped: Vec::new(),
+                blurred: Vec::new(),
             },
         }
     }
@@ -61,7 +64,13 @@ impl<'a> Rectifier<'a> {
     /// its light x exposure product per channel (so that its light has intensity 1); NaN
     /// where that photo does not see the texel well (out of frame, too oblique, clipped): the
     /// photo's own mask, which the capture's loader honours. Photos come in order, from 0.
-    pub fn photo(&mut self, k: usize, photo: &Photo, s: [f64; 3]) -> Result<Vec<f32>> {
+    pub fn photo(
+        &mut self,
+        k: usize,
+        photo: &Photo,
+        s: [f64; 3],
+        blur: &super::blur::BlurField,
+    ) -> Result<Vec<f32>> {
         let (board, cal, size) = (self.board, self.cal, self.done.size);
         assert_eq!(k, self.done.scale.len(), "photos are rectified in order");
         let w = board.window_mm;
@@ -70,7 +79,8 @@ impl<'a> Rectifier<'a> {
         let n = size[0] * size[1];
         let pose = &cal.poses[k];
         let mut img = vec![f32::NAN; 3 * n];
-        let (mut good, mut clipped) = (0usize, 0usize);
+        let (mut good, mut clipped, mut blurred) = (0usize, 0usize, 0usize);
+        let texel_mm = (size_mm[0] / size[0] as f64).min(size_mm[1] / size[1] as f64);
         for y in 0..size[1] {
             for x in 0..size[0] {
                 let p = centre + pixel_position(size_mm, size[0], size[1], x, y);
@@ -84,7 +94,30 @@ impl<'a> Rectifier<'a> {
                     .intrinsics
                     .project(&pose.to_camera(&p))
                     .and_then(|[u, v]| Some((photo.sample(u, v)?, photo.peak_near(u, v)?)));
+                // blurred: the photo's blur here exceeds a sharp photo's, and spans more than a
+                // texel on the board
+                let is_blurred = || {
+                    let Some(b) = blur.at(p.x, p.y).filter(|b| *b > super::blur::BLURRED_PX) else {
+                        return false;
+                    };
+                    let step = Vector3::new(texel_mm, 0.0, 0.0);
+                    let px_per_texel = match (
+                        cal.intrinsics.project(&pose.to_camera(&p)),
+                        cal.intrinsics.project(&pose.to_camera(&(p + step))),
+                        cal.intrinsics
+                            .project(&pose.to_camera(&(p + Vector3::new(0.0, texel_mm, 0.0)))),
+                    ) {
+                        (Some(a), Some(b), Some(c)) => {
+                            (b[0] - a[0]).hypot(b[1] - a[1]).max((c[0] - a[0]).hypot(c[1] - a[1]))
+                        }
+                        _ => return false,
+                    };
+                    b > px_per_texel
+                };
                 match value {
+                    Some(_) if !near_edge && view_cos > MIN_VIEW_COS && is_blurred() => {
+                        blurred += 1
+                    }
                     Some((rgb, peak)) if !near_edge && view_cos > MIN_VIEW_COS && peak < CLIPPED => {
                         for c in 0..3 {
                             img[3 * i + c] = (rgb[c] as f64 / s[c]) as f32;
@@ -100,6 +133,7 @@ impl<'a> Rectifier<'a> {
         self.done.scale.push(s);
         self.done.seen.push(good as f64 / n as f64);
         self.done.clipped.push(clipped as f64 / n as f64);
+        self.done.blurred.push(blurred as f64 / n as f64);
         Ok(img)
     }
 
@@ -315,7 +349,9 @@ mod tests {
             exif: None,
         };
         let mut r = Rectifier::new(&board, &cal, [32, 32]);
-        let img = r.photo(0, &photo, [0.2, 0.2, 0.4]).unwrap();
+        let img = r
+            .photo(0, &photo, [0.2, 0.2, 0.4], &super::super::blur::BlurField::default())
+            .unwrap();
         let done = r.finish();
         // the disc covers 36 mm of the window's diameter at 300 mm (f 1000 px: 3.33 px/mm)
         assert!(done.clipped[0] > 0.05 && done.clipped[0] < 0.4, "{}", done.clipped[0]);

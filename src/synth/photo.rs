@@ -53,6 +53,8 @@ pub struct PhotoShot {
     pub seed: u64,
     /// Supersamples per pixel side (anti-aliasing).
     pub supersample: usize,
+    /// The lens's blur: a Gaussian's standard deviation in pixels (0: sharp), e.g. defocus.
+    pub blur_px: f64,
 }
 
 impl PhotoScene<'_> {
@@ -132,13 +134,10 @@ impl PhotoScene<'_> {
             bail!("a photo needs pixels and at least 1 supersample");
         }
         let n = shot.supersample;
-        let rows: Vec<Vec<f32>> = (0..h)
+        // the clean picture (linear, exposed), then the lens's blur, then the sensor's noise
+        let mut clean: Vec<f64> = (0..h)
             .into_par_iter()
-            .map(|y| {
-                let mut rng = rand::rngs::StdRng::seed_from_u64(
-                    shot.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ y as u64,
-                );
-                let unit = Normal::new(0.0, 1.0).expect("a unit normal");
+            .flat_map_iter(|y| {
                 let mut row = Vec::with_capacity(3 * w as usize);
                 for x in 0..w {
                     let mut sum = [0.0; 3];
@@ -155,18 +154,69 @@ impl PhotoScene<'_> {
                             }
                         }
                     }
-                    for s in sum {
-                        let value = s / (n * n) as f64 * shot.exposure;
-                        let sigma = (shot.noise_floor * shot.noise_floor + shot.noise_gain * value.max(0.0)).sqrt();
-                        let noisy = value + sigma * unit.sample(&mut rng);
-                        row.push(noisy.clamp(0.0, 1.0) as f32);
-                    }
+                    row.extend(sum.map(|s| s / (n * n) as f64 * shot.exposure));
                 }
                 row
             })
             .collect();
+        if shot.blur_px > 0.0 {
+            gaussian_blur(&mut clean, w as usize, h as usize, shot.blur_px);
+        }
+        let rows: Vec<Vec<f32>> = clean
+            .par_chunks(3 * w as usize)
+            .enumerate()
+            .map(|(y, clean)| {
+                let mut rng = rand::rngs::StdRng::seed_from_u64(
+                    shot.seed.wrapping_mul(0x9e37_79b9_7f4a_7c15) ^ y as u64,
+                );
+                let unit = Normal::new(0.0, 1.0).expect("a unit normal");
+                clean
+                    .iter()
+                    .map(|&value| {
+                        let sigma = (shot.noise_floor * shot.noise_floor
+                            + shot.noise_gain * value.max(0.0))
+                        .sqrt();
+                        let noisy = value + sigma * unit.sample(&mut rng);
+                        noisy.clamp(0.0, 1.0) as f32
+                    })
+                    .collect()
+            })
+            .collect();
         Ok(rows.into_iter().flatten().collect())
     }
+}
+
+/// Blur the interleaved RGB `image` (`w` x `h`) by a Gaussian of standard deviation `sigma` px
+/// (separable, edges clamped).
+fn gaussian_blur(image: &mut [f64], w: usize, h: usize, sigma: f64) {
+    let r = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-r..=r)
+        .map(|i| (-0.5 * (i as f64 / sigma).powi(2)).exp())
+        .collect();
+    let total: f64 = kernel.iter().sum();
+    let kernel: Vec<f64> = kernel.iter().map(|k| k / total).collect();
+    let pass = |src: &[f64], dst: &mut [f64], along_x: bool| {
+        dst.par_chunks_mut(3 * w).enumerate().for_each(|(y, row)| {
+            for x in 0..w {
+                let mut acc = [0.0; 3];
+                for (j, kv) in kernel.iter().enumerate() {
+                    let o = j as isize - r;
+                    let (xx, yy) = if along_x {
+                        ((x as isize + o).clamp(0, w as isize - 1) as usize, y)
+                    } else {
+                        (x, (y as isize + o).clamp(0, h as isize - 1) as usize)
+                    };
+                    for c in 0..3 {
+                        acc[c] += kv * src[3 * (yy * w + xx) + c];
+                    }
+                }
+                row[3 * x..3 * x + 3].copy_from_slice(&acc);
+            }
+        });
+    };
+    let mut tmp = vec![0.0; image.len()];
+    pass(image, &mut tmp, true);
+    pass(&tmp, image, false);
 }
 
 /// What `fibrefit synth --photos` is asked.
@@ -280,6 +330,7 @@ pub fn write_photo_set(
             noise_floor: SET_NOISE_FLOOR,
             seed: req.seed.wrapping_add(i as u64),
             supersample: 3,
+            blur_px: 0.0,
         };
         let (name, bytes) = match req.format {
             PhotoFormat::Jpeg => {
