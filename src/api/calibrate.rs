@@ -203,9 +203,8 @@ pub fn calibrate(
     }
     let readings: Vec<[f64; 3]> = patch.iter().map(|p| p.scale).collect();
     let disagree = exif_disagreements(&photos, &readings);
-    let apart: Vec<bool> = photos
-        .iter()
-        .map(|p| disagree.iter().any(|(j, _)| photos[*j].path == p.path))
+    let apart: Vec<bool> = (0..n)
+        .map(|k| disagree.iter().any(|(j, _)| *j == k))
         .collect();
     let group: Vec<u64> = kinds
         .iter()

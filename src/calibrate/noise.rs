@@ -81,7 +81,7 @@ impl FlatBlocks {
             ((py1 - py0) / bh).floor() as usize,
         );
         let mut z = [[0.0f64; SIDE * SIDE]; 3];
-        'block: for by in 0..ny {
+        for by in 0..ny {
             for bx in 0..nx {
                 let (x0, y0) = (px0 + bx as f64 * bw, py0 + by as f64 * bh);
                 if near_window(x0, y0)
@@ -128,7 +128,7 @@ impl FlatBlocks {
                 }
             }
             if self.blocks[0].len() > 2_000_000 {
-                break 'block;
+                break;
             }
         }
     }
@@ -248,8 +248,8 @@ fn truncated_mean_ratio(t: f64, k: f64) -> f64 {
     num / den
 }
 
-/// The line v = var0 + gain m through `points` (m, v), weighted, both coefficients >= 0 (a
-/// negative one refitted at 0 with the other alone); None when nothing has weight.
+/// The line v = var0 + gain m through `points` (m, v), weighted, both coefficients >= 0
+/// ([`crate::load::bracket::nonnegative_pair`]); None when nothing has weight.
 fn weighted_line(points: &[(f64, f64)], weight: impl Fn(f64) -> f64) -> Option<(f64, f64)> {
     let (mut s, mut sm, mut smm, mut sv, mut smv) = (0.0, 0.0, 0.0, 0.0, 0.0);
     for &(m, v) in points {
@@ -263,20 +263,7 @@ fn weighted_line(points: &[(f64, f64)], weight: impl Fn(f64) -> f64) -> Option<(
     if s <= 0.0 {
         return None;
     }
-    let det = s * smm - sm * sm;
-    let (mut var0, mut gain) = if det > 1e-12 * s * smm {
-        ((sv * smm - sm * smv) / det, (s * smv - sm * sv) / det)
-    } else {
-        (sv / s, 0.0)
-    };
-    if gain < 0.0 {
-        gain = 0.0;
-        var0 = sv / s;
-    }
-    if var0 < 0.0 {
-        var0 = 0.0;
-        gain = if smm > 0.0 { smv / smm } else { 0.0 };
-    }
+    let (var0, gain) = crate::load::bracket::nonnegative_pair([s, sm, smm], [sv, smv]);
     (var0 > 0.0 || gain > 0.0).then_some((var0, gain))
 }
 

@@ -269,6 +269,28 @@ fn noise_rows(frames: &[(LinearImage, f64)], order: &[usize], c: usize) -> Vec<[
     rows
 }
 
+/// The least-squares (var0, gain) of `y = var0 a + gain b` from its normal equations
+/// (`[sum a^2, sum a b, sum b^2]`, `[sum a y, sum b y]`, weighted), both kept >= 0: they are
+/// variances, so a negative one is refitted at 0 with the other alone. A singular system
+/// (every b in proportion to a) gives var0 alone.
+pub(crate) fn nonnegative_pair([aa, ab, bb]: [f64; 3], [ay, by]: [f64; 2]) -> (f64, f64) {
+    let det = aa * bb - ab * ab;
+    let (mut var0, mut gain) = if det > 1e-12 * aa * bb {
+        ((ay * bb - by * ab) / det, (aa * by - ab * ay) / det)
+    } else {
+        (ay / aa, 0.0)
+    };
+    if gain < 0.0 {
+        gain = 0.0;
+        var0 = ay / aa;
+    }
+    if var0 < 0.0 {
+        var0 = 0.0;
+        gain = if bb > 0.0 { by / bb } else { 0.0 };
+    }
+    (var0, gain)
+}
+
 /// (var0, gain, pairs used) fitted to `rows` (of one channel, from one bracket or pooled);
 /// `None` when fewer than [`MIN_NOISE_PAIRS`] pairs qualify or they cannot tell read noise
 /// from shot noise (every pair at nearly one value).
@@ -307,21 +329,7 @@ pub fn fit_noise(rows: &[[f64; 9]]) -> Option<(f64, f64, usize)> {
         if used == 0 {
             return (0.0, 0.0, 0);
         }
-        let det = aa * bb - ab * ab;
-        let (mut var0, mut gain) = if det > 1e-12 * aa * bb {
-            ((ay * bb - by * ab) / det, (aa * by - ab * ay) / det)
-        } else {
-            (ay / aa, 0.0)
-        };
-        // both are variances: a negative one is refitted at 0 with the other alone
-        if gain < 0.0 {
-            gain = 0.0;
-            var0 = ay / aa;
-        }
-        if var0 < 0.0 {
-            var0 = 0.0;
-            gain = if bb > 0.0 { by / bb } else { 0.0 };
-        }
+        let (var0, gain) = nonnegative_pair([aa, ab, bb], [ay, by]);
         (var0, gain, used)
     };
     let scale = rows.iter().map(|r| r[2]).sum::<f64>() / rows.len().max(1) as f64;
