@@ -7,15 +7,10 @@ use fibrefit::board::camera::{Intrinsics, Pose};
 use fibrefit::load::board::BoardFile;
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use fibrefit::synth::photo::{PhotoScene, PhotoShot, SET_CAMERA};
 use nalgebra::Vector3;
 
-const CAMERA: Intrinsics = Intrinsics {
-    size_px: [1600, 1200],
-    focal_px: 1000.0,
-    principal_px: [805.0, 596.0],
-    k: [-0.08, 0.02],
-};
+const CAMERA: Intrinsics = SET_CAMERA;
 const BLURRED: usize = 2;
 
 fn light(pose: &Pose) -> Vector3<f64> {

@@ -15,19 +15,15 @@ use fibrefit::load::capture::{Camera, CaptureFile, Light};
 use fibrefit::model::frame::{DirectionPair, FibreFrame};
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use fibrefit::synth::photo::{set_pose, PhotoScene, PhotoShot, SET_CAMERA, SET_FLASH_MM};
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::path::{Path, PathBuf};
 
-const CAMERA: Intrinsics = Intrinsics {
-    size_px: [1600, 1200],
-    focal_px: 1000.0,
-    principal_px: [805.0, 596.0],
-    k: [-0.08, 0.02],
-};
-const FLASH: [f64; 3] = [10.0, 0.0, 0.0];
+// the camera and flash of `synth --photos`' set
+const CAMERA: Intrinsics = SET_CAMERA;
+const FLASH: [f64; 3] = SET_FLASH_MM;
 const TRUTH: &str = "model = \"poulin-fournier\"
 kd = [0.5, 0.35, 0.25]
 ks = 0.4
@@ -36,16 +32,9 @@ spacing = 2.6
 fibre_azimuth_deg = 25";
 const TEXELS: usize = 40;
 
+/// The set's 8 cameras: 300 mm away, 20-60 degrees of elevation, all around.
 fn poses() -> Vec<Pose> {
-    (0..8)
-        .map(|i| {
-            let elev = (20.0 + 40.0 * (i % 4) as f64 / 3.0).to_radians();
-            let azim = (45.0 * i as f64 + 10.0).to_radians();
-            let eye =
-                Vector3::new(azim.cos() * elev.cos(), azim.sin() * elev.cos(), elev.sin()) * 300.0;
-            Pose::look_at(eye, Vector3::zeros())
-        })
-        .collect()
+    (0..8).map(|i| set_pose(i, 8)).collect()
 }
 
 fn truth() -> (ModelParams, Box<dyn fibrefit::model::ShadingModel>) {
