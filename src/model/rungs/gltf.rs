@@ -350,19 +350,44 @@ pub fn half_vector(l: &Local, v: &Local) -> Local {
 
 /// E(cos theta) at the table's nodes: int sheen_brdf (N.l) d omega over the hemisphere, by a
 /// 48 x 48 Gauss-Legendre rule in (N.l, phi) (phi over half the circle, by symmetry).
+///
+/// A fit builds the material once per evaluation of its residuals (every Jacobian column), and
+/// the table is 32 x 48 x 48 powers: it is kept per thread for the last [`SHEEN_E_CACHE`] sheen
+/// alphas (keyed by their bits, so a hit returns exactly what the sum would), and the rule's
+/// light directions are made once. Before the cache the table was half of `--model auto`'s
+/// time on the felt.
 fn sheen_albedo_table(a: f64) -> [f64; SHEEN_E_NODES] {
-    use crate::model::numerics::quadrature::GaussLegendre;
-    let gl = GaussLegendre::new(48);
-    let (x, w) = gl.nodes_and_weights();
-    let mut table = [0.0; SHEEN_E_NODES];
-    for (k, e) in table.iter_mut().enumerate() {
-        let mu = (k as f64 / (SHEEN_E_NODES - 1) as f64).max(1e-6);
-        let v = Local {
-            t: (1.0 - mu * mu).sqrt(),
-            b: 0.0,
-            n: mu,
-        };
-        let mut sum = 0.0;
+    thread_local! {
+        static CACHE: std::cell::RefCell<Vec<(u64, [f64; SHEEN_E_NODES])>> =
+            const { std::cell::RefCell::new(Vec::new()) };
+    }
+    let key = a.to_bits();
+    if let Some(t) = CACHE.with(|c| c.borrow().iter().find(|e| e.0 == key).map(|e| e.1)) {
+        return t;
+    }
+    let table = sheen_albedo_sum(a);
+    CACHE.with(|c| {
+        let mut c = c.borrow_mut();
+        if c.len() >= SHEEN_E_CACHE {
+            c.remove(0);
+        }
+        c.push((key, table));
+    });
+    table
+}
+
+/// Sheen alphas whose albedo tables each thread keeps.
+const SHEEN_E_CACHE: usize = 8;
+
+/// The sheen albedo sum itself (see [`sheen_albedo_table`]).
+fn sheen_albedo_sum(a: f64) -> [f64; SHEEN_E_NODES] {
+    /// The rule's light directions with their weights (w_i, w_j), made once.
+    static RULE: std::sync::OnceLock<Vec<(f64, f64, Local)>> = std::sync::OnceLock::new();
+    let rule = RULE.get_or_init(|| {
+        use crate::model::numerics::quadrature::GaussLegendre;
+        let gl = GaussLegendre::new(48);
+        let (x, w) = gl.nodes_and_weights();
+        let mut rule = Vec::with_capacity(x.len() * x.len());
         for (xi, wi) in x.iter().zip(w) {
             let nl = 0.5 * (xi + 1.0);
             let sl = (1.0 - nl * nl).sqrt();
@@ -373,8 +398,22 @@ fn sheen_albedo_table(a: f64) -> [f64; SHEEN_E_NODES] {
                     b: sl * phi.sin(),
                     n: nl,
                 };
-                sum += wi * wj * sheen_brdf(a, &l, &v) * nl;
+                rule.push((*wi, *wj, l));
             }
+        }
+        rule
+    });
+    let mut table = [0.0; SHEEN_E_NODES];
+    for (k, e) in table.iter_mut().enumerate() {
+        let mu = (k as f64 / (SHEEN_E_NODES - 1) as f64).max(1e-6);
+        let v = Local {
+            t: (1.0 - mu * mu).sqrt(),
+            b: 0.0,
+            n: mu,
+        };
+        let mut sum = 0.0;
+        for (wi, wj, l) in rule {
+            sum += wi * wj * sheen_brdf(a, l, &v) * l.n;
         }
         // d(N.l) = dx / 2, d phi = pi dx / 2, twice for the other half of the circle
         *e = sum * 0.5 * 0.5 * PI * 2.0;
@@ -515,5 +554,17 @@ mod tests {
             assert!(e.is_finite() && (0.0..1.0).contains(&e), "E[{k}] = {e}");
         }
         assert!(g.sheen_albedo(1.0) > 0.0);
+    }
+
+    #[test]
+    fn the_cached_sheen_table_is_the_sum_bit_for_bit() {
+        // more alphas than the cache holds, each asked for twice, interleaved
+        let alphas: Vec<f64> = (1..=2 * SHEEN_E_CACHE).map(|k| 0.05 * k as f64).collect();
+        for round in 0..2 {
+            for &a in &alphas {
+                let (cached, sum) = (sheen_albedo_table(a), sheen_albedo_sum(a));
+                assert_eq!(cached.map(f64::to_bits), sum.map(f64::to_bits), "a {a} round {round}");
+            }
+        }
     }
 }
