@@ -14,6 +14,7 @@ pub mod felt;
 pub mod maps;
 pub mod photos;
 pub mod real;
+pub mod render;
 pub mod report;
 pub mod robustness;
 pub mod sampling;

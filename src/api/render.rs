@@ -61,6 +61,8 @@ pub struct RenderRequest {
     pub maps: Option<PathBuf>,
     /// Ward on a curvature-tangent mesh: alphas F |k1|, F |k2|.
     pub ward_curvature_alpha: Option<f64>,
+    /// How the subsample rays are shaded (adaptive by default: smooth interior pixels once).
+    pub subsamples: render::Subsamples,
     /// Where the progress bar and warnings go.
     pub progress: crate::progress::Progress,
 }
@@ -75,6 +77,7 @@ pub struct Render {
     pub scene: Scene,
     texel_maps: Option<TexelMapsIn>,
     ward_curvature_alpha: Option<f64>,
+    subsamples: render::Subsamples,
     inputs: Vec<PathBuf>,
     progress: crate::progress::Progress,
 }
@@ -124,6 +127,7 @@ impl Render {
             scene,
             texel_maps,
             ward_curvature_alpha: req.ward_curvature_alpha,
+            subsamples: req.subsamples,
             inputs,
             progress: req.progress,
         })
@@ -154,12 +158,13 @@ impl Render {
         };
         let scene = &self.scene;
         let bar = self.progress.bar(scene.camera.height as u64, "render");
-        let pic = render::render(
+        let pic = render::render_with(
             &scene.objects,
             &material,
             &scene.lights,
             &scene.camera,
             scene.supersample,
+            self.subsamples,
             &bar,
         );
         bar.finish_and_clear();
@@ -421,6 +426,7 @@ pub fn paper_figures(
         tangent: vec![],
         position: vec![],
         fibre_height: vec![],
+        shaded_every: tiles.iter().map(|t| t.shaded_every).sum(),
     };
     for (k, pic) in tiles.iter().enumerate() {
         let (r, c) = (k / cols, k % cols);

@@ -78,6 +78,10 @@ pub enum Study {
         #[arg(long, default_value_t = 4000)]
         width: u32,
     },
+    /// Previews per rung: `fibrefit render` of a 512 x 512 torus with supersample 2, adaptive
+    /// shading against every subsample shaded, side by side (median wall time, the pictures'
+    /// difference): writes OUT/render_speed.md and .csv
+    Render,
     /// The exported shader's cost per rung (evaluations per second on this machine's GPU
     /// driver against the Rust model on the CPU, SPIR-V instruction counts): writes
     /// OUT/shader_cost.md and .csv
@@ -302,6 +306,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         Study::Camera { size } => camera(args, size),
         Study::Shader => shader(args),
         Study::Photos { count, width } => photos(args, count, width),
+        Study::Render => render(args),
         Study::Maps => maps(args),
         Study::Selection(sel) => selection(args, &sel),
         Study::Felt(f) => felt(args, &f),
@@ -336,6 +341,29 @@ fn camera(args: &BenchArgs, size: usize) -> Result<()> {
             );
         }
         eprintln!("wrote {}", args.out.join("camera_resolution.md").display());
+    }
+    Ok(())
+}
+
+fn render(args: &BenchArgs) -> Result<()> {
+    let (size, repeats) = if args.quick { (128, 1) } else { (512, 3) };
+    let t = Instant::now();
+    let progress = crate::progress::Progress::new(args.quiet);
+    let scratch = tempfile::tempdir()?;
+    let run = crate::bench::render::run(scratch.path(), size, repeats, &progress)?;
+    let command = match args.quick {
+        true => "fibrefit bench render --quick",
+        false => "fibrefit bench render",
+    };
+    crate::bench::render::write(&args.out, &run, command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        for r in &run.rows {
+            eprintln!(
+                "{}: {:.2} s adaptive, {:.2} s every subsample; largest difference {:.1e} of the level, {} PNG codes",
+                r.name, r.adaptive_s, r.every_s, r.max_rel_level, r.max_codes
+            );
+        }
+        eprintln!("wrote {}", args.out.join("render_speed.md").display());
     }
     Ok(())
 }

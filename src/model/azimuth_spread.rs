@@ -98,21 +98,25 @@ impl AzimuthSpread {
     }
 
     /// `out` = the weighted sum over the nodes of `inner_many` (the inner rung's batch
-    /// evaluation) at the pairs turned by each node's angle.
+    /// evaluation) at the pairs turned by each node's angle: every node's pairs in one batch
+    /// (a cross-section rung fills its lanes), summed node by node in order.
     fn sum_over_nodes(
         &self,
         pairs: &[DirectionPair],
         out: &mut [Basis],
         inner_many: impl Fn(&[DirectionPair], &mut [Basis]),
     ) {
+        let n = pairs.len();
+        let rotated: Vec<DirectionPair> = self
+            .nodes
+            .iter()
+            .flat_map(|&(c, s, _)| pairs.iter().map(move |p| Self::rotate(p, c, s)))
+            .collect();
+        let mut part = vec![Basis::default(); rotated.len()];
+        inner_many(&rotated, &mut part);
         out.iter_mut().for_each(|o| *o = Basis::default());
-        let mut rotated = Vec::with_capacity(pairs.len());
-        let mut part = vec![Basis::default(); pairs.len()];
-        for &(c, s, w) in &self.nodes {
-            rotated.clear();
-            rotated.extend(pairs.iter().map(|p| Self::rotate(p, c, s)));
-            inner_many(&rotated, &mut part);
-            for (o, b) in out.iter_mut().zip(&part) {
+        for (k, &(_, _, w)) in self.nodes.iter().enumerate() {
+            for (o, b) in out.iter_mut().zip(&part[k * n..(k + 1) * n]) {
                 *o = *o + b.scaled(w);
             }
         }
@@ -166,19 +170,13 @@ impl ShadingModel for AzimuthSpread {
         if self.adaptive {
             return self.exact(pair, |p| self.inner.basis(p));
         }
-        // the nodes' pairs as one batch: the inner rung's lanes see them together (one pair
-        // at a time left a cross-section rung's lanes almost empty: 16 single evaluations)
-        let rotated: Vec<DirectionPair> = self
-            .nodes
-            .iter()
-            .map(|&(c, s, _)| Self::rotate(pair, c, s))
-            .collect();
-        let mut part = vec![Basis::default(); rotated.len()];
-        self.inner.basis_many(&rotated, &mut part);
-        self.nodes
-            .iter()
-            .zip(&part)
-            .fold(Basis::default(), |acc, (&(_, _, w), b)| acc + b.scaled(w))
+        // the nodes' pairs as one batch: one pair at a time left a cross-section rung's lanes
+        // almost empty
+        let mut out = [Basis::default()];
+        self.sum_over_nodes(std::slice::from_ref(pair), &mut out, |rotated, part| {
+            self.inner.basis_many(rotated, part)
+        });
+        out[0]
     }
 
     fn basis_at_height_above_horizon(&self, pair: &DirectionPair, height: f64) -> Option<Basis> {
@@ -190,24 +188,11 @@ impl ShadingModel for AzimuthSpread {
                 self.inner.basis_at_height(p, height).unwrap_or_default()
             }));
         }
-        let rotated: Vec<DirectionPair> = self
-            .nodes
-            .iter()
-            .map(|&(c, s, _)| Self::rotate(pair, c, s))
-            .collect();
-        let mut part = vec![Basis::default(); rotated.len()];
-        if !self
-            .inner
-            .basis_many_at_height(&rotated, height, &mut part)
-        {
-            return None;
-        }
-        Some(
-            self.nodes
-                .iter()
-                .zip(&part)
-                .fold(Basis::default(), |acc, (&(_, _, w), b)| acc + b.scaled(w)),
-        )
+        let mut out = [Basis::default()];
+        self.sum_over_nodes(std::slice::from_ref(pair), &mut out, |rotated, part| {
+            self.inner.basis_many_at_height(rotated, height, part);
+        });
+        Some(out[0])
     }
 
     fn basis_many_at_height(

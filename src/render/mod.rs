@@ -302,19 +302,50 @@ impl Material<'_> {
         out
     }
 
-    /// Radiance per channel towards `v` at a hit under `lights`.
+    /// [`Material::basis`] of every pair at one shading point, into `out`: as one batch
+    /// (`basis_many`, `basis_many_at_height`), equal to pair by pair.
+    fn bases(&self, sp: &ShadingPoint, pairs: &[DirectionPair], out: &mut [Basis]) {
+        if let Some(m) = sp.lobe.and_then(|l| self.model.with_lobe(l)) {
+            return m.basis_many(pairs, out);
+        }
+        match (sp.height, sp.ward_alphas) {
+            (_, Some(_)) => {
+                for (p, o) in pairs.iter().zip(out.iter_mut()) {
+                    *o = self.basis(sp, p);
+                }
+            }
+            (Some(h), None) => {
+                if !self.model.basis_many_at_height(pairs, h, out) {
+                    out.iter_mut().for_each(|o| *o = Basis::default());
+                }
+            }
+            (None, None) => self.model.basis_many(pairs, out),
+        }
+    }
+
+    /// Radiance per channel towards `v` at a hit under `lights` (the lights above the
+    /// horizon evaluated as one batch).
     pub fn radiance(&self, hit: &objects::Hit, v: &Vec3, lights: &[Light]) -> [f64; 3] {
         let sp = self.point(hit);
-        let mut out = [0.0; 3];
+        let frame = FibreFrame::from_azimuth(0.0);
+        let local_v = sp.local(v);
+        let mut pairs = Vec::with_capacity(lights.len());
+        let mut weights = Vec::with_capacity(lights.len());
         for light in lights {
             let (l, irradiance) = light.at(&hit.position);
             let cos_i = sp.n.dot(&l);
             if cos_i <= 0.0 {
                 continue;
             }
-            let f = self.brdf(&sp, &l, v);
-            for c in 0..3 {
-                out[c] += f[c] * irradiance * cos_i;
+            pairs.push(DirectionPair::new(&frame, &sp.local(&l), &local_v));
+            weights.push((irradiance, cos_i));
+        }
+        let mut bases = vec![Basis::default(); pairs.len()];
+        self.bases(&sp, &pairs, &mut bases);
+        let mut out = [0.0; 3];
+        for (basis, &(irradiance, cos_i)) in bases.iter().zip(&weights) {
+            for (c, o) in out.iter_mut().enumerate() {
+                *o += basis.brdf(&sp.albedos, c.min(self.channels - 1)) * irradiance * cos_i;
             }
         }
         out
@@ -362,6 +393,10 @@ pub struct Picture {
     pub position: Vec<[f32; 3]>,
     /// Fibre height H used (fibre radii); NaN where none.
     pub fibre_height: Vec<f32>,
+    /// Pixels whose every subsample ray was shaded (all those any ray hits with supersample > 1
+    /// and [`Subsamples::Every`]; with [`Subsamples::Adaptive`], the edges and the pixels whose
+    /// radiance is not smooth).
+    pub shaded_every: usize,
 }
 
 /// One pixel's radiance, coverage, (normal, tangent, position) and fibre height.
@@ -375,14 +410,95 @@ pub fn nearest(objects: &[Object], ray: &Ray) -> Option<objects::Hit> {
         .min_by(|a, b| a.t.total_cmp(&b.t))
 }
 
+/// How a pixel's subsamples are shaded.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Subsamples {
+    /// Every subsample ray is shaded (the exact box-filtered picture; slow for costly rungs).
+    Every,
+    /// Adaptive: every subsample ray is traced (coverage, edges), but an interior pixel whose
+    /// radiance is smooth is shaded once, at its centre. Over a pixel the mean of the
+    /// symmetric s x s subsample grid is the centre's value plus c (L_xx + L_yy), c = (s^2 - 1)
+    /// / (24 s^2), to second order (the odd terms cancel); L_xx, L_yy from the neighbouring
+    /// pixels' centres. Where c (|L_xx| + |L_yy|) exceeds `tolerance` times the picture's
+    /// level (the 99.5th percentile of the lit centres' radiance, what `--exposure auto` maps
+    /// to 0.8), or the pixel, or one of its four neighbours, is not covered by the same object,
+    /// every subsample is shaded as with [`Subsamples::Every`].
+    Adaptive { tolerance: f64 },
+}
+
+/// The default adaptive tolerance: 2e-4 of the picture's level, a twentieth of an 8-bit step
+/// at `--exposure auto` before the sRGB curve (`fibrefit bench render` measures the result
+/// against [`Subsamples::Every`]).
+pub const ADAPTIVE_TOLERANCE: f64 = 2e-4;
+
+/// One pixel's centre: the object hit (its index), its shaded radiance, its AOVs and
+/// fibre height, and the subsamples' coverage (hits, and whether all hit the centre's object).
+struct Centre {
+    object: Option<usize>,
+    radiance: [f64; 3],
+    aov: [[f32; 3]; 3],
+    height: f32,
+    hits: usize,
+    interior: bool,
+}
+
+/// The picture's level: the 99.5th percentile of the lit centres' radiance (largest channel);
+/// 1 where nothing is lit.
+fn level(centres: &[Centre]) -> f64 {
+    let mut lit: Vec<f64> = centres
+        .iter()
+        .filter(|c| c.object.is_some())
+        .map(|c| c.radiance.iter().fold(0.0f64, |a, &b| a.max(b)))
+        .filter(|&v| v > 0.0 && v.is_finite())
+        .collect();
+    if lit.is_empty() {
+        return 1.0;
+    }
+    let k = ((lit.len() - 1) as f64 * 0.995).round() as usize;
+    *lit.select_nth_unstable_by(k, |a, b| a.total_cmp(b)).1
+}
+
+/// The nearest hit of `ray` among `objects`, with the object's index.
+fn nearest_indexed(objects: &[Object], ray: &Ray) -> Option<(usize, objects::Hit)> {
+    objects
+        .iter()
+        .enumerate()
+        .filter_map(|(k, o)| o.intersect(ray).map(|h| (k, h)))
+        .min_by(|a, b| a.1.t.total_cmp(&b.1.t))
+}
+
 /// Render `objects` with `material` under `lights` through `camera`, `supersample` x
-/// `supersample` rays per pixel.
+/// `supersample` rays per pixel, shaded adaptively ([`Subsamples::Adaptive`] at
+/// [`ADAPTIVE_TOLERANCE`]).
 pub fn render(
     objects: &[Object],
     material: &Material,
     lights: &[Light],
     camera: &Camera,
     supersample: usize,
+    bar: &indicatif::ProgressBar,
+) -> Picture {
+    render_with(
+        objects,
+        material,
+        lights,
+        camera,
+        supersample,
+        Subsamples::Adaptive {
+            tolerance: ADAPTIVE_TOLERANCE,
+        },
+        bar,
+    )
+}
+
+/// [`render`] with the subsamples shaded as `shading` says.
+pub fn render_with(
+    objects: &[Object],
+    material: &Material,
+    lights: &[Light],
+    camera: &Camera,
+    supersample: usize,
+    shading: Subsamples,
     bar: &indicatif::ProgressBar,
 ) -> Picture {
     let (w, h) = (camera.width, camera.height);
@@ -392,58 +508,133 @@ pub fn render(
             .map(|o| o.bound() + (o.centre() - camera.target).norm())
             .fold(0.0, f64::max);
     let s = supersample.max(1);
-    let rows: Vec<Vec<PixelOut>> = (0..h)
+    let sub = |x: usize, sx: usize| x as f64 + (sx as f64 + 0.5) / s as f64;
+    // the centres are shaded where they may stand for the subsamples (or are the only one)
+    let adaptive = matches!(shading, Subsamples::Adaptive { .. }) && s > 1;
+    let shade_centres = adaptive || s == 1;
+    // pass 1: every pixel's centre shaded, its subsamples traced
+    let centres: Vec<Centre> = (0..h)
+        .into_par_iter()
+        .flat_map_iter(|y| {
+            (0..w).map(move |x| {
+                let centre = nearest_indexed(
+                    objects,
+                    &camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance),
+                );
+                let (mut hits, mut interior) = (0usize, centre.is_some());
+                for sy in 0..s {
+                    for sx in 0..s {
+                        let hit = nearest_indexed(objects, &camera.ray(sub(x, sx), sub(y, sy), distance));
+                        hits += hit.is_some() as usize;
+                        interior &= hit.map(|h| h.0) == centre.as_ref().map(|c| c.0);
+                    }
+                }
+                let f = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
+                let centre_ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance);
+                match centre {
+                    Some((k, hit)) => {
+                        let mapped = material.mapped(&hit);
+                        Centre {
+                            object: Some(k),
+                            radiance: match shade_centres {
+                                true => material.radiance(&hit, &-centre_ray.direction, lights),
+                                false => [0.0; 3],
+                            },
+                            aov: [f(mapped.normal), f(mapped.tangent), f(mapped.position)],
+                            height: material.height_at(&mapped).map_or(f32::NAN, |h| h as f32),
+                            hits,
+                            interior,
+                        }
+                    }
+                    None => Centre {
+                        object: None,
+                        radiance: [0.0; 3],
+                        aov: [[0.0; 3]; 3],
+                        height: f32::NAN,
+                        hits,
+                        interior: false,
+                    },
+                }
+            })
+        })
+        .collect();
+    bar.inc((h / 2) as u64);
+    let tolerance = match shading {
+        Subsamples::Adaptive { tolerance } if adaptive => Some(tolerance * level(&centres)),
+        _ => None,
+    };
+    let c2 = (s * s - 1) as f64 / (24.0 * (s * s) as f64);
+    // is the centre's value the subsamples' mean within the tolerance?
+    let smooth = |x: usize, y: usize| -> bool {
+        let (Some(tol), true) = (tolerance, centres[y * w + x].interior) else {
+            return false;
+        };
+        if x == 0 || y == 0 || x + 1 >= w || y + 1 >= h {
+            return false;
+        }
+        let at = |x: usize, y: usize| &centres[y * w + x];
+        let me = at(x, y);
+        let around = [at(x - 1, y), at(x + 1, y), at(x, y - 1), at(x, y + 1)];
+        if around.iter().any(|c| c.object != me.object) {
+            return false;
+        }
+        (0..3).all(|c| {
+            let lxx = around[0].radiance[c] + around[1].radiance[c] - 2.0 * me.radiance[c];
+            let lyy = around[2].radiance[c] + around[3].radiance[c] - 2.0 * me.radiance[c];
+            c2 * (lxx.abs() + lyy.abs()) <= tol
+        })
+    };
+    // pass 2: the pixels' values, every subsample shaded where the centre does not stand for them
+    let rows: Vec<Vec<(PixelOut, bool)>> = (0..h)
         .into_par_iter()
         .map(|y| {
             let row = (0..w)
                 .map(|x| {
-                    let mut sum = [0.0f64; 3];
-                    let mut hits = 0usize;
-                    for sy in 0..s {
-                        for sx in 0..s {
-                            let ray = camera.ray(
-                                x as f64 + (sx as f64 + 0.5) / s as f64,
-                                y as f64 + (sy as f64 + 0.5) / s as f64,
-                                distance,
-                            );
-                            if let Some(hit) = nearest(objects, &ray) {
-                                hits += 1;
-                                let l = material.radiance(&hit, &-ray.direction, lights);
-                                for c in 0..3 {
-                                    sum[c] += l[c];
+                    let me = &centres[y * w + x];
+                    let n = (s * s) as f64;
+                    let (radiance, every) = if s == 1 || me.hits == 0 {
+                        (me.radiance, false)
+                    } else if smooth(x, y) {
+                        (me.radiance.map(|v| v * me.hits as f64 / n), false)
+                    } else {
+                        let mut sum = [0.0f64; 3];
+                        for sy in 0..s {
+                            for sx in 0..s {
+                                let ray = camera.ray(sub(x, sx), sub(y, sy), distance);
+                                if let Some(hit) = nearest(objects, &ray) {
+                                    let l = material.radiance(&hit, &-ray.direction, lights);
+                                    for c in 0..3 {
+                                        sum[c] += l[c];
+                                    }
                                 }
                             }
                         }
-                    }
-                    let n = (s * s) as f64;
-                    let centre = nearest(
-                        objects,
-                        &camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance),
-                    );
-                    let f = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
-                    let (aov, fh) = match centre.map(|h| material.mapped(&h)) {
-                        Some(hit) => (
-                            [f(hit.normal), f(hit.tangent), f(hit.position)],
-                            material.height_at(&hit).map_or(f32::NAN, |h| h as f32),
-                        ),
-                        None => ([[0.0; 3]; 3], f32::NAN),
+                        (sum.map(|v| v / n), true)
                     };
                     (
-                        sum.map(|v| (v / n) as f32),
-                        (hits as f64 / n) as f32,
-                        aov,
-                        fh,
+                        (
+                            radiance.map(|v| v as f32),
+                            (me.hits as f64 / n) as f32,
+                            me.aov,
+                            me.height,
+                        ),
+                        every,
                     )
                 })
                 .collect();
-            bar.inc(1);
+            if y % 2 == 1 {
+                bar.inc(1);
+            }
             row
         })
         .collect();
     let all: Vec<_> = rows.into_iter().flatten().collect();
+    let shaded_every = all.iter().filter(|p| p.1).count();
+    let all: Vec<PixelOut> = all.into_iter().map(|p| p.0).collect();
     Picture {
         width: w,
         height: h,
+        shaded_every,
         radiance: all.iter().map(|p| p.0).collect(),
         alpha: all.iter().map(|p| p.1).collect(),
         normal: all.iter().map(|p| p.2[0]).collect(),
