@@ -52,7 +52,16 @@ pub struct SpeedRow {
     pub evals_per_second: f64,
     /// `Sampler::new` (the cross-section rungs tabulate their cone law there), milliseconds.
     pub construct_ms: f64,
+    /// `Sampler::sample` with the evaluation on [`SPEED_THREADS`] threads at once (their
+    /// samples summed over the same wall time): what 2 cores draw. Goal (issue 41): at least
+    /// [`SAMPLES_GOAL`] for every rung.
+    pub parallel_samples_per_second: f64,
 }
+
+/// Threads of the parallel speed measure (the 2 cores the goal is set on).
+pub const SPEED_THREADS: usize = 2;
+/// Samples per second (with the rung's evaluation) every rung should draw on 2 cores.
+pub const SAMPLES_GOAL: f64 = 2e6;
 
 pub struct SamplingRun {
     pub variance: Vec<VarianceRow>,
@@ -191,32 +200,61 @@ fn samples_for(id: ModelId, quick: bool) -> usize {
 
 /// Samples per second of `sampler` (with `m`'s evaluation, and with a constant model) and
 /// `m`'s evaluations per second, over the study's views, on this thread.
-fn speed_row(id: ModelId, variant: &str, p: &ModelParams, budget: f64) -> Result<SpeedRow> {
+fn speed_row(
+    id: ModelId,
+    variant: &str,
+    p: &ModelParams,
+    heights: Option<(f64, f64)>,
+    budget: f64,
+) -> Result<SpeedRow> {
     let m = model::build(id, p)?;
     let t = Instant::now();
     let sampler = Sampler::new(id, p);
     let construct_ms = 1e3 * t.elapsed().as_secs_f64();
     let a = p.albedos;
     let views: Vec<Local> = VIEWS.iter().map(|&(t, f)| view(t, f)).collect();
-    // run until `budget` seconds have passed, in rounds over the views
-    let time = |f: &mut dyn FnMut(&Local, [f64; 2]) -> f64| {
-        let mut u = Uniforms::new(17);
+    // run until `budget` seconds have passed, in rounds over the views; the count
+    let run = |seed: u64, f: &dyn Fn(&Local, [f64; 2], f64) -> f64| {
+        let mut u = Uniforms::new(seed);
         let (mut count, mut sink) = (0usize, 0.0);
         let t = Instant::now();
         while t.elapsed().as_secs_f64() < budget || count == 0 {
             for v in &views {
-                sink += f(v, [u.next(), u.next()]);
+                sink += f(v, [u.next(), u.next()], u.next());
                 count += 1;
             }
         }
         std::hint::black_box(sink);
-        count as f64 / t.elapsed().as_secs_f64()
+        (count, t.elapsed().as_secs_f64())
     };
-    let samples_per_second = time(&mut |v, u| {
+    let time = |f: &mut dyn FnMut(&Local, [f64; 2]) -> f64| {
+        let f = std::cell::RefCell::new(f);
+        let (count, seconds) = run(17, &|v, u, _| (f.borrow_mut())(v, u));
+        count as f64 / seconds
+    };
+    // a texel's height per draw where the variant has a map (heights over their range)
+    let height = |r: f64| heights.map(|(lo, hi)| lo + (hi - lo) * r);
+    let with_eval = |v: &Local, u: [f64; 2], r: f64| {
         sampler
-            .sample(m.as_ref(), &a, None, v, u)
+            .sample(m.as_ref(), &a, height(r), v, u)
             .map_or(0.0, |s| s.weight[0])
+    };
+    let (run_ref, with_eval_ref) = (&run, &with_eval);
+    let parallel_samples_per_second = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..SPEED_THREADS)
+            .map(|k| scope.spawn(move || run_ref(17 + k as u64, with_eval_ref)))
+            .collect();
+        let done: Vec<(usize, f64)> = handles
+            .into_iter()
+            .map(|h| h.join().expect("a speed thread"))
+            .collect();
+        let count: usize = done.iter().map(|d| d.0).sum();
+        count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
     });
+    let samples_per_second = {
+        let (count, seconds) = run(17, &with_eval);
+        count as f64 / seconds
+    };
     let sampler_only_per_second = time(&mut |v, u| {
         sampler
             .sample(&Lambert, &a, None, v, u)
@@ -239,6 +277,7 @@ fn speed_row(id: ModelId, variant: &str, p: &ModelParams, budget: f64) -> Result
         sampler_only_per_second,
         evals_per_second,
         construct_ms,
+        parallel_samples_per_second,
     })
 }
 
@@ -364,6 +403,7 @@ fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
             id,
             "-",
             &params(id, &params_text(id, e))?,
+            None,
             budget,
         )?);
         bar.inc(1);
@@ -389,9 +429,29 @@ fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
             "fuzz + fresnel",
             "fuzz = 0.5\nfuzz_depth = 0.3\nfresnel_ior = 1.5\n",
         ),
+        (
+            ModelId::PoulinFournier,
+            "spread 180 + fuzz (felt)",
+            "azimuth_spread_deg = 180\nfuzz = 0.5\nfuzz_depth = 0.3\n",
+        ),
+        (
+            ModelId::VaryingTopology,
+            "a height per draw (maps)",
+            "",
+        ),
+        (
+            ModelId::VaryingTopology,
+            "spread 30 + fuzz",
+            "azimuth_spread_deg = 30\nfuzz = 0.5\nfuzz_depth = 0.3\n",
+        ),
     ] {
         let text = params_text(id, e) + extra;
-        speed.push(speed_row(id, variant, &params(id, &text)?, budget)?);
+        let p = params(id, &text)?;
+        // a per-texel height map: every draw at its own height over the whole range
+        let heights = variant
+            .contains("height per draw")
+            .then(|| (0.0, crate::model::topology::max_height(p.spacing)));
+        speed.push(speed_row(id, variant, &p, heights, budget)?);
         bar.inc(1);
     }
     Ok(speed)
