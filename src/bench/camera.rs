@@ -139,6 +139,73 @@ pub struct CameraRun {
     /// The near rig's capture ([`pinhole_rows`]): its rendering time and how far the direction
     /// lattice's blend lies from the model.
     pub pinhole: Option<PinholeRun>,
+    /// Map recovery with pinhole cameras against orthographic ones, size by size (issue 41:
+    /// at most [`PINHOLE_RATIO_GOAL`] times the time, as accurate).
+    pub ratios: Vec<SizeRatio>,
+}
+
+/// The pinhole capture's map recovery may take at most this many times the orthographic one's.
+pub const PINHOLE_RATIO_GOAL: f64 = 1.5;
+
+/// Map recovery of one size's two captures (orthographic, pinhole), side by side.
+#[derive(Clone, Debug, serde::Serialize)]
+pub struct SizeRatio {
+    pub size: usize,
+    pub orthographic: Cost,
+    pub pinhole: Cost,
+    pub orthographic_accuracy: String,
+    pub pinhole_accuracy: String,
+    /// Lattice nodes of the pinhole capture (columns, rows; 0 when its texels are evaluated
+    /// directly).
+    pub lattice: (usize, usize),
+}
+
+impl SizeRatio {
+    /// Pinhole wall time over orthographic.
+    pub fn ratio(&self) -> f64 {
+        self.pinhole.wall_seconds / self.orthographic.wall_seconds
+    }
+}
+
+/// Map recovery (maps + globals) of the benchmark's swatch at `size` x `size` pixels with
+/// orthographic cameras and directional lights, then with the near rig, one after the other.
+pub fn size_ratio(exe: &Path, scratch: &Path, size: usize) -> Result<SizeRatio> {
+    let mut out = Vec::new();
+    let mut lattice = (0, 0);
+    for rig in [Rig::Distant, Rig::Near] {
+        let dir = scratch.join(format!("ratio_{size}_{rig:?}"));
+        std::fs::create_dir_all(&dir)?;
+        let d = dir.join("d");
+        std::fs::write(dir.join("synth.toml"), synth_config(size, rig))?;
+        crate::synth::run(&dir.join("synth.toml"), &d, &crate::progress::Progress::quiet())?;
+        let blind = super::maps::write_blind(&d)?;
+        std::fs::write(dir.join("maps.toml"), FIT_MAPS)?;
+        if rig == Rig::Near {
+            let store = CaptureStore::load(&blind, Default::default())?;
+            let cfg: crate::fit::config::FitConfig = toml::from_str(FIT_MAPS)?;
+            lattice = crate::fit::maps::lattice_nodes(&store, &cfg.maps).unwrap_or((0, 0));
+        }
+        let cmd = fit_command(
+            exe,
+            &blind,
+            (&dir.join("maps.toml"), &dir.join("maps.json")),
+            Some(&dir.join("maps")),
+        );
+        let cost = measure(cmd, &dir.join("maps.log"))?;
+        let accuracy = map_accuracy(&d, &dir.join("maps"))?;
+        std::fs::remove_dir_all(&dir)?;
+        out.push((cost, accuracy));
+    }
+    let (pinhole, pinhole_accuracy) = out.pop().expect("two runs");
+    let (orthographic, orthographic_accuracy) = out.pop().expect("two runs");
+    Ok(SizeRatio {
+        size,
+        orthographic,
+        pinhole,
+        orthographic_accuracy,
+        pinhole_accuracy,
+        lattice,
+    })
 }
 
 /// What [`pinhole_rows`] measured besides its row.
@@ -315,6 +382,7 @@ pub fn run(
         store_bytes_per_value: counted.store_bytes,
         synth_seconds,
         pinhole: Some(pinhole),
+        ratios: vec![],
     })
 }
 

@@ -66,6 +66,10 @@ pub enum Study {
         /// Image size N (pixels per side)
         #[arg(value_name = "N", default_value_t = 1024)]
         size: usize,
+        /// Further sizes at which map recovery with pinhole cameras and point lights is timed
+        /// against orthographic cameras, side by side (N itself always is)
+        #[arg(long, value_name = "N,...", value_delimiter = ',', default_values_t = [160, 512])]
+        ratio_sizes: Vec<usize>,
     },
     /// The photo route's speed and memory: `fibrefit calibrate` on synthetic JPEG photos of
     /// the board (a child process; wall time, CPU time, peak memory): writes OUT/photo_speed.md
@@ -200,7 +204,10 @@ impl Legacy {
         } else if self.sampling {
             Study::Sampling
         } else if let Some(size) = self.camera {
-            Study::Camera { size }
+            Study::Camera {
+                size,
+                ratio_sizes: vec![160, 512],
+            }
         } else if self.shader {
             Study::Shader
         } else if self.maps {
@@ -303,7 +310,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         Study::Speed => speed(args),
         Study::Robustness(r) => robustness(args, &r),
         Study::Sampling => sampling(args),
-        Study::Camera { size } => camera(args, size),
+        Study::Camera { size, ratio_sizes } => camera(args, size, &ratio_sizes),
         Study::Shader => shader(args),
         Study::Photos { count, width } => photos(args, count, width),
         Study::Render => render(args),
@@ -314,19 +321,28 @@ pub fn run(args: &BenchArgs) -> Result<()> {
     }
 }
 
-fn camera(args: &BenchArgs, size: usize) -> Result<()> {
-    if size < 8 {
-        bail!("bench camera {size}: the capture needs at least 8 x 8 pixels");
+fn camera(args: &BenchArgs, size: usize, ratio_sizes: &[usize]) -> Result<()> {
+    if let Some(s) = std::iter::once(&size).chain(ratio_sizes).find(|&&s| s < 8) {
+        bail!("bench camera: size {s}: the capture needs at least 8 x 8 pixels");
     }
     let t = Instant::now();
     let bar = crate::progress::Progress::new(args.quiet).bar(3, "camera");
     let scratch = tempfile::tempdir()?;
     let exe = std::env::current_exe()?;
-    let run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;
+    let mut run = crate::bench::camera::run(&exe, scratch.path(), size, &bar)?;
+    for &n in ratio_sizes.iter().filter(|&&n| n != size) {
+        bar.set_message(format!("camera: pinhole against orthographic at {n} x {n}"));
+        run.ratios
+            .push(crate::bench::camera::size_ratio(&exe, scratch.path(), n)?);
+    }
     bar.finish_and_clear();
-    let command = match size {
-        1024 => "fibrefit bench camera".to_string(),
-        n => format!("fibrefit bench camera {n}"),
+    let command = match (size, ratio_sizes) {
+        (1024, [160, 512]) => "fibrefit bench camera".to_string(),
+        (n, [160, 512]) => format!("fibrefit bench camera {n}"),
+        (n, r) => format!(
+            "fibrefit bench camera {n} --ratio-sizes {}",
+            r.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(",")
+        ),
     };
     crate::bench::report::camera::write(&args.out, &run, &command, t.elapsed().as_secs_f64())?;
     if !args.quiet {

@@ -64,6 +64,7 @@ pub fn write(dir: &Path, run: &CameraRun, command: &str, seconds: f64) -> Result
         run.store_bytes_per_value
     );
     md += &memory_how(run);
+    md += &ratio_section(run);
     md += &pinhole_section(run);
     let mut f = crate::export::atomic::AtomicFile::create(&dir.join("camera_resolution.md"))?;
     std::io::Write::write_all(&mut f.writer(), md.as_bytes())?;
@@ -139,7 +140,7 @@ fn pinhole_section(run: &CameraRun) -> String {
          column table serves the texels.\n\n\
          - Map recovery builds column tables (65 H x 192 psi nodes, as the shared table) at the \
          nodes of a lattice over the image instead (`src/fit/maps/direction_lattice.rs`), spaced so \
-         that no image's light or view direction turns by more than {} degrees between neighbouring \
+         that no image's light or view direction turns by more than {} deg between neighbouring \
          nodes ({} x {} nodes here; each built the first time a texel needs it), and blends a \
          texel's columns bilinearly in its position from the four nodes around it. As with the \
          shared table, the blend serves the grid and the coarse searches only: the final search, \
@@ -169,5 +170,65 @@ fn pinhole_section(run: &CameraRun) -> String {
         b.own_table_max,
         b.own_table_rms,
     );
+    md
+}
+
+/// Pinhole against orthographic map recovery at every size measured (issue 41 item 1).
+fn ratio_section(run: &CameraRun) -> String {
+    use crate::bench::camera::PINHOLE_RATIO_GOAL;
+    let find = |prefix: &str| run.rows.iter().find(|r| r.job.starts_with(prefix));
+    let main = match (
+        find("maps (H, psi) + globals: directional"),
+        find("maps (H, psi) + globals: point lights"),
+    ) {
+        (Some(o), Some(p)) => Some((run.size, o.wall_seconds, p.wall_seconds, o.accuracy.clone(), p.accuracy.clone(), None)),
+        _ => None,
+    };
+    let mut all: Vec<_> = run
+        .ratios
+        .iter()
+        .map(|r| {
+            (
+                r.size,
+                r.orthographic.wall_seconds,
+                r.pinhole.wall_seconds,
+                r.orthographic_accuracy.clone(),
+                r.pinhole_accuracy.clone(),
+                Some(r.lattice),
+            )
+        })
+        .chain(main)
+        .collect();
+    if all.is_empty() {
+        return String::new();
+    }
+    all.sort_by_key(|r| r.0);
+    let mut md = format!(
+        "\n## Pinhole cameras against orthographic ones, size by size\n\n\
+         The same 20 mm swatch, 8 images, maps + globals, once with directional lights and \
+         orthographic cameras and once with the near rig (below), one after the other; wall time \
+         of each `fibrefit fit --maps` and their ratio (goal of issue 41: at most {PINHOLE_RATIO_GOAL}x, \
+         with equal accuracy). Where the small sizes' extra cost goes: a fixed number of lattice \
+         tables (each 65 x 192 model batches per image, as many nodes at 160 px as at 1024 px: the \
+         directions turn by the same angles over the swatch), and each texel's columns blended \
+         from four tables instead of read from one.\n\n\
+         | size | orthographic [s] | pinhole [s] | ratio | lattice nodes | orthographic maps | pinhole maps |\n\
+         |---|---|---|---|---|---|---|\n"
+    );
+    for (n, o, p, oa, pa, lattice) in all {
+        let ratio = p / o;
+        md += &format!(
+            "| {n} x {n} | {o:.1} | {p:.1} | {} | {} | {oa} | {pa} |\n",
+            match ratio <= PINHOLE_RATIO_GOAL {
+                true => format!("{ratio:.2}x"),
+                false => format!("**{ratio:.2}x**"),
+            },
+            match lattice {
+                Some((0, 0)) => "none (texels direct)".to_string(),
+                Some((x, y)) => format!("{x} x {y}"),
+                None => "(section below)".to_string(),
+            }
+        );
+    }
     md
 }
