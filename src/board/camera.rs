@@ -102,3 +102,43 @@ pub fn pixel_on_board(k: &Intrinsics, pose: &Pose, u: f64, v: f64) -> Option<Vec
     let t = -pose.position.z / d.z;
     (t > 0.0).then(|| pose.position + t * d)
 }
+
+/// The lens blur both sides of the photo route share: `synth --photos` blurs its photos with it
+/// and `calibrate` measures a photo's blur by fitting it. Blurs the interleaved `image` (`w` x
+/// `h` pixels of `channels` values) in place by a Gaussian of standard deviation `sigma` px,
+/// truncated at 3 sigma, separable, edges clamped.
+pub fn gaussian_blur(image: &mut [f64], w: usize, h: usize, channels: usize, sigma: f64) {
+    use rayon::prelude::*;
+    assert_eq!(image.len(), w * h * channels);
+    let r = (3.0 * sigma).ceil() as isize;
+    let kernel: Vec<f64> = (-r..=r)
+        .map(|i| (-0.5 * (i as f64 / sigma).powi(2)).exp())
+        .collect();
+    let total: f64 = kernel.iter().sum();
+    let kernel: Vec<f64> = kernel.iter().map(|k| k / total).collect();
+    let pass = |src: &[f64], dst: &mut [f64], along_x: bool| {
+        dst.par_chunks_mut(channels * w)
+            .enumerate()
+            .for_each(|(y, row)| {
+                for x in 0..w {
+                    let out = &mut row[channels * x..channels * (x + 1)];
+                    out.iter_mut().for_each(|o| *o = 0.0);
+                    for (j, kv) in kernel.iter().enumerate() {
+                        let o = j as isize - r;
+                        let (xx, yy) = if along_x {
+                            ((x as isize + o).clamp(0, w as isize - 1) as usize, y)
+                        } else {
+                            (x, (y as isize + o).clamp(0, h as isize - 1) as usize)
+                        };
+                        let at = channels * (yy * w + xx);
+                        for (c, o) in out.iter_mut().enumerate() {
+                            *o += kv * src[at + c];
+                        }
+                    }
+                }
+            });
+    };
+    let mut tmp = vec![0.0; image.len()];
+    pass(image, &mut tmp, true);
+    pass(&tmp, image, false);
+}

@@ -11,7 +11,7 @@
 //! the swatch at the texels' scale there (defocus at grazing views, shake).
 
 use super::Calibration;
-use crate::board::camera::pixel_on_board;
+use crate::board::camera::{gaussian_blur, pixel_on_board};
 use crate::load::board::BoardFile;
 use crate::load::image_io::srgb_to_linear;
 use crate::load::photo::Photo;
@@ -216,34 +216,12 @@ fn fit_cost(model: &[f64], seen: &[f64], used: &[bool], side: usize) -> Option<f
     Some((syy - sy * sy / n) - cxy * cxy / vx)
 }
 
-/// `image` (`side` x `side`) blurred by a Gaussian of standard deviation `sigma` px (separable,
-/// edges clamped).
+/// `image` (`side` x `side`) blurred by the lens blur of standard deviation `sigma` px that
+/// `synth --photos` applies ([`gaussian_blur`]).
 fn blurred(image: &[f64], side: usize, sigma: f64) -> Vec<f64> {
-    let r = (3.0 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-r..=r)
-        .map(|i| (-0.5 * (i as f64 / sigma).powi(2)).exp())
-        .collect();
-    let total: f64 = kernel.iter().sum();
-    let pass = |src: &[f64], along_x: bool| -> Vec<f64> {
-        let mut out = vec![0.0; side * side];
-        for y in 0..side {
-            for x in 0..side {
-                let mut acc = 0.0;
-                for (j, kv) in kernel.iter().enumerate() {
-                    let o = j as isize - r;
-                    let (xx, yy) = if along_x {
-                        ((x as isize + o).clamp(0, side as isize - 1) as usize, y)
-                    } else {
-                        (x, (y as isize + o).clamp(0, side as isize - 1) as usize)
-                    };
-                    acc += kv * src[yy * side + xx];
-                }
-                out[y * side + x] = acc / total;
-            }
-        }
-        out
-    };
-    pass(&pass(image, true), false)
+    let mut out = image.to_vec();
+    gaussian_blur(&mut out, side, side, 1, sigma);
+    out
 }
 
 #[cfg(test)]

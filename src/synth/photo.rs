@@ -3,7 +3,7 @@
 //! perspective camera with radial distortion, a point light (a flash beside the lens), noise,
 //! and 8-bit sRGB out. The whole photo route (`fibrefit calibrate`) is tested against them.
 
-use crate::board::camera::{pixel_on_board, Intrinsics, Pose};
+use crate::board::camera::{gaussian_blur, pixel_on_board, Intrinsics, Pose};
 use crate::load::board::BoardFile;
 use crate::load::image_io::{linear_to_srgb, srgb_to_linear};
 use crate::model::frame::{DirectionPair, FibreFrame};
@@ -160,7 +160,7 @@ impl PhotoScene<'_> {
             })
             .collect();
         if shot.blur_px > 0.0 {
-            gaussian_blur(&mut clean, w as usize, h as usize, shot.blur_px);
+            gaussian_blur(&mut clean, w as usize, h as usize, 3, shot.blur_px);
         }
         let rows: Vec<Vec<f32>> = clean
             .par_chunks(3 * w as usize)
@@ -184,39 +184,6 @@ impl PhotoScene<'_> {
             .collect();
         Ok(rows.into_iter().flatten().collect())
     }
-}
-
-/// Blur the interleaved RGB `image` (`w` x `h`) by a Gaussian of standard deviation `sigma` px
-/// (separable, edges clamped).
-fn gaussian_blur(image: &mut [f64], w: usize, h: usize, sigma: f64) {
-    let r = (3.0 * sigma).ceil() as isize;
-    let kernel: Vec<f64> = (-r..=r)
-        .map(|i| (-0.5 * (i as f64 / sigma).powi(2)).exp())
-        .collect();
-    let total: f64 = kernel.iter().sum();
-    let kernel: Vec<f64> = kernel.iter().map(|k| k / total).collect();
-    let pass = |src: &[f64], dst: &mut [f64], along_x: bool| {
-        dst.par_chunks_mut(3 * w).enumerate().for_each(|(y, row)| {
-            for x in 0..w {
-                let mut acc = [0.0; 3];
-                for (j, kv) in kernel.iter().enumerate() {
-                    let o = j as isize - r;
-                    let (xx, yy) = if along_x {
-                        ((x as isize + o).clamp(0, w as isize - 1) as usize, y)
-                    } else {
-                        (x, (y as isize + o).clamp(0, h as isize - 1) as usize)
-                    };
-                    for c in 0..3 {
-                        acc[c] += kv * src[3 * (yy * w + xx) + c];
-                    }
-                }
-                row[3 * x..3 * x + 3].copy_from_slice(&acc);
-            }
-        });
-    };
-    let mut tmp = vec![0.0; image.len()];
-    pass(image, &mut tmp, true);
-    pass(&tmp, image, false);
 }
 
 /// What `fibrefit synth --photos` is asked.
