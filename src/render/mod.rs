@@ -404,10 +404,7 @@ type PixelOut = ([f32; 3], f32, [[f32; 3]; 3], f32);
 
 /// The nearest hit of `ray` among `objects`.
 pub fn nearest(objects: &[Object], ray: &Ray) -> Option<objects::Hit> {
-    objects
-        .iter()
-        .filter_map(|o| o.intersect(ray))
-        .min_by(|a, b| a.t.total_cmp(&b.t))
+    nearest_indexed(objects, ray).map(|(_, hit)| hit)
 }
 
 /// How a pixel's subsamples are shaded.
@@ -517,20 +514,23 @@ pub fn render_with(
         .into_par_iter()
         .flat_map_iter(|y| {
             (0..w).map(move |x| {
-                let centre = nearest_indexed(
-                    objects,
-                    &camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance),
-                );
+                let centre_ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance);
+                let centre = nearest_indexed(objects, &centre_ray);
                 let (mut hits, mut interior) = (0usize, centre.is_some());
-                for sy in 0..s {
-                    for sx in 0..s {
-                        let hit = nearest_indexed(objects, &camera.ray(sub(x, sx), sub(y, sy), distance));
-                        hits += hit.is_some() as usize;
-                        interior &= hit.map(|h| h.0) == centre.as_ref().map(|c| c.0);
+                if s == 1 {
+                    // the one subsample ray is the centre's
+                    hits = centre.is_some() as usize;
+                } else {
+                    for sy in 0..s {
+                        for sx in 0..s {
+                            let ray = camera.ray(sub(x, sx), sub(y, sy), distance);
+                            let hit = nearest_indexed(objects, &ray);
+                            hits += hit.is_some() as usize;
+                            interior &= hit.map(|h| h.0) == centre.as_ref().map(|c| c.0);
+                        }
                     }
                 }
                 let f = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];
-                let centre_ray = camera.ray(x as f64 + 0.5, y as f64 + 0.5, distance);
                 match centre {
                     Some((k, hit)) => {
                         let mapped = material.mapped(&hit);
