@@ -198,8 +198,9 @@ fn samples_for(id: ModelId, quick: bool) -> usize {
     }
 }
 
-/// Samples per second of `sampler` (with `m`'s evaluation, and with a constant model) and
-/// `m`'s evaluations per second, over the study's views, on this thread.
+/// Samples per second of `sampler` (with `m`'s evaluation on this thread and on
+/// [`SPEED_THREADS`] threads, and with a constant model) and `m`'s evaluations per second, over
+/// the study's views.
 fn speed_row(
     id: ModelId,
     variant: &str,
@@ -227,9 +228,8 @@ fn speed_row(
         std::hint::black_box(sink);
         (count, t.elapsed().as_secs_f64())
     };
-    let time = |f: &mut dyn FnMut(&Local, [f64; 2]) -> f64| {
-        let f = std::cell::RefCell::new(f);
-        let (count, seconds) = run(17, &|v, u, _| (f.borrow_mut())(v, u));
+    let time = |f: &dyn Fn(&Local, [f64; 2], f64) -> f64| {
+        let (count, seconds) = run(17, f);
         count as f64 / seconds
     };
     // a texel's height per draw where the variant has a map (heights over their range)
@@ -251,16 +251,13 @@ fn speed_row(
         let count: usize = done.iter().map(|d| d.0).sum();
         count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
     });
-    let samples_per_second = {
-        let (count, seconds) = run(17, &with_eval);
-        count as f64 / seconds
-    };
-    let sampler_only_per_second = time(&mut |v, u| {
+    let samples_per_second = time(&with_eval);
+    let sampler_only_per_second = time(&|v, u, _| {
         sampler
             .sample(&Lambert, &a, None, v, u)
             .map_or(0.0, |s| s.pdf)
     });
-    let evals_per_second = time(&mut |v, u| {
+    let evals_per_second = time(&|v, u, _| {
         let z = u[0].max(1e-3);
         let r = (1.0 - z * z).sqrt();
         let l = Local {
