@@ -4,10 +4,9 @@
 
 use fibrefit::api::board::{board, BoardRequest};
 use fibrefit::board::camera::{Intrinsics, Pose};
-use fibrefit::load::board::BoardFile;
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot, SET_CAMERA};
+use fibrefit::synth::photo::{PhotoShot, SwatchOnBoard, SET_CAMERA};
 use nalgebra::Vector3;
 
 const CAMERA: Intrinsics = SET_CAMERA;
@@ -21,19 +20,11 @@ fn light(pose: &Pose) -> Vector3<f64> {
 fn a_blurred_photo_is_named_and_its_texels_left_out() {
     let dir = tempfile::tempdir().unwrap();
     board(&BoardRequest::default(), dir.path()).unwrap();
-    let b = BoardFile::read(&dir.path().join("board.toml")).unwrap();
-    let picture = image::open(dir.path().join("board.png"))
-        .unwrap()
-        .to_luma8();
     let raw: RawParams = toml::from_str("kd = [0.5, 0.4, 0.3]").unwrap();
     let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
-    let model = fibrefit::model::build(ModelId::Lambert, &params).unwrap();
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let set =
+        SwatchOnBoard::read(&dir.path().join("board.toml"), ModelId::Lambert, params).unwrap();
+    let (b, picture, scene) = (&set.board, &set.picture, set.scene());
     let mut photos = Vec::new();
     for i in 0..6 {
         let elev = (25.0 + 30.0 * (i % 3) as f64 / 2.0).to_radians();

@@ -6,10 +6,9 @@ use fibrefit::api::board::{board, BoardRequest};
 use fibrefit::board::camera::{Intrinsics, Pose};
 use fibrefit::board::detect;
 use fibrefit::calibrate::{calibrate, Corner, Views};
-use fibrefit::load::board::BoardFile;
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use fibrefit::synth::photo::{PhotoShot, SwatchOnBoard};
 use nalgebra::Vector3;
 
 const TRUTH: Intrinsics = Intrinsics {
@@ -36,19 +35,11 @@ fn poses() -> Vec<Pose> {
 fn eight_photos_give_the_cameras_within_a_millimetre() {
     let dir = tempfile::tempdir().unwrap();
     board(&BoardRequest::default(), dir.path()).unwrap();
-    let b = BoardFile::read(&dir.path().join("board.toml")).unwrap();
-    let picture = image::open(dir.path().join("board.png"))
-        .unwrap()
-        .to_luma8();
     let raw: RawParams = toml::from_str("kd = 0.5").unwrap();
     let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
-    let model = fibrefit::model::build(ModelId::Lambert, &params).unwrap();
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let set =
+        SwatchOnBoard::read(&dir.path().join("board.toml"), ModelId::Lambert, params).unwrap();
+    let (b, scene) = (&set.board, set.scene());
     let truth = poses();
     let mut corners = Vec::new();
     for (k, pose) in truth.iter().enumerate() {

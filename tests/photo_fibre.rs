@@ -10,12 +10,11 @@
 use assert_cmd::Command;
 use fibrefit::api::board::{board, BoardRequest};
 use fibrefit::board::camera::{Intrinsics, Pose};
-use fibrefit::load::board::BoardFile;
 use fibrefit::load::capture::{Camera, CaptureFile, Light};
 use fibrefit::model::frame::{DirectionPair, FibreFrame};
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{set_pose, PhotoScene, PhotoShot, SET_CAMERA, SET_FLASH_MM};
+use fibrefit::synth::photo::{set_pose, PhotoShot, SwatchOnBoard, SET_CAMERA, SET_FLASH_MM};
 use nalgebra::Vector3;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
@@ -47,15 +46,10 @@ fn truth() -> (ModelParams, Box<dyn fibrefit::model::ShadingModel>) {
 /// The board and 8 DNG photos in `dir`.
 fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
     board(&BoardRequest::default(), dir).unwrap();
-    let b = BoardFile::read(&dir.join("board.toml")).unwrap();
-    let picture = image::open(dir.join("board.png")).unwrap().to_luma8();
-    let (params, model) = truth();
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let (params, _) = truth();
+    let set =
+        SwatchOnBoard::read(&dir.join("board.toml"), ModelId::PoulinFournier, params).unwrap();
+    let scene = set.scene();
     let mut files = Vec::new();
     for (k, pose) in poses().iter().enumerate() {
         let shot = PhotoShot {

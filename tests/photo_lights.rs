@@ -11,7 +11,7 @@ use fibrefit::load::board::BoardFile;
 use fibrefit::load::image_io;
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use fibrefit::synth::photo::{PhotoScene, PhotoShot, SwatchOnBoard};
 use nalgebra::Vector3;
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -50,17 +50,10 @@ fn write_tiff(path: &Path, values: &[f32]) {
 /// every one) and their ambient frames as 16-bit linear TIFFs, and the lights file.
 fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>, PathBuf) {
     board(&BoardRequest::default(), dir).unwrap();
-    let b = BoardFile::read(&dir.join("board.toml")).unwrap();
-    let picture = image::open(dir.join("board.png")).unwrap().to_luma8();
     let raw: RawParams = toml::from_str(&format!("kd = {KD:?}")).unwrap();
     let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
-    let model = fibrefit::model::build(ModelId::Lambert, &params).unwrap();
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let set = SwatchOnBoard::read(&dir.join("board.toml"), ModelId::Lambert, params).unwrap();
+    let scene = set.scene();
     let room = Some((Vector3::new(-400.0, 300.0, 700.0), 0.3));
     let mut lights = format!("lamp_mm = {LAMP:?}\n");
     let mut files = Vec::new();

@@ -9,7 +9,7 @@ use fibrefit::board::camera::{Intrinsics, Pose};
 use fibrefit::load::board::BoardFile;
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use fibrefit::synth::photo::{PhotoShot, SwatchOnBoard};
 use nalgebra::Vector3;
 use std::path::{Path, PathBuf};
 
@@ -36,17 +36,10 @@ fn poses() -> Vec<Pose> {
 /// The board and 8 JPEG photos in `dir`.
 fn shoot(dir: &Path) -> (PathBuf, Vec<PathBuf>) {
     board(&BoardRequest::default(), dir).unwrap();
-    let b = BoardFile::read(&dir.join("board.toml")).unwrap();
-    let picture = image::open(dir.join("board.png")).unwrap().to_luma8();
     let raw: RawParams = toml::from_str(&format!("kd = {KD:?}")).unwrap();
     let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
-    let model = fibrefit::model::build(ModelId::Lambert, &params).unwrap();
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let set = SwatchOnBoard::read(&dir.join("board.toml"), ModelId::Lambert, params).unwrap();
+    let scene = set.scene();
     let mut files = Vec::new();
     for (k, pose) in poses().iter().enumerate() {
         let shot = PhotoShot {

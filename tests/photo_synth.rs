@@ -4,29 +4,20 @@
 use fibrefit::api::board::{board, BoardRequest};
 use fibrefit::board::camera::{Intrinsics, Pose};
 use fibrefit::board::detect;
-use fibrefit::load::board::BoardFile;
 use fibrefit::model::params::{ModelParams, RawParams};
 use fibrefit::model::ModelId;
-use fibrefit::synth::photo::{PhotoScene, PhotoShot};
+use fibrefit::synth::photo::{PhotoShot, SwatchOnBoard};
 use nalgebra::Vector3;
 
 #[test]
 fn detected_corners_are_the_true_cameras_projections() {
     let dir = tempfile::tempdir().unwrap();
     board(&BoardRequest::default(), dir.path()).unwrap();
-    let b = BoardFile::read(&dir.path().join("board.toml")).unwrap();
-    let picture = image::open(dir.path().join("board.png"))
-        .unwrap()
-        .to_luma8();
     let raw: RawParams = toml::from_str("kd = [0.6, 0.4, 0.3]").unwrap();
     let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert).unwrap();
-    let model = fibrefit::model::build(ModelId::Lambert, &params).unwrap();
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let set =
+        SwatchOnBoard::read(&dir.path().join("board.toml"), ModelId::Lambert, params).unwrap();
+    let (b, scene) = (&set.board, set.scene());
     let intrinsics = Intrinsics {
         size_px: [1600, 1200],
         focal_px: 1500.0,

@@ -8,10 +8,9 @@
 use super::camera::{measure, Cost};
 use crate::api::board::{board, BoardRequest};
 use crate::board::camera::Intrinsics;
-use crate::load::board::BoardFile;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::ModelId;
-use crate::synth::photo::{set_pose, PhotoFormat, PhotoScene, PhotoShot, SET_CAMERA, SET_FLASH_MM};
+use crate::synth::photo::{set_pose, PhotoFormat, PhotoShot, SwatchOnBoard, SET_CAMERA, SET_FLASH_MM};
 use anyhow::{Context, Result};
 use nalgebra::Vector3;
 use std::fmt::Write as _;
@@ -50,17 +49,10 @@ fn camera(width: u32) -> Intrinsics {
 /// or DNGs.
 fn shoot(dir: &Path, n: usize, width: u32, format: PhotoFormat) -> Result<(PathBuf, Vec<PathBuf>)> {
     board(&BoardRequest::default(), dir)?;
-    let b = BoardFile::read(&dir.join("board.toml"))?;
-    let picture = image::open(dir.join("board.png"))?.to_luma8();
     let raw: RawParams = toml::from_str("kd = [0.5, 0.4, 0.3]")?;
     let (params, _) = ModelParams::from_raw(&raw, ModelId::Lambert)?;
-    let model = crate::model::build(ModelId::Lambert, &params)?;
-    let scene = PhotoScene {
-        board: &b,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
+    let set = SwatchOnBoard::read(&dir.join("board.toml"), ModelId::Lambert, params)?;
+    let scene = set.scene();
     let k = camera(width);
     let mut files = Vec::new();
     for i in 0..n {

@@ -230,6 +230,52 @@ pub const SET_NOISE_FLOOR: f64 = 0.002;
 /// The flash's position in the camera frame (mm) of the photo set.
 pub const SET_FLASH_MM: [f64; 3] = [10.0, 0.0, 0.0];
 
+/// A printed board with a swatch in its window, ready to photograph: what `synth --photos`,
+/// `bench photos` and the photo tests render ([`SwatchOnBoard::scene`]).
+pub struct SwatchOnBoard {
+    pub board: BoardFile,
+    /// `board.png` beside `board.toml`.
+    pub picture: GrayImage,
+    pub model: Box<dyn ShadingModel>,
+    pub params: ModelParams,
+}
+
+impl SwatchOnBoard {
+    /// The board of `board_toml` (its `board.png` beside it, of the size the TOML says) with a
+    /// swatch of rung `id` at `params`.
+    pub fn read(board_toml: &std::path::Path, id: crate::model::ModelId, params: ModelParams) -> Result<Self> {
+        let board = BoardFile::read(board_toml)?;
+        let png_path = board_toml.with_file_name("board.png");
+        let picture = crate::load::image_io::decode_png(&png_path, "board picture")?.to_luma8();
+        if [picture.width(), picture.height()] != board.png_px {
+            bail!(
+                "{}: {}x{} pixels, but board.toml says {:?}",
+                png_path.display(),
+                picture.width(),
+                picture.height(),
+                board.png_px
+            );
+        }
+        let model = crate::model::build(id, &params)?;
+        Ok(Self {
+            board,
+            picture,
+            model,
+            params,
+        })
+    }
+
+    /// The scene: the board on a dark table (reflectance 0.05), the swatch in its window.
+    pub fn scene(&self) -> PhotoScene<'_> {
+        PhotoScene {
+            board: &self.board,
+            picture: &self.picture,
+            swatch: Some((self.model.as_ref(), &self.params)),
+            table_reflectance: 0.05,
+        }
+    }
+}
+
 /// Photo `i` of `n`'s camera: 300 mm from the window's centre, elevations cycling through
 /// 20-60 degrees, azimuths all around.
 pub fn set_pose(i: usize, n: usize) -> Pose {
@@ -250,18 +296,6 @@ pub fn write_photo_set(
     if !(1..=64).contains(&req.count) {
         bail!("--count {}: expected 1 to 64 photos", req.count);
     }
-    let board = BoardFile::read(&req.board)?;
-    let png_path = req.board.with_file_name("board.png");
-    let picture = crate::load::image_io::decode_png(&png_path, "board picture")?.to_luma8();
-    if [picture.width(), picture.height()] != board.png_px {
-        bail!(
-            "{}: {}x{} pixels, but board.toml says {:?}",
-            png_path.display(),
-            picture.width(),
-            picture.height(),
-            board.png_px
-        );
-    }
     let raw = crate::export::result_json::read_params(&req.params)?;
     let (id, params, warnings) = crate::export::result_json::checked_params(
         &raw,
@@ -271,14 +305,9 @@ pub fn write_photo_set(
     for w in &warnings {
         progress.warn(&format!("{}: {w}", req.params.display()));
     }
-    let model = crate::model::build(id, &params)?;
-    let scene = PhotoScene {
-        board: &board,
-        picture: &picture,
-        swatch: Some((model.as_ref(), &params)),
-        table_reflectance: 0.05,
-    };
-    let inputs = [req.board.clone(), png_path, req.params.clone()];
+    let set = SwatchOnBoard::read(&req.board, id, params)?;
+    let scene = set.scene();
+    let inputs = [req.board.clone(), req.board.with_file_name("board.png"), req.params.clone()];
     let mut outs = crate::export::atomic::Outputs::new(&inputs);
     let dir = outs.dir(out, "--out")?;
     let mut files = Vec::new();
