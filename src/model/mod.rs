@@ -388,5 +388,6 @@ pub fn build_aligned(id: ModelId, p: &ModelParams) -> Box<dyn ShadingModel> {
         histogram_bins: p.histogram_bins,
         topology: &p.topology,
         gltf: p.gltf,
+        principled: p.principled,
     })
 }

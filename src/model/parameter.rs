@@ -49,6 +49,11 @@ pub enum Param {
     Sheen,
     SheenRoughness,
     GltfVariant,
+    PrincipledLayers,
+    Anisotropic,
+    SpecularIorLevel,
+    SpecularTint,
+    SheenWeight,
 }
 
 /// What a rung can do, declared in its own file ([`super::rung::Rung::abilities`]). A
@@ -80,6 +85,10 @@ pub enum Ability {
     /// and _ior (`metallic`, `roughness`, `anisotropy_strength`, `specular_factor`, `ior`,
     /// `sheen`, `sheen_roughness`, and the layers' unit weight `gltf_layers`).
     GltfMaterial,
+    /// Blender's Principled BSDF as Cycles evaluates it (`roughness`, `anisotropic`, `ior`,
+    /// `specular_ior_level`, `specular_tint`, `sheen_weight`, `sheen_roughness`, and the layers'
+    /// unit weight `principled_layers`).
+    PrincipledMaterial,
 }
 
 /// Who reads a parameter.
@@ -87,6 +96,9 @@ pub enum Ability {
 pub enum Reader {
     /// Rungs with this ability.
     Rung(Ability),
+    /// Rungs with either ability (one value meaning the same in both: the GGX roughness, the
+    /// IOR).
+    Either(Ability, Ability),
     /// The fuzz layer, over any rung.
     FuzzLayer,
 }
@@ -240,10 +252,10 @@ use super::fuzz::{ASYMMETRY_RANGE, DEPTH_RANGE, WEIGHT_MAX};
 use Ability::*;
 use Component as C;
 use Kind::{Albedo as A, Knob, Shape};
-use Reader::{FuzzLayer, Rung as R};
+use Reader::{Either, FuzzLayer, Rung as R};
 
 /// Every parameter and knob, in the order rungs list them (a fit's parameters keep this order).
-pub const TABLE: [ParamInfo; 33] = [
+pub const TABLE: [ParamInfo; 38] = [
     row(
         Param::RhoD,
         "rho_d",
@@ -517,9 +529,9 @@ pub const TABLE: [ParamInfo; 33] = [
         Param::Roughness,
         "roughness",
         "1",
-        "glTF perceptual roughness r (GGX alpha = r^2)",
+        "perceptual roughness r (GGX alpha = r^2): glTF's roughness, Blender's Roughness",
         Shape,
-        R(GltfMaterial),
+        Either(GltfMaterial, PrincipledMaterial),
     )
     .absent(0.5)
     .start(At(0.5))
@@ -547,9 +559,9 @@ pub const TABLE: [ParamInfo; 33] = [
         Param::Ior,
         "ior",
         "1",
-        "KHR_materials_ior index of refraction: dielectric F0 = ((ior - 1) / (ior + 1))^2",
+        "index of refraction, dielectric F0 = ((ior - 1) / (ior + 1))^2: KHR_materials_ior, Blender's IOR",
         Shape,
-        R(GltfMaterial),
+        Either(GltfMaterial, PrincipledMaterial),
     )
     .absent(1.5)
     .start(At(1.5))
@@ -567,9 +579,9 @@ pub const TABLE: [ParamInfo; 33] = [
         Param::SheenRoughness,
         "sheen_roughness",
         "1",
-        "KHR_materials_sheen roughness (Charlie alpha = roughness^2)",
+        "sheen roughness: glTF's (Charlie alpha = roughness^2), Blender's Sheen Roughness (its LTC table)",
         Shape,
-        R(GltfMaterial),
+        Either(GltfMaterial, PrincipledMaterial),
     )
     .absent(0.5)
     .start(At(0.5))
@@ -582,6 +594,61 @@ pub const TABLE: [ParamInfo; 33] = [
         Knob,
         R(GltfMaterial),
     ),
+    // Blender's Principled BSDF (model/rungs/principled.rs): base colour is `kd`, the layers over
+    // its diffuse (specular, sheen) one column of weight 1; names and ranges are Blender's
+    row(
+        Param::PrincipledLayers,
+        "principled_layers",
+        "1",
+        "weight of the Principled BSDF's layers over the base colour's diffuse (specular, sheen): 1 in Blender",
+        A(C::Specular),
+        R(PrincipledMaterial),
+    )
+    .absent(1.0)
+    .start(At(1.0))
+    .range(At(1.0), At(1.0))
+    .held()
+    .listed_only(),
+    row(
+        Param::Anisotropic,
+        "anisotropic",
+        "1",
+        "Blender's Anisotropic: alpha / aspect across the fibres, alpha aspect along, aspect = sqrt(1 - 0.9 a)",
+        Shape,
+        R(PrincipledMaterial),
+    )
+    .start(At(0.5)),
+    row(
+        Param::SpecularIorLevel,
+        "specular_ior_level",
+        "1",
+        "Blender's Specular IOR Level: F0 x 2 level (0.5: the IOR's own)",
+        Shape,
+        R(PrincipledMaterial),
+    )
+    .absent(0.5)
+    .start(At(0.5))
+    .held(),
+    row(
+        Param::SpecularTint,
+        "specular_tint",
+        "1",
+        "Blender's Specular Tint, grey: scales F0 (not the grazing reflectance)",
+        Shape,
+        R(PrincipledMaterial),
+    )
+    .absent(1.0)
+    .start(At(1.0))
+    .held(),
+    row(
+        Param::SheenWeight,
+        "sheen_weight",
+        "1",
+        "Blender's Sheen Weight (Sheen Tint white)",
+        Shape,
+        R(PrincipledMaterial),
+    )
+    .start(At(0.5)),
 ];
 
 impl Param {

@@ -124,6 +124,21 @@ pub struct RawParams {
     /// `gltf`: whose BRDF (`khronos`, the default, or `threejs`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gltf_variant: Option<GltfVariant>,
+    /// `principled`: the layers' weight over the base colour's diffuse (1: Blender).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub principled_layers: Option<Albedo>,
+    /// `principled`: Blender's Anisotropic in [0, 1] (the tangent across the fibres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub anisotropic: Option<f64>,
+    /// `principled`: Blender's Specular IOR Level in [0, 1] (0.5: the IOR's own F0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_ior_level: Option<f64>,
+    /// `principled`: Blender's Specular Tint, grey, in [0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_tint: Option<f64>,
+    /// `principled`: Blender's Sheen Weight in [0, 1] (Sheen Tint white).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sheen_weight: Option<f64>,
 }
 
 pub const DEFAULT_QUADRATURE_ORDER: usize = 16;
@@ -157,6 +172,8 @@ pub struct ModelParams {
     pub preview: Preview,
     /// The `gltf` rung's material (its defaults for other rungs).
     pub gltf: GltfShape,
+    /// The `principled` rung's material (its defaults for other rungs).
+    pub principled: PrincipledShape,
 }
 
 fn check_range(name: Param, v: f64, lo: f64, hi: f64) -> Result<f64> {
@@ -220,6 +237,11 @@ impl RawParams {
             Param::Sheen => self.sheen.is_some(),
             Param::SheenRoughness => self.sheen_roughness.is_some(),
             Param::GltfVariant => self.gltf_variant.is_some(),
+            Param::PrincipledLayers => self.principled_layers.is_some(),
+            Param::Anisotropic => self.anisotropic.is_some(),
+            Param::SpecularIorLevel => self.specular_ior_level.is_some(),
+            Param::SpecularTint => self.specular_tint.is_some(),
+            Param::SheenWeight => self.sheen_weight.is_some(),
         }
     }
 }
@@ -244,6 +266,8 @@ impl ModelParams {
             ward_albedos(raw)?
         } else if id.has(Ability::GltfMaterial) {
             (gltf_albedos(raw, raw.gltf_variant.unwrap_or_default())?, 1.0, 1.0)
+        } else if id.has(Ability::PrincipledMaterial) {
+            (principled_albedos(raw)?, 1.0, 1.0)
         } else {
             (fibre_albedos(raw, id)?, 1.0, 1.0)
         };
@@ -274,6 +298,7 @@ impl ModelParams {
                     ambient,
                 },
                 gltf: GltfShape::from_raw(raw)?,
+                principled: PrincipledShape::from_raw(raw)?,
             },
             warnings,
         ))
@@ -319,6 +344,11 @@ fn unused_warnings(raw: &RawParams, id: ModelId) -> Vec<String> {
         Sheen,
         SheenRoughness,
         GltfVariant,
+        PrincipledLayers,
+        Anisotropic,
+        SpecularIorLevel,
+        SpecularTint,
+        SheenWeight,
     ];
     for p in order {
         if raw.gives(p) && !id.reads(p) {
@@ -588,6 +618,107 @@ impl GltfShape {
         match err {
             Some(e) => Err(e),
             None => Ok(shape.with_variant(raw.gltf_variant.unwrap_or_default())),
+        }
+    }
+}
+
+/// The `principled` rung's albedos: the base colour `kd` (diffuse column) and the layers'
+/// weight (specular column), 1 as Blender defines the material.
+fn principled_albedos(raw: &RawParams) -> Result<Albedos> {
+    let kd = raw
+        .kd
+        .ok_or_else(|| anyhow!("model `principled` needs `kd` (the base colour)"))?;
+    check_albedo(Param::Kd, &kd)?;
+    let layers = raw.principled_layers.unwrap_or(Albedo::Grey(1.0));
+    for c in layers.channels() {
+        check_range(Param::PrincipledLayers, c, 1.0, 1.0)?;
+    }
+    Ok(Albedos {
+        diffuse: kd.channels(),
+        specular: [1.0; 3],
+        substrate: [0.0; 3],
+        fuzz: [0.0; 3],
+        rgb: kd.is_rgb(),
+    })
+}
+
+/// The `principled` rung's shape parameters (`model/rungs/principled.rs`), as Blender's
+/// Principled BSDF names them, as a parameter file or a fit gives them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PrincipledShape {
+    /// Roughness r (alpha = r^2).
+    pub roughness: f64,
+    /// Anisotropic in [0, 1], the tangent across the fibres.
+    pub anisotropic: f64,
+    /// IOR.
+    pub ior: f64,
+    /// Specular IOR Level (0.5: the IOR's own F0).
+    pub specular_ior_level: f64,
+    /// Specular Tint, grey.
+    pub specular_tint: f64,
+    /// Sheen Weight (Sheen Tint white).
+    pub sheen_weight: f64,
+    /// Sheen Roughness.
+    pub sheen_roughness: f64,
+}
+
+impl Default for PrincipledShape {
+    /// The parameter table's values for a rung (or file) without them.
+    fn default() -> Self {
+        Self::of(|p| p.info().absent)
+    }
+}
+
+impl PrincipledShape {
+    /// The shape with each parameter's value from `value`.
+    pub fn of(mut value: impl FnMut(Param) -> f64) -> Self {
+        Self {
+            roughness: value(Param::Roughness),
+            anisotropic: value(Param::Anisotropic),
+            ior: value(Param::Ior),
+            specular_ior_level: value(Param::SpecularIorLevel),
+            specular_tint: value(Param::SpecularTint),
+            sheen_weight: value(Param::SheenWeight),
+            sheen_roughness: value(Param::SheenRoughness),
+        }
+    }
+
+    /// The lobe's roughness and anisotropic as given.
+    pub fn lobe(&self) -> crate::model::Lobe {
+        crate::model::Lobe {
+            roughness: self.roughness,
+            anisotropy: self.anisotropic,
+        }
+    }
+
+    /// The values in `raw` (the table's absent values where it gives none), each within its
+    /// hard limits.
+    fn from_raw(raw: &RawParams) -> Result<Self> {
+        let given = |p: Param| match p {
+            Param::Roughness => raw.roughness,
+            Param::Anisotropic => raw.anisotropic,
+            Param::Ior => raw.ior,
+            Param::SpecularIorLevel => raw.specular_ior_level,
+            Param::SpecularTint => raw.specular_tint,
+            Param::SheenWeight => raw.sheen_weight,
+            _ => raw.sheen_roughness,
+        };
+        let mut err = None;
+        let shape = Self::of(|p| {
+            let info = p.info();
+            let v = given(p).unwrap_or(info.absent);
+            let (lo, hi) = (info.limits.0.at(2.0, 2.0), info.limits.1.at(2.0, 2.0));
+            match check_range(p, v, lo, hi) {
+                Ok(v) => v,
+                Err(e) => {
+                    err.get_or_insert(e);
+                    info.absent
+                }
+            }
+        });
+        match err {
+            Some(e) => Err(e),
+            None => Ok(shape),
         }
     }
 }

@@ -20,6 +20,8 @@ pub struct AlignedInputs<'a> {
     pub topology: &'a Topology,
     /// The `gltf` rung's material (the table's defaults for the other rungs).
     pub gltf: super::params::GltfShape,
+    /// The `principled` rung's material (the table's defaults for the other rungs).
+    pub principled: super::params::PrincipledShape,
 }
 
 /// How the importance sampler's lobe technique proposes directions for a rung.

@@ -260,6 +260,17 @@ impl Sampler {
             LobeSampling::FibreCone => Lobe::Fibre {
                 gamma: LOBE_WIDTH / p.exponent.max(1.0).sqrt(),
             },
+            LobeSampling::Ggx if id.has(Ability::PrincipledMaterial) => {
+                let q = &p.principled;
+                let (ab, at) = super::rungs::principled::alphas(q.roughness, q.anisotropic);
+                Lobe::Ggx {
+                    at,
+                    ab,
+                    dielectric: 1.0,
+                    f0: super::rungs::principled::f0_from_ior(q.ior),
+                    metal: 0.0,
+                }
+            }
             LobeSampling::Ggx => {
                 let g = &p.gltf;
                 // the lobe the variant evaluates (three.js floors the roughness)

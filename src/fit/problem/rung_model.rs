@@ -48,6 +48,7 @@ fn aligned_model_for(
         topology: &topology,
         gltf: crate::model::params::GltfShape::of(|p| set.shape_value(p))
             .with_variant(set.gltf_variant),
+        principled: crate::model::params::PrincipledShape::of(|p| set.shape_value(p)),
     })
 }
 

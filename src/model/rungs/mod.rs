@@ -13,6 +13,7 @@ pub mod hast_diffuse;
 pub mod lambert;
 pub mod max_normal;
 pub mod poulin_fournier;
+pub mod principled;
 pub mod reference;
 pub mod varying_topology;
 pub mod ward;
@@ -42,6 +43,8 @@ pub enum ModelId {
     /// The glTF 2.0 metallic-roughness material with sheen, anisotropy, specular and IOR
     /// (`gltf`).
     Gltf,
+    /// Blender 5.0's Principled BSDF as Cycles renders it (`principled`).
+    Principled,
 }
 
 impl fmt::Display for ModelId {
@@ -70,7 +73,7 @@ impl FromStr for ModelId {
 impl ModelId {
     /// Cheapest first (the exported shader numbers the rungs in this order); `gltf`, added
     /// later, is last so the numbers of the others stay as exported shaders have them.
-    pub const ALL: [ModelId; 8] = [
+    pub const ALL: [ModelId; 9] = [
         ModelId::Lambert,
         ModelId::MaxNormal,
         ModelId::HastDiffuse,
@@ -79,6 +82,7 @@ impl ModelId {
         ModelId::VaryingTopology,
         ModelId::Reference,
         ModelId::Gltf,
+        ModelId::Principled,
     ];
 
     /// The rung this id names: the registry's one `match`.
@@ -92,6 +96,7 @@ impl ModelId {
             ModelId::Reference => &reference::RUNG,
             ModelId::Ward => &ward::RUNG,
             ModelId::Gltf => &gltf::RUNG,
+            ModelId::Principled => &principled::RUNG,
         }
     }
 
@@ -140,6 +145,7 @@ impl ModelId {
     pub fn reads(self, p: Param) -> bool {
         match p.info().reader {
             Reader::Rung(a) => self.has(a),
+            Reader::Either(a, b) => self.has(a) || self.has(b),
             Reader::FuzzLayer => true,
         }
     }
