@@ -77,7 +77,9 @@ out = [
     "//! `intern/cycles/scene/shader.tables` (numbers only; the code that reads them is\n"
     "//! `super`). Written by `scripts/cycles_tables.py` from the `bpy` 5.0.1 module, where the\n"
     "//! compiled arrays are these exactly (the script checks each by what it is). Do not edit.\n\n"
-    "#![cfg_attr(rustfmt, rustfmt_skip)]\n",
+    "#![cfg_attr(rustfmt, rustfmt_skip)]\n"
+    "// numbers, not constants (one of them is 0.69314)\n"
+    "#![allow(clippy::approx_constant)]\n",
     rust("GGX_E", "`table_ggx_E`: GGX directional albedo E, 32 x 32, x = roughness (sqrt of alpha), y = cos theta.", ggx_e),
     rust("GGX_EAVG", "`table_ggx_Eavg`: its cosine-weighted average over the hemisphere, by roughness.", ggx_eavg),
     rust(

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Set up what the tests need on a fresh Debian or Ubuntu machine, then run every test: Rust
 # (cargo test), then the Python package (built with maturin into a virtual environment, tested
-# with pytest, Mitsuba 3 for the plugin's tests), then the browser tests (three.js,
+# with pytest, Mitsuba 3 for the plugin's tests), then Blender's Cycles (the bpy module in its own
+# virtual environment, .venv-blender/), then the browser tests (three.js,
 # <model-viewer> and `fibrefit view`'s page in headless Chromium, tests/browser). Safe to run
 # again: it installs only what is missing, and the virtual environment (.venv-test/) is kept
 # between runs.
@@ -44,6 +45,15 @@ venv=.venv-test
 [ -x "$venv/bin/python" ] || python3 -m venv --system-site-packages "$venv"
 py="$venv/bin/python"
 "$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" "pandas>=1.3" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
+# Blender's Python module for the Blender tests (python/tests/test_blender.py: the `principled`
+# rung rendered by Cycles): bpy 5.0.1 (374 MB, once) needs Python 3.11 and numpy < 2, so it has
+# its own virtual environment, kept between runs like the other
+bvenv=.venv-blender
+[ -x "$bvenv/bin/python" ] || python3 -m venv "$bvenv"
+bpy_py="$bvenv/bin/python"
+"$bpy_py" -c 'import sys; sys.exit(sys.version_info[:2] != (3, 11))' ||
+    { echo "scripts/test.sh: Blender's bpy 5.0.1 needs Python 3.11 ($bvenv has $("$bpy_py" --version))" >&2; exit 2; }
+"$bpy_py" -m pip install --quiet --disable-pip-version-check "bpy==5.0.1" "numpy>=1.26,<2" pytest
 phase "set-up (apt, pip)"
 
 # every test; a fresh build gains nothing from incremental compilation (it only costs time and
@@ -53,10 +63,16 @@ cargo test --no-run
 phase "building the Rust tests"
 cargo test --no-fail-fast
 phase "running the Rust tests"
-"$py" -m pip install --quiet --disable-pip-version-check ./python
+# one wheel, installed into both environments
+rm -rf target/python-wheel
+"$py" -m pip wheel --quiet --disable-pip-version-check --no-deps ./python -w target/python-wheel
+"$py" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/python-wheel/fibrefit-*.whl
+"$bpy_py" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/python-wheel/fibrefit-*.whl
 phase "building the Python package"
-"$py" -m pytest -q python/tests
+"$py" -m pytest -q python/tests --ignore=python/tests/test_blender.py
 phase "running the Python tests"
+FIBREFIT_REQUIRE_BPY=1 "$bpy_py" -m pytest -q python/tests/test_blender.py
+phase "running the Blender tests (Cycles)"
 
 # the browser tests: the exported GLB in three.js and <model-viewer> (tests/browser/run.mjs). The
 # npm packages (pinned by package-lock.json) go into tests/browser/node_modules, not committed,

@@ -20,6 +20,8 @@ Each function is a command of the command line, its keyword arguments the comman
   file: the exact model beside the glTF route in WebGL2, measured against fitted, the parameter
   table), written as ``fibrefit view`` writes it; returns its path.
 - ``load_data(path, *, <loading flags>) -> dict``: a measurement's samples as numpy arrays.
+- ``fibrefit.blender``: a ``principled`` fit as a Principled BSDF material in the running Blender
+  (``fibrefit.blender.material(result, name=None)``), as ``fibrefit export --blender``.
 - ``fibrefit.mitsuba``: a Mitsuba 3 BSDF plugin backed by ``Material`` and the Mitsuba scene of a
   capture image.
 

@@ -119,6 +119,9 @@ def export(
     *,
     progress: bool = False,
 ) -> Dict[str, Any]: ...
+def blender_script(
+    result: str, name: Optional[str] = None, *, progress: bool = False
+) -> Dict[str, Any]: ...
 def view(
     result: str,
     out: Optional[str] = None,

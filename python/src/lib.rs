@@ -873,6 +873,50 @@ fn view(
     Ok(out)
 }
 
+/// The Blender script `fibrefit export RESULT --blender FILE.py --name NAME` writes, in memory:
+/// a dict with `script` (the Python source), `name` (the material's name: `name`, or the
+/// result's file stem), `inputs` (the Principled BSDF's inputs it sets, by Blender's names),
+/// `fibre_azimuth_deg` and `error_text` (the fit's error against its data). `result` must be a
+/// `principled` fit without the fuzz layer (anything else raises, as the CLI refuses it).
+#[pyfunction]
+#[pyo3(signature = (result, name=None, *, progress=false))]
+fn blender_script<'py>(
+    py: Python<'py>,
+    result: PathBuf,
+    name: Option<String>,
+    progress: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let req = ExportRequest {
+        result,
+        model: None,
+        shader: None,
+        check: false,
+        gltf: false,
+        object: "swatch".to_string(),
+        blender: Some(name.unwrap_or_default()),
+        progress: fibrefit::Progress::new(!progress),
+    };
+    let out = py.detach(|| export_api::export(&req)).map_err(err)?;
+    let (m, script, error) = out
+        .blender
+        .ok_or_else(|| FibrefitError::new_err("no Blender material was built"))?;
+    let d = PyDict::new(py);
+    d.set_item("script", script)?;
+    d.set_item("name", &m.name)?;
+    let inputs = PyDict::new(py);
+    for (k, v) in m.inputs() {
+        if v.len() == 1 {
+            inputs.set_item(k, v[0])?;
+        } else {
+            inputs.set_item(k, v)?;
+        }
+    }
+    d.set_item("inputs", inputs)?;
+    d.set_item("fibre_azimuth_deg", m.fibre_azimuth_deg)?;
+    d.set_item("error_text", error.text())?;
+    Ok(d)
+}
+
 /// The fitted model of the result JSON (or parameter file) `result` as `fibrefit export`
 /// builds it, in memory: a dict with `model`, `shader` (the source in `shader`'s language:
 /// wgsl, glsl, hlsl or msl; or None), `glb` (bytes of the GLB preview on `object` when `gltf`;
@@ -916,6 +960,7 @@ fn export<'py>(
         check,
         gltf,
         object: object.to_string(),
+        blender: None,
         progress: fibrefit::Progress::new(!progress),
     };
     let out = py.detach(|| export_api::export(&req)).map_err(err)?;
@@ -1082,6 +1127,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(score, m)?)?;
     m.add_function(wrap_pyfunction!(eval, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
+    m.add_function(wrap_pyfunction!(blender_script, m)?)?;
     m.add_function(wrap_pyfunction!(view, m)?)?;
     m.add_function(wrap_pyfunction!(board, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;

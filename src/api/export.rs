@@ -2,6 +2,7 @@
 //! the Rust model when asked) and as a glTF material on a preview mesh (a `fit --maps` result's
 //! maps as its textures), built in memory; the caller writes them into its reserved outputs.
 
+use crate::export::blender_out::BlenderMaterial;
 use crate::export::gltf_out::{self, VertexFrames};
 use crate::export::shader::{self, check, gpu::Gpu, Language};
 use crate::fit::gltf_material::{self, FittedMaterial};
@@ -29,6 +30,9 @@ pub struct ExportRequest {
     pub gltf: bool,
     /// The preview mesh: swatch, sphere, torus or a .obj.
     pub object: String,
+    /// A Blender script making a Principled BSDF material of a `principled` fit, named this
+    /// (None: no script; an empty name: the result's file stem).
+    pub blender: Option<String>,
     /// Where notes, the check's figures and warnings go.
     pub progress: crate::progress::Progress,
 }
@@ -43,6 +47,8 @@ pub struct ExportOutcome {
     pub glb: Option<(Vec<u8>, GltfRoute)>,
     /// The per-texel maps the GLB carries as textures (a `fit --maps` result).
     pub textures: Option<GlbTextures>,
+    /// The Blender material and its script, with the fit's error against its data.
+    pub blender: Option<(BlenderMaterial, String, DataError)>,
     /// The result's values its data did not determine (at a bound, held, flat cost): the
     /// exports use them as given and say so (a warning, the shader's header, the GLB
     /// material's `extras.fibrefit.undetermined`).
@@ -279,12 +285,71 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
         }
         false => (None, None),
     };
+    let blender = match &req.blender {
+        Some(name) => {
+            let m = blender_material(req, id, &params, name, &lines)?;
+            let script = m.script();
+            Some((m, script, DataError::of_result(&req.result)))
+        }
+        None => None,
+    };
     Ok(ExportOutcome {
         model: id,
         shader: shader_text,
         glb,
         textures,
+        blender,
         undetermined,
+    })
+}
+
+/// The Blender material of a `principled` result (its values exactly), named `name` (empty:
+/// the result's file stem), its provenance `lines` and error against the data in the script's
+/// header. Any other result is refused: the material would be a conversion, not the fit.
+fn blender_material(
+    req: &ExportRequest,
+    id: ModelId,
+    params: &ModelParams,
+    name: &str,
+    lines: &[String],
+) -> Result<BlenderMaterial> {
+    let file = req.result.display();
+    if !id.has(crate::model::Ability::PrincipledMaterial) {
+        bail!(
+            "--blender: {file} is a `{id}` result; the Blender material is a `principled` fit \
+             (Blender's Principled BSDF as Cycles renders it, fitted to the data): run \
+             `fibrefit fit DATA --model principled` and export that result"
+        );
+    }
+    if params.fuzz_depth > 0.0 {
+        bail!(
+            "--blender: {file} is a principled + fuzz fit (fuzz_depth {}): Blender's Principled \
+             BSDF has no fuzz layer; fit `--model principled` without it",
+            params.fuzz_depth
+        );
+    }
+    if let Some(dir) = maps_of(&req.result, &crate::progress::Progress::quiet())? {
+        req.progress.warn(&format!(
+            "--blender carries the global fit only, not the per-texel maps in {}",
+            dir.display()
+        ));
+    }
+    let name = if name.is_empty() {
+        req.result
+            .file_stem()
+            .map_or("fibrefit".into(), |s| s.to_string_lossy().into_owned())
+    } else {
+        name.to_string()
+    };
+    let error = DataError::of_result(&req.result);
+    let mut provenance = lines.to_vec();
+    provenance.push(format!("error against the data: {}", error.text()));
+    Ok(BlenderMaterial {
+        name,
+        base_color: params.albedos.diffuse,
+        shape: params.principled,
+        fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
+        provenance,
     })
 }
 

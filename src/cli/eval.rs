@@ -23,6 +23,9 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
                      (across the fibres), specular and ior; kd is the base colour
   gltf_variant       gltf: khronos (the specification, default) or threejs (what three.js
                      r187 renders: docs/web.md); a result's knobs.gltf_variant
+  roughness, anisotropic, ior, specular_ior_level, specular_tint, sheen_weight,
+  sheen_roughness    principled: Blender 5.0's Principled BSDF as Cycles renders it, by its
+                     own names (tints grey; anisotropy across the fibres); kd is Base Color
   azimuth_spread_deg spread of the fibre directions around psi, [0, 180] degrees
                      (default 0: parallel; 180: isotropic, felt); fibre rungs
   azimuth_nodes      nodes of the spread's quadrature N_psi            (default 16)

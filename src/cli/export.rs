@@ -1,6 +1,7 @@
-//! `fibrefit export RESULT.json --shader wgsl|glsl|glsl-es|hlsl|msl --out FILE` and
-//! `--gltf FILE.glb [--object ...]`: the fitted model as shader code a renderer runs, and as a
-//! glTF material for engines without custom shaders.
+//! `fibrefit export RESULT.json --shader wgsl|glsl|glsl-es|hlsl|msl --out FILE`,
+//! `--gltf FILE.glb [--object ...]` and `--blender FILE.py [--name NAME]`: the fitted model as
+//! shader code a renderer runs, as a glTF material for engines without custom shaders, and as a
+//! Blender material.
 
 use crate::api::export::{self as export_api, ExportOutcome, ExportRequest, GltfRoute};
 use crate::export::atomic::Outputs;
@@ -35,7 +36,13 @@ helps), fitted over 1500 direction pairs like the result's Ward fallback; the ex
 conversion with its error against the model. A `fit --maps` result's maps (the directory its
 `maps.directory` names) become PNG textures in the GLB: base colour (sRGB, from kd/ks/height),
 metallic-roughness (from height) and the anisotropy texture (fibre direction from the azimuth
-map, strength from height).")]
+map, strength from height).
+BLENDER: a Python script that makes (or rebuilds in place) a material with a Principled BSDF
+carrying a `principled` fit's values exactly (the rung is that node as Cycles evaluates it;
+python/tests/test_blender.py renders it in Cycles), a Tangent node (UV Map) and Anisotropic
+Rotation so the fibres lie at fibre_azimuth_deg from the UV u axis; run it in Blender or exec it
+with the bpy module (fibrefit.blender.material in Python). Other results are refused: fit with
+--model principled. docs/guide/blender.md.")]
 pub struct ExportArgs {
     /// A fitted result (.json) or any parameter file `eval` accepts
     pub result: PathBuf,
@@ -64,14 +71,21 @@ pub struct ExportArgs {
         requires = "gltf"
     )]
     pub object: String,
+    /// Write a Blender script (.py) that makes a Principled BSDF material with a `principled`
+    /// fit's values (run it in Blender, or exec it with the bpy module)
+    #[arg(long, value_name = "FILE.py")]
+    pub blender: Option<PathBuf>,
+    /// The Blender material's name [default: the result's file stem]
+    #[arg(long, value_name = "NAME", requires = "blender")]
+    pub name: Option<String>,
     /// No summary on stderr
     #[arg(long, short)]
     pub quiet: bool,
 }
 
 pub fn run(args: &ExportArgs) -> Result<()> {
-    if args.shader.is_none() && args.gltf.is_none() {
-        bail!("nothing to export: give --shader LANG --out FILE and/or --gltf FILE.glb");
+    if args.shader.is_none() && args.gltf.is_none() && args.blender.is_none() {
+        bail!("nothing to export: give --shader LANG --out FILE, --gltf FILE.glb and/or --blender FILE.py");
     }
     let lang: Option<Language> = args
         .shader
@@ -85,6 +99,10 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         check: args.check,
         gltf: args.gltf.is_some(),
         object: args.object.clone(),
+        blender: args
+            .blender
+            .as_ref()
+            .map(|_| args.name.clone().unwrap_or_default()),
         progress: crate::progress::Progress::new(args.quiet),
     };
     // every output reserved before the work (none an input or another output), written together
@@ -104,11 +122,23 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         }
         gltf_out = Some(outs.file(g, "--gltf")?);
     }
+    let mut blender_out = None;
+    if let Some(b) = &args.blender {
+        let ext = b
+            .extension()
+            .and_then(|e| e.to_str())
+            .map(str::to_ascii_lowercase);
+        if ext.as_deref() != Some("py") {
+            bail!("--blender {}: expected a .py file name", b.display());
+        }
+        blender_out = Some(outs.file(b, "--blender")?);
+    }
     let ExportOutcome {
         model: id,
         shader: shader_text,
         glb,
         textures,
+        blender,
         ..
     } = export_api::export(&req)?;
     // write: every file staged, then committed together
@@ -118,8 +148,20 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if let (Some((bytes, _)), Some(id)) = (&glb, gltf_out) {
         outs.put(id, bytes)?;
     }
+    if let (Some((_, script, _)), Some(id)) = (&blender, blender_out) {
+        outs.put(id, script.as_bytes())?;
+    }
     outs.commit()?;
     if !args.quiet {
+        if let (Some((m, _, error)), Some(path)) = (&blender, &args.blender) {
+            eprintln!(
+                "wrote {} (Blender material `{}`: the principled fit written exactly, a Principled BSDF; fibres at {:.1} deg from the UV u axis)",
+                path.display(),
+                m.name,
+                m.fibre_azimuth_deg
+            );
+            eprintln!("  error against the data: {}", error.text());
+        }
         for line in summary(args, lang, id, &glb, &textures) {
             eprintln!("{line}");
         }

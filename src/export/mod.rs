@@ -1,9 +1,10 @@
 //! Writers of the outputs a user asks for (result JSON, fit report and plots, maps, pictures,
-//! eval tables, glTF, shaders): every file goes through [`atomic::Outputs`], so a failed run
+//! eval tables, glTF, shaders, Blender scripts): every file goes through [`atomic::Outputs`], so a failed run
 //! never leaves a half-written file or clobbers an existing one. The benchmarks' reports are
 //! written by `bench::report`.
 
 pub mod atomic;
+pub mod blender_out;
 pub mod brdf_plots;
 pub mod coverage_plot;
 pub mod dng;

@@ -622,24 +622,26 @@ pub const TABLE: [ParamInfo; 38] = [
         Param::SpecularIorLevel,
         "specular_ior_level",
         "1",
-        "Blender's Specular IOR Level: F0 x 2 level (0.5: the IOR's own)",
+        "Blender's Specular IOR Level: F0 x 2 level (0.5: the IOR's own; fitted only when listed: with ior it sets one F0)",
         Shape,
         R(PrincipledMaterial),
     )
     .absent(0.5)
     .start(At(0.5))
-    .held(),
+    .held()
+    .listed_only(),
     row(
         Param::SpecularTint,
         "specular_tint",
         "1",
-        "Blender's Specular Tint, grey: scales F0 (not the grazing reflectance)",
+        "Blender's Specular Tint, grey: scales F0, not the grazing reflectance (fitted only when listed)",
         Shape,
         R(PrincipledMaterial),
     )
     .absent(1.0)
     .start(At(1.0))
-    .held(),
+    .held()
+    .listed_only(),
     row(
         Param::SheenWeight,
         "sheen_weight",

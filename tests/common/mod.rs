@@ -199,6 +199,12 @@ pub fn reference(s: &Section) -> Box<dyn ShadingModel> {
     ))
 }
 
+/// The value of `p` in the example of rung `id` (the table's absent value where it has none).
+fn example(id: ModelId, p: model::parameter::Param) -> f64 {
+    let example = id.rung().example.iter().find(|e| e.0 == p);
+    example.map_or(p.info().absent, |e| e.1)
+}
+
 /// Every rung, built at the given section.
 pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
     let topology = Topology {
@@ -217,10 +223,8 @@ pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
                 quadrature_order: 16,
                 histogram_bins: 16,
                 topology: &topology,
-                gltf: model::params::GltfShape::of(|p| {
-                    let example = id.rung().example.iter().find(|e| e.0 == p);
-                    example.map_or(p.info().absent, |e| e.1)
-                }),
+                gltf: model::params::GltfShape::of(|p| example(id, p)),
+                principled: model::params::PrincipledShape::of(|p| example(id, p)),
             })
         })
         .collect()

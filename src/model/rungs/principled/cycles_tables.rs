@@ -4,6 +4,8 @@
 //! compiled arrays are these exactly (the script checks each by what it is). Do not edit.
 
 #![cfg_attr(rustfmt, rustfmt_skip)]
+// numbers, not constants (one of them is 0.69314)
+#![allow(clippy::approx_constant)]
 
 /// `table_ggx_E`: GGX directional albedo E, 32 x 32, x = roughness (sqrt of alpha), y = cos theta.
 pub static GGX_E: [f32; 1024] = [

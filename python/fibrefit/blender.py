@@ -1,0 +1,41 @@
+"""Blender: a ``principled`` fit as a Principled BSDF material, made in the running Blender.
+
+``material(result, name=None)`` runs, in this Python's ``bpy`` (inside Blender, or the ``bpy``
+module from PyPI), the script ``fibrefit export RESULT --blender FILE.py --name NAME`` writes:
+it makes the material ``name`` (default: the result's file stem), or rebuilds it in place when
+it exists (its users keep it), with a Principled BSDF carrying the fit's values exactly (the
+``principled`` rung is that node as Cycles evaluates it) and a Tangent node (UV map) so the
+fibres lie at the fit's ``fibre_azimuth_deg`` from the UV u axis. Returns the
+``bpy.types.Material``. ``script(result, name=None)`` returns the script's text and what it sets,
+without Blender.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Dict, Optional
+
+from . import _native
+
+
+def script(result: str, name: Optional[str] = None) -> Dict[str, Any]:
+    """The Blender script for ``result`` (a ``principled`` fit without the fuzz layer): a dict
+    with ``script`` (Python source), ``name``, ``inputs`` (the Principled BSDF's inputs it
+    sets, by Blender's names), ``fibre_azimuth_deg`` and ``error_text`` (the fit's error against
+    its data). Raises ``FibrefitError`` with the command line's message otherwise."""
+    return _native.blender_script(str(result), name)
+
+
+def material(result: str, name: Optional[str] = None):
+    """Make (or rebuild in place) the Blender material of ``result`` in the running ``bpy``;
+    returns the ``bpy.types.Material``."""
+    try:
+        import bpy  # noqa: F401  (the script imports it; fail here with a clear message)
+    except ImportError as e:  # pragma: no cover - depends on the environment
+        raise ImportError(
+            "fibrefit.blender.material needs Blender's Python module `bpy` (run it inside "
+            "Blender, or `pip install bpy` on Python 3.11)"
+        ) from e
+    s = script(result, name)
+    namespace: Dict[str, Any] = {"__name__": "fibrefit_blender_material"}
+    exec(compile(s["script"], f"<fibrefit blender material {s['name']}>", "exec"), namespace)
+    return namespace["MATERIAL"]
