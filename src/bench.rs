@@ -15,6 +15,7 @@ pub mod maps;
 pub mod photos;
 pub mod real;
 pub mod render;
+pub mod renderers;
 pub mod report;
 pub mod robustness;
 pub mod sampling;

@@ -22,6 +22,8 @@ STUDIES (each writes its tables, CSV and plots into OUT and says the command tha
                (OUT/selection.*)
   real FILE... [--curet DIR]  real fabrics against their floor, what their data allow
                (OUT/real_fabrics.*)
+  renderers [FILE...]  each renderer's route (exact model, Blender's principled, glTF, Ward, the
+               old glTF conversion) against the data (OUT/renderers.*)
 `fibrefit bench STUDY --help` gives each study's options.")]
 pub struct BenchArgs {
     /// The study (default: speed)
@@ -104,6 +106,23 @@ pub enum Study {
     /// (lambert, ward), the time: writes OUT/real_fabrics.md, .csv and the first measured
     /// file's residual hemisphere maps
     Real(RealArgs),
+    /// Each route a renderer takes against the data: `--model auto --metric log` on each file
+    /// (default: the shipped felt, silk and brushed sets), the choice (exact: Mitsuba plugin,
+    /// shader), principled (Blender), gltf, ward held out, the old glTF conversion of the
+    /// choice on every sample, each renderer rung's fit time: writes OUT/renderers.md and .csv
+    Renderers(RenderersArgs),
+}
+
+#[derive(Debug, Clone, Args)]
+pub struct RenderersArgs {
+    /// Measurements (measured .bsdf/MERL files, goniometric tables) [default: ROOT's
+    /// tests/data/rgl/acrylic_felt_green_rgb.bsdf, data_synthetic/silk/gonio.csv and
+    /// data_synthetic/brushed/gonio.csv]
+    #[arg(value_name = "FILE")]
+    pub files: Vec<PathBuf>,
+    /// Direction pairs drawn from each measured file
+    #[arg(long, value_name = "N", default_value_t = 3000)]
+    pub directions: usize,
 }
 
 #[derive(Debug, Clone, Args)]
@@ -318,6 +337,7 @@ pub fn run(args: &BenchArgs) -> Result<()> {
         Study::Selection(sel) => selection(args, &sel),
         Study::Felt(f) => felt(args, &f),
         Study::Real(r) => real(args, &r),
+        Study::Renderers(r) => renderers(args, &r),
     }
 }
 
@@ -565,6 +585,29 @@ fn real(args: &BenchArgs, r: &RealArgs) -> Result<()> {
     )?;
     if !args.quiet {
         eprintln!("wrote {}", args.out.join("real_fabrics.md").display());
+    }
+    Ok(())
+}
+
+fn renderers(args: &BenchArgs, r: &RenderersArgs) -> Result<()> {
+    let t = Instant::now();
+    let files = match r.files.is_empty() {
+        true => crate::bench::renderers::default_files(&args.root),
+        false => r.files.clone(),
+    };
+    let rows = crate::bench::renderers::run(
+        &files,
+        r.directions,
+        &crate::progress::Progress::new(args.quiet),
+    )?;
+    let mut command = String::from("fibrefit bench renderers");
+    for f in &r.files {
+        command += &format!(" {}", f.display());
+    }
+    command += &format!(" --directions {}", r.directions);
+    crate::bench::report::renderers::write(&args.out, &rows, &command, t.elapsed().as_secs_f64())?;
+    if !args.quiet {
+        eprintln!("wrote {}", args.out.join("renderers.md").display());
     }
     Ok(())
 }

@@ -850,6 +850,7 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
                 "train_samples_per_fold": s.counts.train_samples_per_fold,
                 "heldout_samples_per_fold": s.counts.heldout_samples_per_fold,
                 "heldout_samples_total": s.counts.heldout_samples_total,
+                "renderer_routes": crate::fit::selection::renderer_routes(s),
             })
         }),
         quality: Some(serde_json::to_value(&outcome.quality)?),

@@ -146,6 +146,11 @@ pub struct Rung {
     /// The symmetries of its parameters beyond the table's periodic ones (the fibre azimuth's
     /// 180 degrees, T -> -T, holds for every rung): [`Rung::canonicalise`].
     pub symmetries: &'static [Symmetry],
+    /// The renderer whose own material this rung is (an export carries its fit exactly, without
+    /// the fuzz layer), in words; `--model auto` shows the best such candidate beside its choice.
+    pub renderer: Option<&'static str>,
+    /// Whether `--model auto` also tries it with the fuzz layer (`selection.fuzz`).
+    pub auto_fuzz: bool,
 }
 
 impl Rung {

@@ -6,6 +6,7 @@ pub mod camera;
 pub mod felt;
 pub mod maps;
 pub mod real;
+pub mod renderers;
 pub mod robustness;
 pub mod sampling;
 pub mod selection;

@@ -36,7 +36,7 @@ pub fn model_values_on<'a>(
 
 /// Unweighted RMSE, relative RMSE and log error of `values` against the samples `test`
 /// (`ch` channels).
-pub(super) fn plain_errors(
+pub fn plain_errors(
     values: &[[f64; 3]],
     test: &[&crate::load::samples::Sample],
     ch: usize,

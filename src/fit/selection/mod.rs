@@ -129,10 +129,85 @@ mod table;
 
 pub use heldout::{of_fit, of_selection, splits_for, HeldOut, Split};
 use measure::*;
-pub use measure::{heldout, heldout_log_terms, model_values_on, problem_at, ranking_config};
+pub use measure::{
+    heldout, heldout_log_terms, model_values_on, plain_errors, problem_at, ranking_config,
+};
 pub use rule::*;
 pub use run::select_with;
 pub use table::{metric_name, table};
+
+/// The best candidate that is a renderer's own material (a rung with
+/// [`crate::model::Rung::renderer`], without the fuzz layer), per renderer, beside the choice.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct RendererRoute {
+    /// The renderer, in words.
+    pub renderer: String,
+    /// Its best candidate (the rung).
+    pub candidate: String,
+    /// Its held-out error and standard error (the fit's metric).
+    pub cv_error: f64,
+    pub cv_standard_error: f64,
+    /// The choice and its held-out error.
+    pub chosen: String,
+    pub chosen_error: f64,
+    /// Whether its error is within the choice's standard error of the choice's.
+    pub within_noise: bool,
+    /// What the difference means, in one line.
+    pub text: String,
+}
+
+/// The renderers' own materials among the candidates of `s`, each with its held-out error
+/// beside the choice and what the difference means; empty when none was measured.
+pub fn renderer_routes(s: &SelectionOutcome) -> Vec<RendererRoute> {
+    let Some(chosen) = s.candidates.iter().find(|c| c.chosen) else {
+        return Vec::new();
+    };
+    let mut out: Vec<RendererRoute> = Vec::new();
+    for c in s.candidates.iter().filter(|c| !c.fuzz && c.error.is_none()) {
+        let Ok(id) = c.rung.parse::<ModelId>() else {
+            continue;
+        };
+        let Some(renderer) = id.rung().renderer else {
+            continue;
+        };
+        if let Some(r) = out.iter_mut().find(|r| r.renderer == renderer) {
+            if c.cv_error >= r.cv_error {
+                continue;
+            }
+            out.retain(|r| r.renderer != renderer);
+        }
+        let within = c.cv_error <= chosen.cv_error + chosen.cv_standard_error;
+        let pct = 100.0 * (c.cv_error / chosen.cv_error - 1.0);
+        let head = format!(
+            "for {renderer}: `{}`, held-out error {:.4} +- {:.4}",
+            c.name, c.cv_error, c.cv_standard_error
+        );
+        let text = if c.chosen {
+            format!("{head}: it is the choice; its export carries the fit exactly")
+        } else if within {
+            format!(
+                "{head}; the choice `{}` {:.4} ({pct:+.0} %): within the noise, the renderer's own material carries these data as well as the choice",
+                chosen.name, chosen.cv_error
+            )
+        } else {
+            format!(
+                "{head}; the choice `{}` {:.4}: {pct:.0} % higher error in that renderer's own material; where that matters use the Mitsuba plugin or the exported shader (`export --shader`)",
+                chosen.name, chosen.cv_error
+            )
+        };
+        out.push(RendererRoute {
+            renderer: renderer.to_string(),
+            candidate: c.name.clone(),
+            cv_error: c.cv_error,
+            cv_standard_error: c.cv_standard_error,
+            chosen: chosen.name.clone(),
+            chosen_error: chosen.cv_error,
+            within_noise: within || c.chosen,
+            text,
+        });
+    }
+    out
+}
 
 pub fn select(samples: &Samples, cfg: &FitConfig) -> Result<SelectionOutcome> {
     select_with(
@@ -206,14 +281,15 @@ impl Counts {
 
 /// The candidates of `cfg`: every rung, without and with the fuzz layer (only with it when the
 /// config lists a fuzz parameter or `--fuzz` asked; only without when `selection.fuzz` is
-/// false): (name, rung, fuzz, config).
+/// false or the rung is not tried with it, [`crate::model::Rung::auto_fuzz`]): (name, rung,
+/// fuzz, config).
 pub fn candidates_of(cfg: &FitConfig) -> Result<Vec<(String, ModelId, bool, FitConfig)>> {
     let listed = cfg.listed_fuzz_parameter().is_some();
     let mut out = Vec::new();
     for name in &cfg.selection.rungs {
         let id: ModelId = name.parse().map_err(|e: String| anyhow::anyhow!(e))?;
         let rc = cfg.for_rung(id);
-        let variants: &[bool] = match (listed, cfg.selection.fuzz) {
+        let variants: &[bool] = match (listed, cfg.selection.fuzz && id.rung().auto_fuzz) {
             (true, _) => &[true],
             (false, true) => &[false, true],
             (false, false) => &[false],

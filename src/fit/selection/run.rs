@@ -118,7 +118,9 @@ impl Run<'_> {
     fn rank(&mut self, k: usize) -> Option<FitOutcome> {
         let (name, id, fuzz, rc) = &self.list[k];
         let cfg = self.cfg;
-        let coarse = match cfg.selection.coarse_ranking {
+        // a renderer's own material (closed form, cheap) is measured at the config's knobs and
+        // starts: its error is reported beside the choice as what that renderer gets
+        let coarse = match cfg.selection.coarse_ranking && id.rung().renderer.is_none() {
             true => ranking_config(rc),
             false => rc.clone(),
         };

@@ -49,5 +49,12 @@ pub fn table(s: &SelectionOutcome) -> String {
             }
         }
     }
+    let routes = renderer_routes(s);
+    if !routes.is_empty() {
+        t += "\nRenderers' own materials (the best candidate of each, without the fuzz layer):\n";
+        for r in routes {
+            t += &format!("- {}\n", r.text);
+        }
+    }
     t
 }

@@ -171,6 +171,8 @@ pub static RUNG: Rung = Rung {
         (Param::SheenRoughness, 0.5),
     ],
     symmetries: &[],
+    renderer: Some("web and real-time engines (glTF 2.0: three.js, <model-viewer>, Babylon.js)"),
+    auto_fuzz: true,
 };
 
 /// Nodes of the sheen's directional albedo table E(cos theta), at cos theta = k / (n - 1).

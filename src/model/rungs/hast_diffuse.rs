@@ -41,6 +41,8 @@ pub static RUNG: Rung = Rung {
     auto_rank: Some(1),
     example: &[(Param::Kd, 0.5)],
     symmetries: &[],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 #[derive(Clone, Copy, Debug, Default)]

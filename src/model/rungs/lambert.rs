@@ -30,6 +30,8 @@ pub static RUNG: Rung = Rung {
     auto_rank: Some(0),
     example: &[(Param::Kd, 0.5)],
     symmetries: &[],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 #[derive(Clone, Copy, Debug, Default)]

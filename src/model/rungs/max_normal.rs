@@ -36,6 +36,8 @@ pub static RUNG: Rung = Rung {
     auto_rank: Some(3),
     example: &[(Param::Kd, 0.3), (Param::Ks, 0.6), (Param::Exponent, 100.0)],
     symmetries: &[],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 #[derive(Clone, Copy, Debug)]

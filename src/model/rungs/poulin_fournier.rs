@@ -49,6 +49,8 @@ pub static RUNG: Rung = Rung {
         (Param::Spacing, 2.6),
     ],
     symmetries: &[],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 #[derive(Clone, Debug)]

@@ -76,7 +76,7 @@ pub static RUNG: Rung = Rung {
         "the Principled BSDF's shader is Blender's own: export --blender writes the material",
     ),
     cost: Cost::ClosedForm,
-    auto_rank: None,
+    auto_rank: Some(7),
     example: &[
         (Param::Kd, 0.4),
         (Param::Roughness, 0.45),
@@ -86,6 +86,8 @@ pub static RUNG: Rung = Rung {
         (Param::SheenRoughness, 0.5),
     ],
     symmetries: &[],
+    renderer: Some("Blender (Cycles' Principled BSDF)"),
+    auto_fuzz: false,
 };
 
 /// Cycles' `CLOSURE_WEIGHT_CUTOFF`: closures lighter than this are not made.

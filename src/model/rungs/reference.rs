@@ -43,6 +43,8 @@ pub static RUNG: Rung = Rung {
     auto_rank: None,
     example: crate::model::varying_topology::EXAMPLE,
     symmetries: &[],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 /// Relative tolerance of each inner integral (the model promise is 1e-9).

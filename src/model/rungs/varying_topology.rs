@@ -76,6 +76,8 @@ pub static RUNG: Rung = Rung {
     auto_rank: Some(5),
     example: EXAMPLE,
     symmetries: &[],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 /// The varying-topology example (the reference shares it).

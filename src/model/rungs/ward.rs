@@ -46,6 +46,8 @@ pub static RUNG: Rung = Rung {
         along: Param::AlphaX,
         across: Param::AlphaY,
     }],
+    renderer: None,
+    auto_fuzz: true,
 };
 
 #[derive(Clone, Copy, Debug)]
