@@ -73,7 +73,9 @@ pub static RUNG: Rung = Rung {
         cone_from: None,
     },
     shader: ShaderSection::None(
-        "the Principled BSDF's shader is Blender's own: export --blender writes the material",
+        "model `principled` is Blender's Principled BSDF: Blender renders it (export --blender \
+         writes the material; docs/guide/blender.md), fibrefit has no shader or WebGL view of it; \
+         for web engines fit and export the `gltf` rung",
     ),
     cost: Cost::ClosedForm,
     auto_rank: Some(7),
