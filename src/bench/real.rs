@@ -68,21 +68,27 @@ pub struct RealRun {
     pub drawn: Option<(usize, FitOutcome, FitConfig, Samples)>,
 }
 
+/// `f` as the real-data studies read it: a measured file at `directions` seeded pairs (seed 23,
+/// theta up to 78 deg), a table as it is.
+pub fn load_drawn(f: &Path, directions: usize) -> Result<Samples> {
+    let opts = LoadOptions {
+        measured: MeasuredOptions {
+            directions,
+            seed: 23,
+            max_theta_deg: 78.0,
+        },
+        ..Default::default()
+    };
+    load_data(f, &opts)
+}
+
 /// Data sets to run: (name, source, fibrous, kind, samples).
 type Set = (String, PathBuf, bool, &'static str, Samples);
 
 fn sets(files: &[PathBuf], curet: Option<&Path>, directions: usize) -> Result<Vec<Set>> {
     let mut out = Vec::new();
     for f in files {
-        let opts = LoadOptions {
-            measured: MeasuredOptions {
-                directions,
-                seed: 23,
-                max_theta_deg: 78.0,
-            },
-            ..Default::default()
-        };
-        let s = load_data(f, &opts)?;
+        let s = load_drawn(f, directions)?;
         let kind = match s.kind {
             crate::load::samples::DataKind::Measured => "measured file",
             _ => "table",

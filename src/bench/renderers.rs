@@ -12,8 +12,6 @@ use crate::bench::real::median;
 use crate::bench::selection::auto_fit;
 use crate::fit::config::Metric;
 use crate::fit::selection::Candidate;
-use crate::load::rgl::MeasuredOptions;
-use crate::load::{load_data, LoadOptions};
 use crate::model::frame::{DirectionPair, FibreFrame};
 use crate::model::Param;
 use anyhow::Result;
@@ -70,15 +68,7 @@ pub fn run(
 ) -> Result<Vec<RendererRow>> {
     let mut rows = Vec::new();
     for f in files {
-        let opts = LoadOptions {
-            measured: MeasuredOptions {
-                directions,
-                seed: 23,
-                max_theta_deg: 78.0,
-            },
-            ..Default::default()
-        };
-        let data = load_data(f, &opts)?;
+        let data = crate::bench::real::load_drawn(f, directions)?;
         let name = f
             .parent()
             .filter(|_| f.file_stem().is_some_and(|s| s == "gonio"))

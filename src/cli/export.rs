@@ -111,28 +111,14 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         Some(out) => Some(outs.file(out, "--out")?),
         None => None,
     };
-    let mut gltf_out = None;
-    if let Some(g) = &args.gltf {
-        let ext = g
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        if ext.as_deref() != Some("glb") {
-            bail!("--gltf {}: expected a .glb file name", g.display());
-        }
-        gltf_out = Some(outs.file(g, "--gltf")?);
-    }
-    let mut blender_out = None;
-    if let Some(b) = &args.blender {
-        let ext = b
-            .extension()
-            .and_then(|e| e.to_str())
-            .map(str::to_ascii_lowercase);
-        if ext.as_deref() != Some("py") {
-            bail!("--blender {}: expected a .py file name", b.display());
-        }
-        blender_out = Some(outs.file(b, "--blender")?);
-    }
+    let gltf_out = match &args.gltf {
+        Some(g) => Some(outs.file(with_extension(g, "glb", "--gltf")?, "--gltf")?),
+        None => None,
+    };
+    let blender_out = match &args.blender {
+        Some(b) => Some(outs.file(with_extension(b, "py", "--blender")?, "--blender")?),
+        None => None,
+    };
     let ExportOutcome {
         model: id,
         shader: shader_text,
@@ -167,6 +153,15 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// `path` when it ends in `.ext` (any case); else the error naming `flag`.
+fn with_extension<'a>(path: &'a std::path::Path, ext: &str, flag: &str) -> Result<&'a std::path::Path> {
+    let given = path.extension().and_then(|e| e.to_str());
+    if !given.is_some_and(|e| e.eq_ignore_ascii_case(ext)) {
+        bail!("{flag} {}: expected a .{ext} file name", path.display());
+    }
+    Ok(path)
 }
 
 /// What was written, one line each, for stderr: the shader, the GLB's material (the fit itself

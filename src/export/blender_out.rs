@@ -149,10 +149,10 @@ fn py_str(s: &str) -> String {
     o + "\""
 }
 
-/// A Python float literal that reads back as the same f64.
+/// A Python float literal that reads back as the same f64 (finite: the values are checked).
 fn py_f(x: f64) -> String {
     let s = format!("{x:?}");
-    if s.contains(['.', 'e', 'E']) || s.contains("inf") || s.contains("NaN") {
+    if s.contains(['.', 'e']) {
         s
     } else {
         s + ".0"

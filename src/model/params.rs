@@ -201,6 +201,25 @@ pub fn uses(id: ModelId, name: &str) -> bool {
 }
 
 impl RawParams {
+    /// The value the file gives the renderer rungs' shape parameter `p` (None: not given, or
+    /// not such a parameter).
+    fn shape_value(&self, p: Param) -> Option<f64> {
+        match p {
+            Param::Metallic => self.metallic,
+            Param::Roughness => self.roughness,
+            Param::AnisotropyStrength => self.anisotropy_strength,
+            Param::SpecularFactor => self.specular_factor,
+            Param::Ior => self.ior,
+            Param::Sheen => self.sheen,
+            Param::SheenRoughness => self.sheen_roughness,
+            Param::Anisotropic => self.anisotropic,
+            Param::SpecularIorLevel => self.specular_ior_level,
+            Param::SpecularTint => self.specular_tint,
+            Param::SheenWeight => self.sheen_weight,
+            _ => None,
+        }
+    }
+
     /// Whether the file gives parameter or knob `p`.
     pub fn gives(&self, p: Param) -> bool {
         match p {
@@ -593,32 +612,30 @@ impl GltfShape {
     /// The values in `raw` (the table's absent values where it gives none), each within its
     /// hard limits.
     fn from_raw(raw: &RawParams) -> Result<Self> {
-        let given = |p: Param| match p {
-            Param::Metallic => raw.metallic,
-            Param::Roughness => raw.roughness,
-            Param::AnisotropyStrength => raw.anisotropy_strength,
-            Param::SpecularFactor => raw.specular_factor,
-            Param::Ior => raw.ior,
-            Param::Sheen => raw.sheen,
-            _ => raw.sheen_roughness,
-        };
-        let mut err = None;
-        let shape = Self::of(|p| {
-            let info = p.info();
-            let v = given(p).unwrap_or(info.absent);
-            let (lo, hi) = (info.limits.0.at(2.0, 2.0), info.limits.1.at(2.0, 2.0));
-            match check_range(p, v, lo, hi) {
-                Ok(v) => v,
-                Err(e) => {
-                    err.get_or_insert(e);
-                    info.absent
-                }
+        let shape = checked_shape(raw, |value| Self::of(value))?;
+        Ok(shape.with_variant(raw.gltf_variant.unwrap_or_default()))
+    }
+}
+
+/// A rung's shape made `of` the values in `raw` (the table's absent value where it gives none),
+/// each within its hard limits; the first out of range is the error.
+fn checked_shape<T>(raw: &RawParams, of: impl FnOnce(&mut dyn FnMut(Param) -> f64) -> T) -> Result<T> {
+    let mut err = None;
+    let shape = of(&mut |p| {
+        let info = p.info();
+        let v = raw.shape_value(p).unwrap_or(info.absent);
+        let (lo, hi) = (info.limits.0.at(2.0, 2.0), info.limits.1.at(2.0, 2.0));
+        match check_range(p, v, lo, hi) {
+            Ok(v) => v,
+            Err(e) => {
+                err.get_or_insert(e);
+                info.absent
             }
-        });
-        match err {
-            Some(e) => Err(e),
-            None => Ok(shape.with_variant(raw.gltf_variant.unwrap_or_default())),
         }
+    });
+    match err {
+        Some(e) => Err(e),
+        None => Ok(shape),
     }
 }
 
@@ -694,32 +711,7 @@ impl PrincipledShape {
     /// The values in `raw` (the table's absent values where it gives none), each within its
     /// hard limits.
     fn from_raw(raw: &RawParams) -> Result<Self> {
-        let given = |p: Param| match p {
-            Param::Roughness => raw.roughness,
-            Param::Anisotropic => raw.anisotropic,
-            Param::Ior => raw.ior,
-            Param::SpecularIorLevel => raw.specular_ior_level,
-            Param::SpecularTint => raw.specular_tint,
-            Param::SheenWeight => raw.sheen_weight,
-            _ => raw.sheen_roughness,
-        };
-        let mut err = None;
-        let shape = Self::of(|p| {
-            let info = p.info();
-            let v = given(p).unwrap_or(info.absent);
-            let (lo, hi) = (info.limits.0.at(2.0, 2.0), info.limits.1.at(2.0, 2.0));
-            match check_range(p, v, lo, hi) {
-                Ok(v) => v,
-                Err(e) => {
-                    err.get_or_insert(e);
-                    info.absent
-                }
-            }
-        });
-        match err {
-            Some(e) => Err(e),
-            None => Ok(shape),
-        }
+        checked_shape(raw, |value| Self::of(value))
     }
 }
 

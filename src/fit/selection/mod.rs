@@ -162,20 +162,21 @@ pub fn renderer_routes(s: &SelectionOutcome) -> Vec<RendererRoute> {
     let Some(chosen) = s.candidates.iter().find(|c| c.chosen) else {
         return Vec::new();
     };
-    let mut out: Vec<RendererRoute> = Vec::new();
+    // each renderer's best candidate, in the order the renderers first appear
+    let mut best: Vec<(&str, &Candidate)> = Vec::new();
     for c in s.candidates.iter().filter(|c| !c.fuzz && c.error.is_none()) {
-        let Ok(id) = c.rung.parse::<ModelId>() else {
+        let Some(renderer) = c.rung.parse::<ModelId>().ok().and_then(|id| id.rung().renderer)
+        else {
             continue;
         };
-        let Some(renderer) = id.rung().renderer else {
-            continue;
-        };
-        if let Some(r) = out.iter_mut().find(|r| r.renderer == renderer) {
-            if c.cv_error >= r.cv_error {
-                continue;
-            }
-            out.retain(|r| r.renderer != renderer);
+        match best.iter_mut().find(|b| b.0 == renderer) {
+            Some(b) if c.cv_error < b.1.cv_error => b.1 = c,
+            Some(_) => {}
+            None => best.push((renderer, c)),
         }
+    }
+    let mut out = Vec::new();
+    for (renderer, c) in best {
         let within = c.cv_error <= chosen.cv_error + chosen.cv_standard_error;
         let pct = 100.0 * (c.cv_error / chosen.cv_error - 1.0);
         let head = format!(

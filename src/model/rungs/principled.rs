@@ -98,12 +98,13 @@ const WEIGHT_CUTOFF: f64 = 1e-5;
 /// The material at one parameter set, with what does not depend on the directions.
 #[derive(Clone, Debug)]
 pub struct Principled {
-    /// Roughness and anisotropic as given (for `with_lobe`).
-    roughness: f64,
-    anisotropic: f64,
     /// GGX alpha along Blender's tangent (across the fibres, B) and along the fibres (T).
     alpha_b: f64,
     alpha_t: f64,
+    /// The energy tables' roughness sqrt(sqrt(alpha_b alpha_t)) and E_avg there (by view
+    /// direction only E changes).
+    rough: f64,
+    e_avg: f64,
     /// The specular's relative IOR after the IOR level, its Fresnel F0 (tinted, saturated) and
     /// the untinted F0 of eta; `None`: no specular closure (eta = 1).
     specular: Option<Specular>,
@@ -128,7 +129,6 @@ struct Specular {
 impl Principled {
     /// The material of `p`.
     pub fn new(p: &PrincipledShape) -> Self {
-        let (alpha_b, alpha_t) = alphas(p.roughness, p.anisotropic);
         // "Apply IOR adjustment"
         let ior = p.ior.max(1e-5);
         let mut eta = ior;
@@ -152,15 +152,25 @@ impl Principled {
                 fss: f0 + (1.0 - f0) * s,
             }
         });
-        Self {
-            roughness: p.roughness,
-            anisotropic: p.anisotropic,
-            alpha_b,
-            alpha_t,
+        let mut m = Self {
+            alpha_b: 0.0,
+            alpha_t: 0.0,
+            rough: 0.0,
+            e_avg: 0.0,
             specular,
             sheen_weight: p.sheen_weight.max(0.0),
-            sheen_roughness: p.sheen_roughness.clamp(0.0, 1.0).clamp(1e-3, 1.0),
-        }
+            // saturated by the node, then clamped by `bsdf_sheen_setup`
+            sheen_roughness: p.sheen_roughness.clamp(1e-3, 1.0),
+        };
+        m.set_lobe(p.roughness, p.anisotropic);
+        m
+    }
+
+    /// The GGX lobe of `roughness` and `anisotropic`, with what the energy tables take of it.
+    fn set_lobe(&mut self, roughness: f64, anisotropic: f64) {
+        (self.alpha_b, self.alpha_t) = alphas(roughness, anisotropic);
+        self.rough = (self.alpha_b * self.alpha_t).sqrt().sqrt();
+        self.e_avg = lookup_1d(&GGX_EAVG, self.rough);
     }
 
     /// The BRDF's parts at (l, v), v towards the camera: (diffuse per unit base colour, the
@@ -192,9 +202,8 @@ impl Principled {
         // 2. the specular
         let mut specular = 0.0;
         if let Some(s) = &self.specular {
-            let rough = (self.alpha_b * self.alpha_t).sqrt().sqrt();
+            let (rough, e_avg) = (self.rough, self.e_avg);
             let e = lookup_2d(&GGX_E, 32, 32, rough, mu_v);
-            let e_avg = lookup_1d(&GGX_EAVG, rough);
             let missing = (1.0 - e) / e;
             let energy_scale = 1.0 + missing;
             let darkening = if s.fss != 1.0 {
@@ -242,11 +251,6 @@ impl Principled {
         };
         let g2 = 1.0 / (1.0 + lambda(l) + lambda(v));
         f * d * g2 / (4.0 * v.n * l.n)
-    }
-
-    /// The values the Principled BSDF node takes, as Blender names them (for exports).
-    pub fn alphas(&self) -> (f64, f64) {
-        (self.alpha_b, self.alpha_t)
     }
 }
 
@@ -386,9 +390,7 @@ impl ShadingModel for Principled {
 
     fn with_lobe(&self, lobe: Lobe) -> Option<Box<dyn ShadingModel>> {
         let mut p = self.clone();
-        p.roughness = lobe.roughness;
-        p.anisotropic = lobe.anisotropy;
-        (p.alpha_b, p.alpha_t) = alphas(lobe.roughness, lobe.anisotropy);
+        p.set_lobe(lobe.roughness, lobe.anisotropy);
         Some(Box::new(p))
     }
 
@@ -531,7 +533,7 @@ mod tests {
         let v = dir(40.0, 0.0);
         let mirror_off_across = m.parts(&dir(40.0, 180.0 + 25.0), &v).1;
         let mirror_off_along = m.parts(&dir(40.0 - 15.0, 180.0), &v).1;
-        let (ab, at) = m.alphas();
+        let (ab, at) = alphas(0.45, 0.6);
         assert!(ab > at);
         assert!(mirror_off_across > 0.0 && mirror_off_along > 0.0);
     }
