@@ -44,7 +44,10 @@ fi
 venv=.venv-test
 [ -x "$venv/bin/python" ] || python3 -m venv --system-site-packages "$venv"
 py="$venv/bin/python"
-"$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" "pandas>=1.3" pytest "maturin>=1.5,<2" "mitsuba>=3.5"
+# MaterialX (validates the --materialx document, generates its GLSL for the compile check and
+# the WebGL renders of tests/browser/materialx.mjs) and usd-core (opens and validates --usd)
+"$py" -m pip install --quiet --disable-pip-version-check "numpy>=1.21" "pandas>=1.3" pytest "maturin>=1.5,<2" "mitsuba>=3.5" \
+    "materialx==1.39.5" "usd-core==26.11"
 # Blender's Python module for the Blender tests (python/tests/test_blender.py: the `principled`
 # rung rendered by Cycles): bpy 5.0.1 (374 MB, once) needs Python 3.11 and numpy < 2, so it has
 # its own virtual environment, kept between runs like the other
@@ -69,7 +72,7 @@ rm -rf target/python-wheel
 "$py" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/python-wheel/fibrefit-*.whl
 "$bpy_py" -m pip install --quiet --disable-pip-version-check --force-reinstall --no-deps target/python-wheel/fibrefit-*.whl
 phase "building the Python package"
-"$py" -m pytest -q python/tests --ignore=python/tests/test_blender.py
+FIBREFIT_REQUIRE_MATERIALX=1 "$py" -m pytest -q python/tests --ignore=python/tests/test_blender.py
 phase "running the Python tests"
 FIBREFIT_REQUIRE_BPY=1 "$bpy_py" -m pytest -q python/tests/test_blender.py
 phase "running the Blender tests (Cycles)"
@@ -87,4 +90,6 @@ phase "installing the browser tests' npm packages"
 # the fibrefit binary `cargo test` built for the Rust tests
 FIBREFIT="${CARGO_TARGET_DIR:-target}/debug/fibrefit" node tests/browser/run.mjs
 FIBREFIT="${CARGO_TARGET_DIR:-target}/debug/fibrefit" node tests/browser/view.mjs
-phase "running the browser tests (three.js, model-viewer, fibrefit view)"
+# the openpbr rung in MaterialX's own generated shader (WebGL2), against the rung
+FIBREFIT="${CARGO_TARGET_DIR:-target}/debug/fibrefit" PYTHON="$py" node tests/browser/materialx.mjs
+phase "running the browser tests (three.js, model-viewer, fibrefit view, MaterialX)"

@@ -94,19 +94,22 @@ fn fuzz_true_false_and_none_set_auto_s_candidates() {
             .collect()
     };
     let (default, with, without) = (names(None), names(Some(true)), names(Some(false)));
-    // every rung of the ladder (eight with gltf and principled), without and with the fuzz
-    // layer but those auto tries without it only (principled: Blender has no fuzz layer)
+    // every rung of the ladder (nine with gltf, principled and openpbr), without and with the
+    // fuzz layer but those auto tries without it only (principled, openpbr: their renderers
+    // have no fuzz layer of fibrefit's)
     let rungs = without.len();
     assert!(rungs >= 8, "{without:?}");
     let plain_only = fibrefit::model::rungs::auto_candidates()
         .into_iter()
         .filter(|id| !id.rung().auto_fuzz)
         .count();
-    assert_eq!(plain_only, 1);
+    assert_eq!(plain_only, 2);
     assert_eq!(default.len(), 2 * rungs - plain_only, "{default:?}");
     assert!(
         default.contains(&"principled".to_string())
             && !default.contains(&"principled + fuzz".to_string())
+            && default.contains(&"openpbr".to_string())
+            && !default.contains(&"openpbr + fuzz".to_string())
     );
     assert!(with.iter().all(|n| n.ends_with("+ fuzz")) && with.len() == rungs);
     assert!(without.iter().all(|n| !n.contains("fuzz")));

@@ -22,6 +22,9 @@ Each function is a command of the command line, its keyword arguments the comman
 - ``load_data(path, *, <loading flags>) -> dict``: a measurement's samples as numpy arrays.
 - ``fibrefit.blender``: a ``principled`` fit as a Principled BSDF material in the running Blender
   (``fibrefit.blender.material(result, name=None)``), as ``fibrefit export --blender``.
+- ``fibrefit.materialx``: an ``openpbr`` fit as an OpenPBR Surface material
+  (``fibrefit.materialx.document(result)``, ``.usda(result)``), as ``fibrefit export
+  --materialx`` and ``--usd``.
 - ``fibrefit.mitsuba``: a Mitsuba 3 BSDF plugin backed by ``Material`` and the Mitsuba scene of a
   capture image.
 

@@ -894,6 +894,7 @@ fn blender_script<'py>(
         gltf: false,
         object: "swatch".to_string(),
         blender: Some(name.unwrap_or_default()),
+        openpbr: None,
         progress: fibrefit::Progress::new(!progress),
     };
     let out = py.detach(|| export_api::export(&req)).map_err(err)?;
@@ -913,6 +914,56 @@ fn blender_script<'py>(
     }
     d.set_item("inputs", inputs)?;
     d.set_item("fibre_azimuth_deg", m.fibre_azimuth_deg)?;
+    d.set_item("error_text", error.text())?;
+    Ok(d)
+}
+
+/// The OpenPBR material `fibrefit export RESULT --materialx FILE.mtlx --usd FILE.usda --name
+/// NAME` writes, in memory: a dict with `document` (the MaterialX document), `usda` (the USD
+/// stage), `name` (the material's name, made a valid MaterialX name), `inputs` (the OpenPBR
+/// Surface inputs it sets, by OpenPBR's names: floats, colours as lists),
+/// `tangent_rotation_deg` (the `rotate3d` amount of the UV tangent), `fibre_azimuth_deg`,
+/// `preview_roughness` (the UsdPreviewSurface fallback's) and `error_text` (the fit's error
+/// against its data). `result` must be an `openpbr` fit without the fuzz layer (anything else
+/// raises, as the CLI refuses it).
+#[pyfunction]
+#[pyo3(signature = (result, name=None, *, progress=false))]
+fn openpbr_material<'py>(
+    py: Python<'py>,
+    result: PathBuf,
+    name: Option<String>,
+    progress: bool,
+) -> PyResult<Bound<'py, PyDict>> {
+    let req = ExportRequest {
+        result,
+        model: None,
+        shader: None,
+        check: false,
+        gltf: false,
+        object: "swatch".to_string(),
+        blender: None,
+        openpbr: Some((name.unwrap_or_default(), "--materialx")),
+        progress: fibrefit::Progress::new(!progress),
+    };
+    let out = py.detach(|| export_api::export(&req)).map_err(err)?;
+    let (m, error) = out
+        .openpbr
+        .ok_or_else(|| FibrefitError::new_err("no OpenPBR material was built"))?;
+    let d = PyDict::new(py);
+    d.set_item("document", m.document())?;
+    d.set_item("usda", m.usda())?;
+    d.set_item("name", &m.name)?;
+    let inputs = PyDict::new(py);
+    for (k, v) in m.inputs() {
+        match v {
+            export_api::OpenPbrValue::Float(x) => inputs.set_item(k, x)?,
+            export_api::OpenPbrValue::Color(c) => inputs.set_item(k, c.to_vec())?,
+        }
+    }
+    d.set_item("inputs", inputs)?;
+    d.set_item("tangent_rotation_deg", m.tangent_rotation_deg())?;
+    d.set_item("fibre_azimuth_deg", m.fibre_azimuth_deg)?;
+    d.set_item("preview_roughness", m.preview_roughness())?;
     d.set_item("error_text", error.text())?;
     Ok(d)
 }
@@ -961,6 +1012,7 @@ fn export<'py>(
         gltf,
         object: object.to_string(),
         blender: None,
+        openpbr: None,
         progress: fibrefit::Progress::new(!progress),
     };
     let out = py.detach(|| export_api::export(&req)).map_err(err)?;
@@ -1128,6 +1180,7 @@ fn _native(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(eval, m)?)?;
     m.add_function(wrap_pyfunction!(export, m)?)?;
     m.add_function(wrap_pyfunction!(blender_script, m)?)?;
+    m.add_function(wrap_pyfunction!(openpbr_material, m)?)?;
     m.add_function(wrap_pyfunction!(view, m)?)?;
     m.add_function(wrap_pyfunction!(board, m)?)?;
     m.add_function(wrap_pyfunction!(calibrate, m)?)?;

@@ -4,6 +4,7 @@
 
 use crate::export::blender_out::BlenderMaterial;
 use crate::export::gltf_out::{self, VertexFrames};
+pub use crate::export::materialx_out::{OpenPbrMaterial, Value as OpenPbrValue};
 use crate::export::shader::{self, check, gpu::Gpu, Language};
 use crate::fit::gltf_material::{self, FittedMaterial};
 use crate::load::mesh;
@@ -33,6 +34,10 @@ pub struct ExportRequest {
     /// A Blender script making a Principled BSDF material of a `principled` fit, named this
     /// (None: no script; an empty name: the result's file stem).
     pub blender: Option<String>,
+    /// An OpenPBR Surface material of an `openpbr` fit (MaterialX document, USD stage): its
+    /// name (empty: the result's file stem) and the flag asking for it, as errors name it
+    /// (None: none).
+    pub openpbr: Option<(String, &'static str)>,
     /// Where notes, the check's figures and warnings go.
     pub progress: crate::progress::Progress,
 }
@@ -49,6 +54,9 @@ pub struct ExportOutcome {
     pub textures: Option<GlbTextures>,
     /// The Blender material and its script, with the fit's error against its data.
     pub blender: Option<(BlenderMaterial, String, DataError)>,
+    /// The OpenPBR material (its MaterialX document and USD stage come from it), with the
+    /// fit's error against its data.
+    pub openpbr: Option<(OpenPbrMaterial, DataError)>,
     /// The result's values its data did not determine (at a bound, held, flat cost): the
     /// exports use them as given and say so (a warning, the shader's header, the GLB
     /// material's `extras.fibrefit.undetermined`).
@@ -293,44 +301,60 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
         }
         None => None,
     };
+    let openpbr = match &req.openpbr {
+        Some((name, flag)) => {
+            let m = openpbr_material(req, id, &params, (name, flag), &lines)?;
+            Some((m, DataError::of_result(&req.result)))
+        }
+        None => None,
+    };
     Ok(ExportOutcome {
         model: id,
         shader: shader_text,
         glb,
         textures,
         blender,
+        openpbr,
         undetermined,
     })
 }
 
-/// The Blender material of a `principled` result (its values exactly), named `name` (empty:
-/// the result's file stem), its provenance `lines` and error against the data in the script's
-/// header. Any other result is refused: the material would be a conversion, not the fit.
-fn blender_material(
+/// A renderer's material of a result of the rung with `ability` (its values exactly), for
+/// export `flag`; any other result is refused (the material would be a conversion, not the
+/// fit), as is one with the fuzz layer (no renderer material has it). Returns the material's
+/// name (`name`, or the result's file stem when empty) and its header lines: `lines` and the
+/// error against the data.
+fn renderer_material(
     req: &ExportRequest,
     id: ModelId,
     params: &ModelParams,
+    (flag, ability, rung): (&str, crate::model::Ability, &str),
     name: &str,
     lines: &[String],
-) -> Result<BlenderMaterial> {
+) -> Result<(String, Vec<String>)> {
     let file = req.result.display();
-    if !id.has(crate::model::Ability::PrincipledMaterial) {
+    let what = id.rung().renderer.unwrap_or("a renderer's material");
+    if !id.has(ability) {
+        let target = ModelId::ALL
+            .into_iter()
+            .find(|m| m.has(ability))
+            .and_then(|m| m.rung().renderer)
+            .unwrap_or(rung);
         bail!(
-            "--blender: {file} is a `{id}` result; the Blender material is a `principled` fit \
-             (Blender's Principled BSDF as Cycles renders it, fitted to the data): run \
-             `fibrefit fit DATA --model principled` and export that result"
+            "{flag}: {file} is a `{id}` result; this export is a `{rung}` fit ({target}, fitted \
+             to the data): run `fibrefit fit DATA --model {rung}` and export that result"
         );
     }
     if params.fuzz_depth > 0.0 {
         bail!(
-            "--blender: {file} is a principled + fuzz fit (fuzz_depth {}): Blender's Principled \
-             BSDF has no fuzz layer; fit `--model principled` without it",
+            "{flag}: {file} is a {rung} + fuzz fit (fuzz_depth {}): {what} has no fuzz layer of \
+             fibrefit's; fit `--model {rung}` without it",
             params.fuzz_depth
         );
     }
     if let Some(dir) = maps_of(&req.result, &crate::progress::Progress::quiet())? {
         req.progress.warn(&format!(
-            "--blender carries the global fit only, not the per-texel maps in {}",
+            "{flag} carries the global fit only, not the per-texel maps in {}",
             dir.display()
         ));
     }
@@ -344,10 +368,48 @@ fn blender_material(
     let error = DataError::of_result(&req.result);
     let mut provenance = lines.to_vec();
     provenance.push(format!("error against the data: {}", error.text()));
+    Ok((name, provenance))
+}
+
+/// The Blender material of a `principled` result (its values exactly), named `name` (empty:
+/// the result's file stem).
+fn blender_material(
+    req: &ExportRequest,
+    id: ModelId,
+    params: &ModelParams,
+    name: &str,
+    lines: &[String],
+) -> Result<BlenderMaterial> {
+    let rung = (
+        "--blender",
+        crate::model::Ability::PrincipledMaterial,
+        "principled",
+    );
+    let (name, provenance) = renderer_material(req, id, params, rung, name, lines)?;
     Ok(BlenderMaterial {
         name,
         base_color: params.albedos.diffuse,
         shape: params.principled,
+        fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
+        provenance,
+    })
+}
+
+/// The OpenPBR Surface material of an `openpbr` result (its values exactly), named `name`
+/// (empty: the result's file stem) made a valid MaterialX name.
+fn openpbr_material(
+    req: &ExportRequest,
+    id: ModelId,
+    params: &ModelParams,
+    (name, flag): (&str, &str),
+    lines: &[String],
+) -> Result<OpenPbrMaterial> {
+    let rung = (flag, crate::model::Ability::OpenPbrMaterial, "openpbr");
+    let (name, provenance) = renderer_material(req, id, params, rung, name, lines)?;
+    Ok(OpenPbrMaterial {
+        name: OpenPbrMaterial::valid_name(&name),
+        base_color: params.albedos.diffuse,
+        shape: params.openpbr,
         fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
         provenance,
     })

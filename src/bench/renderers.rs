@@ -3,6 +3,7 @@
 //! fitted as `fibrefit fit DATA --model auto --metric log` runs it, so every candidate's held-out
 //! log error is on the same folds or split: the choice (the exact fibre model: the Mitsuba plugin
 //! and the exported shader carry it), `principled` (Blender's own material: `export --blender`),
+//! `openpbr` (MaterialX / USD pipelines' OpenPBR Surface: `export --materialx`, `--usd`),
 //! `gltf` (web engines' own: `export --gltf`), `ward`; and the old route, the glTF material
 //! fitted to the chosen model (`export --gltf` of a non-gltf result), whose error against the data
 //! is measured on every sample (it is fitted to the model, not to the data; the choice's own
@@ -19,7 +20,7 @@ use std::path::{Path, PathBuf};
 
 /// The candidates the report names per route (without the fuzz layer: what a renderer's own
 /// material can carry).
-pub const ROUTES: [&str; 3] = ["principled", "gltf", "ward"];
+pub const ROUTES: [&str; 4] = ["principled", "openpbr", "gltf", "ward"];
 
 /// One data set's routes.
 #[derive(Clone, Debug)]

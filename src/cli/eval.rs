@@ -26,6 +26,10 @@ PARAMETERS (TOML or JSON; names of MODEL.md §5):
   roughness, anisotropic, ior, specular_ior_level, specular_tint, sheen_weight,
   sheen_roughness    principled: Blender 5.0's Principled BSDF as Cycles renders it, by its
                      own names (tints grey; anisotropy across the fibres); kd is Base Color
+  specular_roughness, specular_roughness_anisotropy, specular_ior, specular_weight,
+  fuzz_weight, fuzz_roughness
+                     openpbr: OpenPBR Surface as MaterialX 1.39 renders it, by its own names
+                     (colours white; anisotropy across the fibres); kd is base_color
   azimuth_spread_deg spread of the fibre directions around psi, [0, 180] degrees
                      (default 0: parallel; 180: isotropic, felt); fibre rungs
   azimuth_nodes      nodes of the spread's quadrature N_psi            (default 16)

@@ -42,7 +42,16 @@ carrying a `principled` fit's values exactly (the rung is that node as Cycles ev
 python/tests/test_blender.py renders it in Cycles), a Tangent node (UV Map) and Anisotropic
 Rotation so the fibres lie at fibre_azimuth_deg from the UV u axis; run it in Blender or exec it
 with the bpy module (fibrefit.blender.material in Python). Other results are refused: fit with
---model principled. docs/guide/blender.md.")]
+--model principled. docs/guide/blender.md.
+MATERIALX: a MaterialX 1.39 document with an OpenPBR Surface (open_pbr_surface) carrying an
+`openpbr` fit's values exactly (the rung is that node as MaterialX implements it; every input
+the fit's subset fixes is written too), its tangent the geometry's UV tangent turned about the
+normal so the fibres lie at fibre_azimuth_deg from u. Validated by the materialx package and
+its generated GLSL compiled in the tests (python/tests/test_materialx.py).
+USD: a USD stage (.usda) with that material: its MaterialX render context (outputs:mtlx:surface)
+is the same OpenPBR network as UsdShade shaders, its universal surface a UsdPreviewSurface
+fallback for viewers without MaterialX (not the fit: no fuzz, no anisotropy), and a swatch bound
+to it. Other results are refused: fit with --model openpbr. docs/guide/materialx.md.")]
 pub struct ExportArgs {
     /// A fitted result (.json) or any parameter file `eval` accepts
     pub result: PathBuf,
@@ -75,8 +84,17 @@ pub struct ExportArgs {
     /// fit's values (run it in Blender, or exec it with the bpy module)
     #[arg(long, value_name = "FILE.py")]
     pub blender: Option<PathBuf>,
-    /// The Blender material's name [default: the result's file stem]
-    #[arg(long, value_name = "NAME", requires = "blender")]
+    /// Write a MaterialX document (.mtlx) with an OpenPBR Surface carrying an `openpbr` fit's
+    /// values
+    #[arg(long, value_name = "FILE.mtlx")]
+    pub materialx: Option<PathBuf>,
+    /// Write a USD stage (.usda) with that OpenPBR material (MaterialX render context) and a
+    /// UsdPreviewSurface fallback, bound to a swatch
+    #[arg(long, value_name = "FILE.usda")]
+    pub usd: Option<PathBuf>,
+    /// The material's name in Blender, MaterialX or USD [default: the result's file stem;
+    /// MaterialX and USD turn other characters than letters, digits and _ into _]
+    #[arg(long, value_name = "NAME")]
     pub name: Option<String>,
     /// No summary on stderr
     #[arg(long, short)]
@@ -84,9 +102,26 @@ pub struct ExportArgs {
 }
 
 pub fn run(args: &ExportArgs) -> Result<()> {
-    if args.shader.is_none() && args.gltf.is_none() && args.blender.is_none() {
-        bail!("nothing to export: give --shader LANG --out FILE, --gltf FILE.glb and/or --blender FILE.py");
+    if args.shader.is_none()
+        && args.gltf.is_none()
+        && args.blender.is_none()
+        && args.materialx.is_none()
+        && args.usd.is_none()
+    {
+        bail!(
+            "nothing to export: give --shader LANG --out FILE, --gltf FILE.glb, --blender FILE.py, \
+             --materialx FILE.mtlx and/or --usd FILE.usda"
+        );
     }
+    if args.name.is_some() && args.blender.is_none() && args.materialx.is_none() && args.usd.is_none() {
+        bail!("--name names the material of --blender, --materialx or --usd; none was given");
+    }
+    let openpbr_flag = match (&args.materialx, &args.usd) {
+        (Some(_), Some(_)) => Some("--materialx/--usd"),
+        (Some(_), None) => Some("--materialx"),
+        (None, Some(_)) => Some("--usd"),
+        (None, None) => None,
+    };
     let lang: Option<Language> = args
         .shader
         .as_deref()
@@ -103,6 +138,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
             .blender
             .as_ref()
             .map(|_| args.name.clone().unwrap_or_default()),
+        openpbr: openpbr_flag.map(|f| (args.name.clone().unwrap_or_default(), f)),
         progress: crate::progress::Progress::new(args.quiet),
     };
     // every output reserved before the work (none an input or another output), written together
@@ -119,12 +155,21 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         Some(b) => Some(outs.file(with_extension(b, "py", "--blender")?, "--blender")?),
         None => None,
     };
+    let materialx_out = match &args.materialx {
+        Some(m) => Some(outs.file(with_extension(m, "mtlx", "--materialx")?, "--materialx")?),
+        None => None,
+    };
+    let usd_out = match &args.usd {
+        Some(u) => Some(outs.file(with_extension(u, "usda", "--usd")?, "--usd")?),
+        None => None,
+    };
     let ExportOutcome {
         model: id,
         shader: shader_text,
         glb,
         textures,
         blender,
+        openpbr,
         ..
     } = export_api::export(&req)?;
     // write: every file staged, then committed together
@@ -137,6 +182,12 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if let (Some((_, script, _)), Some(id)) = (&blender, blender_out) {
         outs.put(id, script.as_bytes())?;
     }
+    if let (Some((m, _)), Some(id)) = (&openpbr, materialx_out) {
+        outs.put(id, m.document().as_bytes())?;
+    }
+    if let (Some((m, _)), Some(id)) = (&openpbr, usd_out) {
+        outs.put(id, m.usda().as_bytes())?;
+    }
     outs.commit()?;
     if !args.quiet {
         if let (Some((m, _, error)), Some(path)) = (&blender, &args.blender) {
@@ -146,6 +197,25 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 m.name,
                 m.fibre_azimuth_deg
             );
+            eprintln!("  error against the data: {}", error.text());
+        }
+        if let Some((m, error)) = &openpbr {
+            if let Some(path) = &args.materialx {
+                eprintln!(
+                    "wrote {} (MaterialX material `{}`: the openpbr fit written exactly, an OpenPBR Surface; fibres at {:.1} deg from the UV u axis)",
+                    path.display(),
+                    m.name,
+                    m.fibre_azimuth_deg
+                );
+            }
+            if let Some(path) = &args.usd {
+                eprintln!(
+                    "wrote {} (USD material `{}`: the openpbr fit as its MaterialX surface; a UsdPreviewSurface fallback, roughness {:.3}, without the fuzz and the anisotropy; a swatch bound to it)",
+                    path.display(),
+                    m.name,
+                    m.preview_roughness()
+                );
+            }
             eprintln!("  error against the data: {}", error.text());
         }
         for line in summary(args, lang, id, &glb, &textures) {

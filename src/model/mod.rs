@@ -389,5 +389,6 @@ pub fn build_aligned(id: ModelId, p: &ModelParams) -> Box<dyn ShadingModel> {
         topology: &p.topology,
         gltf: p.gltf,
         principled: p.principled,
+        openpbr: p.openpbr,
     })
 }

@@ -54,6 +54,13 @@ pub enum Param {
     SpecularIorLevel,
     SpecularTint,
     SheenWeight,
+    OpenPbrLayers,
+    SpecularWeight,
+    SpecularRoughness,
+    SpecularRoughnessAnisotropy,
+    SpecularIor,
+    FuzzWeight,
+    FuzzRoughness,
 }
 
 /// What a rung can do, declared in its own file ([`super::rung::Rung::abilities`]). A
@@ -89,6 +96,10 @@ pub enum Ability {
     /// `specular_ior_level`, `specular_tint`, `sheen_weight`, `sheen_roughness`, and the layers'
     /// unit weight `principled_layers`).
     PrincipledMaterial,
+    /// OpenPBR Surface as MaterialX 1.39 implements it (`specular_roughness`,
+    /// `specular_roughness_anisotropy`, `specular_ior`, `specular_weight`, `fuzz_weight`,
+    /// `fuzz_roughness`, and the layers' unit weight `openpbr_layers`).
+    OpenPbrMaterial,
 }
 
 /// Who reads a parameter.
@@ -255,7 +266,7 @@ use Kind::{Albedo as A, Knob, Shape};
 use Reader::{Either, FuzzLayer, Rung as R};
 
 /// Every parameter and knob, in the order rungs list them (a fit's parameters keep this order).
-pub const TABLE: [ParamInfo; 38] = [
+pub const TABLE: [ParamInfo; 45] = [
     row(
         Param::RhoD,
         "rho_d",
@@ -650,6 +661,84 @@ pub const TABLE: [ParamInfo; 38] = [
         Shape,
         R(PrincipledMaterial),
     )
+    .start(At(0.5)),
+    // OpenPBR Surface (model/rungs/openpbr.rs): base colour is `kd`, the layers over its diffuse
+    // (specular, fuzz) one column of weight 1; names and ranges are OpenPBR's
+    row(
+        Param::OpenPbrLayers,
+        "openpbr_layers",
+        "1",
+        "weight of OpenPBR's layers over the base colour's diffuse (specular, fuzz): 1 in OpenPBR",
+        A(C::Specular),
+        R(OpenPbrMaterial),
+    )
+    .absent(1.0)
+    .start(At(1.0))
+    .range(At(1.0), At(1.0))
+    .held()
+    .listed_only(),
+    row(
+        Param::SpecularWeight,
+        "specular_weight",
+        "1",
+        "OpenPBR's specular_weight: F0 x weight (1: the IOR's own; fitted only when listed: with specular_ior it sets one F0)",
+        Shape,
+        R(OpenPbrMaterial),
+    )
+    .absent(1.0)
+    .start(At(1.0))
+    .held()
+    .listed_only(),
+    row(
+        Param::SpecularRoughness,
+        "specular_roughness",
+        "1",
+        "OpenPBR's specular_roughness r (GGX alpha = r^2, before the anisotropy)",
+        Shape,
+        R(OpenPbrMaterial),
+    )
+    .absent(0.3)
+    .start(At(0.5))
+    .range(At(0.0), At(1.0))
+    .fit_range(At(0.03), At(1.0)),
+    row(
+        Param::SpecularRoughnessAnisotropy,
+        "specular_roughness_anisotropy",
+        "1",
+        "OpenPBR's specular_roughness_anisotropy a: alpha across the fibres r^2 sqrt(2 / (1 + (1 - a)^2)), along (1 - a) times that",
+        Shape,
+        R(OpenPbrMaterial),
+    )
+    .start(At(0.5)),
+    row(
+        Param::SpecularIor,
+        "specular_ior",
+        "1",
+        "OpenPBR's specular_ior (dielectric F0 = ((ior - 1) / (ior + 1))^2)",
+        Shape,
+        R(OpenPbrMaterial),
+    )
+    .absent(1.5)
+    .start(At(1.5))
+    .range(At(1.01), At(3.0)),
+    row(
+        Param::FuzzWeight,
+        "fuzz_weight",
+        "1",
+        "OpenPBR's fuzz_weight (fuzz_color white): Zeltner et al.'s sheen over the specular and base",
+        Shape,
+        R(OpenPbrMaterial),
+    )
+    .start(At(0.5)),
+    row(
+        Param::FuzzRoughness,
+        "fuzz_roughness",
+        "1",
+        "OpenPBR's fuzz_roughness (MaterialX clamps it to [0.01, 1])",
+        Shape,
+        R(OpenPbrMaterial),
+    )
+    .absent(0.5)
     .start(At(0.5)),
 ];
 

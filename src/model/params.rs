@@ -139,6 +139,27 @@ pub struct RawParams {
     /// `principled`: Blender's Sheen Weight in [0, 1] (Sheen Tint white).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub sheen_weight: Option<f64>,
+    /// `openpbr`: the layers' weight over the base colour's diffuse (1: OpenPBR).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub openpbr_layers: Option<Albedo>,
+    /// `openpbr`: specular_weight in [0, 1] (1: the IOR's own F0).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_weight: Option<f64>,
+    /// `openpbr`: specular_roughness in [0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_roughness: Option<f64>,
+    /// `openpbr`: specular_roughness_anisotropy in [0, 1] (the tangent across the fibres).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_roughness_anisotropy: Option<f64>,
+    /// `openpbr`: specular_ior.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub specular_ior: Option<f64>,
+    /// `openpbr`: fuzz_weight in [0, 1] (fuzz_color white).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fuzz_weight: Option<f64>,
+    /// `openpbr`: fuzz_roughness in [0, 1].
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub fuzz_roughness: Option<f64>,
 }
 
 pub const DEFAULT_QUADRATURE_ORDER: usize = 16;
@@ -174,6 +195,8 @@ pub struct ModelParams {
     pub gltf: GltfShape,
     /// The `principled` rung's material (its defaults for other rungs).
     pub principled: PrincipledShape,
+    /// The `openpbr` rung's material (its defaults for other rungs).
+    pub openpbr: OpenPbrShape,
 }
 
 fn check_range(name: Param, v: f64, lo: f64, hi: f64) -> Result<f64> {
@@ -216,6 +239,12 @@ impl RawParams {
             Param::SpecularIorLevel => self.specular_ior_level,
             Param::SpecularTint => self.specular_tint,
             Param::SheenWeight => self.sheen_weight,
+            Param::SpecularWeight => self.specular_weight,
+            Param::SpecularRoughness => self.specular_roughness,
+            Param::SpecularRoughnessAnisotropy => self.specular_roughness_anisotropy,
+            Param::SpecularIor => self.specular_ior,
+            Param::FuzzWeight => self.fuzz_weight,
+            Param::FuzzRoughness => self.fuzz_roughness,
             _ => None,
         }
     }
@@ -261,6 +290,13 @@ impl RawParams {
             Param::SpecularIorLevel => self.specular_ior_level.is_some(),
             Param::SpecularTint => self.specular_tint.is_some(),
             Param::SheenWeight => self.sheen_weight.is_some(),
+            Param::OpenPbrLayers => self.openpbr_layers.is_some(),
+            Param::SpecularWeight => self.specular_weight.is_some(),
+            Param::SpecularRoughness => self.specular_roughness.is_some(),
+            Param::SpecularRoughnessAnisotropy => self.specular_roughness_anisotropy.is_some(),
+            Param::SpecularIor => self.specular_ior.is_some(),
+            Param::FuzzWeight => self.fuzz_weight.is_some(),
+            Param::FuzzRoughness => self.fuzz_roughness.is_some(),
         }
     }
 }
@@ -286,7 +322,9 @@ impl ModelParams {
         } else if id.has(Ability::GltfMaterial) {
             (gltf_albedos(raw, raw.gltf_variant.unwrap_or_default())?, 1.0, 1.0)
         } else if id.has(Ability::PrincipledMaterial) {
-            (principled_albedos(raw)?, 1.0, 1.0)
+            (layered_albedos(raw, id, raw.principled_layers, Param::PrincipledLayers)?, 1.0, 1.0)
+        } else if id.has(Ability::OpenPbrMaterial) {
+            (layered_albedos(raw, id, raw.openpbr_layers, Param::OpenPbrLayers)?, 1.0, 1.0)
         } else {
             (fibre_albedos(raw, id)?, 1.0, 1.0)
         };
@@ -318,6 +356,7 @@ impl ModelParams {
                 },
                 gltf: GltfShape::from_raw(raw)?,
                 principled: PrincipledShape::from_raw(raw)?,
+                openpbr: OpenPbrShape::from_raw(raw)?,
             },
             warnings,
         ))
@@ -368,6 +407,13 @@ fn unused_warnings(raw: &RawParams, id: ModelId) -> Vec<String> {
         SpecularIorLevel,
         SpecularTint,
         SheenWeight,
+        OpenPbrLayers,
+        SpecularWeight,
+        SpecularRoughness,
+        SpecularRoughnessAnisotropy,
+        SpecularIor,
+        FuzzWeight,
+        FuzzRoughness,
     ];
     for p in order {
         if raw.gives(p) && !id.reads(p) {
@@ -639,16 +685,16 @@ fn checked_shape<T>(raw: &RawParams, of: impl FnOnce(&mut dyn FnMut(Param) -> f6
     }
 }
 
-/// The `principled` rung's albedos: the base colour `kd` (diffuse column) and the layers'
-/// weight (specular column), 1 as Blender defines the material.
-fn principled_albedos(raw: &RawParams) -> Result<Albedos> {
+/// A renderer material's albedos (`principled`, `openpbr`): the base colour `kd` (diffuse
+/// column) and the layers' weight `layers` (specular column), 1 as the renderer defines the
+/// material.
+fn layered_albedos(raw: &RawParams, id: ModelId, layers: Option<Albedo>, name: Param) -> Result<Albedos> {
     let kd = raw
         .kd
-        .ok_or_else(|| anyhow!("model `principled` needs `kd` (the base colour)"))?;
+        .ok_or_else(|| anyhow!("model `{id}` needs `kd` (the base colour)"))?;
     check_albedo(Param::Kd, &kd)?;
-    let layers = raw.principled_layers.unwrap_or(Albedo::Grey(1.0));
-    for c in layers.channels() {
-        check_range(Param::PrincipledLayers, c, 1.0, 1.0)?;
+    for c in layers.unwrap_or(Albedo::Grey(1.0)).channels() {
+        check_range(name, c, 1.0, 1.0)?;
     }
     Ok(Albedos {
         diffuse: kd.channels(),
@@ -705,6 +751,59 @@ impl PrincipledShape {
         crate::model::Lobe {
             roughness: self.roughness,
             anisotropy: self.anisotropic,
+        }
+    }
+
+    /// The values in `raw` (the table's absent values where it gives none), each within its
+    /// hard limits.
+    fn from_raw(raw: &RawParams) -> Result<Self> {
+        checked_shape(raw, |value| Self::of(value))
+    }
+}
+
+/// The `openpbr` rung's shape parameters (`model/rungs/openpbr.rs`), as OpenPBR Surface names
+/// them, as a parameter file or a fit gives them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct OpenPbrShape {
+    /// specular_weight (1: the IOR's own F0).
+    pub specular_weight: f64,
+    /// specular_roughness r.
+    pub specular_roughness: f64,
+    /// specular_roughness_anisotropy in [0, 1], the tangent across the fibres.
+    pub specular_roughness_anisotropy: f64,
+    /// specular_ior.
+    pub specular_ior: f64,
+    /// fuzz_weight (fuzz_color white).
+    pub fuzz_weight: f64,
+    /// fuzz_roughness.
+    pub fuzz_roughness: f64,
+}
+
+impl Default for OpenPbrShape {
+    /// The parameter table's values for a rung (or file) without them.
+    fn default() -> Self {
+        Self::of(|p| p.info().absent)
+    }
+}
+
+impl OpenPbrShape {
+    /// The shape with each parameter's value from `value`.
+    pub fn of(mut value: impl FnMut(Param) -> f64) -> Self {
+        Self {
+            specular_weight: value(Param::SpecularWeight),
+            specular_roughness: value(Param::SpecularRoughness),
+            specular_roughness_anisotropy: value(Param::SpecularRoughnessAnisotropy),
+            specular_ior: value(Param::SpecularIor),
+            fuzz_weight: value(Param::FuzzWeight),
+            fuzz_roughness: value(Param::FuzzRoughness),
+        }
+    }
+
+    /// The lobe's roughness and anisotropy as given.
+    pub fn lobe(&self) -> crate::model::Lobe {
+        crate::model::Lobe {
+            roughness: self.specular_roughness,
+            anisotropy: self.specular_roughness_anisotropy,
         }
     }
 

@@ -22,6 +22,8 @@ pub struct AlignedInputs<'a> {
     pub gltf: super::params::GltfShape,
     /// The `principled` rung's material (the table's defaults for the other rungs).
     pub principled: super::params::PrincipledShape,
+    /// The `openpbr` rung's material (the table's defaults for the other rungs).
+    pub openpbr: super::params::OpenPbrShape,
 }
 
 /// How the importance sampler's lobe technique proposes directions for a rung.

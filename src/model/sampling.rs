@@ -271,6 +271,21 @@ impl Sampler {
                     metal: 0.0,
                 }
             }
+            LobeSampling::Ggx if id.has(Ability::OpenPbrMaterial) => {
+                let q = &p.openpbr;
+                let (ab, at) = super::rungs::openpbr::alphas(
+                    q.specular_roughness,
+                    q.specular_roughness_anisotropy,
+                );
+                Lobe::Ggx {
+                    at,
+                    ab,
+                    dielectric: 1.0,
+                    f0: (q.specular_weight * super::rungs::principled::f0_from_ior(q.specular_ior))
+                        .clamp(0.0, 0.99999),
+                    metal: 0.0,
+                }
+            }
             LobeSampling::Ggx => {
                 let g = &p.gltf;
                 // the lobe the variant evaluates (three.js floors the roughness)

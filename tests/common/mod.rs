@@ -225,6 +225,7 @@ pub fn all_rungs(s: &Section) -> Vec<Box<dyn ShadingModel>> {
                 topology: &topology,
                 gltf: model::params::GltfShape::of(|p| example(id, p)),
                 principled: model::params::PrincipledShape::of(|p| example(id, p)),
+                openpbr: model::params::OpenPbrShape::of(|p| example(id, p)),
             })
         })
         .collect()

@@ -45,7 +45,9 @@ pub fn write(dir: &Path, rows: &[RendererRow], command: &str, seconds: f64) -> R
          Routes: **exact** = `--model auto`'s choice, which the Mitsuba plugin \
          (`fibrefit.mitsuba`) and the exported shader (`export --shader`) carry exactly; \
          **principled** = Blender's Principled BSDF fitted to the data (`export --blender`, exact \
-         in Cycles: [docs/guide/blender.md](../docs/guide/blender.md)); **gltf** = the glTF \
+         in Cycles: [docs/guide/blender.md](../docs/guide/blender.md)); **openpbr** = OpenPBR \
+         Surface fitted to the data (`export --materialx`, `--usd`, exact in MaterialX's \
+         generated shader: [docs/guide/materialx.md](../docs/guide/materialx.md)); **gltf** = the glTF \
          material fitted to the data (`export --gltf` of a gltf fit, exact in engines that \
          follow the specification); **ward**; **old glTF conversion** = the glTF material fitted \
          to the chosen *model* over 1500 direction pairs (`export --gltf` of any other result): \
@@ -143,7 +145,7 @@ pub fn write(dir: &Path, rows: &[RendererRow], command: &str, seconds: f64) -> R
             "- **{}** ({} samples, {}; chosen `{}`):",
             r.data, r.samples, r.validation, c.name
         );
-        for route in ["principled", "gltf"] {
+        for route in ["principled", "openpbr", "gltf"] {
             if let Some(p) = r.candidate(route) {
                 let pct = 100.0 * (p.heldout_log_error / c.heldout_log_error - 1.0);
                 let within = p.cv_error <= c.cv_error + c.cv_standard_error;

@@ -49,6 +49,7 @@ fn aligned_model_for(
         gltf: crate::model::params::GltfShape::of(|p| set.shape_value(p))
             .with_variant(set.gltf_variant),
         principled: crate::model::params::PrincipledShape::of(|p| set.shape_value(p)),
+        openpbr: crate::model::params::OpenPbrShape::of(|p| set.shape_value(p)),
     })
 }
 

@@ -13,6 +13,7 @@ pub mod hast_diffuse;
 pub mod lambert;
 pub mod max_normal;
 pub mod poulin_fournier;
+pub mod openpbr;
 pub mod principled;
 pub mod reference;
 pub mod varying_topology;
@@ -45,6 +46,8 @@ pub enum ModelId {
     Gltf,
     /// Blender 5.0's Principled BSDF as Cycles renders it (`principled`).
     Principled,
+    /// OpenPBR Surface as MaterialX 1.39 renders it (`openpbr`).
+    OpenPbr,
 }
 
 impl fmt::Display for ModelId {
@@ -73,7 +76,7 @@ impl FromStr for ModelId {
 impl ModelId {
     /// Cheapest first (the exported shader numbers the rungs in this order); `gltf`, added
     /// later, is last so the numbers of the others stay as exported shaders have them.
-    pub const ALL: [ModelId; 9] = [
+    pub const ALL: [ModelId; 10] = [
         ModelId::Lambert,
         ModelId::MaxNormal,
         ModelId::HastDiffuse,
@@ -83,6 +86,7 @@ impl ModelId {
         ModelId::Reference,
         ModelId::Gltf,
         ModelId::Principled,
+        ModelId::OpenPbr,
     ];
 
     /// The rung this id names: the registry's one `match`.
@@ -97,6 +101,7 @@ impl ModelId {
             ModelId::Ward => &ward::RUNG,
             ModelId::Gltf => &gltf::RUNG,
             ModelId::Principled => &principled::RUNG,
+            ModelId::OpenPbr => &openpbr::RUNG,
         }
     }
 

@@ -1,0 +1,197 @@
+"""The `openpbr` rung's exports checked by MaterialX and USD themselves: fits of the shipped felt,
+silk and brushed data, written as a MaterialX document (``fibrefit.materialx.document``, what
+``fibrefit export --materialx`` writes) and a USD stage (``--usd``).
+
+- MaterialX (the ``materialx`` package, 1.39): the document validates against MaterialX's own
+  data library, its OpenPBR Surface's values are the result's, and the GLSL MaterialX generates
+  from it (pixel and vertex stages) compiles with glslangValidator.
+- USD (``usd-core``): the stage opens, every validator usd-core registers passes, the material's
+  MaterialX render context and universal surface resolve to the OpenPBR and UsdPreviewSurface
+  shaders. usd-core's wheel is built without MaterialX, so its shader registry cannot know
+  MaterialX's node definitions (``ND_...``); those shaders are checked against MaterialX's own
+  library instead (every id a node definition, every input one of its inputs, of its type).
+
+The renders themselves (the generated shader in WebGL equals the rung) are in
+tests/browser/materialx.mjs.
+
+scripts/test.sh installs ``materialx`` and ``usd-core`` into the test environment; without
+them (FIBREFIT_REQUIRE_MATERIALX unset) these tests are skipped.
+"""
+
+import json
+import os
+import re
+import shutil
+import subprocess
+from xml.etree import ElementTree
+
+import numpy as np
+import pytest
+
+import fibrefit
+import fibrefit.materialx
+from conftest import DATA, ROOT
+
+try:
+    import MaterialX as mx
+    import MaterialX.PyMaterialXGenGlsl as mx_glsl
+    import MaterialX.PyMaterialXGenShader as mx_gen
+    from pxr import Sdf, Usd, UsdShade, UsdValidation
+except ImportError:  # pragma: no cover - depends on the environment
+    if os.environ.get("FIBREFIT_REQUIRE_MATERIALX"):
+        raise
+    pytest.skip("the materialx and usd-core packages are not installed", allow_module_level=True)
+
+FELT = ROOT / "tests" / "data" / "rgl" / "acrylic_felt_green_rgb.bsdf"
+
+
+@pytest.fixture(scope="module")
+def fits(tmp_path_factory):
+    """openpbr fits of the shipped felt (RGL), silk and brushed (goniometric tables)."""
+    out = {}
+    d = tmp_path_factory.mktemp("fits")
+    for name, data in [
+        ("felt", FELT),
+        ("silk", DATA / "silk" / "gonio.csv"),
+        ("brushed", DATA / "brushed" / "gonio.csv"),
+    ]:
+        r = fibrefit.fit(str(data), model="openpbr", directions=1500 if name == "felt" else None)
+        path = d / f"{name}.json"
+        r.to_json(str(path))
+        out[name] = path
+    return out
+
+
+@pytest.fixture(scope="module")
+def library():
+    lib = mx.createDocument()
+    mx.loadLibraries(mx.getDefaultDataLibraryFolders(), mx.getDefaultDataSearchPath(), lib)
+    return lib
+
+
+def load(text, library):
+    doc = mx.createDocument()
+    mx.readFromXmlString(doc, text)
+    doc.setDataLibrary(library)
+    return doc
+
+
+@pytest.mark.parametrize("name", ["felt", "silk", "brushed"])
+def test_the_document_validates_and_carries_the_fit(fits, library, name):
+    m = fibrefit.materialx.material(str(fits[name]), name=f"fibrefit {name}")
+    ElementTree.fromstring(m["document"])  # well-formed XML (a strict parser: no `--` in comments)
+    doc = load(m["document"], library)
+    ok, message = doc.validate()
+    assert ok, message
+    assert m["name"] == f"fibrefit_{name}"
+    material = doc.getChild(m["name"])
+    assert material.getCategory() == "surfacematerial"
+    shaders = mx.getShaderNodes(material)
+    assert len(shaders) == 1 and shaders[0].getCategory() == "open_pbr_surface"
+    surface = shaders[0]
+    assert surface.getNodeDef().getName() == "ND_open_pbr_surface_surfaceshader"
+    # the values are the result's, by OpenPBR's names: as written (float64 text) and as
+    # MaterialX reads them (float32)
+    def value(key):
+        text = surface.getInput(key).getValueString()
+        exact = [float(x) for x in text.split(",")]
+        read = surface.getInputValue(key)
+        read = list(read) if hasattr(read, "__len__") else [read]
+        assert np.allclose(read, exact, rtol=1e-7, atol=1e-30), key
+        return exact if len(exact) > 1 else exact[0]
+
+    params = {k: v["value"] for k, v in json.loads(fits[name].read_text())["parameters"].items()}
+    kd = params["kd"]
+    kd = kd if isinstance(kd, list) else [kd] * 3
+    assert np.allclose(value("base_color"), kd, rtol=1e-14, atol=1e-300)
+    for key in [
+        "specular_roughness",
+        "specular_roughness_anisotropy",
+        "specular_ior",
+        "specular_weight",
+        "fuzz_weight",
+        "fuzz_roughness",
+    ]:
+        assert value(key) == pytest.approx(params[key], rel=1e-14, abs=1e-300), key
+    for key, want in m["inputs"].items():
+        assert np.allclose(value(key), want, rtol=1e-14, atol=1e-300), key
+    # the tangent: the UV tangent turned about the normal so the anisotropy lies across the fibres
+    rotate = doc.getNode(f"{m['name']}_tangent_across_fibres")
+    amount = float(rotate.getInput("amount").getValueString())
+    assert amount == m["tangent_rotation_deg"]
+    assert (amount + params["fibre_azimuth_deg"] + 90.0) % 360.0 == pytest.approx(0.0, abs=1e-9) or (
+        amount + params["fibre_azimuth_deg"] + 90.0
+    ) % 360.0 == pytest.approx(360.0, abs=1e-9)
+    print(f"{name}: valid; {len(m['inputs'])} inputs equal the result's")
+
+
+@pytest.mark.skipif(shutil.which("glslangValidator") is None, reason="glslangValidator not installed")
+@pytest.mark.parametrize("name", ["felt", "silk"])
+def test_the_glsl_materialx_generates_compiles(fits, library, name, tmp_path):
+    m = fibrefit.materialx.material(str(fits[name]))
+    doc = load(m["document"], library)
+    material = doc.getChild(m["name"])
+    gen = mx_glsl.GlslShaderGenerator.create()
+    ctx = mx_gen.GenContext(gen)
+    ctx.registerSourceCodeSearchPath(mx.getDefaultDataSearchPath())
+    shader = gen.generate("fibrefit", material, ctx)
+    for stage, ext in [(mx_gen.PIXEL_STAGE, "frag"), (mx_gen.VERTEX_STAGE, "vert")]:
+        src = shader.getSourceCode(stage)
+        assert "mx_sheen_bsdf" in src or ext == "vert"
+        path = tmp_path / f"{name}.{ext}"
+        path.write_text(src)
+        run = subprocess.run(["glslangValidator", str(path)], capture_output=True, text=True)
+        assert run.returncode == 0, run.stdout + run.stderr
+    print(f"{name}: MaterialX's GLSL ({len(shader.getSourceCode(mx_gen.PIXEL_STAGE))} chars) compiles")
+
+
+@pytest.mark.parametrize("name", ["felt", "brushed"])
+def test_the_usd_stage_opens_and_validates(fits, library, name, tmp_path):
+    m = fibrefit.materialx.material(str(fits[name]))
+    path = tmp_path / f"{name}.usda"
+    path.write_text(m["usda"])
+    stage = Usd.Stage.Open(str(path))
+    assert stage.GetDefaultPrim().GetPath() == Sdf.Path("/fibrefit")
+    validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
+    assert len(validators) >= 20
+    errors = UsdValidation.ValidationContext(validators).Validate(stage)
+    material_ids = set()
+    for e in errors:
+        # usd-core has no MaterialX: only its registry's ignorance of MaterialX's ids may remain
+        found = re.match(r"shaderId '(ND_\w+)' specified on shader prim", e.GetMessage())
+        assert e.GetName() == "MissingShaderIdInRegistry" and found, (e.GetName(), e.GetMessage())
+        material_ids.add(found.group(1))
+    # ... and those are MaterialX's own node definitions, with their inputs and types
+    shaders = [UsdShade.Shader(p) for p in stage.Traverse() if p.IsA(UsdShade.Shader)]
+    ids = {s.GetIdAttr().Get(): s for s in shaders}
+    assert material_ids <= set(ids)
+    for node_id, s in ids.items():
+        if node_id == "UsdPreviewSurface":
+            continue
+        nodedef = library.getNodeDef(node_id)
+        assert nodedef is not None, node_id
+        usd_types = {"float": "float", "color3": "color3f", "vector3": "vector3f", "string": "string"}
+        for i in s.GetInputs():
+            d = nodedef.getActiveInput(i.GetBaseName())
+            assert d is not None, f"{node_id} has no input {i.GetBaseName()}"
+            assert str(i.GetTypeName()) == usd_types[d.getType()], (node_id, i.GetBaseName())
+    mat = UsdShade.Material(stage.GetPrimAtPath(f"/fibrefit/Materials/{m['name']}"))
+    mtlx = mat.ComputeSurfaceSource("mtlx")[0]
+    assert mtlx.GetIdAttr().Get() == "ND_open_pbr_surface_surfaceshader"
+    assert mat.ComputeSurfaceSource()[0].GetIdAttr().Get() == "UsdPreviewSurface"
+    for key, value in m["inputs"].items():
+        got = mtlx.GetInput(key).Get()
+        got = list(got) if hasattr(got, "__len__") else [got]
+        want = value if isinstance(value, list) else [value]
+        assert np.allclose(got, want, rtol=1e-6), key
+    swatch = stage.GetPrimAtPath("/fibrefit/Swatch")
+    bound, _ = UsdShade.MaterialBindingAPI(swatch).ComputeBoundMaterial()
+    assert bound.GetPath() == mat.GetPath()
+    print(f"{name}: USD stage valid ({len(validators)} validators; MaterialX ids checked against MaterialX)")
+
+
+def test_other_results_are_refused_with_the_route_to_an_openpbr_fit(tmp_path):
+    p = tmp_path / "ward.toml"
+    p.write_text('model = "ward"\nrho_d = 0.3\nrho_s = 0.1\nalpha_x = 0.2\nalpha_y = 0.3\n')
+    with pytest.raises(fibrefit.FibrefitError, match="--model openpbr"):
+        fibrefit.materialx.document(str(p))
