@@ -53,7 +53,7 @@ fn main_job_writes_a_complete_result_that_eval_reproduces() {
         "knobs",
         "data",
         "check_values",
-        "ward_fallback",
+        "renderer_materials",
         "tool",
     ] {
         assert!(r.get(key).is_some(), "missing {key}");
@@ -72,10 +72,22 @@ fn main_job_writes_a_complete_result_that_eval_reproduces() {
     assert!(r["parameters"]["kd"]["value"].as_array().unwrap().len() == 3);
     let checks = r["check_values"].as_array().unwrap();
     assert_eq!(checks.len(), 20);
-    assert!(r["ward_fallback"]["relative_rms_error"]
-        .as_f64()
-        .unwrap()
-        .is_finite());
+    // the renderers' own materials, fitted to the same data: each a result of its own
+    let materials = r["renderer_materials"].as_array().unwrap();
+    let names: Vec<&str> = materials
+        .iter()
+        .map(|m| m["model"].as_str().unwrap())
+        .collect();
+    assert_eq!(names, ["gltf", "principled", "openpbr"]);
+    for m in materials {
+        assert_eq!(m["schema"], "fibrefit-result/1");
+        assert!(m["statistics"]["relative_rmse"]
+            .as_f64()
+            .unwrap()
+            .is_finite());
+        assert!(m["parameters"]["kd"]["value"].is_array());
+        assert_eq!(m["data"]["sha256"], sha);
+    }
 
     // eval with the result file (model id taken from it) reproduces the check values
     let mut q = String::from("theta_i,phi_i,theta_o,phi_o\n");

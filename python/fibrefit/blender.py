@@ -18,7 +18,9 @@ from . import _native
 
 
 def script(result: str, name: Optional[str] = None) -> Dict[str, Any]:
-    """The Blender script for ``result`` (a ``principled`` fit without the fuzz layer): a dict
+    """The Blender script for ``result`` (a ``principled`` fit without the fuzz layer, or any
+    other fit's result, whose ``renderer_materials`` hold the ``principled`` material fitted to
+    the same data): a dict
     with ``script`` (Python source), ``name``, ``inputs`` (the Principled BSDF's inputs it
     sets, by Blender's names), ``fibre_azimuth_deg`` and ``error_text`` (the fit's error against
     its data). Raises ``FibrefitError`` with the command line's message otherwise."""

@@ -17,7 +17,9 @@ from . import _native
 
 
 def material(result: str, name: Optional[str] = None) -> Dict[str, Any]:
-    """The OpenPBR material of ``result`` (an ``openpbr`` fit without the fuzz layer): a dict
+    """The OpenPBR material of ``result`` (an ``openpbr`` fit without the fuzz layer, or any
+    other fit's result, whose ``renderer_materials`` hold the ``openpbr`` material fitted to
+    the same data): a dict
     with ``document`` (MaterialX), ``usda`` (USD), ``name``, ``inputs`` (the OpenPBR Surface
     inputs set, by OpenPBR's names), ``tangent_rotation_deg``, ``fibre_azimuth_deg``,
     ``preview_roughness`` and ``error_text`` (the fit's error against its data). Raises

@@ -877,7 +877,8 @@ fn view(
 /// a dict with `script` (the Python source), `name` (the material's name: `name`, or the
 /// result's file stem), `inputs` (the Principled BSDF's inputs it sets, by Blender's names),
 /// `fibre_azimuth_deg` and `error_text` (the fit's error against its data). `result` must be a
-/// `principled` fit without the fuzz layer (anything else raises, as the CLI refuses it).
+/// `principled` fit without the fuzz layer or a fit that recorded the `principled` material
+/// (`renderer_materials`; anything else raises, as the CLI refuses it).
 #[pyfunction]
 #[pyo3(signature = (result, name=None, *, progress=false))]
 fn blender_script<'py>(
@@ -924,8 +925,9 @@ fn blender_script<'py>(
 /// Surface inputs it sets, by OpenPBR's names: floats, colours as lists),
 /// `tangent_rotation_deg` (the `rotate3d` amount of the UV tangent), `fibre_azimuth_deg`,
 /// `preview_roughness` (the UsdPreviewSurface fallback's) and `error_text` (the fit's error
-/// against its data). `result` must be an `openpbr` fit without the fuzz layer (anything else
-/// raises, as the CLI refuses it).
+/// against its data). `result` must be an `openpbr` fit without the fuzz layer or a fit that
+/// recorded the `openpbr` material (`renderer_materials`; anything else raises, as the CLI
+/// refuses it).
 #[pyfunction]
 #[pyo3(signature = (result, name=None, *, progress=false))]
 fn openpbr_material<'py>(

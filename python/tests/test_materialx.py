@@ -195,3 +195,19 @@ def test_other_results_are_refused_with_the_route_to_an_openpbr_fit(tmp_path):
     p.write_text('model = "ward"\nrho_d = 0.3\nrho_s = 0.1\nalpha_x = 0.2\nalpha_y = 0.3\n')
     with pytest.raises(fibrefit.FibrefitError, match="--model openpbr"):
         fibrefit.materialx.document(str(p))
+
+
+def test_any_fit_carries_the_openpbr_material_fitted_to_its_data(library, tmp_path):
+    # a fibre rung's fit records OpenPBR fitted to the same data; the export writes that
+    r = fibrefit.fit(str(DATA / "silk" / "gonio.csv"), model="hast-diffuse")
+    path = tmp_path / "silk.json"
+    r.to_json(str(path))
+    recorded = {m["model"]: m for m in json.loads(path.read_text())["renderer_materials"]}
+    assert set(recorded) == {"gltf", "principled", "openpbr"}
+    m = fibrefit.materialx.material(str(path))
+    doc = load(m["document"], library)
+    assert doc.validate()[0]
+    want = recorded["openpbr"]["parameters"]["specular_roughness"]["value"]
+    assert m["inputs"]["specular_roughness"] == want
+    rel = recorded["openpbr"]["statistics"]["relative_rmse"]
+    assert f"relative RMS error {100 * rel:.1f} %" in m["error_text"]

@@ -114,12 +114,18 @@ pub struct DataError {
 impl DataError {
     /// The errors `result` (a fitted result's JSON) states; all none for anything else.
     pub fn of_result(result: &Path) -> Self {
-        let Some(v) = crate::load::input::read_text(result)
+        match crate::load::input::read_text(result)
             .ok()
             .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        else {
-            return Self::default();
-        };
+        {
+            Some(v) => Self::of_value(&v),
+            None => Self::default(),
+        }
+    }
+
+    /// The errors a result's JSON `v` states (a result, or one of its `renderer_materials`,
+    /// whose `heldout` holds its candidate's held-out errors).
+    pub fn of_value(v: &serde_json::Value) -> Self {
         let num = |x: &serde_json::Value| x.as_f64().filter(|f| f.is_finite());
         let stats = &v["statistics"];
         let mut e = Self {
@@ -137,6 +143,13 @@ impl DataError {
             e.heldout_metric = v["selection"]["metric"].as_str().map(str::to_string);
             e.heldout_relative_rmse = num(&c["heldout_relative_rmse"]);
             e.heldout_log_error = num(&c["heldout_log_error"]);
+        }
+        let heldout = &v["heldout"];
+        if let Some(h) = num(&heldout["cv_error"]) {
+            e.heldout_error = Some(h);
+            e.heldout_metric = heldout["metric"].as_str().map(str::to_string);
+            e.heldout_relative_rmse = num(&heldout["heldout_relative_rmse"]);
+            e.heldout_log_error = num(&heldout["heldout_log_error"]);
         }
         let floor = &v["quality"]["floor"];
         if let Some(h) = num(&floor["heldout_error"]) {
@@ -295,17 +308,14 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
     };
     let blender = match &req.blender {
         Some(name) => {
-            let m = blender_material(req, id, &params, name, &lines)?;
+            let (m, error) = blender_material(req, id, &params, name, &lines)?;
             let script = m.script();
-            Some((m, script, DataError::of_result(&req.result)))
+            Some((m, script, error))
         }
         None => None,
     };
     let openpbr = match &req.openpbr {
-        Some((name, flag)) => {
-            let m = openpbr_material(req, id, &params, (name, flag), &lines)?;
-            Some((m, DataError::of_result(&req.result)))
-        }
+        Some((name, flag)) => Some(openpbr_material(req, id, &params, (name, flag), &lines)?),
         None => None,
     };
     Ok(ExportOutcome {
@@ -319,11 +329,75 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
     })
 }
 
-/// A renderer's material of a result of the rung with `ability` (its values exactly), for
-/// export `flag`; any other result is refused (the material would be a conversion, not the
-/// fit), as is one with the fuzz layer (no renderer material has it). Returns the material's
-/// name (`name`, or the result's file stem when empty) and its header lines: `lines` and the
-/// error against the data.
+/// Where a renderer's material comes from: the result itself (a fit of that renderer's rung), or
+/// the renderer's own material its fit recorded, fitted to the same data (`renderer_materials`).
+struct MaterialSource {
+    id: ModelId,
+    params: ModelParams,
+    error: DataError,
+    /// The rung of the result whose recorded material this is (None: the result itself).
+    recorded_by: Option<ModelId>,
+}
+
+/// The material of the rung with `ability` for the result `req.result` of rung `id`: the
+/// result itself when it is that rung, else the one its fit recorded (`renderer_materials`),
+/// else None (a parameter file, a per-texel fit, a result written before they were recorded).
+fn material_source(
+    req: &ExportRequest,
+    id: ModelId,
+    params: &ModelParams,
+    ability: crate::model::Ability,
+) -> Result<Option<MaterialSource>> {
+    let own = id.has(ability).then(|| MaterialSource {
+        id,
+        params: params.clone(),
+        error: DataError::of_result(&req.result),
+        recorded_by: None,
+    });
+    // the result itself, unless it carries fibrefit's fuzz layer: then the plain material its
+    // fit recorded, if any (else itself, which the caller refuses with the reason)
+    if own.as_ref().is_some_and(|s| s.params.fuzz_depth == 0.0) {
+        return Ok(own);
+    }
+    let recorded = crate::load::input::read_text(&req.result)
+        .ok()
+        .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
+        .and_then(|v| {
+            let entry = v["renderer_materials"].as_array()?.iter().find(|e| {
+                e["model"]
+                    .as_str()
+                    .and_then(|m| m.parse::<ModelId>().ok())
+                    .is_some_and(|m| m.has(ability))
+            })?;
+            Some((
+                entry.clone(),
+                v["data"]["file"].as_str().map(str::to_string),
+            ))
+        });
+    let Some((entry, data)) = recorded else {
+        return Ok(own);
+    };
+    let label = format!("{} (its renderer_materials)", req.result.display());
+    let raw = crate::export::result_json::params_of_result(&entry)
+        .map_err(|e| anyhow!("{label}: {e}"))?;
+    let (rid, p, _) = crate::export::result_json::checked_params(&raw, None, &label)?;
+    let mut error = DataError::of_value(&entry);
+    error.data = error.data.or(data);
+    Ok(Some(MaterialSource {
+        id: rid,
+        params: p,
+        error,
+        recorded_by: Some(id),
+    }))
+}
+
+/// A renderer's material of a result (its values exactly) of the rung with `ability`, for
+/// export `flag`: the result itself, or the material its fit recorded, fitted to the same data
+/// ([`material_source`]); anything else is refused (a parameter file of another rung: the
+/// material would be a conversion, not a fit), as is a fit with fibrefit's fuzz layer (no
+/// renderer has it). Returns the material's name (`name`, or the result's file stem when
+/// empty), its header lines (`lines`, where it comes from, its error against the data) and its
+/// source.
 fn renderer_material(
     req: &ExportRequest,
     id: ModelId,
@@ -331,25 +405,26 @@ fn renderer_material(
     (flag, ability, rung): (&str, crate::model::Ability, &str),
     name: &str,
     lines: &[String],
-) -> Result<(String, Vec<String>)> {
+) -> Result<(String, Vec<String>, MaterialSource)> {
     let file = req.result.display();
-    let what = id.rung().renderer.unwrap_or("a renderer's material");
-    if !id.has(ability) {
-        let target = ModelId::ALL
-            .into_iter()
-            .find(|m| m.has(ability))
-            .and_then(|m| m.rung().renderer)
-            .unwrap_or(rung);
+    let target = ModelId::ALL
+        .into_iter()
+        .find(|m| m.has(ability))
+        .and_then(|m| m.rung().renderer)
+        .unwrap_or(rung);
+    let Some(source) = material_source(req, id, params, ability)? else {
         bail!(
-            "{flag}: {file} is a `{id}` result; this export is a `{rung}` fit ({target}, fitted \
-             to the data): run `fibrefit fit DATA --model {rung}` and export that result"
+            "{flag}: {file} is a `{id}` result or parameter file without {target}'s own material \
+             fitted to its data (a fit records it, beside the fit, unless it is per texel or \
+             was written by an older fibrefit): run `fibrefit fit DATA --model {rung}` (or fit \
+             DATA again with any rung) and export that result"
         );
-    }
-    if params.fuzz_depth > 0.0 {
+    };
+    if source.params.fuzz_depth > 0.0 {
         bail!(
-            "{flag}: {file} is a {rung} + fuzz fit (fuzz_depth {}): {what} has no fuzz layer of \
-             fibrefit's; fit `--model {rung}` without it",
-            params.fuzz_depth
+            "{flag}: {file} is a {rung} + fuzz fit (fuzz_depth {}): {target} has no fuzz layer \
+             of fibrefit's; fit `--model {rung}` without it",
+            source.params.fuzz_depth
         );
     }
     if let Some(dir) = maps_of(&req.result, &crate::progress::Progress::quiet())? {
@@ -365,54 +440,79 @@ fn renderer_material(
     } else {
         name.to_string()
     };
-    let error = DataError::of_result(&req.result);
-    let mut provenance = lines.to_vec();
-    provenance.push(format!("error against the data: {}", error.text()));
-    Ok((name, provenance))
+    // a recorded material's values are its own: of the result's lines only where it came from
+    let mut provenance = match source.recorded_by {
+        Some(_) => lines.iter().take(1).cloned().collect(),
+        None => lines.to_vec(),
+    };
+    if let Some(by) = source.recorded_by {
+        let by = match params.fuzz_depth > 0.0 {
+            true => format!("{by} + fuzz"),
+            false => by.to_string(),
+        };
+        let line = format!(
+            "the `{}` material {file}'s `{by}` fit recorded (renderer_materials): {target}'s own \
+             material fitted to the same data, not a conversion of the `{by}` model",
+            source.id
+        );
+        req.progress.say(&line);
+        provenance.push(line);
+    }
+    provenance.push(format!("error against the data: {}", source.error.text()));
+    Ok((name, provenance, source))
 }
 
-/// The Blender material of a `principled` result (its values exactly), named `name` (empty:
-/// the result's file stem).
+/// The Blender material of a `principled` result, or of the `principled` material a result
+/// recorded (its values exactly), named `name` (empty: the result's file stem).
 fn blender_material(
     req: &ExportRequest,
     id: ModelId,
     params: &ModelParams,
     name: &str,
     lines: &[String],
-) -> Result<BlenderMaterial> {
+) -> Result<(BlenderMaterial, DataError)> {
     let rung = (
         "--blender",
         crate::model::Ability::PrincipledMaterial,
         "principled",
     );
-    let (name, provenance) = renderer_material(req, id, params, rung, name, lines)?;
-    Ok(BlenderMaterial {
-        name,
-        base_color: params.albedos.diffuse,
-        shape: params.principled,
-        fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
-        provenance,
-    })
+    let (name, provenance, source) = renderer_material(req, id, params, rung, name, lines)?;
+    let p = &source.params;
+    Ok((
+        BlenderMaterial {
+            name,
+            base_color: p.albedos.diffuse,
+            shape: p.principled,
+            fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
+            provenance,
+        },
+        source.error,
+    ))
 }
 
-/// The OpenPBR Surface material of an `openpbr` result (its values exactly), named `name`
-/// (empty: the result's file stem) made a valid MaterialX name.
+/// The OpenPBR Surface material of an `openpbr` result, or of the `openpbr` material a result
+/// recorded (its values exactly), named `name` (empty: the result's file stem) made a valid
+/// MaterialX name.
 fn openpbr_material(
     req: &ExportRequest,
     id: ModelId,
     params: &ModelParams,
     (name, flag): (&str, &str),
     lines: &[String],
-) -> Result<OpenPbrMaterial> {
+) -> Result<(OpenPbrMaterial, DataError)> {
     let rung = (flag, crate::model::Ability::OpenPbrMaterial, "openpbr");
-    let (name, provenance) = renderer_material(req, id, params, rung, name, lines)?;
-    Ok(OpenPbrMaterial {
-        name: OpenPbrMaterial::valid_name(&name),
-        base_color: params.albedos.diffuse,
-        shape: params.openpbr,
-        fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
-        provenance,
-    })
+    let (name, provenance, source) = renderer_material(req, id, params, rung, name, lines)?;
+    let p = &source.params;
+    Ok((
+        OpenPbrMaterial {
+            name: OpenPbrMaterial::valid_name(&name),
+            base_color: p.albedos.diffuse,
+            shape: p.openpbr,
+            fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
+            provenance,
+        },
+        source.error,
+    ))
 }
 
 /// The shader in `lang`, its provenance `lines` in its header; with `req.check`, run on the GPU
@@ -525,27 +625,53 @@ fn glb_preview(
         "TANGENT is the fibre direction (the mesh's own fibre field)".to_string()
     };
     let why = not_pure_gltf(id, params);
-    if let Some(w) = &why {
+    // another rung's fit: the glTF material it recorded, fitted to the same data (not with maps:
+    // their textures come from the fit's own maps)
+    let recorded = match (id == ModelId::Gltf && why.is_none(), &maps) {
+        (false, None) => material_source(req, id, params, crate::model::Ability::GltfMaterial)?
+            .filter(|s| not_pure_gltf(s.id, &s.params).is_none()),
+        _ => None,
+    };
+    if let (Some(w), None) = (&why, &recorded) {
         req.progress.warn(w);
     }
     let mut images = Vec::new();
     let mut textures = None;
-    let (material, route) = if id == ModelId::Gltf && why.is_none() {
+    let (material, route) = if (id == ModelId::Gltf && why.is_none()) || recorded.is_some() {
+        let (gid, gparams, error, route_words) = match &recorded {
+            Some(s) => {
+                let words = format!(
+                    "recorded: the glTF material the `{id}` fit recorded (renderer_materials), the \
+                     gltf rung fitted to the same data, every value written as fitted; not a \
+                     conversion of the `{id}` model"
+                );
+                req.progress.say(&format!("--gltf: {words}"));
+                (s.id, &s.params, s.error.clone(), words)
+            }
+            None => (
+                id,
+                params,
+                error,
+                "fitted: the gltf rung's own fit, every value written as fitted (the rung is this glTF material)".to_string(),
+            ),
+        };
+        let psi_deg = gparams.fibre_azimuth.to_degrees();
+        let turn = turn + (gparams.fibre_azimuth - params.fibre_azimuth);
         let values = gltf_out::RungValues {
-            base_color: params.albedos.diffuse,
-            shape: params.gltf,
+            base_color: gparams.albedos.diffuse,
+            shape: gparams.gltf,
             anisotropy_rotation: turn + std::f64::consts::FRAC_PI_2,
         };
         let extras = serde_json::json!({
-            "model": id.as_str(),
-            "route": "fitted: the gltf rung's own fit, every value written as fitted (the rung is this glTF material)",
+            "model": gid.as_str(),
+            "route": route_words,
             "error_against_data": error.json(),
             "fibre_azimuth_deg": psi_deg,
             "tangent": tangent_words,
             "anisotropy_direction": "across the fibres: anisotropyRotation = the fibres' angle from the TANGENT + 90 deg",
             "sheen_roughness": "the Charlie alpha is sheenRoughnessFactor^2 (the Khronos Sample Viewer and three.js)",
-            "gltf_variant": params.gltf.variant.as_str(),
-            "exact_in": params.gltf.variant.exact_in(),
+            "gltf_variant": gparams.gltf.variant.as_str(),
+            "exact_in": gparams.gltf.variant.exact_in(),
             "source": lines,
         });
         let mut tx = None;

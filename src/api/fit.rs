@@ -10,9 +10,9 @@ use crate::export::report::{self, ReportFiles};
 use crate::export::result_json as rj;
 use crate::fit::config::{FitConfig, Metric};
 use crate::fit::maps::TexelMaps;
-use crate::fit::problem::{albedos_of, model_for};
+use crate::fit::problem::model_for;
 use crate::fit::selection::SelectionOutcome;
-use crate::fit::{self, parameters::Param, ward_fallback, FitOutcome};
+use crate::fit::{self, parameters::Param, FitOutcome};
 use crate::load::capture_store::CaptureStore;
 use crate::load::samples::{DataKind, Samples};
 use crate::load::{load_data, LoadOptions};
@@ -636,43 +636,115 @@ fn all_pixels_stage(
     Ok(Some(all))
 }
 
-/// Ward's lobe fitted to the model (none for a rung with Ward's lobe: it is its own
-/// fallback). An optional stage: its failure is a warning, never the loss of the fit; its
-/// warnings join `warnings` (a poor fallback must be seen).
-fn ward_stage(
+/// The renderers' own materials (every rung with a [`crate::model::Rung::renderer`]) fitted to
+/// the same data, for the exports of this result: all but the fit's own rung when the fit is a
+/// renderer's material without the fuzz layer (its export is the fit); none per texel. Each is a global fit of that rung alone at the config's knobs,
+/// without the fuzz layer (no renderer has fibrefit's), recorded as a result of its own
+/// (`schema`, `model`, `parameters`, `statistics`, `knobs`, `data`) with its renderer, its fit
+/// time and, after `--model auto`, its candidate's held-out errors. An optional stage: a failure
+/// is a warning, never the loss of the fit.
+fn renderer_stage(
     req: &FitRequest,
     cfg: &FitConfig,
-    outcome: &FitOutcome,
-    m: &dyn crate::model::ShadingModel,
-    channels: usize,
+    data: &Loaded,
+    selection: Option<&fit::selection::SelectionOutcome>,
     warnings: &mut Vec<String>,
-) -> Result<Option<rj::WardFallback>> {
-    if cfg.model_id()?.has(crate::model::Ability::WardLobe) {
-        return Ok(None);
-    }
-    req.progress.line("fit: the Ward fallback");
-    let albedos = albedos_of(&outcome.set);
-    // in degrees through radians, as it always was (the fallback's fit is seeded by it)
-    let psi = outcome.set.shape_value(Param::Azimuth).to_radians();
-    Ok(
-        match ward_fallback::fit(m, &albedos, psi.to_degrees(), cfg.seed, channels) {
-            Ok(w) => {
-                warnings.extend(w.warnings.iter().cloned());
-                Some(rj::WardFallback::of(w))
-            }
+) -> Result<Vec<serde_json::Value>> {
+    let id = cfg.model_id()?;
+    let fuzz = cfg.listed_fuzz_parameter().is_some();
+    let mut out = Vec::new();
+    for rid in crate::model::ModelId::ALL {
+        let Some(renderer) = rid.rung().renderer else {
+            continue;
+        };
+        if rid == id && !fuzz {
+            continue; // the fit is that renderer's material itself
+        }
+        req.progress.line(&format!(
+            "fit: {rid}, {renderer}'s own material, to the same data"
+        ));
+        let mut rc = cfg.for_rung(rid);
+        rc.parameters
+            .retain(|k, _| !crate::model::Param::from_name(k).is_some_and(|p| p.is_fuzz()));
+        rc.free_unlisted_shapes(rid);
+        let started = std::time::Instant::now();
+        let quiet = crate::progress::Progress::quiet();
+        let fitted = fit::fit_with_hints(&data.samples, &rc, &quiet, &[]).and_then(|o| {
+            let model = model_for(
+                &o.set,
+                rc.knobs.quadrature_order,
+                rc.knobs.histogram_bins,
+                rc.knobs.azimuth_nodes,
+                o.map.clone(),
+            );
+            let r = rj::assemble(rj::ResultParts {
+                config: &rc,
+                outcome: &o,
+                model: model.as_ref(),
+                samples: &data.samples,
+                data: &req.data,
+                data_sha256: req.held.as_ref().map(|h| h.sha256.clone()),
+                stride: req.load.subsample.stride,
+                fraction: req.load.subsample.fraction,
+                all_pixels: None,
+                selection: None,
+                warnings: o.warnings.clone(),
+            })?;
+            Ok(serde_json::to_value(r)?)
+        });
+        let full = match fitted {
+            Ok(v) => v,
             Err(e) => {
                 warnings.push(format!(
-                    "the Ward fallback could not be fitted, so the result has none: {e:#}"
+                    "{renderer}'s own material (`{rid}`) could not be fitted to the data, so the \
+                     result has none for it: {e:#}"
                 ));
-                None
+                continue;
             }
-        },
-    )
+        };
+        let mut entry = serde_json::Map::new();
+        for key in [
+            "schema",
+            "model",
+            "parameters",
+            "statistics",
+            "knobs",
+            "data",
+        ] {
+            entry.insert(key.into(), full[key].clone());
+        }
+        // a renderer's material reads no topology map (the fit's own knobs name it, relative)
+        if let Some(k) = entry.get_mut("knobs").and_then(|k| k.as_object_mut()) {
+            k.remove("topology_map");
+            k.remove("topology_map_sha256");
+        }
+        entry.insert("renderer".into(), renderer.into());
+        entry.insert("fit_seconds".into(), started.elapsed().as_secs_f64().into());
+        let candidate = selection.and_then(|s| {
+            s.candidates
+                .iter()
+                .find(|c| c.rung == rid.as_str() && !c.fuzz && c.error.is_none())
+        });
+        if let (Some(c), Some(s)) = (candidate, selection) {
+            entry.insert(
+                "heldout".into(),
+                serde_json::json!({
+                    "cv_error": c.cv_error,
+                    "cv_standard_error": c.cv_standard_error,
+                    "metric": s.metric,
+                    "heldout_relative_rmse": c.heldout_relative_rmse,
+                    "heldout_log_error": c.heldout_log_error,
+                }),
+            );
+        }
+        out.push(serde_json::Value::Object(entry));
+    }
+    Ok(out)
 }
 
 /// [`fit`], keeping `sink` up to date with what an auto run has finished (for a partial
-/// result). The stages: load, select (auto), the global fit, the all-pixel check, the Ward
-/// fallback, the result and report, the texel stage (maps).
+/// result). The stages: load, select (auto), the global fit, the all-pixel check, the
+/// renderers' own materials, the result and report, the texel stage (maps).
 pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun> {
     check(req)?;
     let mut cfg = req.config.clone();
@@ -717,7 +789,10 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         cfg.knobs.azimuth_nodes,
         outcome.map.clone(),
     );
-    let ward = ward_stage(req, &cfg, &outcome, model.as_ref(), channels, &mut warnings)?;
+    let renderer_materials = match global_work {
+        None => renderer_stage(req, &cfg, &data, selection.as_ref(), &mut warnings)?,
+        Some(_) => Vec::new(),
+    };
     let mut result = rj::assemble(rj::ResultParts {
         config: &cfg,
         outcome: &outcome,
@@ -728,7 +803,6 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         stride: req.load.subsample.stride,
         fraction: req.load.subsample.fraction,
         all_pixels: all_pixels.as_ref(),
-        ward_fallback: ward,
         selection: selection.as_ref(),
         warnings: warnings.clone(),
     })?;
@@ -738,10 +812,8 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         &req.data.display().to_string(),
         cfg.metric_reason.as_deref(),
     );
-    report_text += &result
-        .ward_fallback
-        .as_ref()
-        .map_or(String::new(), report::ward_text);
+    result.renderer_materials = renderer_materials;
+    report_text += &report::renderer_materials_text(&result.renderer_materials);
     if let Some(s) = &selection {
         report_text += &format!("[[Model selection]]\n{}", fit::selection::table(s));
     }

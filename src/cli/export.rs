@@ -30,10 +30,12 @@ it; the fibre direction on the torus and an OBJ), TEXCOORD_0 and a glTF material
 (without the fuzz layer, which glTF cannot carry) is written exactly: base colour, metallic,
 roughness, KHR_materials_anisotropy (across the fibres), _specular, _ior and _sheen as fitted,
 its kd and fibre-direction maps as textures; its error against the data is printed and stated
-in the material's extras. Any other result gets a glTF material converted from the model:
-base colour, roughness, KHR_materials_anisotropy and KHR_materials_ior (and _sheen where it
-helps), fitted over 1500 direction pairs like the result's Ward fallback; the extras label it a
-conversion with its error against the model. A `fit --maps` result's maps (the directory its
+in the material's extras. Any other fit's result carries the gltf material fitted to the same
+data (renderer_materials): that is written exactly, with its own error against the data. A
+parameter file, a per-texel fit or an older result gets a glTF material converted from the
+model: base colour, roughness, KHR_materials_anisotropy and KHR_materials_ior (and _sheen where
+it helps), fitted over 1500 direction pairs; the extras label it a conversion with its error
+against the model. A `fit --maps` result's maps (the directory its
 `maps.directory` names) become PNG textures in the GLB: base colour (sRGB, from kd/ks/height),
 metallic-roughness (from height) and the anisotropy texture (fibre direction from the azimuth
 map, strength from height).
@@ -41,7 +43,8 @@ BLENDER: a Python script that makes (or rebuilds in place) a material with a Pri
 carrying a `principled` fit's values exactly (the rung is that node as Cycles evaluates it;
 python/tests/test_blender.py renders it in Cycles), a Tangent node (UV Map) and Anisotropic
 Rotation so the fibres lie at fibre_azimuth_deg from the UV u axis; run it in Blender or exec it
-with the bpy module (fibrefit.blender.material in Python). Other results are refused: fit with
+with the bpy module (fibrefit.blender.material in Python). Any other fit's result carries the
+principled material fitted to the same data, which is written; parameter files are refused: fit with
 --model principled. docs/guide/blender.md.
 MATERIALX: a MaterialX 1.39 document with an OpenPBR Surface (open_pbr_surface) carrying an
 `openpbr` fit's values exactly (the rung is that node as MaterialX implements it; every input
@@ -51,7 +54,8 @@ its generated GLSL compiled in the tests (python/tests/test_materialx.py).
 USD: a USD stage (.usda) with that material: its MaterialX render context (outputs:mtlx:surface)
 is the same OpenPBR network as UsdShade shaders, its universal surface a UsdPreviewSurface
 fallback for viewers without MaterialX (not the fit: no fuzz, no anisotropy), and a swatch bound
-to it. Other results are refused: fit with --model openpbr. docs/guide/materialx.md.")]
+to it. Any other fit's result carries the openpbr material fitted to the same data, which is
+written; parameter files are refused: fit with --model openpbr. docs/guide/materialx.md.")]
 pub struct ExportArgs {
     /// A fitted result (.json) or any parameter file `eval` accepts
     pub result: PathBuf,

@@ -118,31 +118,45 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str, metric: Option<&str>)
     t
 }
 
-/// The [[Ward fallback]] section: Ward's parameters fitted to the model, how far off it they are
-/// and the fallback's warnings.
-pub fn ward_text(w: &super::result_json::WardFallback) -> String {
+/// The [[Renderer materials]] section: each renderer's own material fitted to the same data
+/// (a result's `renderer_materials`), its values and its error against the data.
+pub fn renderer_materials_text(entries: &[serde_json::Value]) -> String {
     let mut t = String::new();
-    let _ = writeln!(
-        t,
-        "[[Ward fallback]] (Ward fitted to this model over {} directions)",
-        w.directions
-    );
-    for (name, v) in &w.parameters {
-        let num = |x: &serde_json::Value| x.as_f64().map_or(x.to_string(), |x| format!("{x:.6}"));
-        let shown = match v.as_array() {
-            Some(a) => format!("[{}]", a.iter().map(num).collect::<Vec<_>>().join(", ")),
-            None => num(v),
-        };
-        let _ = writeln!(t, "    {name:<20} {shown}");
+    if entries.is_empty() {
+        return t;
     }
     let _ = writeln!(
         t,
-        "    RMS error          = {:.6e} 1/sr ({:.1} % relative)",
-        w.rms_error,
-        100.0 * w.relative_rms_error
+        "[[Renderer materials]] (each renderer's own material fitted to the same data; export --blender, --materialx, --usd, --gltf use them)"
     );
-    for warning in &w.warnings {
-        let _ = writeln!(t, "    warning: {warning}");
+    let num = |x: &serde_json::Value| x.as_f64().map_or(x.to_string(), |x| format!("{x:.4}"));
+    for e in entries {
+        let stats = &e["statistics"];
+        let _ = write!(
+            t,
+            "    {:<11} {}: relative RMS error {:.1} % (in-sample)",
+            e["model"].as_str().unwrap_or("?"),
+            e["renderer"].as_str().unwrap_or("?"),
+            100.0 * stats["relative_rmse"].as_f64().unwrap_or(f64::NAN)
+        );
+        if let Some(h) = e["heldout"]["cv_error"].as_f64() {
+            let _ = write!(t, ", held-out error {h:.4}");
+        }
+        let _ = writeln!(t, "; fitted in {:.2} s", e["fit_seconds"].as_f64().unwrap_or(0.0));
+        let values: Vec<String> = e["parameters"]
+            .as_object()
+            .into_iter()
+            .flatten()
+            .map(|(k, v)| {
+                let v = &v["value"];
+                let shown = match v.as_array() {
+                    Some(a) => format!("[{}]", a.iter().map(num).collect::<Vec<_>>().join(", ")),
+                    None => num(v),
+                };
+                format!("{k} {shown}")
+            })
+            .collect();
+        let _ = writeln!(t, "        {}", values.join(", "));
     }
     t
 }

@@ -1,7 +1,7 @@
 //! The renderer JSON (schema `fibrefit-result/1`, documented in docs/formats.md), written and read in
 //! this one place: the fitted model with its conventions, parameters and uncertainties,
-//! statistics, knobs, provenance, check values for renderer ports, and a Ward fallback
-//! ([`ResultFile`]); read back as parameters ([`read_params`]: `eval`, `render`, `export`,
+//! statistics, knobs, provenance, check values for renderer ports, and the renderers' own
+//! materials fitted to the same data ([`ResultFile`]); read back as parameters ([`read_params`]: `eval`, `render`, `export`,
 //! `synth`) or as a fit's parameter set ([`read_result`]: `score`, map tiles).
 
 use crate::fit::config::{FitConfig, Knobs as FitKnobs, Metric, ParamEntry};
@@ -379,9 +379,14 @@ pub struct ResultFile {
     pub data: Provenance,
     /// The fitted BRDF (1/sr) at fixed direction pairs, for checking a renderer's port.
     pub check_values: Vec<CheckValue>,
-    /// Ward's lobe fitted to the model, for renderers without the fibre model.
-    #[serde(skip_serializing_if = "Option::is_none")]
-    pub ward_fallback: Option<WardFallback>,
+    /// The renderers' own materials (the rungs with a renderer: `principled`, `openpbr`,
+    /// `gltf`) fitted to the same data, for `export --blender`, `--materialx`, `--usd` and
+    /// `--gltf` of this result: each a result of its own (`schema`, `model`, `parameters`,
+    /// `statistics`, `knobs`, `data`) with `renderer`, `fit_seconds` and, after `--model auto`,
+    /// `heldout` (its candidate's held-out errors). Absent when the fit is itself one, or per
+    /// texel.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub renderer_materials: Vec<serde_json::Value>,
     /// `--model auto`: every candidate compared (errors, free parameters, time).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub model_selection: Vec<serde_json::Value>,
@@ -512,19 +517,6 @@ pub struct CheckValue {
     pub phi_o: f64,
     /// BRDF per channel, 1/sr (one entry for grey).
     pub brdf: Vec<f64>,
-}
-
-#[derive(Clone, Debug, Serialize, Deserialize)]
-pub struct WardFallback {
-    pub model: String,
-    pub parameters: BTreeMap<String, serde_json::Value>,
-    /// Over the dense direction set it was fitted on, against the fitted model: 1/sr.
-    pub rms_error: f64,
-    pub relative_rms_error: f64,
-    pub directions: usize,
-    /// More than 25 % off the model, or a parameter at a bound (absent in files written before).
-    #[serde(default)]
-    pub warnings: Vec<String>,
 }
 
 /// Fixed direction pairs (degrees) for check values: in-plane, cross-plane, grazing, mirror.
@@ -709,7 +701,6 @@ pub struct ResultParts<'a> {
     pub fraction: f64,
     /// A capture's fit on a sample of texels, checked on every pixel.
     pub all_pixels: Option<&'a crate::fit::all_pixels::AllPixels>,
-    pub ward_fallback: Option<WardFallback>,
     pub selection: Option<&'a crate::fit::selection::SelectionOutcome>,
     /// Every warning of the run (the quality checks', the fallback's, configuring's notes).
     pub warnings: Vec<String>,
@@ -737,24 +728,6 @@ pub fn check_values(
             brdf: crate::model::brdf_at_degrees(m, &albedos, psi, d, channels),
         })
         .collect()
-}
-
-impl WardFallback {
-    /// The result's record of a fitted Ward fallback.
-    pub fn of(w: crate::fit::ward_fallback::WardFallback) -> Self {
-        Self {
-            model: ModelId::Ward.to_string(),
-            parameters: w
-                .parameters
-                .into_iter()
-                .map(|(k, v)| (k, number_or_rgb(&v)))
-                .collect(),
-            rms_error: w.rms_error,
-            relative_rms_error: w.relative_rms_error,
-            directions: w.directions,
-            warnings: w.warnings,
-        }
-    }
 }
 
 /// The result file of a fit (its maps block, if any, added by the maps stage).
@@ -829,7 +802,7 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
             channels,
         },
         check_values: check_values(p.model, outcome, channels),
-        ward_fallback: p.ward_fallback,
+        renderer_materials: Vec::new(),
         model_selection: selection
             .map(|s| {
                 s.candidates

@@ -1,7 +1,7 @@
 //! A glTF 2.0 material fitted to a fitted fibre model, for engines without custom shaders: the
 //! core metallic-roughness BRDF (dielectric, metallic 0) with KHR_materials_anisotropy and
 //! KHR_materials_ior, and KHR_materials_sheen when it measurably helps ([`SHEEN_GAIN`]), fitted
-//! to the model over the Ward fallback's kind of direction set.
+//! to the model over a dense set of direction pairs ([`DIRECTIONS`]).
 //!
 //! The BRDF is the one the glTF specification (Appendix B and the extensions' texts) defines:
 //!
@@ -28,8 +28,8 @@ use nalgebra::DVector;
 use std::f64::consts::PI;
 
 /// Directions the material is fitted over (light and view uniform in solid angle up to 80 deg),
-/// as many as the Ward fallback.
-pub const DIRECTIONS: usize = crate::fit::ward_fallback::DIRECTIONS;
+/// as many as the old Ward fallback had.
+pub const DIRECTIONS: usize = 1500;
 
 /// Parameter ranges searched.
 pub const ROUGHNESS_RANGE: (f64, f64) = (0.02, 1.0);

@@ -27,7 +27,6 @@ pub mod score;
 pub mod selection;
 pub mod setup;
 pub mod uncertainty;
-pub mod ward_fallback;
 
 use crate::load::samples::Samples;
 use crate::model::topology::TopologyMap;
