@@ -108,7 +108,7 @@ pub enum Study {
     Real(RealArgs),
     /// Each route a renderer takes against the data: `--model auto --metric log` on each file
     /// (default: the shipped felt, silk and brushed sets), the choice (exact: Mitsuba plugin,
-    /// shader), principled (Blender), gltf, ward held out, the old glTF conversion of the
+    /// shader), principled (Blender), openpbr (MaterialX / USD), gltf, ward held out, the old glTF conversion of the
     /// choice on every sample, each renderer rung's fit time: writes OUT/renderers.md and .csv
     Renderers(RenderersArgs),
 }
