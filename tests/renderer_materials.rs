@@ -95,6 +95,23 @@ fn a_fit_records_the_renderers_materials_and_the_exports_write_them() {
         "{stderr}"
     );
     assert!(!stderr.contains("converted"), "{stderr}");
+    // a recorded material's own undetermined values are named as such (not the fit's)
+    for m in [p, o, g] {
+        for (name, e) in m["parameters"].as_object().unwrap() {
+            let undetermined = match &e["determined"] {
+                serde_json::Value::Bool(b) => !b,
+                serde_json::Value::Array(a) => a.iter().any(|d| d == false),
+                _ => false,
+            };
+            if undetermined {
+                let rung = m["model"].as_str().unwrap();
+                assert!(
+                    stderr.contains(&format!("the recorded `{rung}` material's `{name}")),
+                    "{rung} {name}: {stderr}"
+                );
+            }
+        }
+    }
     // the values written are the recorded ones, and the error line is the material's own
     let script = std::fs::read_to_string(&py).unwrap();
     assert!(

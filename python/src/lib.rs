@@ -1022,11 +1022,27 @@ fn export<'py>(
     d.set_item("model", out.model.as_str())?;
     d.set_item("shader", out.shader)?;
     match out.glb {
-        Some((bytes, export_api::GltfRoute::Fitted { values, error })) => {
+        Some((
+            bytes,
+            export_api::GltfRoute::Fitted {
+                values,
+                error,
+                recorded_by,
+            },
+        )) => {
             d.set_item("glb", PyBytes::new(py, &bytes))?;
             let g = PyDict::new(py);
             let s = &values.shape;
-            g.set_item("route", "fitted")?;
+            // "recorded": the gltf material another rung's fit recorded, fitted to its data
+            g.set_item(
+                "route",
+                if recorded_by.is_some() {
+                    "recorded"
+                } else {
+                    "fitted"
+                },
+            )?;
+            g.set_item("recorded_by", recorded_by.map(|m| m.to_string()))?;
             g.set_item("base_color", values.base_color.to_vec())?;
             g.set_item("metallic", s.metallic)?;
             g.set_item("roughness", s.roughness)?;

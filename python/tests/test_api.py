@@ -91,7 +91,10 @@ def test_export_is_the_clis(silk_result, tmp_path):
         run_cli("export", silk_result, "--gltf", glb, "--object", obj, "-q")
         assert e.glb == glb.read_bytes() and e.shader is None
         m = e.gltf_material
-        assert len(m["base_color"]) == 3 and 0 <= m["roughness"] <= 1 and m["directions"] > 0
+        assert len(m["base_color"]) == 3 and 0 <= m["roughness"] <= 1
+        # the glTF material the varying-topology fit recorded, fitted to the same data
+        assert m["route"] == "recorded" and m["recorded_by"] == "varying-topology"
+        assert m["relative_rms_error_against_data"] > 0 and "relative RMS error" in m["error_text"]
     both = fibrefit.export(silk_result, shader="wgsl", gltf=True)
     assert both.shader and both.glb[:4] == b"glTF"
 

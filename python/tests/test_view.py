@@ -39,6 +39,11 @@ def test_view_compares_a_fit_with_its_data(tmp_path):
     d = page_data(fibrefit.view(tmp_path / "fit.json", out=tmp_path / "v.html"))
     assert d["comparison"]["available"], d["comparison"]["note"]
     assert d["result"]["fitted"]
+    # the glTF route is the gltf material the fit recorded, fitted to the same data
+    route = d["gltf_route"]
+    assert route["kind"] == "recorded" and "fitted to the same data" in route["text"], route
+    recorded = next(m for m in json.loads((tmp_path / "fit.json").read_text())["renderer_materials"] if m["model"] == "gltf")
+    assert route["values"]["roughnessFactor"] == recorded["parameters"]["roughness"]["value"]
 
 
 def test_view_refusals_write_nothing(tmp_path):

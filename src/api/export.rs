@@ -66,12 +66,15 @@ pub struct ExportOutcome {
 /// The glTF material a GLB carries, and how it was made.
 #[derive(Clone, Debug)]
 pub enum GltfRoute {
-    /// A `gltf` fit (no fuzz layer): the fit's own values, written exactly.
+    /// A `gltf` fit (no fuzz layer), or the `gltf` material another rung's fit recorded
+    /// (fitted to the same data): its own values, written exactly.
     Fitted {
         /// The values written.
         values: gltf_out::RungValues,
         /// The fit's error against its data, as the result states it.
         error: DataError,
+        /// The rung of the fit that recorded the material (None: the result is the gltf fit).
+        recorded_by: Option<ModelId>,
     },
     /// A glTF material fitted to the result's model (another rung, or a `gltf` fit with a
     /// component glTF cannot carry): its error is against the model, not the data.
@@ -337,6 +340,8 @@ struct MaterialSource {
     error: DataError,
     /// The rung of the result whose recorded material this is (None: the result itself).
     recorded_by: Option<ModelId>,
+    /// Its values the data did not determine (a recorded material's own).
+    undetermined: Vec<crate::fit::determined::Undetermined>,
 }
 
 /// The material of the rung with `ability` for the result `req.result` of rung `id`: the
@@ -353,41 +358,76 @@ fn material_source(
         params: params.clone(),
         error: DataError::of_result(&req.result),
         recorded_by: None,
+        undetermined: crate::export::result_json::undetermined_of(&req.result),
     });
     // the result itself, unless it carries fibrefit's fuzz layer: then the plain material its
     // fit recorded, if any (else itself, which the caller refuses with the reason)
     if own.as_ref().is_some_and(|s| s.params.fuzz_depth == 0.0) {
         return Ok(own);
     }
-    let recorded = crate::load::input::read_text(&req.result)
+    let recorded = match crate::load::input::read_text(&req.result)
         .ok()
         .and_then(|t| serde_json::from_str::<serde_json::Value>(&t).ok())
-        .and_then(|v| {
-            let entry = v["renderer_materials"].as_array()?.iter().find(|e| {
-                e["model"]
-                    .as_str()
-                    .and_then(|m| m.parse::<ModelId>().ok())
-                    .is_some_and(|m| m.has(ability))
-            })?;
-            Some((
-                entry.clone(),
-                v["data"]["file"].as_str().map(str::to_string),
-            ))
-        });
-    let Some((entry, data)) = recorded else {
-        return Ok(own);
+    {
+        Some(v) => recorded_material(&v, ability, &req.result.display().to_string())?,
+        None => None,
     };
-    let label = format!("{} (its renderer_materials)", req.result.display());
-    let raw = crate::export::result_json::params_of_result(&entry)
-        .map_err(|e| anyhow!("{label}: {e}"))?;
-    let (rid, p, _) = crate::export::result_json::checked_params(&raw, None, &label)?;
-    let mut error = DataError::of_value(&entry);
-    error.data = error.data.or(data);
-    Ok(Some(MaterialSource {
-        id: rid,
-        params: p,
+    Ok(match recorded {
+        Some(r) => Some(MaterialSource {
+            id: r.id,
+            params: r.params,
+            error: r.error,
+            recorded_by: Some(id),
+            undetermined: r.undetermined,
+        }),
+        None => own,
+    })
+}
+
+/// A renderer's own material a fit recorded (`renderer_materials`), checked.
+pub struct RecordedMaterial {
+    /// Its rung.
+    pub id: ModelId,
+    /// Its values.
+    pub params: ModelParams,
+    /// Its error against the data it was fitted to.
+    pub error: DataError,
+    /// Its values the data did not determine.
+    pub undetermined: Vec<crate::fit::determined::Undetermined>,
+}
+
+/// The material of the rung with `ability` that the result `v` (its JSON, read from `file`)
+/// recorded, fitted to the same data as the result's fit; None when it recorded none (a
+/// parameter file, a per-texel fit, an older result, the fit being that material itself).
+pub fn recorded_material(
+    v: &serde_json::Value,
+    ability: crate::model::Ability,
+    file: &str,
+) -> Result<Option<RecordedMaterial>> {
+    let entry = v["renderer_materials"].as_array().and_then(|a| {
+        a.iter().find(|e| {
+            e["model"]
+                .as_str()
+                .and_then(|m| m.parse::<ModelId>().ok())
+                .is_some_and(|m| m.has(ability))
+        })
+    });
+    let Some(entry) = entry else {
+        return Ok(None);
+    };
+    let label = format!("{file} (its renderer_materials)");
+    let raw =
+        crate::export::result_json::params_of_result(entry).map_err(|e| anyhow!("{label}: {e}"))?;
+    let (id, params, _) = crate::export::result_json::checked_params(&raw, None, &label)?;
+    let mut error = DataError::of_value(entry);
+    error.data = error
+        .data
+        .or_else(|| v["data"]["file"].as_str().map(str::to_string));
+    Ok(Some(RecordedMaterial {
+        id,
+        params,
         error,
-        recorded_by: Some(id),
+        undetermined: crate::export::result_json::undetermined_in(entry),
     }))
 }
 
@@ -457,6 +497,19 @@ fn renderer_material(
         );
         req.progress.say(&line);
         provenance.push(line);
+        // its own values the data did not determine: used, but not as measurements
+        for u in &source.undetermined {
+            let w = format!(
+                "{flag}: the recorded `{}` material's {}; used as given, not a measurement",
+                source.id,
+                crate::fit::determined::warning(u)
+            );
+            req.progress.warn(&w);
+            provenance.push(format!(
+                "UNDETERMINED: {}",
+                crate::fit::determined::warning(u)
+            ));
+        }
     }
     provenance.push(format!("error against the data: {}", source.error.text()));
     Ok((name, provenance, source))
@@ -646,6 +699,13 @@ fn glb_preview(
                      conversion of the `{id}` model"
                 );
                 req.progress.say(&format!("--gltf: {words}"));
+                for u in &s.undetermined {
+                    req.progress.warn(&format!(
+                        "--gltf: the recorded `{}` material's {}; used as given, not a measurement",
+                        s.id,
+                        crate::fit::determined::warning(u)
+                    ));
+                }
                 (s.id, &s.params, s.error.clone(), words)
             }
             None => (
@@ -686,7 +746,11 @@ fn glb_preview(
         }
         (
             gltf_out::gltf_rung_material(&values, tx.as_ref(), extras),
-            GltfRoute::Fitted { values, error },
+            GltfRoute::Fitted {
+                values,
+                error,
+                recorded_by: recorded.as_ref().and(Some(id)),
+            },
         )
     } else {
         let model = model::build(id, params)?;
@@ -723,7 +787,11 @@ fn glb_preview(
         )
     };
     let mut material = material;
-    gltf_out::mark_undetermined(&mut material, undetermined);
+    // a recorded material's own undetermined values, else the result's
+    match &recorded {
+        Some(s) => gltf_out::mark_undetermined(&mut material, &s.undetermined),
+        None => gltf_out::mark_undetermined(&mut material, undetermined),
+    }
     let mut bytes = Vec::new();
     gltf_out::write_glb_with_images(
         &mut bytes,

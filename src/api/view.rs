@@ -164,7 +164,7 @@ fn content(
     let lines = vec![format!("{title} (fibrefit view)")];
     let exact_glsl = shader::translate(&shader::wgsl(id, params, &lines)?, Language::Glsl)
         .map_err(|e| anyhow!("the exact model's shader: {e:#}"))?;
-    let (gltf_params, gltf_route) = gltf_route(id, params)?;
+    let (gltf_params, gltf_route) = gltf_route(id, params, result)?;
     let gltf_glsl = shader::translate(
         &shader::wgsl(ModelId::Gltf, &gltf_params, &lines)?,
         Language::Glsl,
@@ -281,11 +281,38 @@ fn meshes(id: ModelId, params: &ModelParams) -> Result<Vec<ViewMesh>> {
 }
 
 /// The glTF route's material as `gltf` rung parameters, and what it is: a `gltf` fit's own
-/// values (no fuzz layer), or the material `export --gltf` fits to the model (metallic 0,
+/// values (no fuzz layer), the `gltf` material the result's fit recorded (fitted to the same
+/// data, as `export --gltf` writes it: its fibres turned from the result's by the difference of
+/// their azimuths), or for a parameter file the material `export --gltf` fits to the model (metallic 0,
 /// specular factor 1; its anisotropy direction at its fitted rotation from the fibres, where
 /// the rung has it at 90 deg: the page turns the rung's fibre tangent by the difference).
-fn gltf_route(id: ModelId, params: &ModelParams) -> Result<(ModelParams, Value)> {
+fn gltf_route(id: ModelId, params: &ModelParams, result: &Value) -> Result<(ModelParams, Value)> {
     let why = crate::api::export::not_pure_gltf(id, params);
+    let recorded = match id == ModelId::Gltf && why.is_none() {
+        true => None,
+        false => crate::api::export::recorded_material(
+            result,
+            crate::model::Ability::GltfMaterial,
+            "the result",
+        )?
+        .filter(|r| crate::api::export::not_pure_gltf(r.id, &r.params).is_none()),
+    };
+    if let Some(r) = recorded {
+        let route = json!({
+            "kind": "recorded",
+            "text": format!(
+                "the glTF material the {id} fit recorded, fitted to the same data (not to the model), as `export --gltf` writes it: {}",
+                r.error.text()
+            ),
+            "values": gltf_values(r.params.albedos.diffuse, &r.params.gltf),
+            "error_against_data": r.error.json(),
+            "azimuth_offset_rad": r.params.fibre_azimuth - params.fibre_azimuth,
+        });
+        let mut p = r.params;
+        // drawn in the result's fibre frame, turned by the offset
+        p.fibre_azimuth = params.fibre_azimuth;
+        return Ok((p, route));
+    }
     if id == ModelId::Gltf && why.is_none() {
         let g = params.gltf;
         let route = json!({
@@ -372,7 +399,7 @@ mod tests {
         let raw = crate::export::result_json::read_params(&path).unwrap();
         let (id, params, _) =
             crate::export::result_json::checked_params(&raw, None, "pf.toml").unwrap();
-        let (p, route) = gltf_route(id, &params).unwrap();
+        let (p, route) = gltf_route(id, &params, &Value::Null).unwrap();
         assert_eq!(route["kind"], "converted");
         let offset = route["azimuth_offset_rad"].as_f64().unwrap();
         let fitted = gltf_material::fit(

@@ -259,7 +259,7 @@ fn summary(
         return lines;
     };
     let (fitted, why, source_error) = match route {
-        GltfRoute::Fitted { values, error } => {
+        GltfRoute::Fitted { values, error, .. } => {
             lines.push(format!("wrote {} ({}: {})", path.display(), args.object, fitted_text(values)));
             lines.push(format!("  error against the data: {}", error.text()));
             return with_textures(lines, textures);
