@@ -215,9 +215,28 @@ fn the_result_records_them_and_the_exports_say_so() {
     );
     let glb_bytes = std::fs::read(&glb).unwrap();
     let doc = glb_json(&glb_bytes);
-    let und = &doc["materials"][0]["extras"]["fibrefit"]["undetermined"];
-    assert_eq!(und[0]["parameter"], "alpha_y", "{und}");
-    assert!((und[0]["value_used"].as_f64().unwrap() - 0.2).abs() < 1e-9);
+    // the GLB carries the gltf material the fit recorded (fitted to the same data): its extras
+    // name that material's own undetermined values, not the ward fit's
+    let recorded = r["renderer_materials"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .find(|m| m["model"] == "gltf")
+        .unwrap();
+    let own = fibrefit::export::result_json::undetermined_in(recorded);
+    let und = doc["materials"][0]["extras"]["fibrefit"]["undetermined"]
+        .as_array()
+        .cloned()
+        .unwrap_or_default();
+    assert_eq!(und.len(), own.len(), "{und:?}");
+    for (u, o) in und.iter().zip(&own) {
+        assert_eq!(u["parameter"], o.label.as_str());
+        assert!((u["value_used"].as_f64().unwrap() - o.value).abs() < 1e-12);
+        assert!(
+            stderr.contains(&format!("the recorded `gltf` material's `{}`", o.label)),
+            "{stderr}"
+        );
+    }
     // `eval` and `render` read the values through the same loader: said there too
     let q = d.join("q.csv");
     std::fs::write(&q, "theta_i,phi_i,theta_o,phi_o\n30,0,30,180\n").unwrap();
