@@ -873,6 +873,27 @@ fn view(
     Ok(out)
 }
 
+/// An export of `result` asking only for a renderer's material: the Blender script (`blender`:
+/// its name) or the OpenPBR material (`openpbr`: its name and the flag errors name).
+fn material_request(
+    result: PathBuf,
+    blender: Option<String>,
+    openpbr: Option<(String, &'static str)>,
+    progress: bool,
+) -> ExportRequest {
+    ExportRequest {
+        result,
+        model: None,
+        shader: None,
+        check: false,
+        gltf: false,
+        object: "swatch".to_string(),
+        blender,
+        openpbr,
+        progress: fibrefit::Progress::new(!progress),
+    }
+}
+
 /// The Blender script `fibrefit export RESULT --blender FILE.py --name NAME` writes, in memory:
 /// a dict with `script` (the Python source), `name` (the material's name: `name`, or the
 /// result's file stem), `inputs` (the Principled BSDF's inputs it sets, by Blender's names),
@@ -887,17 +908,8 @@ fn blender_script<'py>(
     name: Option<String>,
     progress: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let req = ExportRequest {
-        result,
-        model: None,
-        shader: None,
-        check: false,
-        gltf: false,
-        object: "swatch".to_string(),
-        blender: Some(name.unwrap_or_default()),
-        openpbr: None,
-        progress: fibrefit::Progress::new(!progress),
-    };
+    let name = name.unwrap_or_default();
+    let req = material_request(result, Some(name), None, progress);
     let out = py.detach(|| export_api::export(&req)).map_err(err)?;
     let (m, script, error) = out
         .blender
@@ -936,17 +948,8 @@ fn openpbr_material<'py>(
     name: Option<String>,
     progress: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let req = ExportRequest {
-        result,
-        model: None,
-        shader: None,
-        check: false,
-        gltf: false,
-        object: "swatch".to_string(),
-        blender: None,
-        openpbr: Some((name.unwrap_or_default(), "--materialx")),
-        progress: fibrefit::Progress::new(!progress),
-    };
+    let name = (name.unwrap_or_default(), "--materialx");
+    let req = material_request(result, None, Some(name), progress);
     let out = py.detach(|| export_api::export(&req)).map_err(err)?;
     let (m, error) = out
         .openpbr

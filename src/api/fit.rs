@@ -781,7 +781,7 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         Some(_) => None,
     };
     let mut warnings = outcome.warnings.clone();
-    // the fitted model, built once for the fallback and the check values
+    // the fitted model, for the check values
     let model = model_for(
         &outcome.set,
         cfg.knobs.quadrature_order,

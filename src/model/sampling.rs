@@ -281,8 +281,7 @@ impl Sampler {
                     at,
                     ab,
                     dielectric: 1.0,
-                    f0: (q.specular_weight * super::rungs::principled::f0_from_ior(q.specular_ior))
-                        .clamp(0.0, 0.99999),
+                    f0: super::rungs::openpbr::specular_f0(q),
                     metal: 0.0,
                 }
             }

@@ -112,11 +112,9 @@ pub struct OpenPbr {
 impl OpenPbr {
     /// The material of `p`.
     pub fn new(p: &OpenPbrShape) -> Self {
-        // specular_F0 .. modulated_eta_s (the coat's weight 0: eta_s = specular_ior)
-        let eta_s = p.specular_ior;
-        let f0_sqrt = (eta_s - 1.0) / (eta_s + 1.0);
-        let scaled = (p.specular_weight * f0_sqrt * f0_sqrt).clamp(0.0, 0.99999);
-        let eps = sign(eta_s - 1.0) * scaled.sqrt();
+        // .. modulated_eta_s (the coat's weight 0: eta_s = specular_ior), whose F0 is the scaled one
+        let scaled = specular_f0(p);
+        let eps = sign(p.specular_ior - 1.0) * scaled.sqrt();
         let eta = (1.0 + eps) / (1.0 - eps);
         let mut m = Self {
             alpha_b: 0.0,
@@ -200,6 +198,12 @@ pub fn alphas(roughness: f64, anisotropy: f64) -> (f64, f64) {
     let inv = 1.0 - anisotropy;
     let ax = roughness * roughness * (2.0 / (inv * inv + 1.0)).sqrt();
     (ax, inv * ax)
+}
+
+/// `specular_F0` .. `scaled_specular_F0_clamped`: specular_weight x F0(specular_ior), clamped to
+/// [0, 0.99999] (the coat's weight 0), the F0 of the dielectric's modulated IOR.
+pub fn specular_f0(p: &OpenPbrShape) -> f64 {
+    (p.specular_weight * ior_to_f0(p.specular_ior)).clamp(0.0, 0.99999)
 }
 
 /// GLSL's `sign`.
