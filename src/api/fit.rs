@@ -893,13 +893,9 @@ fn per_texel_names(req: &crate::fit::config::MapsConfig) -> Vec<&'static str> {
     if req.ks {
         v.extend([Param::Ks, Param::RhoS]);
     }
-    if req.roughness {
-        v.push(Param::Roughness);
-    }
-    if req.anisotropy_strength {
-        v.push(Param::AnisotropyStrength);
-    }
-    v.into_iter().map(Param::name).collect()
+    let mut names: Vec<&'static str> = v.into_iter().map(Param::name).collect();
+    names.extend(req.lobe_maps().into_iter().map(|(_, name)| name));
+    names
 }
 
 /// The files a fit writes, reserved before the work.

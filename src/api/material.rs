@@ -140,7 +140,11 @@ impl Material {
             *w = format!("{}: {w}", result.display());
         }
         let texel_maps = match &maps_dir {
-            Some(d) => Some(TexelMapsIn::load(d, None).map_err(|e| anyhow!("maps: {e:#}"))?),
+            Some(d) => {
+                let m = TexelMapsIn::load(d, None).map_err(|e| anyhow!("maps: {e:#}"))?;
+                m.lobe_for(id, d).map_err(|e| anyhow!("maps: {e:#}"))?;
+                Some(m)
+            }
             None => None,
         };
         let shading = model::build(id, &params)?;
@@ -183,6 +187,7 @@ impl Material {
             ks: None,
             roughness: None,
             anisotropy: None,
+            lobe_names: vec![],
             width: size.0,
             rows: size.1,
         });
@@ -229,7 +234,7 @@ impl Material {
             texel_maps: self.texel_maps.as_ref(),
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             ward_curvature: None,
-            lobe: p.gltf.lobe(),
+            lobe: p.lobe(self.model),
         }
     }
 

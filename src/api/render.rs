@@ -118,7 +118,11 @@ impl Render {
             }
         }
         let texel_maps = match &maps {
-            Some(dir) => Some(TexelMapsIn::load(dir, None).map_err(|e| anyhow!("--maps: {e:#}"))?),
+            Some(dir) => {
+                let m = TexelMapsIn::load(dir, None).map_err(|e| anyhow!("--maps: {e:#}"))?;
+                m.lobe_for(id, dir).map_err(|e| anyhow!("--maps: {e:#}"))?;
+                Some(m)
+            }
             None => None,
         };
         Ok(Self {
@@ -154,7 +158,7 @@ impl Render {
             texel_maps: self.texel_maps.as_ref(),
             fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
             ward_curvature: self.ward_curvature_alpha,
-            lobe: params.gltf.lobe(),
+            lobe: params.lobe(self.model),
         };
         let scene = &self.scene;
         let bar = self.progress.bar(scene.camera.height as u64, "render");
@@ -390,7 +394,7 @@ pub fn paper_figures(
             texel_maps: None,
             fibre_azimuth_deg: 0.0,
             ward_curvature: None,
-            lobe: params.gltf.lobe(),
+            lobe: params.lobe(id),
         };
         for lights in &lightings {
             let camera = Camera {

@@ -337,16 +337,15 @@ fn check_one_run(
 
 /// The maps request the tiles were fitted with (their maps and smoothness).
 fn maps_config(tile: &TileFile) -> crate::fit::config::MapsConfig {
-    crate::fit::config::MapsConfig {
+    let req = crate::fit::config::MapsConfig {
         height: tile.maps.iter().any(|m| m == "height"),
         fibre_azimuth: tile.maps.iter().any(|m| m == "fibre_azimuth"),
         kd: tile.maps.iter().any(|m| m == "kd"),
         ks: tile.maps.iter().any(|m| m == "ks"),
-        roughness: tile.maps.iter().any(|m| m == "roughness"),
-        anisotropy_strength: tile.maps.iter().any(|m| m == "anisotropy_strength"),
         smoothness: tile.smoothness,
         ..Default::default()
-    }
+    };
+    tile.maps.iter().fold(req, |r, m| r.with_lobe_map(m))
 }
 
 /// Name the paths in the result `g` relative to its folder (`args.out`'s): the topology map

@@ -3,8 +3,10 @@
 //! error map for each and the residual map; a description for the result JSON.
 //!
 //! Files: `height.exr` (H, fibre radii), `fibre_azimuth.exr` (psi, degrees in [-90, 90)),
-//! `kd.exr`, `ks.exr` (albedos, one channel per colour channel), `roughness.exr` and
-//! `anisotropy_strength.exr` (the `gltf` rung's lobe), `<name>_std_error.exr`, and
+//! `kd.exr`, `ks.exr` (albedos, one channel per colour channel), the lobe of a renderer's
+//! material by the rung's own names (`gltf`: `roughness.exr`, `anisotropy_strength.exr`;
+//! `principled`: `roughness.exr`, `anisotropic.exr`; `openpbr`: `specular_roughness.exr`,
+//! `specular_roughness_anisotropy.exr`), `<name>_std_error.exr`, and
 //! `residual.exr` (RMS relative residual per texel), and a picture of each (`<name>.png`,
 //! `<name>_std_error.png`, `residual.png`: the map at the capture's resolution, one panel per
 //! channel, with a colour bar; grey where no texel is). All are reserved in the run's outputs
@@ -33,9 +35,28 @@ fn layout(name: &str, channels: usize) -> (&'static str, usize, Getter) {
             |v, c| v.kd[c],
         ),
         "ks" => ("weight of the specular lobe (ks)", channels, |v, c| v.ks[c]),
-        "roughness" => ("unitless (the lobe's roughness, glTF's)", 1, |v, _| v.roughness),
+        "roughness" => (
+            "unitless (the lobe's roughness: glTF's, Blender's)",
+            1,
+            |v, _| v.roughness,
+        ),
+        "specular_roughness" => (
+            "unitless (OpenPBR's specular_roughness)",
+            1,
+            |v, _| v.roughness,
+        ),
         "anisotropy_strength" => (
             "unitless in [0, 1] (KHR_materials_anisotropy's strength)",
+            1,
+            |v, _| v.anisotropy,
+        ),
+        "anisotropic" => (
+            "unitless in [0, 1] (Blender's Anisotropic)",
+            1,
+            |v, _| v.anisotropy,
+        ),
+        "specular_roughness_anisotropy" => (
+            "unitless in [0, 1] (OpenPBR's specular_roughness_anisotropy)",
             1,
             |v, _| v.anisotropy,
         ),
@@ -120,7 +141,10 @@ fn bar_label(name: &str) -> (&'static str, &'static str) {
         "fibre_azimuth" => ("fibre azimuth psi", "deg"),
         "kd" => ("kd", "albedo"),
         "roughness" => ("roughness", "unitless"),
+        "specular_roughness" => ("specular roughness", "unitless"),
         "anisotropy_strength" => ("anisotropy strength", "unitless"),
+        "anisotropic" => ("anisotropic", "unitless"),
+        "specular_roughness_anisotropy" => ("specular roughness anisotropy", "unitless"),
         _ => ("ks", "weight"),
     }
 }

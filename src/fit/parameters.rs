@@ -103,6 +103,24 @@ impl ParamSet {
             .unwrap_or(kind.info().absent)
     }
 
+    /// The rung's parameter in lobe role `role` with its value (`None`: the rung has no lobe
+    /// a texel map can carry).
+    pub fn lobe_shape(&self, role: crate::model::LobeRole) -> Option<&ShapeParam> {
+        self.rung.lobe_param(role).and_then(|p| self.shape(p))
+    }
+
+    /// The value in lobe role `role` (the gltf table's absent value where the rung has none).
+    pub fn lobe_value(&self, role: crate::model::LobeRole) -> f64 {
+        use crate::model::LobeRole;
+        match self.lobe_shape(role) {
+            Some(s) => s.value,
+            None => match role {
+                LobeRole::Roughness => Param::Roughness.info().absent,
+                LobeRole::Anisotropy => Param::AnisotropyStrength.info().absent,
+            },
+        }
+    }
+
     /// Varying shape parameters, in order.
     pub fn free_shapes(&self) -> Vec<usize> {
         (0..self.shapes.len())

@@ -1,21 +1,36 @@
 //! Per-texel maps as `fit --maps` writes them, read back as inputs (`synth` renders a capture
 //! from them, `render` shows them on an object): `height.exr` (fibre radii),
-//! `fibre_azimuth.exr` (degrees), `kd.exr`, `ks.exr` (grey or R, G, B), and for the `gltf`
-//! rung `roughness.exr` and `anisotropy_strength.exr`; those present are used, NaN texels take
-//! the global value.
+//! `fibre_azimuth.exr` (degrees), `kd.exr`, `ks.exr` (grey or R, G, B), and for the renderers'
+//! materials their lobe by the rung's own names (`gltf`: `roughness.exr`,
+//! `anisotropy_strength.exr`; `principled`: `roughness.exr`, `anisotropic.exr`; `openpbr`:
+//! `specular_roughness.exr`, `specular_roughness_anisotropy.exr`); those present are used, NaN
+//! texels take the global value.
 
 use super::image_io::{self, LinearImage};
+use crate::model::{LobeRole, ModelId};
 use anyhow::{bail, Result};
 use std::path::Path;
 
 /// The files of a maps directory, in the order `fit --maps` lists them.
-pub const MAP_FILES: [&str; 6] = [
+pub const MAP_FILES: [&str; 9] = [
     "height.exr",
     "fibre_azimuth.exr",
     "kd.exr",
     "ks.exr",
     "roughness.exr",
+    "specular_roughness.exr",
     "anisotropy_strength.exr",
+    "anisotropic.exr",
+    "specular_roughness_anisotropy.exr",
+];
+
+/// The lobe maps' names by role (a rung's own parameter names; one of each role at most).
+const LOBE_NAMES: [(LobeRole, &str); 5] = [
+    (LobeRole::Roughness, "roughness"),
+    (LobeRole::Roughness, "specular_roughness"),
+    (LobeRole::Anisotropy, "anisotropy_strength"),
+    (LobeRole::Anisotropy, "anisotropic"),
+    (LobeRole::Anisotropy, "specular_roughness_anisotropy"),
 ];
 
 pub struct TexelMapsIn {
@@ -27,6 +42,8 @@ pub struct TexelMapsIn {
     pub roughness: Option<LinearImage>,
     /// The lobe's anisotropy strength (`gltf`: KHR_materials_anisotropy's).
     pub anisotropy: Option<LinearImage>,
+    /// The lobe maps' names as found (without `.exr`), roughness first: which rung's they are.
+    pub lobe_names: Vec<&'static str>,
     pub width: usize,
     pub rows: usize,
 }
@@ -61,7 +78,25 @@ impl TexelMapsIn {
             read("kd.exr")?,
             read("ks.exr")?,
         );
-        let (roughness, anisotropy) = (read("roughness.exr")?, read("anisotropy_strength.exr")?);
+        let mut lobe = [None, None];
+        let mut lobe_names: Vec<&'static str> = vec![];
+        for role in LobeRole::BOTH {
+            for (r, name) in LOBE_NAMES.into_iter().filter(|(r, _)| *r == role) {
+                let Some(m) = read(&format!("{name}.exr"))? else {
+                    continue;
+                };
+                if let Some(first) = lobe_names.iter().find(|n| LOBE_NAMES.contains(&(r, **n))) {
+                    bail!(
+                        "{}: holds both {first}.exr and {name}.exr, maps of one lobe value for \
+                         two rungs; keep the one of the fit's rung",
+                        dir.display()
+                    );
+                }
+                lobe_names.push(name);
+                lobe[role as usize] = Some(m);
+            }
+        }
+        let [roughness, anisotropy] = lobe;
         let Some((width, rows)) = want.filter(|_| {
             [&height, &psi, &kd, &ks, &roughness, &anisotropy]
                 .iter()
@@ -80,9 +115,38 @@ impl TexelMapsIn {
             ks,
             roughness,
             anisotropy,
+            lobe_names,
             width,
             rows,
         })
+    }
+
+    /// Whether the maps carry a lobe (a roughness or anisotropy map); an error when they do
+    /// and `id` is not the rung whose parameters they are (`dir`: where they came from).
+    pub fn lobe_for(&self, id: ModelId, dir: &Path) -> Result<bool> {
+        for name in &self.lobe_names {
+            let role = LOBE_NAMES
+                .iter()
+                .find(|(_, n)| n == name)
+                .map(|(r, _)| *r)
+                .expect("a lobe name");
+            match id.lobe_param(role) {
+                Some(p) if p.name() == *name => {}
+                Some(p) => bail!(
+                    "{}: {name}.exr is another rung's lobe map; model `{id}` calls this value \
+                     `{}` ({}.exr)",
+                    dir.display(),
+                    p.name(),
+                    p.name()
+                ),
+                None => bail!(
+                    "{}: {name}.exr is a lobe map, but model `{id}` has no such lobe (the \
+                     renderers' materials have: gltf, principled, openpbr)",
+                    dir.display()
+                ),
+            }
+        }
+        Ok(!self.lobe_names.is_empty())
     }
 
     /// The map's value at (x, y), channel c (clamped to its channels), unless NaN.

@@ -123,10 +123,10 @@ pub trait ShadingModel: Send + Sync {
     /// The basis for a pair with both directions strictly above the horizon.
     fn basis_above_horizon(&self, pair: &DirectionPair) -> Basis;
 
-    /// This model with its lobe's `roughness` and `anisotropy` strength replaced (one texel of
-    /// a roughness or anisotropy map), everything else as it is; `None` for rungs without such
-    /// a lobe ([`Ability::GltfMaterial`]'s `roughness` and `anisotropy_strength`). Cheap: what
-    /// the lobe does not touch (tables, layers) is kept.
+    /// This model with its lobe's roughness and anisotropy replaced (one texel of a roughness
+    /// or anisotropy map), everything else as it is; `None` for rungs without such a lobe (the
+    /// renderers' materials have one: [`LobeRole`]). Cheap: what the lobe does not touch
+    /// (tables, layers) is kept.
     fn with_lobe(&self, _lobe: Lobe) -> Option<Box<dyn ShadingModel>> {
         None
     }
@@ -188,12 +188,39 @@ pub trait ShadingModel: Send + Sync {
     }
 }
 
-/// A lobe's per-texel shape ([`ShadingModel::with_lobe`]): GGX roughness and anisotropy
-/// strength, in the units of the parameters `roughness` and `anisotropy_strength`.
+/// A lobe's per-texel shape ([`ShadingModel::with_lobe`]): GGX roughness and anisotropy, in
+/// the units of the rung's own parameters of those [`LobeRole`]s (`gltf`: `roughness`,
+/// `anisotropy_strength`; `principled`: `roughness`, `anisotropic`; `openpbr`:
+/// `specular_roughness`, `specular_roughness_anisotropy`).
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Lobe {
     pub roughness: f64,
     pub anisotropy: f64,
+}
+
+/// The two values of a lobe a texel map can carry ([`Lobe`]): each rung with such a lobe names
+/// them its own way ([`crate::model::ModelId::lobe_param`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LobeRole {
+    /// The GGX roughness r (alpha = r^2): `gltf`'s and `principled`'s `roughness`, `openpbr`'s
+    /// `specular_roughness`.
+    Roughness,
+    /// The anisotropy: `gltf`'s `anisotropy_strength`, `principled`'s `anisotropic`,
+    /// `openpbr`'s `specular_roughness_anisotropy`.
+    Anisotropy,
+}
+
+impl LobeRole {
+    /// Both roles, roughness first.
+    pub const BOTH: [LobeRole; 2] = [LobeRole::Roughness, LobeRole::Anisotropy];
+
+    /// This role's value of `lobe`.
+    pub fn of(self, lobe: &Lobe) -> f64 {
+        match self {
+            LobeRole::Roughness => lobe.roughness,
+            LobeRole::Anisotropy => lobe.anisotropy,
+        }
+    }
 }
 
 /// A BRDF per channel (1/sr) as a function of the swatch-frame directions (l, v); `None` where

@@ -748,6 +748,18 @@ impl Param {
         TABLE.iter().map(|r| r.param)
     }
 
+    /// The lobe value this parameter is, when a texel map can carry it per texel.
+    pub fn lobe_role(self) -> Option<crate::model::LobeRole> {
+        use crate::model::LobeRole;
+        match self {
+            Param::Roughness | Param::SpecularRoughness => Some(LobeRole::Roughness),
+            Param::AnisotropyStrength | Param::Anisotropic | Param::SpecularRoughnessAnisotropy => {
+                Some(LobeRole::Anisotropy)
+            }
+            _ => None,
+        }
+    }
+
     /// Its row of [`TABLE`].
     pub fn info(self) -> &'static ParamInfo {
         let row = &TABLE[self as usize];

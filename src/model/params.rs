@@ -302,6 +302,18 @@ impl RawParams {
 }
 
 impl ModelParams {
+    /// The lobe a texel map's roughness and anisotropy replace, in model `id`'s own units
+    /// (`principled`'s, `openpbr`'s; `gltf`'s for every other rung, which has none).
+    pub fn lobe(&self, id: ModelId) -> crate::model::Lobe {
+        if id.has(Ability::PrincipledMaterial) {
+            self.principled.lobe()
+        } else if id.has(Ability::OpenPbrMaterial) {
+            self.openpbr.lobe()
+        } else {
+            self.gltf.lobe()
+        }
+    }
+
     /// Check `raw` for model `id`. Returns the parameters and warnings about parameters the model
     /// does not use.
     pub fn from_raw(raw: &RawParams, id: ModelId) -> Result<(Self, Vec<String>)> {

@@ -163,14 +163,9 @@ impl<'a> CaptureScene<'a> {
             None => None,
         };
         if let Some(m) = &unit_maps {
-            let lobe_maps = m.roughness.is_some() || m.anisotropy.is_some();
-            if lobe_maps && req.shading.with_lobe(p.gltf.lobe()).is_none() {
-                bail!(
-                    "capture.maps = {}: roughness.exr or anisotropy_strength.exr, but model `{}` has no such lobe (the gltf rung has)",
-                    c.maps.as_ref().expect("loaded from it").display(),
-                    req.shading.id()
-                );
-            }
+            let dir = c.maps.as_ref().expect("loaded from it");
+            m.lobe_for(req.shading.id(), dir)
+                .map_err(|e| anyhow!("capture.maps = {}: {e:#}", dir.display()))?;
             if m.psi.is_some() && c.tangent.is_some() {
                 bail!("give capture.tangent or a fibre_azimuth.exr in capture.maps, not both");
             }
@@ -229,9 +224,9 @@ impl<'a> CaptureScene<'a> {
             .topo_map
             .as_ref()
             .map(|m| p.topology.texel_height(m.texel(x, y), p.spacing)));
-        // a texel's own roughness and anisotropy strength (gltf's lobe maps)
+        // a texel's own roughness and anisotropy (a renderer material's lobe maps)
         let lobe = um
-            .and_then(|m| m.lobe_at(x, y, p.gltf.lobe()))
+            .and_then(|m| m.lobe_at(x, y, p.lobe(shading.id())))
             .and_then(|l| shading.with_lobe(l));
         let basis = match (height, lobe) {
             (_, Some(m)) => m.basis(&pair),

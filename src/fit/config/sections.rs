@@ -148,12 +148,22 @@ pub struct MapsConfig {
     /// Per-texel specular weight ks (Ward: rho_s), per channel.
     #[serde(default)]
     pub ks: bool,
-    /// Per-texel lobe roughness (`gltf`: glTF's roughness), unitless.
+    /// Per-texel lobe roughness (`gltf`: glTF's roughness; `principled`: Blender's
+    /// Roughness), unitless.
     #[serde(default)]
     pub roughness: bool,
     /// Per-texel anisotropy strength (`gltf`: KHR_materials_anisotropy's), unitless in [0, 1].
     #[serde(default)]
     pub anisotropy_strength: bool,
+    /// Per-texel Anisotropic (`principled`: Blender's), unitless in [0, 1].
+    #[serde(default)]
+    pub anisotropic: bool,
+    /// Per-texel specular_roughness (`openpbr`), unitless.
+    #[serde(default)]
+    pub specular_roughness: bool,
+    /// Per-texel specular_roughness_anisotropy (`openpbr`), unitless in [0, 1].
+    #[serde(default)]
+    pub specular_roughness_anisotropy: bool,
     /// Alternations of (global fit given the maps, per-texel fits given the globals) at most;
     /// they stop earlier when the total cost falls by less than 1e-6 of itself.
     #[serde(default = "default_map_rounds")]
@@ -185,6 +195,9 @@ impl Default for MapsConfig {
             ks: false,
             roughness: false,
             anisotropy_strength: false,
+            anisotropic: false,
+            specular_roughness: false,
+            specular_roughness_anisotropy: false,
             rounds: default_map_rounds(),
             global_texels: default_global_texels(),
             smoothness: 0.0,
@@ -201,12 +214,58 @@ impl MapsConfig {
             ("kd", self.kd),
             ("ks", self.ks),
             ("roughness", self.roughness),
+            ("specular_roughness", self.specular_roughness),
             ("anisotropy_strength", self.anisotropy_strength),
+            ("anisotropic", self.anisotropic),
+            (
+                "specular_roughness_anisotropy",
+                self.specular_roughness_anisotropy,
+            ),
         ]
         .into_iter()
         .filter(|x| x.1)
         .map(|x| x.0)
         .collect()
+    }
+
+    /// The lobe maps requested, each by the name the request gives it (a rung's own parameter
+    /// name: `check_request` refuses another rung's), with its role.
+    pub fn lobe_maps(&self) -> Vec<(crate::model::LobeRole, &'static str)> {
+        use crate::model::LobeRole::{Anisotropy, Roughness};
+        [
+            (Roughness, "roughness", self.roughness),
+            (Roughness, "specular_roughness", self.specular_roughness),
+            (Anisotropy, "anisotropy_strength", self.anisotropy_strength),
+            (Anisotropy, "anisotropic", self.anisotropic),
+            (
+                Anisotropy,
+                "specular_roughness_anisotropy",
+                self.specular_roughness_anisotropy,
+            ),
+        ]
+        .into_iter()
+        .filter(|x| x.2)
+        .map(|x| (x.0, x.1))
+        .collect()
+    }
+
+    /// Whether a map of the lobe's value in `role` is requested (by whichever name).
+    pub fn lobe(&self, role: crate::model::LobeRole) -> bool {
+        self.lobe_maps().iter().any(|m| m.0 == role)
+    }
+
+    /// The request with the lobe map in `role` switched on by `name` (a lobe map's name, as
+    /// [`MapsConfig::lobe_maps`] gives them).
+    pub fn with_lobe_map(mut self, name: &str) -> Self {
+        match name {
+            "roughness" => self.roughness = true,
+            "specular_roughness" => self.specular_roughness = true,
+            "anisotropy_strength" => self.anisotropy_strength = true,
+            "anisotropic" => self.anisotropic = true,
+            "specular_roughness_anisotropy" => self.specular_roughness_anisotropy = true,
+            _ => {}
+        }
+        self
     }
 }
 

@@ -162,7 +162,7 @@ impl Free {
 pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
     let id = cfg.model_id()?;
     if req.requested().is_empty() {
-        bail!("--maps: [maps] in the config requests no map; set height, fibre_azimuth, kd, ks, roughness or anisotropy_strength = true");
+        bail!("--maps: [maps] in the config requests no map; set height, fibre_azimuth, kd, ks, or the lobe's roughness or anisotropy (by the rung's own names: roughness, anisotropy_strength, anisotropic, specular_roughness, specular_roughness_anisotropy) = true");
     }
     if req.height && !id.has_topology() {
         bail!("[maps] height = true: model `{id}` has no fibre topology (use varying-topology or reference)");
@@ -173,12 +173,18 @@ pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
     if req.ks && !(id.reads(Param::Ks) || id.reads(Param::RhoS)) {
         bail!("[maps] ks = true: model `{id}` has no specular lobe");
     }
-    for (on, key, param) in [
-        (req.roughness, "roughness", Param::Roughness),
-        (req.anisotropy_strength, "anisotropy_strength", Param::AnisotropyStrength),
-    ] {
-        if on && !id.reads(param) {
-            bail!("[maps] {key} = true: model `{id}` has no such lobe (the gltf rung has)");
+    for (role, key) in req.lobe_maps() {
+        match id.lobe_param(role) {
+            Some(p) if p.name() == key => {}
+            Some(p) => bail!(
+                "[maps] {key} = true: model `{id}` calls this value `{}`; set {} = true",
+                p.name(),
+                p.name()
+            ),
+            None => bail!(
+                "[maps] {key} = true: model `{id}` has no such lobe (the renderers' materials \
+                 have: gltf, principled, openpbr)"
+            ),
         }
     }
     if req.ks && !cfg.components.specular {
@@ -234,9 +240,7 @@ fn fix_mapped(set: &ParamSet, req: &MapsConfig) -> ParamSet {
         let mapped = match sh.kind {
             Param::Height | Param::MapScale => req.height,
             Param::Azimuth => req.fibre_azimuth,
-            Param::Roughness => req.roughness,
-            Param::AnisotropyStrength => req.anisotropy_strength,
-            _ => false,
+            p => p.lobe_role().is_some_and(|r| req.lobe(r)),
         };
         if mapped {
             sh.vary = false;
@@ -348,8 +352,8 @@ fn start_value(s: &Sample, set: &ParamSet) -> TexelValues {
             .unwrap_or(set.shape_value(Param::Azimuth)),
         kd: galb[0],
         ks: galb[1],
-        roughness: set.shape_value(Param::Roughness),
-        anisotropy: set.shape_value(Param::AnisotropyStrength),
+        roughness: set.lobe_value(crate::model::LobeRole::Roughness),
+        anisotropy: set.lobe_value(crate::model::LobeRole::Anisotropy),
     }
 }
 
@@ -384,8 +388,8 @@ fn free_of(req: &MapsConfig) -> Free {
         psi: req.fibre_azimuth,
         kd: req.kd,
         ks: req.ks,
-        roughness: req.roughness,
-        anisotropy: req.anisotropy_strength,
+        roughness: req.lobe(crate::model::LobeRole::Roughness),
+        anisotropy: req.lobe(crate::model::LobeRole::Anisotropy),
     }
 }
 

@@ -27,9 +27,7 @@ pub(super) struct Globals<'m> {
 
 /// The bounds of the roughness in `set` (the parameter's range where the set has none).
 pub(super) fn roughness_range(set: &ParamSet) -> [f64; 2] {
-    set.shapes
-        .iter()
-        .find(|s| s.kind == Param::Roughness)
+    set.lobe_shape(crate::model::LobeRole::Roughness)
         .map_or([0.0, 1.0], |s| [s.min, s.max])
 }
 

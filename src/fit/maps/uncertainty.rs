@@ -87,6 +87,14 @@ impl SymInverse {
                 0.0
             }
         });
+        if n == 0 {
+            // no free global (every value mapped or held): nothing to invert
+            return Self {
+                scale,
+                values: vec![],
+                vectors: DMatrix::zeros(0, 0),
+            };
+        }
         let eig = scaled.symmetric_eigen();
         Self {
             scale,

@@ -146,6 +146,14 @@ impl ModelId {
         self.parameters().into_iter().map(Param::name).collect()
     }
 
+    /// The rung's parameter in lobe role `role` (what a roughness or anisotropy map of its
+    /// fit carries, named as the rung names it); `None` for rungs without such a lobe.
+    pub fn lobe_param(self, role: crate::model::LobeRole) -> Option<Param> {
+        self.parameters()
+            .into_iter()
+            .find(|p| p.lobe_role() == Some(role))
+    }
+
     /// Whether the rung (or the fuzz layer over it) reads parameter or knob `p`.
     pub fn reads(self, p: Param) -> bool {
         match p.info().reader {
