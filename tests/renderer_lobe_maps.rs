@@ -2,8 +2,9 @@
 //! capture synthesised from known base colour, roughness, anisotropy and fibre-direction maps
 //! (`synth` with `capture.maps`, the maps named as each rung names its parameters) is fitted
 //! with `[maps]` of those names; every map comes back within its standard errors. The exports
-//! carrying the maps are checked in `renderer_maps_export.rs` and, in the renderers themselves,
-//! by `python/tests/test_blender.py` (Cycles) and `python/tests/test_materialx.py`.
+//! carry them as textures beside the material (`export --blender`, `--materialx`, `--usd`),
+//! pixel for pixel; in the renderers themselves they are checked by
+//! `python/tests/test_blender.py` (Cycles at two texels) and `python/tests/test_materialx.py`.
 
 use assert_cmd::Command;
 use fibrefit::load::image_io;
@@ -133,10 +134,11 @@ fn fitted_maps(m: &Material, d: &Path) -> (std::path::PathBuf, std::path::PathBu
 }
 
 /// Every texel's values within their errors (at most one in 50 beyond 4 standard errors), and
-/// the median error small against the maps' ranges.
+/// the median error small against the maps' ranges; then the exports' textures.
 fn maps_are_recovered(m: &Material) {
     let dir = tempfile::tempdir().unwrap();
-    let (_, maps) = fitted_maps(m, dir.path());
+    let (result, maps) = fitted_maps(m, dir.path());
+    exports_carry_the_maps(m, &result, &maps, dir.path());
     let read = |f: &str| image_io::read(&maps.join(f), None, None).unwrap();
     type Truth = &'static dyn Fn(usize, usize) -> f64;
     for (name, truth, range, period) in [
@@ -232,5 +234,119 @@ fn lobe_maps_take_the_rungs_own_names() {
         );
         assert!(!dir.path().join("r.json").exists());
         assert!(!dir.path().join("maps").exists());
+    }
+}
+
+/// The exports of a maps fit: each material file with its textures beside it, named after it,
+/// every pixel the maps' texel (the fibre azimuth as the renderer's rotation), and the material
+/// reading them.
+fn exports_carry_the_maps(m: &Material, result: &Path, maps: &Path, d: &Path) {
+    let read = |p: &Path| image_io::read(p, None, None).unwrap();
+    let map = |name: &str| read(&maps.join(format!("{name}.exr")));
+    let (kd, psi, rough, aniso) = (
+        map("kd"),
+        map("fibre_azimuth"),
+        map(m.lobe[0]),
+        map(m.lobe[1]),
+    );
+    let out = d.join("out");
+    std::fs::create_dir(&out).unwrap();
+    let (flag, files): (&[&str], Vec<(&str, std::path::PathBuf)>) = match m.model {
+        "principled" => (
+            &["--blender", "out/felt.py"],
+            vec![("out/felt.py", out.join("felt.py"))],
+        ),
+        _ => (
+            &["--materialx", "out/felt.mtlx", "--usd", "out/stage.usda"],
+            vec![
+                ("out/felt.mtlx", out.join("felt.mtlx")),
+                ("out/stage.usda", out.join("stage.usda")),
+            ],
+        ),
+    };
+    let o = fibrefit()
+        .current_dir(d)
+        .arg("export")
+        .arg(result)
+        .args(flag)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let said = String::from_utf8_lossy(&o.stderr);
+    for (_, path) in &files {
+        let stem = path.file_stem().unwrap().to_string_lossy().into_owned();
+        let text = std::fs::read_to_string(path).unwrap();
+        let suffixes: [(&str, &str); 4] = match m.model {
+            "principled" => [
+                ("base_color", "\"Base Color\""),
+                ("roughness", "\"Roughness\""),
+                ("anisotropic", "\"Anisotropic\""),
+                ("anisotropic_rotation", "\"Anisotropic Rotation\""),
+            ],
+            _ => [
+                ("base_color", "base_color"),
+                ("specular_roughness", "specular_roughness"),
+                (
+                    "specular_roughness_anisotropy",
+                    "specular_roughness_anisotropy",
+                ),
+                ("tangent_rotation", "amount"),
+            ],
+        };
+        for (suffix, input) in suffixes {
+            let file = format!("{stem}_{suffix}.exr");
+            assert!(text.contains(&file), "{}: names {file}", path.display());
+            assert!(text.contains(input), "{}: drives {input}", path.display());
+            assert!(
+                said.contains(&file),
+                "the export says it wrote {file}: {said}"
+            );
+            let t = read(&out.join(&file));
+            assert_eq!((t.width, t.height, t.channels), (N, N, 3), "{file}");
+            for y in 0..N {
+                for x in 0..N {
+                    let px = t.pixel(x, y);
+                    let want: [f64; 3] = match suffix {
+                        "base_color" => {
+                            [0, 1, 2].map(|c| kd.pixel(x, y)[c.min(kd.channels - 1)] as f64)
+                        }
+                        "anisotropic_rotation" => {
+                            [((psi.pixel(x, y)[0] as f64 + 90.0) / 360.0).rem_euclid(1.0); 3]
+                        }
+                        "tangent_rotation" => {
+                            let a = (-(psi.pixel(x, y)[0] as f64 + 90.0)).rem_euclid(360.0);
+                            [if a > 180.0 { a - 360.0 } else { a }; 3]
+                        }
+                        s if s.ends_with("anisotropy") || s == "anisotropic" => {
+                            [aniso.pixel(x, y)[0] as f64; 3]
+                        }
+                        _ => [rough.pixel(x, y)[0] as f64; 3],
+                    };
+                    for c in 0..3 {
+                        assert!(
+                            (px[c] as f64 - want[c]).abs() <= 1e-6 * want[c].abs().max(1.0),
+                            "{file} ({x}, {y}) channel {c}: {} against the map's {}",
+                            px[c],
+                            want[c]
+                        );
+                    }
+                }
+            }
+        }
+        if m.model == "openpbr" {
+            // image nodes, closest, the tangent's amount from its map
+            assert!(text.contains("closest"), "{text}");
+            if stem == "felt" {
+                assert!(text.contains("<input name=\"amount\" type=\"float\" nodename=\"r_tangent_rotation_map\" />"), "{text}");
+            } else {
+                assert!(text.contains("inputs:amount.connect"), "{text}");
+                assert!(text.contains("UsdUVTexture"), "{text}");
+            }
+        } else {
+            assert!(
+                text.contains("MAPS_DIR = ") && text.contains("Closest"),
+                "{text}"
+            );
+        }
     }
 }

@@ -120,7 +120,15 @@ def export(
     progress: bool = False,
 ) -> Dict[str, Any]: ...
 def blender_script(
-    result: str, name: Optional[str] = None, *, progress: bool = False
+    result: str, name: Optional[str] = None, out: Optional[str] = None, *, progress: bool = False
+) -> Dict[str, Any]: ...
+def openpbr_material(
+    result: str,
+    name: Optional[str] = None,
+    materialx: Optional[str] = None,
+    usd: Optional[str] = None,
+    *,
+    progress: bool = False,
 ) -> Dict[str, Any]: ...
 def view(
     result: str,

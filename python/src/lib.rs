@@ -873,6 +873,27 @@ fn view(
     Ok(out)
 }
 
+/// A material's textures as a dict: input -> {`file` (its name beside the material file),
+/// `path` (where it was written, or None), `pixels` ((height, width, 3) float32, rows from the
+/// top)}.
+fn textures_dict<'py>(
+    py: Python<'py>,
+    t: &fibrefit::api::export::MaterialTextures,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    for tex in &t.textures {
+        let e = PyDict::new(py);
+        let file = t.file_name(tex);
+        e.set_item("path", t.dir.as_ref().map(|dir| dir.join(&file)))?;
+        e.set_item("file", file)?;
+        let px =
+            numpy::PyArray1::from_vec(py, tex.rgb.clone()).reshape([tex.height, tex.width, 3])?;
+        e.set_item("pixels", px)?;
+        d.set_item(tex.input, e)?;
+    }
+    Ok(d)
+}
+
 /// An export of `result` asking only for a renderer's material: the Blender script (`blender`:
 /// its name) or the OpenPBR material (`openpbr`: its name and the flag errors name).
 fn material_request(
@@ -900,22 +921,45 @@ fn material_request(
 /// `fibre_azimuth_deg` and `error_text` (the fit's error against its data). `result` must be a
 /// `principled` fit without the fuzz layer or a fit that recorded the `principled` material
 /// (`renderer_materials`; anything else raises, as the CLI refuses it).
+///
+/// `out` (a `.py` path): also write the script there, a maps fit's textures beside it (as the
+/// command line writes them, through its checked writer), and return that script.
 #[pyfunction]
-#[pyo3(signature = (result, name=None, *, progress=false))]
+#[pyo3(signature = (result, name=None, out=None, *, progress=false))]
 fn blender_script<'py>(
     py: Python<'py>,
     result: PathBuf,
     name: Option<String>,
+    out: Option<PathBuf>,
     progress: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
     let name = name.unwrap_or_default();
     let req = material_request(result, Some(name), None, progress);
-    let out = py.detach(|| export_api::export(&req)).map_err(err)?;
-    let (m, script, error) = out
+    let built = py.detach(|| export_api::export(&req)).map_err(err)?;
+    let (mut m, mut script, error) = built
         .blender
         .ok_or_else(|| FibrefitError::new_err("no Blender material was built"))?;
+    if let Some(out) = &out {
+        m = py
+            .detach(|| -> anyhow::Result<_> {
+                if !out
+                    .extension()
+                    .is_some_and(|e| e.eq_ignore_ascii_case("py"))
+                {
+                    anyhow::bail!("out {}: expected a .py file name", out.display());
+                }
+                let mut outs = fibrefit::api::Outputs::new(&export_api::inputs(&req));
+                let id = outs.file(out, "out")?;
+                let m = export_api::stage_blender(&mut outs, id, &m, (out, "out"))?;
+                outs.commit()?;
+                Ok(m)
+            })
+            .map_err(err)?;
+        script = m.script();
+    }
     let d = PyDict::new(py);
     d.set_item("script", script)?;
+    d.set_item("textures", textures_dict(py, &m.textures)?)?;
     d.set_item("name", &m.name)?;
     let inputs = PyDict::new(py);
     for (k, v) in m.inputs() {
@@ -940,23 +984,69 @@ fn blender_script<'py>(
 /// against its data). `result` must be an `openpbr` fit without the fuzz layer or a fit that
 /// recorded the `openpbr` material (`renderer_materials`; anything else raises, as the CLI
 /// refuses it).
+///
+/// `materialx` (a `.mtlx` path), `usd` (a `.usda` path): also write the document or the stage
+/// there, a maps fit's textures beside each (as the command line writes them), and return
+/// those texts.
 #[pyfunction]
-#[pyo3(signature = (result, name=None, *, progress=false))]
+#[pyo3(signature = (result, name=None, materialx=None, usd=None, *, progress=false))]
 fn openpbr_material<'py>(
     py: Python<'py>,
     result: PathBuf,
     name: Option<String>,
+    materialx: Option<PathBuf>,
+    usd: Option<PathBuf>,
     progress: bool,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let name = (name.unwrap_or_default(), "--materialx");
+    let flag = match (&materialx, &usd) {
+        (None, Some(_)) => "--usd",
+        _ => "--materialx",
+    };
+    let name = (name.unwrap_or_default(), flag);
     let req = material_request(result, None, Some(name), progress);
-    let out = py.detach(|| export_api::export(&req)).map_err(err)?;
-    let (m, error) = out
+    let built = py.detach(|| export_api::export(&req)).map_err(err)?;
+    let (m, error) = built
         .openpbr
         .ok_or_else(|| FibrefitError::new_err("no OpenPBR material was built"))?;
+    let (mut document, mut usda, mut written) = (m.document(), m.usda(), m.clone());
+    if materialx.is_some() || usd.is_some() {
+        let (d, u, w) = py
+            .detach(|| -> anyhow::Result<_> {
+                let mut outs = fibrefit::api::Outputs::new(&export_api::inputs(&req));
+                let mut ids = vec![];
+                for (path, ext, flag, is_usd) in [
+                    (&materialx, "mtlx", "materialx", false),
+                    (&usd, "usda", "usd", true),
+                ] {
+                    if let Some(p) = path {
+                        if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext)) {
+                            anyhow::bail!("{flag} {}: expected a .{ext} file name", p.display());
+                        }
+                        ids.push((outs.file(p, flag)?, p, flag, is_usd));
+                    }
+                }
+                let (mut d, mut u, mut w) = (m.document(), m.usda(), m.clone());
+                let mut shared = vec![];
+                for (id, p, flag, is_usd) in ids {
+                    let to = (p.as_path(), flag, is_usd);
+                    let staged = export_api::stage_openpbr(&mut outs, id, &m, to, &mut shared)?;
+                    if is_usd {
+                        u = staged.usda();
+                    } else {
+                        d = staged.document();
+                    }
+                    w = staged;
+                }
+                outs.commit()?;
+                Ok((d, u, w))
+            })
+            .map_err(err)?;
+        (document, usda, written) = (d, u, w);
+    }
     let d = PyDict::new(py);
-    d.set_item("document", m.document())?;
-    d.set_item("usda", m.usda())?;
+    d.set_item("document", document)?;
+    d.set_item("usda", usda)?;
+    d.set_item("textures", textures_dict(py, &written.textures)?)?;
     d.set_item("name", &m.name)?;
     let inputs = PyDict::new(py);
     for (k, v) in m.inputs() {

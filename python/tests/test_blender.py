@@ -3,7 +3,9 @@ data, made into Blender materials by ``fibrefit.blender.material`` (the script `
 --blender`` writes), rendered by Cycles on the CPU: a flat swatch, a sun lamp of strength E, an
 orthographic camera, a black world and no bounces, so a pixel is ``f(l, v) cos(theta_l) E``
 exactly. Each render equals the rung's BRDF within 1 % at 14 direction pairs per fit (normal,
-45 and 80 degrees; along, across and between the fibres; the view at grazing too).
+45 and 80 degrees; along, across and between the fibres; the view at grazing too), and at two
+texels of a ``--maps`` fit (its base colour, roughness, anisotropic and fibre direction per
+texel, Image Texture nodes reading the EXRs written beside the script) at 8 pairs each.
 
 Needs Blender's Python module (`bpy` 5.0.1, Python 3.11): scripts/test.sh installs it into its
 own virtual environment and sets FIBREFIT_REQUIRE_BPY=1, so CI fails rather than skips when it
@@ -66,15 +68,19 @@ def scene():
     return sc, swatch, sun, cam
 
 
-def render_pairs(tmp_path, result, name, pairs):
+def render_pairs(tmp_path, result, name, pairs, uv=(0.5, 0.5)):
     """Cycles' pixel / E (the BRDF x cos theta_l) at each (l, v), RGB, of the material that
-    ``fibrefit.blender.material`` makes of ``result`` in a fresh scene."""
+    ``fibrefit.blender.material`` makes of ``result`` in a fresh scene, the camera on the
+    swatch's point at texture coordinates ``uv`` (the plane's UVs span it, v up)."""
     sc, swatch, sun, cam = scene()
     swatch.data.materials.append(fibrefit.blender.material(str(result), name=name))
+    at = mathutils.Vector((2.0 * uv[0] - 1.0, 2.0 * uv[1] - 1.0, 0.0))
+    if uv != (0.5, 0.5):
+        cam.data.ortho_scale = 0.002  # well inside one texel, even at 80 degrees
     out = []
     for l, v in pairs:
         sun.rotation_euler = mathutils.Vector(l).to_track_quat("Z", "Y").to_euler()
-        cam.location = mathutils.Vector(v) * 5.0
+        cam.location = at + mathutils.Vector(v) * 5.0
         cam.rotation_euler = mathutils.Vector(v).to_track_quat("Z", "Y").to_euler()
         path = str(tmp_path / "render.exr")
         sc.render.filepath = path
@@ -170,3 +176,60 @@ def test_other_results_are_refused_with_the_route_to_a_principled_fit(tmp_path):
     p.write_text('model = "ward"\nrho_d = 0.3\nrho_s = 0.1\nalpha_x = 0.2\nalpha_y = 0.3\n')
     with pytest.raises(fibrefit.FibrefitError, match="--model principled"):
         fibrefit.blender.script(str(p))
+
+
+@pytest.fixture(scope="module")
+def maps_fit(tmp_path_factory):
+    """A principled ``--maps`` fit of the shipped silk capture (6 images): base colour, fibre direction,
+    roughness and anisotropic per texel."""
+    d = tmp_path_factory.mktemp("maps_fit")
+    cfg = d / "maps.toml"
+    cfg.write_text(
+        'model = "principled"\n[maps]\nkd = true\nfibre_azimuth = true\nroughness = true\n'
+        "anisotropic = true\nrounds = 2\n"
+    )
+    r = fibrefit.fit(str(DATA / "silk" / "capture.toml"), config=str(cfg), maps=str(d / "maps"))
+    path = d / "maps_fit.json"
+    r.to_json(str(path))
+    return path
+
+
+def test_cycles_renders_two_texels_of_a_maps_fit(maps_fit, tmp_path):
+    s = fibrefit.blender.script(str(maps_fit))
+    tex = s["textures"]
+    assert set(tex) == {"Base Color", "Roughness", "Anisotropic", "Anisotropic Rotation"}
+    model = fibrefit.load(str(maps_fit))
+    w, h = model.maps_size
+    rough = tex["Roughness"]["pixels"][..., 0]
+    # the texels of the smoothest and the roughest lobe: the maps must matter
+    texels = [np.unravel_index(np.argmin(rough), rough.shape), np.unravel_index(np.argmax(rough), rough.shape)]
+    assert rough.max() - rough.min() > 0.01, (rough.min(), rough.max())
+    values = []
+    for y, x in texels:
+        uv = ((x + 0.5) / w, 1.0 - (y + 0.5) / h)
+        psi = float(tex["Anisotropic Rotation"]["pixels"][y, x, 0]) * 360.0 - 90.0
+        pairs = [pairs_for(psi)[i] for i in (0, 1, 2, 3, 4, 5, 11, 12)]
+        rendered = render_pairs(tmp_path, maps_fit, "fibrefit maps", pairs, uv=uv)
+        l = np.array([p[0] for p in pairs])
+        v = np.array([p[1] for p in pairs])
+        f = model.eval(l, v, np.tile(uv, (len(pairs), 1)))
+        if f.shape[1] == 1:
+            f = np.repeat(f, 3, axis=1)
+        want = f * l[:, 2:3]
+        rel = np.abs(rendered - want) / np.maximum(want, 1e-4)
+        print(
+            f"maps texel ({x}, {y}): roughness {rough[y, x]:.3f}, fibres at {psi:.1f} deg, "
+            f"{len(pairs)} pairs: worst relative difference {rel.max():.2e}"
+        )
+        assert rel.max() < 0.01, f"texel ({x}, {y}): Cycles vs the rung, worst {rel.max():.2e}:\n{rendered}\n{want}"
+        values.append(want)
+    # the two texels differ (their own lobes, not the global one)
+    assert np.abs(values[0] - values[1]).max() > 0.01 * np.abs(values[1]).max()
+    # the script, run again, rebuilt the material in place: one material, one image per texture
+    assert [m.name for m in bpy.data.materials].count("fibrefit maps") == 1
+    paths = [bpy.path.abspath(i.filepath) for i in bpy.data.images if i.filepath]
+    for t in tex.values():
+        # material() wrote them beside the result, named after the material
+        file = t["file"].replace("maps_fit_", "fibrefit_maps_")
+        assert sum(pathlib.Path(p).name == file for p in paths) == 1, (file, paths)
+        assert (maps_fit.parent / file).is_file()

@@ -11,6 +11,11 @@ silk and brushed data, written as a MaterialX document (``fibrefit.materialx.doc
   MaterialX's node definitions (``ND_...``); those shaders are checked against MaterialX's own
   library instead (every id a node definition, every input one of its inputs, of its type).
 
+A ``--maps`` fit's document and stage read its maps as image nodes (closest filtering) driving
+base_color, specular_roughness, specular_roughness_anisotropy and the tangent's rotation: they
+validate, their GLSL compiles, the files lie beside them (their pixels are the maps' texels:
+tests/renderer_lobe_maps.rs).
+
 The renders themselves (the generated shader in WebGL equals the rung) are in
 tests/browser/materialx.mjs.
 
@@ -129,7 +134,11 @@ def test_the_document_validates_and_carries_the_fit(fits, library, name):
 @pytest.mark.parametrize("name", ["felt", "silk"])
 def test_the_glsl_materialx_generates_compiles(fits, library, name, tmp_path):
     m = fibrefit.materialx.material(str(fits[name]))
-    doc = load(m["document"], library)
+    glsl_compiles(load(m["document"], library), m, name, tmp_path)
+
+
+def glsl_compiles(doc, m, name, tmp_path):
+    """The GLSL MaterialX generates from ``doc`` (pixel and vertex stages) compiles."""
     material = doc.getChild(m["name"])
     gen = mx_glsl.GlslShaderGenerator.create()
     ctx = mx_gen.GenContext(gen)
@@ -150,6 +159,14 @@ def test_the_usd_stage_opens_and_validates(fits, library, name, tmp_path):
     m = fibrefit.materialx.material(str(fits[name]))
     path = tmp_path / f"{name}.usda"
     path.write_text(m["usda"])
+    usd_stage_is_valid(path, m, library)
+    print(f"{name}: USD stage valid (MaterialX ids checked against MaterialX)")
+
+
+def usd_stage_is_valid(path, m, library):
+    """The stage at ``path`` (of material ``m``) opens, passes every usd-core validator but the
+    registry's ignorance of MaterialX's ids, which are MaterialX's own node definitions; its
+    material's surfaces resolve, its values are ``m``'s, the swatch is bound to it."""
     stage = Usd.Stage.Open(str(path))
     assert stage.GetDefaultPrim().GetPath() == Sdf.Path("/fibrefit")
     validators = UsdValidation.ValidationRegistry().GetOrLoadAllValidators()
@@ -166,11 +183,17 @@ def test_the_usd_stage_opens_and_validates(fits, library, name, tmp_path):
     ids = {s.GetIdAttr().Get(): s for s in shaders}
     assert material_ids <= set(ids)
     for node_id, s in ids.items():
-        if node_id == "UsdPreviewSurface":
+        if node_id in ("UsdPreviewSurface", "UsdUVTexture", "UsdPrimvarReader_float2"):
             continue
         nodedef = library.getNodeDef(node_id)
         assert nodedef is not None, node_id
-        usd_types = {"float": "float", "color3": "color3f", "vector3": "vector3f", "string": "string"}
+        usd_types = {
+            "float": "float",
+            "color3": "color3f",
+            "vector3": "vector3f",
+            "string": "string",
+            "filename": "asset",
+        }
         for i in s.GetInputs():
             d = nodedef.getActiveInput(i.GetBaseName())
             assert d is not None, f"{node_id} has no input {i.GetBaseName()}"
@@ -180,6 +203,14 @@ def test_the_usd_stage_opens_and_validates(fits, library, name, tmp_path):
     assert mtlx.GetIdAttr().Get() == "ND_open_pbr_surface_surfaceshader"
     assert mat.ComputeSurfaceSource()[0].GetIdAttr().Get() == "UsdPreviewSurface"
     for key, value in m["inputs"].items():
+        if key in m["textures"]:
+            # read from its image node, the file beside the stage
+            src = mtlx.GetInput(key).GetConnectedSource()[0]
+            image = UsdShade.Shader(src.GetPrim())
+            assert image.GetIdAttr().Get() in ("ND_image_color3", "ND_image_float"), key
+            file = image.GetInput("file").Get()
+            assert (path.parent / file.path).is_file(), file
+            continue
         got = mtlx.GetInput(key).Get()
         got = list(got) if hasattr(got, "__len__") else [got]
         want = value if isinstance(value, list) else [value]
@@ -187,7 +218,6 @@ def test_the_usd_stage_opens_and_validates(fits, library, name, tmp_path):
     swatch = stage.GetPrimAtPath("/fibrefit/Swatch")
     bound, _ = UsdShade.MaterialBindingAPI(swatch).ComputeBoundMaterial()
     assert bound.GetPath() == mat.GetPath()
-    print(f"{name}: USD stage valid ({len(validators)} validators; MaterialX ids checked against MaterialX)")
 
 
 def test_other_results_are_refused_with_the_route_to_an_openpbr_fit(tmp_path):
@@ -211,3 +241,52 @@ def test_any_fit_carries_the_openpbr_material_fitted_to_its_data(library, tmp_pa
     assert m["inputs"]["specular_roughness"] == want
     rel = recorded["openpbr"]["statistics"]["relative_rmse"]
     assert f"relative RMS error {100 * rel:.1f} %" in m["error_text"]
+
+
+@pytest.fixture(scope="module")
+def maps_fit(tmp_path_factory):
+    """An openpbr ``--maps`` fit of the shipped silk capture (6 images): base colour, fibre
+    direction, specular roughness and its anisotropy per texel."""
+    d = tmp_path_factory.mktemp("maps_fit")
+    cfg = d / "maps.toml"
+    cfg.write_text(
+        'model = "openpbr"\n[maps]\nkd = true\nfibre_azimuth = true\nspecular_roughness = true\n'
+        "specular_roughness_anisotropy = true\nrounds = 2\n"
+    )
+    r = fibrefit.fit(str(DATA / "silk" / "capture.toml"), config=str(cfg), maps=str(d / "maps"))
+    path = d / "silk_maps.json"
+    r.to_json(str(path))
+    return path
+
+
+def test_a_maps_fit_reads_its_maps_as_image_nodes(maps_fit, library, tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    m = fibrefit.materialx.material(str(maps_fit), materialx=out / "silk.mtlx", usd=out / "silk.usda")
+    inputs = {"base_color", "specular_roughness", "specular_roughness_anisotropy", "amount"}
+    assert set(m["textures"]) == inputs
+    for t in m["textures"].values():
+        assert t["pixels"].ndim == 3 and t["pixels"].shape[2] == 3 and np.isfinite(t["pixels"]).all()
+        # the document and the stage share one stem, so one set of textures beside both
+        assert t["file"].startswith("silk_") and (out / t["file"]).is_file()
+        assert os.path.samefile(t["path"], out / t["file"])
+    # the document as written: valid, each input read from an image node beside it
+    doc = mx.createDocument()
+    mx.readFromXmlFile(doc, str(out / "silk.mtlx"))
+    doc.setDataLibrary(library)
+    ok, message = doc.validate()
+    assert ok, message
+    surface = mx.getShaderNodes(doc.getChild(m["name"]))[0]
+    rotate = doc.getNode(f"{m['name']}_tangent_across_fibres")
+    for node, key in [(surface, k) for k in sorted(inputs - {"amount"})] + [(rotate, "amount")]:
+        image = node.getInput(key).getConnectedNode()
+        assert image is not None and image.getCategory() == "image", key
+        assert image.getInputValue("filtertype") == "closest", key
+        file = image.getInputValue("file")
+        assert (out / file).is_file(), file
+        assert file == m["textures"][key]["file"], key
+    if shutil.which("glslangValidator"):
+        glsl_compiles(doc, m, "silk_maps", tmp_path)
+    # the stage: valid, the same images (its own files beside it)
+    usd_stage_is_valid(out / "silk.usda", m, library)
+    print(f"maps fit: document and stage valid; {len(inputs)} inputs read from image nodes")

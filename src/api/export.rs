@@ -4,6 +4,7 @@
 
 use crate::export::blender_out::BlenderMaterial;
 use crate::export::gltf_out::{self, VertexFrames};
+pub use crate::export::material_textures::{MapTexture, MaterialTextures};
 pub use crate::export::materialx_out::{OpenPbrMaterial, Value as OpenPbrValue};
 use crate::export::shader::{self, check, gpu::Gpu, Language};
 use crate::fit::gltf_material::{self, FittedMaterial};
@@ -244,6 +245,39 @@ pub struct GlbTextures {
 
 use crate::load::texel_maps::MAP_FILES;
 
+/// Stage the Blender script of `m` into `id` (reserved at `out`, a `.py`) with a maps fit's
+/// textures beside it (reserved here, `flag` naming the option); returns the material as
+/// written (its textures named after `out`).
+pub fn stage_blender(
+    outs: &mut crate::export::atomic::Outputs,
+    id: crate::export::atomic::OutputId,
+    m: &BlenderMaterial,
+    (out, flag): (&Path, &str),
+) -> Result<BlenderMaterial> {
+    let m = m.clone().beside(out);
+    m.textures.write_beside(outs, (out, flag), &mut vec![])?;
+    outs.put(id, m.script().as_bytes())?;
+    Ok(m)
+}
+
+/// Stage the MaterialX document (`usd` false) or the USD stage (`usd` true) of `m` into `id`
+/// (reserved at `out`) with a maps fit's textures beside it (reserved here, unless in
+/// `written`: a document and a stage of one stem share them); returns the material as
+/// written.
+pub fn stage_openpbr(
+    outs: &mut crate::export::atomic::Outputs,
+    id: crate::export::atomic::OutputId,
+    m: &OpenPbrMaterial,
+    (out, flag, usd): (&Path, &str, bool),
+    written: &mut Vec<PathBuf>,
+) -> Result<OpenPbrMaterial> {
+    let m = m.clone().beside(out);
+    m.textures.write_beside(outs, (out, flag), written)?;
+    let text = if usd { m.usda() } else { m.document() };
+    outs.put(id, text.as_bytes())?;
+    Ok(m)
+}
+
 /// Every file an export reads (none may be an output).
 pub fn inputs(req: &ExportRequest) -> Vec<PathBuf> {
     let mut inputs = vec![req.result.clone()];
@@ -445,7 +479,12 @@ fn renderer_material(
     (flag, ability, rung): (&str, crate::model::Ability, &str),
     name: &str,
     lines: &[String],
-) -> Result<(String, Vec<String>, MaterialSource)> {
+) -> Result<(
+    String,
+    Vec<String>,
+    MaterialSource,
+    Option<(PathBuf, TexelMapsIn)>,
+)> {
     let file = req.result.display();
     let target = ModelId::ALL
         .into_iter()
@@ -467,12 +506,33 @@ fn renderer_material(
             source.params.fuzz_depth
         );
     }
-    if let Some(dir) = maps_of(&req.result, &crate::progress::Progress::quiet())? {
-        req.progress.warn(&format!(
-            "{flag} carries the global fit only, not the per-texel maps in {}",
-            dir.display()
-        ));
+    let maps =
+        crate::api::render::maps_dir(None, &req.result, &crate::progress::Progress::quiet())?;
+    if maps.is_none() {
+        if let Ok(Some((named, looked))) = crate::api::render::named_maps_dir(&req.result) {
+            bail!(
+                "{flag}: {}; the material's textures are made of them",
+                crate::api::render::missing_maps(&req.result, &named, &looked)
+            );
+        }
     }
+    let maps = match (maps, source.recorded_by) {
+        (Some(dir), None) => {
+            let m = TexelMapsIn::load(&dir, None)
+                .map_err(|e| anyhow!("{flag}: the maps the result names: {e:#}"))?;
+            m.lobe_for(id, &dir)
+                .map_err(|e| anyhow!("{flag}: the maps the result names: {e:#}"))?;
+            Some((dir, m))
+        }
+        (Some(dir), Some(_)) => {
+            req.progress.warn(&format!(
+                "{flag} carries the recorded global material only, not the per-texel maps in {}",
+                dir.display()
+            ));
+            None
+        }
+        (None, _) => None,
+    };
     let name = if name.is_empty() {
         req.result
             .file_stem()
@@ -512,7 +572,64 @@ fn renderer_material(
         }
     }
     provenance.push(format!("error against the data: {}", source.error.text()));
-    Ok((name, provenance, source))
+    Ok((name, provenance, source, maps))
+}
+
+/// A material's textures of `maps` (from `dir`): `(suffix, input, meaning)` of base colour,
+/// roughness, anisotropy and the fibre direction's input (`rotation`: its value of a fibre
+/// azimuth in degrees), each where the maps have it, the global value `p`'s in their gaps.
+fn material_textures(
+    (dir, maps): (&Path, &TexelMapsIn),
+    p: &ModelParams,
+    id: ModelId,
+    inputs: [(&'static str, &'static str, &'static str); 4],
+    rotation: impl Fn(f64) -> f64,
+) -> MaterialTextures {
+    use crate::export::material_textures::MapTexture;
+    let size = (maps.width, maps.rows);
+    let lobe = p.lobe(id);
+    let grey = |v: f64| [v; 3];
+    let mut textures = vec![];
+    if maps.kd.is_some() {
+        let kd = p.albedos.diffuse;
+        textures.push(MapTexture::of(
+            inputs[0],
+            size,
+            |x, y| {
+                let c = |ch| TexelMapsIn::at(&maps.kd, x, y, ch);
+                Some([c(0)?, c(1)?, c(2)?])
+            },
+            kd,
+        ));
+    }
+    for (k, m, global) in [
+        (1, &maps.roughness, lobe.roughness),
+        (2, &maps.anisotropy, lobe.anisotropy),
+    ] {
+        if m.is_some() {
+            textures.push(MapTexture::of(
+                inputs[k],
+                size,
+                |x, y| TexelMapsIn::at(m, x, y, 0).map(grey),
+                grey(global),
+            ));
+        }
+    }
+    if maps.psi.is_some() {
+        let global = rotation(p.fibre_azimuth.to_degrees());
+        textures.push(MapTexture::of(
+            inputs[3],
+            size,
+            |x, y| TexelMapsIn::at(&maps.psi, x, y, 0).map(|d| grey(rotation(d))),
+            grey(global),
+        ));
+    }
+    MaterialTextures {
+        textures,
+        stem: String::new(),
+        dir: None,
+        maps: Some(dir.to_path_buf()),
+    }
 }
 
 /// The Blender material of a `principled` result, or of the `principled` material a result
@@ -529,8 +646,27 @@ fn blender_material(
         crate::model::Ability::PrincipledMaterial,
         "principled",
     );
-    let (name, provenance, source) = renderer_material(req, id, params, rung, name, lines)?;
+    let (name, provenance, source, maps) = renderer_material(req, id, params, rung, name, lines)?;
     let p = &source.params;
+    let textures = maps.map_or_else(MaterialTextures::default, |(dir, m)| {
+        let inputs = [
+            (
+                "base_color",
+                "Base Color",
+                "Base Color, scene-linear RGB (the fit's kd)",
+            ),
+            ("roughness", "Roughness", "Roughness"),
+            ("anisotropic", "Anisotropic", "Anisotropic"),
+            (
+                "anisotropic_rotation",
+                "Anisotropic Rotation",
+                "Anisotropic Rotation, a fraction of a turn: (fibre azimuth + 90 deg) / 360",
+            ),
+        ];
+        let turn = |psi: f64| crate::export::material_textures::turns(psi + 90.0);
+        material_textures((&dir, &m), p, source.id, inputs, turn)
+    });
+    let stem = name.clone();
     Ok((
         BlenderMaterial {
             name,
@@ -538,6 +674,7 @@ fn blender_material(
             shape: p.principled,
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             provenance,
+            textures: MaterialTextures { stem, ..textures },
         },
         source.error,
     ))
@@ -554,15 +691,36 @@ fn openpbr_material(
     lines: &[String],
 ) -> Result<(OpenPbrMaterial, DataError)> {
     let rung = (flag, crate::model::Ability::OpenPbrMaterial, "openpbr");
-    let (name, provenance, source) = renderer_material(req, id, params, rung, name, lines)?;
+    let (name, provenance, source, maps) = renderer_material(req, id, params, rung, name, lines)?;
     let p = &source.params;
+    let textures = maps.map_or_else(MaterialTextures::default, |(dir, m)| {
+        let inputs = [
+            ("base_color", "base_color", "base_color, linear RGB (the fit's kd)"),
+            ("specular_roughness", "specular_roughness", "specular_roughness"),
+            (
+                "specular_roughness_anisotropy",
+                "specular_roughness_anisotropy",
+                "specular_roughness_anisotropy",
+            ),
+            (
+                "tangent_rotation",
+                "amount",
+                "rotate3d's amount turning the UV tangent across the fibres, degrees: -(fibre azimuth + 90)",
+            ),
+        ];
+        let amount = crate::export::materialx_out::rotation_amount;
+        material_textures((&dir, &m), p, source.id, inputs, amount)
+    });
+    let name = OpenPbrMaterial::valid_name(&name);
+    let stem = name.clone();
     Ok((
         OpenPbrMaterial {
-            name: OpenPbrMaterial::valid_name(&name),
+            name,
             base_color: p.albedos.diffuse,
             shape: p.openpbr,
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             provenance,
+            textures: MaterialTextures { stem, ..textures },
         },
         source.error,
     ))

@@ -8,7 +8,7 @@ use crate::export::atomic::Outputs;
 use crate::export::shader::Language;
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
@@ -183,14 +183,18 @@ pub fn run(args: &ExportArgs) -> Result<()> {
     if let (Some((bytes, _)), Some(id)) = (&glb, gltf_out) {
         outs.put(id, bytes)?;
     }
-    if let (Some((_, script, _)), Some(id)) = (&blender, blender_out) {
-        outs.put(id, script.as_bytes())?;
+    // a maps fit's textures beside each material file, named after it
+    if let (Some((m, _, _)), Some(id), Some(path)) = (&blender, blender_out, &args.blender) {
+        export_api::stage_blender(&mut outs, id, m, (path, "--blender"))?;
     }
-    if let (Some((m, _)), Some(id)) = (&openpbr, materialx_out) {
-        outs.put(id, m.document().as_bytes())?;
+    let mut shared = vec![];
+    if let (Some((m, _)), Some(id), Some(path)) = (&openpbr, materialx_out, &args.materialx) {
+        let to = (path.as_path(), "--materialx", false);
+        export_api::stage_openpbr(&mut outs, id, m, to, &mut shared)?;
     }
-    if let (Some((m, _)), Some(id)) = (&openpbr, usd_out) {
-        outs.put(id, m.usda().as_bytes())?;
+    if let (Some((m, _)), Some(id), Some(path)) = (&openpbr, usd_out, &args.usd) {
+        let to = (path.as_path(), "--usd", true);
+        export_api::stage_openpbr(&mut outs, id, m, to, &mut shared)?;
     }
     outs.commit()?;
     if !args.quiet {
@@ -202,6 +206,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 m.fibre_azimuth_deg
             );
             eprintln!("  error against the data: {}", error.text());
+            textures_said(&m.textures, path, &[]);
         }
         if let Some((m, error)) = &openpbr {
             if let Some(path) = &args.materialx {
@@ -221,6 +226,10 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 );
             }
             eprintln!("  error against the data: {}", error.text());
+            let mut said = vec![];
+            for path in args.materialx.iter().chain(&args.usd) {
+                said.extend(textures_said(&m.textures, path, &said));
+            }
         }
         for line in summary(args, lang, id, &glb, &textures) {
             eprintln!("{line}");
@@ -360,4 +369,29 @@ fn with_textures(mut lines: Vec<String>, textures: &Option<export_api::GlbTextur
         t.names.join(", ")
     ));
     lines
+}
+
+/// The textures written beside the material file `path`, a line each (but those in `said`);
+/// returns their files.
+fn textures_said(
+    t: &crate::export::material_textures::MaterialTextures,
+    path: &Path,
+    said: &[PathBuf],
+) -> Vec<PathBuf> {
+    let t = t.clone().beside(path);
+    let mut files = vec![];
+    for (file, tex) in t.files(path) {
+        if said.contains(&file) {
+            continue;
+        }
+        eprintln!(
+            "  wrote {} ({} per texel, {}x{})",
+            file.display(),
+            tex.input,
+            tex.width,
+            tex.height
+        );
+        files.push(file);
+    }
+    files
 }

@@ -8,7 +8,13 @@
 //! anisotropy lies across them: Anisotropic Rotation = (fibre azimuth + 90 deg) / 360 of a turn.
 //! Running the script again rebuilds the material of that name in place (its users keep it),
 //! never a second one.
+//!
+//! A `fit --maps` result's maps become Image Texture nodes (Closest, Non-Color, the UV map)
+//! driving Base Color, Roughness, Anisotropic and Anisotropic Rotation texel by texel, read from
+//! the EXRs written beside the script ([`MaterialTextures`]); a scalar through a Separate Color
+//! node's Red, so the value reaches the socket unchanged.
 
+use super::material_textures::MaterialTextures;
 use crate::model::params::PrincipledShape;
 
 /// What the script carries.
@@ -24,6 +30,8 @@ pub struct BlenderMaterial {
     pub fibre_azimuth_deg: f64,
     /// Lines for the script's header: where the values come from, their error against the data.
     pub provenance: Vec<String>,
+    /// The per-texel maps' textures (none for a global fit).
+    pub textures: MaterialTextures,
 }
 
 impl BlenderMaterial {
@@ -63,6 +71,12 @@ impl BlenderMaterial {
         ]
     }
 
+    /// The material with its textures named after the script `out` and written beside it.
+    pub fn beside(mut self, out: &std::path::Path) -> Self {
+        self.textures = self.textures.beside(out);
+        self
+    }
+
     /// The script.
     pub fn script(&self) -> String {
         let mut s = String::new();
@@ -76,10 +90,10 @@ impl BlenderMaterial {
             self.fibre_azimuth_deg
         );
         s += "#\n";
-        for l in &self.provenance {
+        for l in self.provenance.iter().chain(&self.textures.lines()) {
             s += &format!("# {l}\n");
         }
-        s += "\nimport bpy\n\n";
+        s += "\nimport os\n\nimport bpy\n\n";
         s += &format!("NAME = {}\n", py_str(&self.name));
         s += "# Principled BSDF inputs, by Blender's names (scene-linear colours)\n";
         s += "INPUTS = {\n";
@@ -95,6 +109,19 @@ impl BlenderMaterial {
             s += &format!("    {}: {v},\n", py_str(k));
         }
         s += "}\n";
+        s += "# Image textures (Closest, Non-Color) driving inputs texel by texel: input -> file,\n";
+        s += "# looked for in MAPS_DIR (where they were written), then beside this script\n";
+        let dir = self.textures.dir.as_ref().map_or(String::new(), |d| d.display().to_string());
+        s += &format!("MAPS_DIR = {}\n", py_str(&dir));
+        s += "TEXTURES = {\n";
+        for t in &self.textures.textures {
+            s += &format!(
+                "    {}: {},\n",
+                py_str(t.input),
+                py_str(&self.textures.file_name(t))
+            );
+        }
+        s += "}\n";
         s += SCRIPT_BODY;
         s
     }
@@ -103,7 +130,21 @@ impl BlenderMaterial {
 /// What every script does with NAME and INPUTS.
 const SCRIPT_BODY: &str = r#"
 
-def fibrefit_material(name=NAME, inputs=INPUTS):
+def texture_path(file_name, maps_dir=MAPS_DIR):
+    """A texture's file: in maps_dir, else beside this script, else in the working directory."""
+    here = globals().get("__file__")
+    dirs = [maps_dir] + ([os.path.dirname(os.path.abspath(here))] if here else []) + [os.getcwd()]
+    for d in dirs:
+        p = os.path.join(d, file_name)
+        if d and os.path.isfile(p):
+            return p
+    raise FileNotFoundError(
+        f"fibrefit material {NAME}: texture {file_name} is in none of {dirs}; keep the "
+        "textures beside the script, or set MAPS_DIR"
+    )
+
+
+def fibrefit_material(name=NAME, inputs=INPUTS, textures=TEXTURES):
     """The material `name`: made, or rebuilt in place (its users keep it)."""
     m = bpy.data.materials.get(name)
     if m is None:
@@ -127,7 +168,28 @@ def fibrefit_material(name=NAME, inputs=INPUTS):
     tangent.direction_type = "UV_MAP"
     links.new(tangent.outputs["Tangent"], bsdf.inputs["Tangent"])
     links.new(bsdf.outputs["BSDF"], out.inputs["Surface"])
-    m["fibrefit"] = {"inputs": {k: list(v) if isinstance(v, tuple) else v for k, v in inputs.items()}}
+    # the per-texel maps: one pixel per texel, read as they are (Non-Color, Closest)
+    for i, (key, file_name) in enumerate(textures.items()):
+        path = texture_path(file_name)
+        image = bpy.data.images.load(path, check_existing=True)
+        image.reload()
+        image.colorspace_settings.name = "Non-Color"
+        tex = nodes.new("ShaderNodeTexImage")
+        tex.location = (-650, 300 - 280 * i)
+        tex.image = image
+        tex.interpolation = "Closest"
+        tex.extension = "EXTEND"
+        if key == "Base Color":
+            links.new(tex.outputs["Color"], bsdf.inputs[key])
+        else:  # a scalar: R (G and B are equal), unchanged by a colour-to-float conversion
+            rgb = nodes.new("ShaderNodeSeparateColor")
+            rgb.location = (-350, 300 - 280 * i)
+            links.new(tex.outputs["Color"], rgb.inputs["Color"])
+            links.new(rgb.outputs["Red"], bsdf.inputs[key])
+    m["fibrefit"] = {
+        "inputs": {k: list(v) if isinstance(v, tuple) else v for k, v in inputs.items()},
+        "textures": dict(textures),
+    }
     return m
 
 
@@ -175,6 +237,7 @@ mod tests {
             shape: PrincipledShape::default(),
             fibre_azimuth_deg: 300.0,
             provenance: vec![],
+            textures: MaterialTextures::default(),
         };
         assert!((m.anisotropic_rotation() - (390.0 / 360.0 - 1.0)).abs() < 1e-15);
         assert!(m.script().contains("\"Anisotropic Rotation\": 0.0833"));

@@ -9,6 +9,7 @@
 //! anticlockwise seen from the normal. MaterialX's `rotate3d` turns clockwise seen from its axis
 //! (`mx_rotate_vector3`: `v cos + (v x axis) sin + ...`), so its amount is `-(azimuth + 90)`.
 
+use super::material_textures::MaterialTextures;
 use crate::model::params::OpenPbrShape;
 
 /// What the document carries.
@@ -25,6 +26,10 @@ pub struct OpenPbrMaterial {
     /// Lines for the document's header: where the values come from, their error against the
     /// data.
     pub provenance: Vec<String>,
+    /// The per-texel maps' textures (none for a global fit): image nodes (closest, the UV
+    /// set) driving base_color, specular_roughness, specular_roughness_anisotropy and the
+    /// tangent's rotation (`amount`) texel by texel.
+    pub textures: MaterialTextures,
 }
 
 /// An input's value: a float or a colour.
@@ -50,15 +55,16 @@ impl OpenPbrMaterial {
         s
     }
 
+    /// The material with its textures named after the file `out` (a document or a stage) and
+    /// written beside it.
+    pub fn beside(mut self, out: &std::path::Path) -> Self {
+        self.textures = self.textures.beside(out);
+        self
+    }
+
     /// `rotate3d`'s amount turning the UV tangent across the fibres, degrees in (-180, 180].
     pub fn tangent_rotation_deg(&self) -> f64 {
-        let a = -(self.fibre_azimuth_deg + 90.0);
-        let a = a.rem_euclid(360.0);
-        if a > 180.0 {
-            a - 360.0
-        } else {
-            a
-        }
+        rotation_amount(self.fibre_azimuth_deg)
     }
 
     /// The OpenPBR Surface inputs this material sets, by OpenPBR's names, with their values:
@@ -106,20 +112,38 @@ impl OpenPbrMaterial {
             "    {:.4} deg from the UV u axis, anticlockwise seen from the normal.\n",
             self.fibre_azimuth_deg
         );
-        for l in &self.provenance {
+        for l in self.provenance.iter().chain(&self.textures.lines()) {
             s += &format!("    {}\n", xml_comment(l));
         }
         s += "  -->\n";
+        for t in &self.textures.textures {
+            let ty = if t.input == "base_color" { "color3" } else { "float" };
+            s += &format!("  <image name=\"{n}_{}_map\" type=\"{ty}\">\n", t.suffix);
+            s += &format!(
+                "    <input name=\"file\" type=\"filename\" value=\"{}\" />\n",
+                xml_attr(&self.textures.file_name(t))
+            );
+            s += "    <input name=\"filtertype\" type=\"string\" value=\"closest\" />\n";
+            s += "    <input name=\"uaddressmode\" type=\"string\" value=\"clamp\" />\n";
+            s += "    <input name=\"vaddressmode\" type=\"string\" value=\"clamp\" />\n";
+            s += "  </image>\n";
+        }
         s += &format!("  <tangent name=\"{n}_uv_tangent\" type=\"vector3\">\n");
         s += "    <input name=\"space\" type=\"string\" value=\"world\" />\n";
         s += &format!("  </tangent>\n  <normal name=\"{n}_normal\" type=\"vector3\">\n");
         s += "    <input name=\"space\" type=\"string\" value=\"world\" />\n  </normal>\n";
         s += &format!("  <rotate3d name=\"{n}_tangent_across_fibres\" type=\"vector3\">\n");
         s += &format!("    <input name=\"in\" type=\"vector3\" nodename=\"{n}_uv_tangent\" />\n");
-        s += &format!(
-            "    <input name=\"amount\" type=\"float\" value=\"{}\" />\n",
-            num(self.tangent_rotation_deg())
-        );
+        s += &match self.textures.of_input("amount") {
+            Some(t) => format!(
+                "    <input name=\"amount\" type=\"float\" nodename=\"{n}_{}_map\" />\n",
+                t.suffix
+            ),
+            None => format!(
+                "    <input name=\"amount\" type=\"float\" value=\"{}\" />\n",
+                num(self.tangent_rotation_deg())
+            ),
+        };
         s += &format!("    <input name=\"axis\" type=\"vector3\" nodename=\"{n}_normal\" />\n");
         s += "  </rotate3d>\n";
         s += &format!("  <open_pbr_surface name=\"{n}_surface\" type=\"surfaceshader\">\n");
@@ -128,7 +152,13 @@ impl OpenPbrMaterial {
                 Value::Float(x) => ("float", num(x)),
                 Value::Color(c) => ("color3", c.map(num).join(", ")),
             };
-            s += &format!("    <input name=\"{k}\" type=\"{ty}\" value=\"{v}\" />\n");
+            s += &match self.textures.of_input(k) {
+                Some(t) => format!(
+                    "    <input name=\"{k}\" type=\"{ty}\" nodename=\"{n}_{}_map\" />\n",
+                    t.suffix
+                ),
+                None => format!("    <input name=\"{k}\" type=\"{ty}\" value=\"{v}\" />\n"),
+            };
         }
         s += &format!(
             "    <input name=\"geometry_tangent\" type=\"vector3\" nodename=\"{n}_tangent_across_fibres\" />\n"
@@ -143,9 +173,28 @@ impl OpenPbrMaterial {
     }
 }
 
+/// `rotate3d`'s amount turning the UV tangent across fibres at `fibre_azimuth_deg` from it,
+/// degrees in (-180, 180].
+pub fn rotation_amount(fibre_azimuth_deg: f64) -> f64 {
+    let a = (-(fibre_azimuth_deg + 90.0)).rem_euclid(360.0);
+    if a > 180.0 {
+        a - 360.0
+    } else {
+        a
+    }
+}
+
 /// A number as MaterialX reads it back to the same f64 (finite: the values are checked).
 pub fn num(x: f64) -> String {
     format!("{x:?}")
+}
+
+/// Text safe inside an XML attribute value.
+fn xml_attr(s: &str) -> String {
+    s.replace('&', "&amp;")
+        .replace('"', "&quot;")
+        .replace('<', "&lt;")
+        .replace('>', "&gt;")
 }
 
 /// Text safe inside an XML comment (no `--`, no markup surprises).
@@ -168,6 +217,7 @@ mod tests {
             shape: OpenPbrShape::default(),
             fibre_azimuth_deg: 20.0,
             provenance: vec!["fit of a -- b".into()],
+            textures: MaterialTextures::default(),
         }
     }
 

@@ -12,6 +12,7 @@ pub mod eval_table;
 pub mod gltf_out;
 pub mod images;
 pub mod maps_out;
+pub mod material_textures;
 pub mod materialx_out;
 pub mod picture;
 pub mod plots;

@@ -36,6 +36,11 @@ impl OpenPbrMaterial {
             self.fibre_azimuth_deg
         );
         doc += &self.provenance.join(" ");
+        let lines = self.textures.lines();
+        if !lines.is_empty() {
+            doc += " ";
+            doc += &lines.join(" ");
+        }
         let mut s = String::from("#usda 1.0\n(\n    defaultPrim = \"fibrefit\"\n");
         s += &format!("    doc = {}\n", usd_str(&doc));
         s += "    metersPerUnit = 1\n    upAxis = \"Z\"\n)\n\n";
@@ -52,7 +57,13 @@ impl OpenPbrMaterial {
                 Value::Float(x) => ("float", num(x)),
                 Value::Color(c) => ("color3f", format!("({})", c.map(num).join(", "))),
             };
-            s += &format!("                {ty} inputs:{k} = {v}\n");
+            s += &match self.textures.of_input(k) {
+                Some(t) => format!(
+                    "                {ty} inputs:{k}.connect = <{m}/{}.outputs:out>\n",
+                    map_prim(t.suffix)
+                ),
+                None => format!("                {ty} inputs:{k} = {v}\n"),
+            };
         }
         s += &format!(
             "                vector3f inputs:geometry_tangent.connect = <{m}/TangentAcrossFibres.outputs:out>\n"
@@ -67,22 +78,68 @@ impl OpenPbrMaterial {
         s += "            def Shader \"TangentAcrossFibres\"\n            {\n";
         s += "                uniform token info:id = \"ND_rotate3d_vector3\"\n";
         s += &format!("                vector3f inputs:in.connect = <{m}/UvTangent.outputs:out>\n");
-        s += &format!(
-            "                float inputs:amount = {}\n",
-            num(self.tangent_rotation_deg())
-        );
+        s += &match self.textures.of_input("amount") {
+            Some(t) => format!(
+                "                float inputs:amount.connect = <{m}/{}.outputs:out>\n",
+                map_prim(t.suffix)
+            ),
+            None => format!(
+                "                float inputs:amount = {}\n",
+                num(self.tangent_rotation_deg())
+            ),
+        };
         s += &format!("                vector3f inputs:axis.connect = <{m}/Normal.outputs:out>\n");
         s += "                vector3f outputs:out\n            }\n\n";
+        // the per-texel maps: MaterialX image nodes (closest), the files beside the stage
+        for t in &self.textures.textures {
+            let (id, ty) = match t.input {
+                "base_color" => ("ND_image_color3", "color3f"),
+                _ => ("ND_image_float", "float"),
+            };
+            s += &format!("            def Shader \"{}\"\n            {{\n", map_prim(t.suffix));
+            s += &format!("                uniform token info:id = \"{id}\"\n");
+            s += &format!(
+                "                asset inputs:file = @./{}@\n",
+                self.textures.file_name(t)
+            );
+            s += "                string inputs:filtertype = \"closest\"\n";
+            s += "                string inputs:uaddressmode = \"clamp\"\n";
+            s += "                string inputs:vaddressmode = \"clamp\"\n";
+            s += &format!("                {ty} outputs:out\n            }}\n\n");
+        }
+        let base_map = self.textures.of_input("base_color");
+        if let Some(t) = base_map {
+            // the fallback's base colour from the same file, through UsdPreviewSurface's nodes
+            s += "            def Shader \"PreviewSt\"\n            {\n";
+            s += "                uniform token info:id = \"UsdPrimvarReader_float2\"\n";
+            s += "                string inputs:varname = \"st\"\n";
+            s += "                float2 outputs:result\n            }\n\n";
+            s += "            def Shader \"PreviewBaseColor\"\n            {\n";
+            s += "                uniform token info:id = \"UsdUVTexture\"\n";
+            s += &format!(
+                "                asset inputs:file = @./{}@\n",
+                self.textures.file_name(t)
+            );
+            s += "                token inputs:sourceColorSpace = \"raw\"\n";
+            s += &format!("                float2 inputs:st.connect = <{m}/PreviewSt.outputs:result>\n");
+            s += "                token inputs:wrapS = \"clamp\"\n                token inputs:wrapT = \"clamp\"\n";
+            s += "                float3 outputs:rgb\n            }\n\n";
+        }
         // the fallback
         let [r, g, b] = self.base_color;
         s += "            def Shader \"PreviewSurface\"\n            {\n";
         s += "                uniform token info:id = \"UsdPreviewSurface\"\n";
-        s += &format!(
-            "                color3f inputs:diffuseColor = ({}, {}, {})\n",
-            num(r),
-            num(g),
-            num(b)
-        );
+        s += &match base_map {
+            Some(_) => format!(
+                "                color3f inputs:diffuseColor.connect = <{m}/PreviewBaseColor.outputs:rgb>\n"
+            ),
+            None => format!(
+                "                color3f inputs:diffuseColor = ({}, {}, {})\n",
+                num(r),
+                num(g),
+                num(b)
+            ),
+        };
         s += "                float inputs:metallic = 0.0\n";
         s += &format!(
             "                float inputs:roughness = {}\n",
@@ -102,6 +159,19 @@ impl OpenPbrMaterial {
         s += "        uniform token subdivisionScheme = \"none\"\n    }\n}\n";
         s
     }
+}
+
+/// The prim of the image node of a texture.
+fn map_prim(suffix: &str) -> String {
+    let camel: String = suffix
+        .split('_')
+        .map(|w| {
+            let mut c = w.chars();
+            c.next()
+                .map_or(String::new(), |f| f.to_ascii_uppercase().to_string() + c.as_str())
+        })
+        .collect();
+    format!("{camel}Map")
 }
 
 /// A USD string literal (triple-quoted where it has quotes or newlines).
@@ -132,6 +202,7 @@ mod tests {
             shape: OpenPbrShape::default(),
             fibre_azimuth_deg: 20.0,
             provenance: vec!["from \"a.json\"".into()],
+            textures: Default::default(),
         };
         let s = m.usda();
         assert!(s.contains("outputs:mtlx:surface.connect = </fibrefit/Materials/felt/OpenPbrSurface.outputs:out>"));
