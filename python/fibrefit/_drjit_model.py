@@ -296,7 +296,7 @@ def shading_frame(w, cos_psi: float, sin_psi: float):
 #: default resolution of the sampling tables: view elevation nodes (uniform in cos), view
 #: azimuth nodes over [0, 2 pi] (relative to the fibre), light elevation nodes (uniform in
 #: cos) and light azimuth nodes over [0, 2 pi] (relative to the view's azimuth)
-SAMPLER_RES = (16, 16, 48, 96)
+SAMPLER_RES = (12, 12, 32, 64)
 
 
 def sampler_table(material: Any, psi: float, res=SAMPLER_RES, floor: float = 0.02) -> Dict[str, Any]:

@@ -354,7 +354,10 @@ class FibrefitBSDF:
         bs.eta = 1.0
         bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
         bs.sampled_component = mi.UInt32(0)
-        value = self.model.eval(l, v, ok) * cos_l
+        # the value at the direction returned (turned back to the fibre frame, as eval turns it),
+        # so weight x pdf is eval(bs.wo) to rounding, even in a sharp lobe
+        l = self._fibre(bs.wo)
+        value = self.model.eval(l, v, ok) * dr.maximum(l.z, 0.0)
         return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
 
     # -- the fast path's frames and the sampler's coordinates -----------------------------------
@@ -533,6 +536,7 @@ def capture_scene(
     image_index: int,
     spp: Optional[int] = None,
     maps: Optional[str] = None,
+    mode: Optional[str] = None,
 ) -> Dict[str, Any]:
     """The Mitsuba scene dict of image ``image_index`` of a capture, with the fitted material.
 
@@ -547,6 +551,9 @@ def capture_scene(
     through each pixel's centre, as a capture's pixel is defined (exact under its point or
     directional light); a number traces that many random rays over each pixel's area (a box
     filter: a sharp highlight then differs from the centre value by the pixel's footprint).
+    ``mode``: the BSDF's (``"auto"``, ``"fast"``, ``"exact"``; None: the plugin's default,
+    auto). A capture whose tangent or height maps fill in makes the material one with maps,
+    which only the exact path renders.
     """
     import mitsuba as mi
 
@@ -591,6 +598,8 @@ def capture_scene(
     bsdf: Dict[str, Any] = {"type": "fibrefit", "filename": _os.fspath(result_json), "capture": _os.fspath(capture_toml)}
     if maps is not None:
         bsdf["maps"] = _os.fspath(maps)
+    if mode is not None:
+        bsdf["mode"] = mode
     return {
         "type": "scene",
         "integrator": {"type": "direct"},
