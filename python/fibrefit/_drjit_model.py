@@ -113,7 +113,11 @@ class DrJitModel:
         self.g0 = [float(x) for x in g[0]]
         self.g1 = [float(x) for x in g[1]]
         self.sheen_table = np.asarray(g[2:], dtype=np.float64).reshape(-1)
-        self._sheen_e = mi.Float(self.sheen_table.astype(np.float32)) if self.rung == "gltf" else None
+        self._sheen_e: Any = None
+        if self.rung == "gltf":
+            scalar = mi.variant().startswith("scalar")
+            # scalar variants: a list indexed by Python ints; JIT variants: an array gathered from
+            self._sheen_e = self.sheen_table.tolist() if scalar else mi.Float(self.sheen_table.astype(np.float32))
 
     # -- the shader's common parts ------------------------------------------------------------
 
@@ -201,6 +205,10 @@ class DrJitModel:
         import mitsuba as mi
 
         x = dr.clip(mu, 0.0, 1.0) * 31.0
+        if isinstance(self._sheen_e, list):
+            k = min(int(math.floor(x)), 30)
+            f = x - k
+            return self._sheen_e[k] * (1.0 - f) + self._sheen_e[k + 1] * f
         k = dr.minimum(mi.UInt32(dr.floor(x)), 30)
         f = x - mi.Float(k)
         a = dr.gather(mi.Float, self._sheen_e, k)
@@ -323,17 +331,21 @@ def sampler_table(material: Any, psi: float, res=SAMPLER_RES, floor: float = 0.0
     cl = np.clip(1.0 - y_l, eps, 1.0)
     CL, XL = np.meshgrid(cl, x_l, indexing="ij")
     SL = np.sqrt(1.0 - CL * CL)
-    # every view node's light grid in one batch (swatch frame: the fibre frame turned by psi)
-    PV, CV = np.meshgrid(phi_v[:-1], np.clip(1.0 - y_v, eps, 1.0), indexing="ij")
-    SV = np.sqrt(1.0 - CV * CV)
-    av = (PV + psi)[..., None, None]
-    v = np.stack(np.broadcast_arrays(SV[..., None, None] * np.cos(av), SV[..., None, None] * np.sin(av), CV[..., None, None] + 0 * XL), axis=-1)
-    al = av + 2 * np.pi * XL
-    l = np.stack(np.broadcast_arrays(SL * np.cos(al), SL * np.sin(al), CL + 0 * al), axis=-1)
-    f = material.eval(l.reshape(-1, 3), v.reshape(-1, 3))
-    lum = f.mean(axis=1) if f.shape[1] > 1 else f[:, 0]
     data = np.zeros((n_pv + 1, n_tv, n_tl, n_pl + 1), dtype=np.float64)
-    data[:-1] = np.clip(lum, 0.0, None).reshape(n_pv, n_tv, n_tl, n_pl + 1) * CL
+    cv = np.clip(1.0 - y_v, eps, 1.0)[:, None, None]
+    sv = np.sqrt(1.0 - cv * cv)
+    for i, pv in enumerate(phi_v[:-1]):
+        # one view azimuth's grid of (view elevation, light direction) pairs a batch, in the
+        # swatch frame (the fibre frame turned by psi)
+        av = pv + psi
+        al = av + 2 * np.pi * XL
+        shape = (n_tv, n_tl, n_pl + 1)
+        v = np.stack(np.broadcast_arrays(sv * math.cos(av), sv * math.sin(av), cv + 0 * XL), axis=-1).reshape(-1, 3)
+        l = np.stack(np.broadcast_arrays(SL * np.cos(al), SL * np.sin(al), CL + 0 * al), axis=-1)
+        l = np.broadcast_to(l, shape + (3,)).reshape(-1, 3)
+        f = material.eval(l, v)
+        lum = f.mean(axis=1) if f.shape[1] > 1 else f[:, 0]
+        data[i] = np.clip(lum, 0.0, None).reshape(shape) * CL
     data[-1] = data[0]  # phi_v = 2 pi is phi_v = 0
     mean = data.mean(axis=(2, 3), keepdims=True)
     mean = np.where(mean > 0, mean, 1.0)
