@@ -8,18 +8,31 @@
     fibrefit.mitsuba.register()
     bsdf = {"type": "fibrefit", "filename": "fit.json"}   # optional "maps": a maps directory
 
-Its ``eval``, ``sample``, ``pdf`` and ``eval_pdf`` call :class:`fibrefit.Material` (the Rust
-model, not a Python copy): the fitted BRDF with the result's per-texel maps looked up at the
-surface's uv, and fibrefit's importance sampler. The fibre frame is the surface's shading frame
-(dp/du is the swatch's x axis; the fibres lie at the result's ``fibre_azimuth_deg`` from it).
-One-sided: zero from below.
+Two paths, chosen by the BSDF's ``mode`` property:
 
-Dr.Jit flags: a BSDF written in Python that converts Dr.Jit arrays to numpy needs evaluated
-(not symbolic) loops and virtual calls in the JIT variants, so ``register()`` switches
-``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off (a plain ``mi.render`` then
-works; renders are slower than with symbolic recording). The LLVM variants need libLLVM 16 or
-newer: when ``DRJIT_LIBLLVM_PATH`` is unset, importing this module points it at Debian's
-``libllvm19`` if that is installed (``apt-get install libllvm19``).
+* ``"fast"``: the fitted BRDF in Dr.Jit's vectorised operations (``fibrefit._drjit_model``: the
+  equations of fibrefit's WGSL export, with the numbers that export bakes in for the result), so
+  Mitsuba compiles it into its kernels like its own BSDFs, and a tabulated importance sampler
+  (Mitsuba's ``MarginalContinuous2D2`` over the light directions, conditioned on the view as
+  its ``measured`` BSDF does; its pdf is exact for what it draws, and the sample's weight is
+  eval x cos / pdf). On load the Dr.Jit model is checked against :class:`fibrefit.Material` at
+  random and grazing direction pairs: each value within 1e-3 of the exact one, relative to
+  max(|value|, 1e-4 of the largest) (the comparison of ``fibrefit export --check``). Ported:
+  lambert, hast-diffuse, max-normal, ward and gltf (khronos), with the spread, Fresnel and the
+  fuzz layer; no maps.
+* ``"exact"`` (or ``"exact": True``): :class:`fibrefit.Material` (the Rust model) through numpy
+  at every call, the result's per-texel maps at the surface's uv, fibrefit's own importance
+  sampler. Any rung, maps included. Converting Dr.Jit arrays to numpy needs evaluated (not
+  symbolic) loops and virtual calls in the JIT variants, so an exact instance switches
+  ``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off when it loads (renders are
+  then slower than with symbolic recording, fast instances included).
+* ``"auto"`` (the default): fast where the result has no maps, its rung is ported and the load
+  check holds; exact otherwise (with a warning saying why).
+
+The fibre frame is the surface's shading frame (dp/du is the swatch's x axis; the fibres lie at
+the result's ``fibre_azimuth_deg`` from it). One-sided: zero from below. The LLVM variants need
+libLLVM 16 or newer: when ``DRJIT_LIBLLVM_PATH`` is unset, importing this module points it at
+Debian's ``libllvm19`` if that is installed (``apt-get install libllvm19``).
 
 ``capture_scene(capture_toml, result_json, image_index)`` is the scene of one image of an
 image capture: rendered and divided by nothing more (the capture's exposure is applied to the
@@ -39,13 +52,18 @@ import numpy as np
 from . import FibrefitError, Material, PathLike, _native
 from . import _image_index, _native_call
 from . import load as _load
+from . import _drjit_model as _dm
 
 __all__ = [
+    "FAST_TOLERANCE",
     "FibrefitBSDF",
     "LLVM_CANDIDATES",
     "bsdf_class",
     "capture_geometry",
     "capture_scene",
+    "check_fast",
+    "check_pairs",
+    "exact_flags",
     "captured_image",
     "image_scene",
     "register",
@@ -75,6 +93,82 @@ def _point_drjit_at_llvm() -> None:
 _point_drjit_at_llvm()
 
 _REGISTERED: Dict[str, bool] = {}
+
+#: the BSDF's ``mode`` values
+MODES = ("auto", "fast", "exact")
+#: the fast path's bound: each value of its Dr.Jit model within this of the exact model's,
+#: relative to max(|value|, 1e-4 of the largest value over the checked pairs)
+FAST_TOLERANCE = 1e-3
+#: the BSDF's properties setting the sampler's table resolution (defaults ``_drjit_model.SAMPLER_RES``)
+TABLE_KEYS = ("table_theta_v", "table_phi_v", "table_theta_l", "table_phi_l")
+
+
+def exact_flags() -> None:
+    """Switch Dr.Jit's symbolic loops and calls off (``dr.JitFlag.SymbolicLoops``,
+    ``dr.JitFlag.SymbolicCalls``) on the calling thread: what a scene with an exact-mode
+    ``fibrefit`` BSDF needs before ``mi.render`` (the exact path converts Dr.Jit arrays to numpy,
+    which symbolic recording cannot do). The fast mode needs nothing. An exact instance calls
+    this itself when it loads, which reaches the rendering thread only when the scene is loaded
+    on it (``mi.load_dict(scene, parallel=False)``); ``register(exact_flags=True)`` calls it too.
+    """
+    import drjit as dr
+
+    dr.set_flag(dr.JitFlag.SymbolicLoops, False)
+    dr.set_flag(dr.JitFlag.SymbolicCalls, False)
+
+
+def check_pairs(n: int = 20000, seed: int = 12345) -> Tuple[np.ndarray, np.ndarray]:
+    """The direction pairs (swatch frame) at which the fast path is checked on load: n pairs
+    uniform over the two hemispheres, n / 4 with both directions within 5 degrees of the
+    horizon, and the normal with directions at 0, 30, 60, 80, 89 and 89.9 degrees."""
+    rng = np.random.default_rng(seed)
+
+    def hemi(k, cmin=0.0, cmax=1.0):
+        z = cmin + (cmax - cmin) * rng.random(k)
+        phi = 2 * np.pi * rng.random(k)
+        r = np.sqrt(1 - z * z)
+        return np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
+
+    g = float(np.sin(np.radians(5.0)))
+    t = np.radians([0.0, 30.0, 60.0, 80.0, 89.0, 89.9])
+    fixed = np.stack([np.sin(t), np.zeros_like(t), np.cos(t)], axis=1)
+    normal = np.broadcast_to([0.0, 0.0, 1.0], fixed.shape)
+    l = np.concatenate([hemi(n), hemi(n // 4, 1e-4, g), fixed, normal])
+    v = np.concatenate([hemi(n), hemi(n // 4, 1e-4, g), normal, fixed])
+    return l, v
+
+
+def check_fast(model: Any, material: Material, cs: Tuple[float, float], pairs=None) -> Dict[str, Any]:
+    """How far the fast path's Dr.Jit model is from ``material.eval`` (the exact model): over
+    the pairs (default :func:`check_pairs`), the largest and 99th-percentile error of each value
+    relative to max(|exact value|, 1e-4 of the largest exact value), the largest absolute error
+    (1/sr) and the largest exact value."""
+    import mitsuba as mi
+
+    l, v = check_pairs() if pairs is None else pairs
+    ref = material.eval(l, v)
+    if mi.variant().startswith("scalar"):
+        idx = np.linspace(0, len(l) - 1, 400).astype(int)
+        l, v, ref = l[idx], v[idx], ref[idx]
+        got = np.array(
+            [np.array(model.eval(_dm.fibre_frame(mi.Vector3f(*a), *cs), _dm.fibre_frame(mi.Vector3f(*b), *cs))) for a, b in zip(l, v)],
+            dtype=np.float64,
+        )
+    else:
+        L = mi.Vector3f(*[mi.Float(np.ascontiguousarray(l[:, k], dtype=np.float32)) for k in range(3)])
+        V = mi.Vector3f(*[mi.Float(np.ascontiguousarray(v[:, k], dtype=np.float32)) for k in range(3)])
+        got = np.array(model.eval(_dm.fibre_frame(L, *cs), _dm.fibre_frame(V, *cs)), dtype=np.float64).T
+    got = got[:, : ref.shape[1]]
+    err = np.abs(got - ref)
+    largest = float(np.abs(ref).max())
+    rel = err / np.maximum(np.abs(ref), 1e-4 * max(largest, 1e-300))
+    return {
+        "cases": int(len(l)),
+        "max_relative": float(rel.max()),
+        "p99_relative": float(np.quantile(rel, 0.99)),
+        "max_absolute": float(err.max()),
+        "largest": largest,
+    }
 
 
 def _rows(a: Any, n: int, width: int) -> np.ndarray:
@@ -153,14 +247,149 @@ class FibrefitBSDF:
             flags = flags | mi.BSDFFlags.SpatiallyVarying
         self.m_flags = flags
         self.m_components = [flags]
+        mode = str(props["mode"]) if "mode" in props else "auto"
+        if "exact" in props and bool(props["exact"]):
+            mode = "exact"
+        if mode not in MODES:
+            raise FibrefitError(f"the fibrefit BSDF's mode {mode!r}: expected one of {', '.join(MODES)}")
+        res = tuple(int(props[k]) if k in props else d for k, d in zip(TABLE_KEYS, _dm.SAMPLER_RES))
+        self.fast_check: Optional[Dict[str, Any]] = None
+        self.fast_reason: Optional[str] = None
+        self.table_bytes = 0
+        if mode != "exact":
+            self.fast_reason = self._setup_fast(maps, capture, res)
+            if self.fast_reason is not None:
+                if mode == "fast":
+                    raise FibrefitError(f"{self.filename}: the fibrefit BSDF's fast mode: {self.fast_reason}")
+                _warnings.warn(f"{self.filename}: the fibrefit BSDF uses its exact path: {self.fast_reason}", stacklevel=2)
+        self.mode = "fast" if mode != "exact" and self.fast_reason is None else "exact"
+        if self.mode == "exact" and not self._scalar:
+            exact_flags()
+
+    def _setup_fast(self, maps, capture, res) -> Optional[str]:
+        """Build the fast path (the Dr.Jit model and the sampler's tables); the reason it cannot
+        be used, or None."""
+        import mitsuba as mi
+
+        if self.material.has_maps:
+            return "the result has per-texel maps (looked up at uv by the exact path only)"
+        try:
+            shader = _native_call(_native.export, self.filename, "wgsl", False, "swatch", False, None, progress=False)["shader"]
+        except FibrefitError as e:
+            return f"no shader export of the result ({e})"
+        p = _dm.parse_wgsl(shader)
+        why = _dm.unsupported_reason(p)
+        if why is not None:
+            return why
+        self.model = _dm.DrJitModel(p)
+        psi = float(np.radians(self.material.fibre_azimuth_deg))
+        self._cs = (float(np.cos(psi)), float(np.sin(psi)))
+        self.fast_check = check_fast(self.model, self.material, self._cs)
+        if self.fast_check["max_relative"] > FAST_TOLERANCE:
+            return (
+                f"the Dr.Jit model is {self.fast_check['max_relative']:.2g} from the exact one "
+                f"(relative, over {self.fast_check['cases']} direction pairs; bound {FAST_TOLERANCE:g})"
+            )
+        t = _dm.sampler_table(self.material, psi, res)
+        self.table_res = res
+        self.table_bytes = int(t["data"].nbytes)
+        self._warp = mi.MarginalContinuous2D2(t["data"], [t["phi_v"].tolist(), t["y_v"].tolist()], normalize=True)
+        return None
 
     def _inputs(self, si, *xs):
+        if not self._scalar:
+            import drjit as dr
+
+            if dr.flag(dr.JitFlag.SymbolicScope):
+                raise FibrefitError(
+                    f"{self.filename}: the fibrefit BSDF's exact path converts Dr.Jit arrays to numpy, which "
+                    "symbolic loops and calls cannot do: call fibrefit.mitsuba.exact_flags() (or "
+                    "register(exact_flags=True)) before mi.render, or load the scene with "
+                    "mi.load_dict(scene, parallel=False)"
+                )
         n = _width(si.wi, si.uv, *xs)
         v = _rows(si.wi, n, 3)
         uv = _rows(si.uv, n, 2)
         return n, v, uv
 
     def eval(self, ctx, si, wo, active=True):
+        if self.mode == "exact":
+            return self._exact_eval(ctx, si, wo, active)
+        import drjit as dr
+
+        l, v = self._fibre(wo), self._fibre(si.wi)
+        return self.model.eval(l, v, active) * dr.maximum(l.z, 0.0)
+
+    def pdf(self, ctx, si, wo, active=True):
+        if self.mode == "exact":
+            return self._exact_pdf(ctx, si, wo, active)
+        return self._fast_pdf(self._fibre(wo), self._fibre(si.wi), active)
+
+    def eval_pdf(self, ctx, si, wo, active=True):
+        if self.mode == "exact":
+            return self._exact_eval_pdf(ctx, si, wo, active)
+        import drjit as dr
+
+        l, v = self._fibre(wo), self._fibre(si.wi)
+        return self.model.eval(l, v, active) * dr.maximum(l.z, 0.0), self._fast_pdf(l, v, active)
+
+    def sample(self, ctx, si, sample1, sample2, active=True):
+        if self.mode == "exact":
+            return self._exact_sample(ctx, si, sample1, sample2, active)
+        import drjit as dr
+        import mitsuba as mi
+
+        v = self._fibre(si.wi)
+        phi_v, param = self._view_param(v)
+        pos, pdf_xy = self._warp.sample(mi.Point2f(sample2), param, active)
+        cos_l = 1.0 - pos.y
+        sin_l = dr.safe_sqrt(1.0 - cos_l * cos_l)
+        phi_l = phi_v + (2.0 * dr.pi) * pos.x
+        l = mi.Vector3f(sin_l * dr.cos(phi_l), sin_l * dr.sin(phi_l), cos_l)
+        ok = active & (v.z > 0.0) & (cos_l > 0.0) & (pdf_xy > 0.0)
+        pdf = dr.select(ok, pdf_xy / (2.0 * dr.pi), 0.0)
+        bs = dr.zeros(mi.BSDFSample3f)
+        bs.wo = self._shading(l)
+        bs.pdf = pdf
+        bs.eta = 1.0
+        bs.sampled_type = mi.UInt32(+mi.BSDFFlags.GlossyReflection)
+        bs.sampled_component = mi.UInt32(0)
+        # the value at the direction returned (turned back to the fibre frame, as eval turns it),
+        # so weight x pdf is eval(bs.wo) to rounding, even in a sharp lobe
+        l = self._fibre(bs.wo)
+        value = self.model.eval(l, v, ok) * dr.maximum(l.z, 0.0)
+        return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
+
+    # -- the fast path's frames and the sampler's coordinates -----------------------------------
+
+    def _fibre(self, w):
+        return _dm.fibre_frame(w, *self._cs)
+
+    def _shading(self, w):
+        return _dm.shading_frame(w, *self._cs)
+
+    def _view_param(self, v):
+        """The view's azimuth in the fibre frame in [0, 2 pi) and the sampler's parameter
+        (that azimuth, 1 - cos theta_v)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        phi_v = dr.atan2(v.y, v.x)
+        phi_v = dr.select(phi_v < 0.0, phi_v + 2.0 * dr.pi, phi_v)
+        return phi_v, mi.Point2f(phi_v, 1.0 - v.z)
+
+    def _fast_pdf(self, l, v, active):
+        import drjit as dr
+        import mitsuba as mi
+
+        phi_v, param = self._view_param(v)
+        x = (dr.atan2(l.y, l.x) - phi_v) * (0.5 / dr.pi)
+        x = x - dr.floor(x)
+        ok = active & (l.z > 0.0) & (v.z > 0.0)
+        p = self._warp.eval(mi.Point2f(x, 1.0 - l.z), param, ok) / (2.0 * dr.pi)
+        return dr.select(ok, p, 0.0)
+
+    def _exact_eval(self, ctx, si, wo, active=True):
         import drjit as dr
 
         n, v, uv = self._inputs(si, wo)
@@ -169,7 +398,7 @@ class FibrefitBSDF:
         cos = np.clip(l[:, 2], 0.0, None)[:, None]
         return dr.select(active, _spectrum(f * cos, self._scalar), 0.0)
 
-    def pdf(self, ctx, si, wo, active=True):
+    def _exact_pdf(self, ctx, si, wo, active=True):
         import drjit as dr
 
         n, v, uv = self._inputs(si, wo)
@@ -177,7 +406,7 @@ class FibrefitBSDF:
         p = self.material.pdf(_unit(v), _unit(l), uv)
         return dr.select(active, _floats(p, self._scalar), 0.0)
 
-    def eval_pdf(self, ctx, si, wo, active=True):
+    def _exact_eval_pdf(self, ctx, si, wo, active=True):
         import drjit as dr
 
         n, v, uv = self._inputs(si, wo)
@@ -191,7 +420,7 @@ class FibrefitBSDF:
             dr.select(active, _floats(p, self._scalar), 0.0),
         )
 
-    def sample(self, ctx, si, sample1, sample2, active=True):
+    def _exact_sample(self, ctx, si, sample1, sample2, active=True):
         import drjit as dr
         import mitsuba as mi
 
@@ -213,7 +442,10 @@ class FibrefitBSDF:
         pass
 
     def to_string(self):
-        return f"FibrefitBSDF[filename={self.filename!r}, model={self.material.model!r}, maps={self.material.has_maps}]"
+        return (
+            f"FibrefitBSDF[filename={self.filename!r}, model={self.material.model!r}, "
+            f"maps={self.material.has_maps}, mode={self.mode!r}]"
+        )
 
 
 _CLASSES: Dict[str, type] = {}
@@ -236,17 +468,19 @@ def bsdf_class() -> type:
     return cls
 
 
-def register(variant: Optional[str] = None) -> None:
+def register(variant: Optional[str] = None, exact_flags: bool = False) -> None:
     """Register the BSDF type ``fibrefit`` (:class:`FibrefitBSDF`) with Mitsuba 3 (for the
     current variant, or ``variant`` after setting it).
 
-    Switches ``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off in the JIT
-    variants (the plugin converts arrays to numpy, which needs evaluated loops and calls).
-    Properties of the BSDF: ``filename`` (a result JSON, required), ``maps`` (a maps
-    directory; default: the one the result names) and ``capture`` (a capture TOML whose
-    tangent/azimuth and height maps fill in where the result has none).
+    Properties of the BSDF: ``filename`` (a result JSON, required), ``mode`` (``"auto"``, the
+    default, ``"fast"`` or ``"exact"``; ``"exact": True`` is ``"mode": "exact"``; see the module
+    docs), ``maps`` (a maps directory; default: the one the result names), ``capture`` (a
+    capture TOML whose tangent/azimuth and height maps fill in where the result has none) and
+    the fast sampler's table resolution ``table_theta_v``, ``table_phi_v``, ``table_theta_l``,
+    ``table_phi_l`` (default ``_drjit_model.SAMPLER_RES``). ``exact_flags``: also switch
+    Dr.Jit's symbolic loops and calls off (:func:`exact_flags`), which exact instances need in
+    the JIT variants; the fast mode renders with them on.
     """
-    import drjit as dr
     import mitsuba as mi
 
     if variant is not None:
@@ -256,9 +490,8 @@ def register(variant: Optional[str] = None) -> None:
         raise FibrefitError("fibrefit.mitsuba.register(): set a Mitsuba variant first (mi.set_variant('llvm_ad_rgb'))")
     if "rgb" not in v:
         raise FibrefitError(f"fibrefit.mitsuba: variant {v!r} is not an RGB variant; use e.g. llvm_ad_rgb or scalar_rgb")
-    if not v.startswith("scalar"):
-        dr.set_flag(dr.JitFlag.SymbolicLoops, False)
-        dr.set_flag(dr.JitFlag.SymbolicCalls, False)
+    if exact_flags and not v.startswith("scalar"):
+        globals()["exact_flags"]()
     cls = bsdf_class()
     mi.register_bsdf("fibrefit", lambda props: cls(props))
     _REGISTERED[v] = True
@@ -303,6 +536,7 @@ def capture_scene(
     image_index: int,
     spp: Optional[int] = None,
     maps: Optional[str] = None,
+    mode: Optional[str] = None,
 ) -> Dict[str, Any]:
     """The Mitsuba scene dict of image ``image_index`` of a capture, with the fitted material.
 
@@ -317,6 +551,9 @@ def capture_scene(
     through each pixel's centre, as a capture's pixel is defined (exact under its point or
     directional light); a number traces that many random rays over each pixel's area (a box
     filter: a sharp highlight then differs from the centre value by the pixel's footprint).
+    ``mode``: the BSDF's (``"auto"``, ``"fast"``, ``"exact"``; None: the plugin's default,
+    auto). A capture whose tangent or height maps fill in makes the material one with maps,
+    which only the exact path renders.
     """
     import mitsuba as mi
 
@@ -361,6 +598,8 @@ def capture_scene(
     bsdf: Dict[str, Any] = {"type": "fibrefit", "filename": _os.fspath(result_json), "capture": _os.fspath(capture_toml)}
     if maps is not None:
         bsdf["maps"] = _os.fspath(maps)
+    if mode is not None:
+        bsdf["mode"] = mode
     return {
         "type": "scene",
         "integrator": {"type": "direct"},

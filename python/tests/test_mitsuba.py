@@ -12,7 +12,7 @@ import fibrefit
 mi = pytest.importorskip("mitsuba")
 import fibrefit.mitsuba as fm  # noqa: E402  (sets DRJIT_LIBLLVM_PATH before the variant loads)
 
-from conftest import CONFIGS, DATA, write_params  # noqa: E402
+from conftest import CONFIGS, DATA, ROOT, write_params  # noqa: E402
 
 VARIANT = os.environ.get("FIBREFIT_MITSUBA_VARIANT", "llvm_ad_rgb")
 
@@ -22,7 +22,9 @@ def variant():
     if VARIANT not in mi.variants():
         pytest.skip(f"Mitsuba variant {VARIANT} not available")
     mi.set_variant(VARIANT)
-    fm.register()
+    # the exact path (the un-ported rungs, maps, mode "exact") needs evaluated loops and calls;
+    # the fast path works either way
+    fm.register(exact_flags=True)
     yield
 
 
@@ -42,7 +44,8 @@ def test_chi2_of_the_sampler_in_mitsuba(tmp_path, rung, theta):
     params = write_params(tmp_path, f"{rung}.json", RUNGS[rung])
     t = np.radians(theta)
     wi = [float(np.sin(t) * np.cos(0.4)), float(np.sin(t) * np.sin(0.4)), float(np.cos(t))]
-    sample, pdf = BSDFAdapter("fibrefit", {"type": "fibrefit", "filename": str(params)}, wi=wi)
+    # fibrefit's own sampler, through the exact path
+    sample, pdf = BSDFAdapter("fibrefit", {"type": "fibrefit", "filename": str(params), "mode": "exact"}, wi=wi)
     # Mitsuba integrates the pdf over each of the 100 x 200 cells with an ires x ires Simpson
     # rule. The fibre lobes and the tube have integrable 1/cos peaks at l = +-T, on the horizon,
     # and Ward's grazing lobe ends at the horizon: at ires = 4 the rule over-integrates those
@@ -62,13 +65,18 @@ def test_chi2_of_the_sampler_in_mitsuba(tmp_path, rung, theta):
     assert chi2.run(significance_level=0.01, test_count=len(RUNGS) * 3), chi2.messages
 
 
-def test_white_furnace_lambert_conserves_and_fibres_do_not_gain(tmp_path):
+@pytest.mark.parametrize("mode", ["exact", "auto"])
+def test_white_furnace_lambert_conserves_and_fibres_do_not_gain(tmp_path, mode):
     # a sphere in a uniform environment of radiance 1 seen by direct lighting with BSDF sampling
     # only: each pixel is the directional albedo, 1 for a white Lambertian, <= 1 for the fibres
-    for text, expect_one in [
+    # (auto: the fast path for the ported rungs, here lambert and the gltf + fuzz material)
+    cases = [
         ('{"model": "lambert", "kd": 1.0}', True),
         ('{"model": "poulin-fournier", "kd": 0.5, "ks": 0.5, "substrate_albedo": 1.0, "exponent": 50, "spacing": 2.5}', False),
-    ]:
+    ]
+    if mode == "auto":
+        cases.append((GLTF_FUZZ, False))
+    for text, expect_one in cases:
         p = write_params(tmp_path, "white.json", text)
         scene = mi.load_dict(
             {
@@ -80,7 +88,7 @@ def test_white_furnace_lambert_conserves_and_fibres_do_not_gain(tmp_path):
                     "film": {"type": "hdrfilm", "width": 24, "height": 24, "rfilter": {"type": "box"}},
                     "sampler": {"type": "independent", "sample_count": 64},
                 },
-                "sphere": {"type": "sphere", "bsdf": {"type": "fibrefit", "filename": str(p)}},
+                "sphere": {"type": "sphere", "bsdf": {"type": "fibrefit", "filename": str(p), "mode": mode}},
                 "env": {"type": "constant", "radiance": {"type": "rgb", "value": 1.0}},
             }
         )
@@ -91,6 +99,148 @@ def test_white_furnace_lambert_conserves_and_fibres_do_not_gain(tmp_path):
         else:
             assert centre < 1.0 + 0.01, centre
         assert np.all(img <= 1.0 + 0.2)  # per-pixel noise at 256 samples
+
+
+# --- the fast mode: the model in Dr.Jit, a tabulated sampler --------------------------------------
+
+#: a felt-like material of a ported rung: gltf with sheen and anisotropy, Fresnel, the fuzz layer
+GLTF_FUZZ = (
+    '{"model": "gltf", "kd": [0.4, 0.5, 0.3], "metallic": 0.0, "roughness": 0.5, "anisotropy_strength": 0.3, '
+    '"ior": 1.5, "sheen": 0.6, "sheen_roughness": 0.7, "specular_factor": 1.0, "fibre_azimuth_deg": -15, '
+    '"fuzz": [0.3, 0.4, 0.2], "fuzz_depth": 0.1, "fuzz_asymmetry": 0.4}'
+)
+FAST = dict(RUNGS, **{"gltf+fuzz": GLTF_FUZZ, "max-normal+spread": (
+    '{"model": "max-normal", "kd": 0.3, "ks": 0.5, "exponent": 300, "fibre_azimuth_deg": 10, "azimuth_spread_deg": 20, '
+    '"fresnel_ior": 1.5, "fuzz": 0.3, "fuzz_depth": 0.2, "fuzz_asymmetry": 0.3}'
+)})
+del FAST["poulin-fournier"]  # not ported: its exact path (below)
+
+
+def load_bsdf(path, **props):
+    return mi.load_dict({"type": "fibrefit", "filename": str(path), **props})
+
+
+def vectors(a):
+    return mi.Vector3f(*[mi.Float(np.ascontiguousarray(a[:, k], dtype=np.float32)) for k in range(3)])
+
+
+def fast_vs_exact(path, n=100_000, seed=5):
+    """The fast path's BSDF values (f cos, as Mitsuba's eval returns them) and the exact path's
+    at n random pairs and at grazing ones, through the plugin's own eval."""
+    pairs = fm.check_pairs(n, seed)
+    fast = load_bsdf(path, mode="fast")
+    m = fibrefit.load(path)
+    l, v = pairs
+    si = dr.zeros(mi.SurfaceInteraction3f, len(l))
+    si.wi = vectors(v)
+    got = np.array(fast.eval(mi.BSDFContext(), si, vectors(l)), dtype=np.float64).T
+    ref = m.eval(l, v) * l[:, 2:3]
+    return got[:, : ref.shape[1]], ref
+
+
+dr = pytest.importorskip("drjit")
+
+
+@pytest.mark.parametrize("name", sorted(FAST))
+def test_fast_path_within_1e_3_of_the_exact_model(tmp_path, name):
+    p = write_params(tmp_path, f"{name}.json", FAST[name])
+    bsdf = load_bsdf(p)
+    assert bsdf.mode == "fast", bsdf.fast_reason
+    # the load check: every value within 1e-3 relative to max(|value|, 1e-4 of the largest)
+    assert bsdf.fast_check["max_relative"] <= 1e-3, bsdf.fast_check
+    # and through Mitsuba's eval at other pairs: f cos, compared the same way
+    got, ref = fast_vs_exact(p)
+    rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
+    assert rel.max() <= 1e-3, rel.max()
+
+
+@pytest.fixture(scope="module")
+def real_fits(tmp_path_factory):
+    """The auto fits of the measured felt (gltf + fuzz), and the synthetic silk and brushed
+    goniometric tables (varying-topology, poulin-fournier)."""
+    d = tmp_path_factory.mktemp("fits")
+    out = {}
+    for name, data in [
+        ("felt", ROOT / "tests/data/rgl/acrylic_felt_green_rgb.bsdf"),
+        ("silk", DATA / "silk" / "gonio.csv"),
+        ("brushed", DATA / "brushed" / "gonio.csv"),
+    ]:
+        fibrefit.fit(data, model="auto").to_json(d / f"{name}.json")
+        out[name] = d / f"{name}.json"
+    return out
+
+
+def test_fast_path_on_the_felt_fit(real_fits):
+    p = real_fits["felt"]
+    bsdf = load_bsdf(p)
+    assert bsdf.mode == "fast", bsdf.fast_reason
+    got, ref = fast_vs_exact(p)
+    rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
+    assert rel.max() <= 1e-3, rel.max()
+
+
+@pytest.mark.parametrize("name", ["silk", "brushed"])
+def test_unported_rungs_keep_the_exact_path(real_fits, name):
+    # poulin-fournier and varying-topology are not ported to Dr.Jit: auto says why and renders
+    # them exactly; fast refuses them
+    with pytest.warns(UserWarning, match="exact path"):
+        bsdf = load_bsdf(real_fits[name])
+    assert bsdf.mode == "exact" and "not ported" in bsdf.fast_reason
+    with pytest.raises(Exception, match="not ported"):
+        load_bsdf(real_fits[name], mode="fast")
+
+
+@pytest.mark.parametrize("name", sorted(FAST))
+def test_fast_sample_weight_is_eval_cos_over_pdf(tmp_path, name):
+    p = write_params(tmp_path, f"{name}.json", FAST[name])
+    bsdf = load_bsdf(p, mode="fast")
+    rng = np.random.default_rng(11)
+    n = 50_000
+    from conftest import hemisphere
+
+    v = hemisphere(n, rng, 89.5)
+    si = dr.zeros(mi.SurfaceInteraction3f, n)
+    si.wi = vectors(v)
+    ctx = mi.BSDFContext()
+    u = mi.Point2f(mi.Float(rng.random(n).astype(np.float32)), mi.Float(rng.random(n).astype(np.float32)))
+    bs, weight = bsdf.sample(ctx, si, mi.Float(rng.random(n).astype(np.float32)), u)
+    value, pdf = bsdf.eval_pdf(ctx, si, bs.wo)
+    w, val = np.array(weight, dtype=np.float64).T, np.array(value, dtype=np.float64).T
+    p_s, p_e = np.array(bs.pdf, dtype=np.float64), np.array(pdf, dtype=np.float64)
+    ok = p_s > 0
+    assert ok.mean() > 0.99
+    # the pdf of what was drawn is the pdf the BSDF reports for it
+    assert np.allclose(p_s[ok], p_e[ok], rtol=2e-3, atol=0), np.abs(p_s[ok] / p_e[ok] - 1).max()
+    # and the weight is eval x cos / pdf (eval returns f cos)
+    want = val[ok] / p_s[ok, None]
+    assert np.allclose(w[ok], want, rtol=2e-6, atol=0), np.abs(w[ok] / want - 1).max()
+    assert np.all(w[~ok] == 0)
+
+
+@pytest.mark.parametrize("name", sorted(FAST))
+@pytest.mark.parametrize("theta", [0.0, 45.0, 80.0])
+def test_chi2_of_the_fast_sampler_in_mitsuba(tmp_path, name, theta):
+    from mitsuba.chi2 import BSDFAdapter, ChiSquareTest, SphericalDomain
+
+    p = write_params(tmp_path, f"{name}.json", FAST[name])
+    t = np.radians(theta)
+    wi = [float(np.sin(t) * np.cos(0.4)), float(np.sin(t) * np.sin(0.4)), float(np.cos(t))]
+    sample, pdf = BSDFAdapter("fibrefit", {"type": "fibrefit", "filename": str(p), "mode": "fast"}, wi=wi)
+    # the proposal's density is bilinear in (dphi, 1 - cos theta_l): smooth, ires = 8
+    chi2 = ChiSquareTest(
+        domain=SphericalDomain(), sample_func=sample, pdf_func=pdf, sample_dim=3, sample_count=1_000_000, res=100, ires=8
+    )
+    assert chi2.run(significance_level=0.01, test_count=len(FAST) * 3), chi2.messages
+
+
+def test_mode_property(tmp_path):
+    p = write_params(tmp_path, "w.json", RUNGS["ward"])
+    assert load_bsdf(p).mode == "fast"
+    assert load_bsdf(p, mode="exact").mode == "exact"
+    assert load_bsdf(p, exact=True).mode == "exact"
+    with pytest.raises(Exception, match="mode"):
+        load_bsdf(p, mode="quick")
+    assert "mode='fast'" in str(load_bsdf(p))
 
 
 WHITE = '{"model": "lambert", "kd": 1.0}'

@@ -1,0 +1,353 @@
+"""The fitted model in Dr.Jit's vectorised operations, for the Mitsuba plugin's fast mode.
+
+The numbers are the library's own: ``fibrefit.export(result, shader="wgsl")`` bakes a result's
+parameters into the WGSL function ``fibrefit_params()`` (albedos, the fuzz layer, the GGX alphas,
+the sheen's albedo table, the spread's nodes, ...); :func:`parse_wgsl` reads them back, and
+:class:`DrJitModel` evaluates the same equations as that shader (``src/export/shader/
+fibrefit.wgsl``, which ``fibrefit export --check`` proves equal to the Rust model) with Dr.Jit
+arrays, so a Mitsuba render compiles them into its kernels instead of calling back into numpy.
+
+Ported rungs: ``lambert``, ``hast-diffuse``, ``max-normal``, ``ward`` and ``gltf`` (its
+``khronos`` variant), each with the shader's common parts (the fibre-direction spread's nodes,
+Fresnel, the fuzz layer). The others (``poulin-fournier``, ``varying-topology``, the ``gltf``
+``threejs`` variant; ``openpbr``, ``principled`` and ``reference`` have no shader) are not:
+:func:`unsupported_reason` says why, and the plugin keeps its exact path for them.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from typing import Any, Dict, List, Optional
+
+import numpy as np
+
+#: rung bodies of the WGSL's ``fibrefit_rung`` that are ported here, by the function they call
+PORTED = {
+    "    return fibrefit_lambert(l, v);": "lambert",
+    "    return fibrefit_hast_diffuse(l, v);": "hast_diffuse",
+    "    return fibrefit_max_normal(l, v, p.shape.x);": "max_normal",
+    "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);": "ward",
+    "    return fibrefit_gltf(l, v, p);": "gltf",
+}
+
+_VEC4 = re.compile(r"vec4<f32>\(([^()]*)\)")
+_CONST = re.compile(r"^const (FIBREFIT_\w+): (?:f32|u32) = ([-+0-9.eE]+)u?;", re.M)
+
+
+def parse_wgsl(src: str) -> Dict[str, Any]:
+    """The parameters a fibrefit WGSL export bakes in: ``rung`` (the ported rung's name, or None),
+    ``rung_body``, ``consts`` (the FIBREFIT_ constants), and the ``FibrefitParams`` members as
+    float64 arrays: ``kd``, ``ks``, ``substrate``, ``fuzz`` (rgb), ``shape``, ``extra``,
+    ``topology`` (4), ``gltf`` (rows x 4), ``heights``, ``spread`` (nodes x 4)."""
+    consts = {k: float(v) for k, v in _CONST.findall(src)}
+    m = re.search(r"fn fibrefit_params\(\) -> FibrefitParams \{(.*?)\n\}", src, re.S)
+    if m is None:
+        raise ValueError("no fibrefit_params() in the shader")
+    rows = [np.array([float(x) for x in r.split(",")], dtype=np.float64) for r in _VEC4.findall(m.group(1))]
+    n_gltf = int(consts["FIBREFIT_GLTF_ROWS"])
+    n_h = int(consts["FIBREFIT_HEIGHT_NODES"])
+    n_s = int(consts["FIBREFIT_SPREAD_NODES"])
+    if len(rows) != 7 + n_gltf + n_h + n_s:
+        raise ValueError(f"fibrefit_params(): {len(rows)} rows, expected {7 + n_gltf + n_h + n_s}")
+    body = re.search(r"fn fibrefit_rung\([^)]*\) -> vec4<f32> \{\n(.*?)\n\}", src, re.S)
+    rung_body = body.group(1) if body else ""
+    p: Dict[str, Any] = {
+        "consts": consts,
+        "rung_body": rung_body,
+        "rung": PORTED.get(rung_body),
+        "kd": rows[0][:3],
+        "ks": rows[1][:3],
+        "substrate": rows[2][:3],
+        "fuzz": rows[3][:3],
+        "shape": rows[4],
+        "extra": rows[5],
+        "topology": rows[6],
+        "gltf": np.array(rows[7 : 7 + n_gltf]),
+        "heights": np.array(rows[7 + n_gltf : 7 + n_gltf + n_h]),
+        "spread": np.array(rows[7 + n_gltf + n_h :]),
+    }
+    return p
+
+
+def unsupported_reason(p: Dict[str, Any]) -> Optional[str]:
+    """Why the fast path cannot evaluate these parameters (None: it can)."""
+    if p["rung"] is None:
+        name = re.search(r"fibrefit_(\w+)\(", p["rung_body"])
+        return (
+            f"its rung ({name.group(1) if name else 'unknown'}) is not ported to Dr.Jit "
+            "(ported: lambert, hast-diffuse, max-normal, ward, gltf khronos)"
+        )
+    if p["rung"] == "gltf" and p["gltf"][1][3] > 0.5:
+        return "the gltf rung's threejs variant is not ported to Dr.Jit (its khronos variant is)"
+    return None
+
+
+class DrJitModel:
+    """The BRDF of :func:`parse_wgsl`'s parameters on Dr.Jit arrays of the current Mitsuba variant.
+
+    :meth:`eval` takes the light and view directions in the fibre frame (x along the fibre, z
+    the normal) as ``mi.Vector3f`` and returns f (1/sr) as ``mi.Color3f``; zero at and below
+    either horizon. Every parameter is a Python float baked into the traced kernel; the sheen's
+    albedo table (32 values) is the one array gathered from.
+    """
+
+    def __init__(self, p: Dict[str, Any]):
+        import mitsuba as mi
+
+        why = unsupported_reason(p)
+        if why is not None:
+            raise ValueError(why)
+        self.p = p
+        self.rung = p["rung"]
+        self.kd = [float(x) for x in p["kd"]]
+        self.ks = [float(x) for x in p["ks"]]
+        self.substrate = [float(x) for x in p["substrate"]]
+        self.fuzz = [float(x) for x in p["fuzz"]]
+        self.fresnel_ior = float(p["shape"][2])
+        self.exponent = float(p["shape"][0])
+        self.alpha_x, self.alpha_y = float(p["extra"][0]), float(p["extra"][1])
+        self.fuzz_depth, self.fuzz_g = float(p["extra"][2]), float(p["extra"][3])
+        self.spread = [(float(c), float(s), float(w)) for c, s, w, _ in p["spread"]]
+        g = p["gltf"]
+        self.g0 = [float(x) for x in g[0]]
+        self.g1 = [float(x) for x in g[1]]
+        self.sheen_table = np.asarray(g[2:], dtype=np.float64).reshape(-1)
+        self._sheen_e: Any = None
+        if self.rung == "gltf":
+            scalar = mi.variant().startswith("scalar")
+            # scalar variants: a list indexed by Python ints; JIT variants: an array gathered from
+            self._sheen_e = self.sheen_table.tolist() if scalar else mi.Float(self.sheen_table.astype(np.float32))
+
+    # -- the shader's common parts ------------------------------------------------------------
+
+    @staticmethod
+    def _pow(x, e: float):
+        import drjit as dr
+
+        return dr.select(x < 1e-30, 0.0, dr.exp(e * dr.log(dr.maximum(x, 1e-30))))
+
+    def _schlick(self, l, v):
+        import drjit as dr
+
+        ior = self.fresnel_ior
+        if ior <= 0.0:
+            return 1.0
+        h = l + v
+        norm = dr.norm(h)
+        c = dr.select(norm > 0.0, dr.clip(dr.dot(l, h) / dr.maximum(norm, 1e-30), 0.0, 1.0), 0.0)
+        f0 = ((ior - 1.0) / (ior + 1.0)) ** 2
+        m = 1.0 - c
+        m2 = m * m
+        return f0 + (1.0 - f0) * (m2 * m2 * m)
+
+    def _fuzz(self, l, v):
+        """(attenuation A, single-scattering column P) of the fuzz layer; no layer: (1, 0)."""
+        import drjit as dr
+
+        depth, g = self.fuzz_depth, self.fuzz_g
+        if depth <= 0.0:
+            return 1.0, 0.0
+        mi_, mo = dr.maximum(l.z, 1e-30), dr.maximum(v.z, 1e-30)
+        a = dr.exp(-depth * (1.0 / mi_ + 1.0 / mo))
+        cos_a = dr.clip(-dr.dot(l, v), -1.0, 1.0)
+        d = dr.maximum(1.0 + g * g - 2.0 * g * cos_a, 1e-30)
+        p = (1.0 - g * g) / (4.0 * math.pi * d * dr.sqrt(d))
+        return a, p * (1.0 - a) / (4.0 * (mi_ + mo))
+
+    # -- the rungs: (diffuse, specular, substrate) columns ---------------------------------------
+
+    def _lambert(self, l, v):
+        return 1.0 / math.pi, 0.0, 0.0
+
+    def _hast_diffuse(self, l, v):
+        import drjit as dr
+
+        phi = (dr.sqrt(l.y * l.y + l.z * l.z) + l.z) / math.pi
+        return phi / (math.pi * l.z), 0.0, 0.0
+
+    def _max_normal(self, l, v):
+        import drjit as dr
+
+        lp = dr.sqrt(l.y * l.y + l.z * l.z)
+        vp = dr.sqrt(v.y * v.y + v.z * v.z)
+        lobe = dr.maximum(lp * vp - l.x * v.x, 0.0)
+        return lp / (math.pi * l.z), self._pow(lobe, self.exponent) / l.z, 0.0
+
+    def _ward(self, l, v):
+        import drjit as dr
+
+        ax, ay = self.alpha_x, self.alpha_y
+        h = l + v
+        e = ((h.x / ax) ** 2 + (h.y / ay) ** 2) / (h.z * h.z)
+        lobe = dr.exp(-e) / (4.0 * math.pi * ax * ay * dr.sqrt(l.z * v.z))
+        return 1.0 / math.pi, lobe, 0.0
+
+    def _sheen_lambda_l(self, x, a: float):
+        import drjit as dr
+
+        t = (1.0 - a) ** 2
+        mix = lambda u, w: u * (1.0 - t) + w * t  # noqa: E731
+        pa, pb, pc = mix(21.5473, 25.3245), mix(3.82987, 3.32435), mix(0.19823, 0.16801)
+        pd, pe = mix(-1.97760, -1.27393), mix(-4.32054, -4.85967)
+        xp = dr.select(x > 0.0, dr.exp(pc * dr.log(dr.maximum(x, 1e-30))), 0.0)
+        return pa / (1.0 + pb * xp) + pd * x + pe
+
+    def _sheen_lambda(self, c, a: float):
+        import drjit as dr
+
+        near = dr.exp(self._sheen_lambda_l(c, a))
+        far = dr.exp(2.0 * self._sheen_lambda_l(0.5, a) - self._sheen_lambda_l(1.0 - c, a))
+        return dr.select(dr.abs(c) < 0.5, near, far)
+
+    def _sheen_albedo(self, mu):
+        import drjit as dr
+        import mitsuba as mi
+
+        x = dr.clip(mu, 0.0, 1.0) * 31.0
+        if isinstance(self._sheen_e, list):
+            k = min(int(math.floor(x)), 30)
+            f = x - k
+            return self._sheen_e[k] * (1.0 - f) + self._sheen_e[k + 1] * f
+        k = dr.minimum(mi.UInt32(dr.floor(x)), 30)
+        f = x - mi.Float(k)
+        a = dr.gather(mi.Float, self._sheen_e, k)
+        b = dr.gather(mi.Float, self._sheen_e, k + 1)
+        return a * (1.0 - f) + b * f
+
+    def _gltf(self, l, v):
+        import drjit as dr
+        import mitsuba as mi
+
+        m, at, ab, sp = self.g0
+        f0, sheen, sheen_alpha = self.g1[0], self.g1[1], self.g1[2]
+        h = dr.normalize(l + v)
+        vh = dr.abs(dr.dot(v, h))
+        x1 = dr.clip(1.0 - vh, 0.0, 1.0)
+        x2 = x1 * x1
+        x = x2 * x2 * x1
+        a2 = at * ab
+        fv = mi.Vector3f(ab * h.x, at * h.y, a2 * h.z)
+        w2 = a2 / dr.dot(fv, fv)
+        d = dr.select(h.z > 0.0, a2 * w2 * w2 / math.pi, 0.0)
+        vis_v = l.z * dr.norm(mi.Vector3f(at * v.x, ab * v.y, v.z))
+        vis_l = v.z * dr.norm(mi.Vector3f(at * l.x, ab * l.y, l.z))
+        s = d * 0.5 / (vis_v + vis_l)
+        fr = f0 + (1.0 - f0) * x
+        diffuse = (1.0 - m) * (1.0 - sp * fr) / math.pi + m * s * (1.0 - x)
+        layers = (1.0 - m) * sp * fr * s + m * s * x
+        if sheen > 0.0:
+            a = sheen_alpha
+            e = dr.maximum(self._sheen_albedo(l.z), self._sheen_albedo(v.z))
+            k = 1.0 - sheen * e
+            sin2 = dr.maximum(1.0 - h.z * h.z, 0.0)
+            dc = dr.select(
+                sin2 > 0.0,
+                (2.0 + 1.0 / a) * dr.exp(0.5 / a * dr.log(dr.maximum(sin2, 1e-30))) / (2.0 * math.pi),
+                0.0,
+            )
+            vs = 1.0 / ((1.0 + self._sheen_lambda(v.z, a) + self._sheen_lambda(l.z, a)) * (4.0 * v.z * l.z))
+            return k * diffuse, k * layers + sheen * dc * dr.clip(vs, 0.0, 1.0), 0.0
+        return diffuse, layers, 0.0
+
+    # -- the public entry ----------------------------------------------------------------------
+
+    def eval(self, l, v, active=True):
+        """f(l, v) in 1/sr (``mi.Color3f``) at fibre-frame unit directions; 0 at and below either
+        horizon."""
+        import drjit as dr
+        import mitsuba as mi
+
+        up = (l.z > 0.0) & (v.z > 0.0) & active
+        # keep the arithmetic finite where the result is masked to zero
+        lz = dr.select(up, l.z, 1.0)
+        vz = dr.select(up, v.z, 1.0)
+        l = mi.Vector3f(l.x, l.y, lz)
+        v = mi.Vector3f(v.x, v.y, vz)
+        rung = getattr(self, "_" + self.rung)
+        bx, by, bz = 0.0, 0.0, 0.0
+        for c, s, w in self.spread:
+            if c == 1.0 and s == 0.0:
+                lr, vr = l, v
+            else:
+                lr = dr.normalize(mi.Vector3f(l.x * c + l.y * s, -l.x * s + l.y * c, l.z))
+                vr = dr.normalize(mi.Vector3f(v.x * c + v.y * s, -v.x * s + v.y * c, v.z))
+            x, y, z = rung(lr, vr)
+            bx, by, bz = bx + w * x, by + w * y, bz + w * z
+        by = by * self._schlick(l, v)
+        a, pz = self._fuzz(l, v)
+        bx, by, bz, bw = bx * a, by * a, bz * a, pz
+        out = []
+        for ch in range(3):
+            val = bx * self.kd[ch] + by * self.ks[ch] + bz * self.substrate[ch] + bw * self.fuzz[ch]
+            out.append(dr.select(up, val, 0.0) if not isinstance(val, float) else dr.select(up, mi.Float(val), 0.0))
+        return mi.Color3f(out[0], out[1], out[2])
+
+
+def fibre_frame(w, cos_psi: float, sin_psi: float):
+    """A shading-frame direction (x = dp/du, z = the normal) in the fibre frame: x along the
+    fibres at azimuth psi from dp/du, y = z x t."""
+    import mitsuba as mi
+
+    return mi.Vector3f(w.x * cos_psi + w.y * sin_psi, -w.x * sin_psi + w.y * cos_psi, w.z)
+
+
+def shading_frame(w, cos_psi: float, sin_psi: float):
+    """The inverse of :func:`fibre_frame`."""
+    import mitsuba as mi
+
+    return mi.Vector3f(w.x * cos_psi - w.y * sin_psi, w.x * sin_psi + w.y * cos_psi, w.z)
+
+
+# -- the tabulated importance sampler ---------------------------------------------------------------
+
+#: default resolution of the sampling tables: view elevation nodes (uniform in cos), view
+#: azimuth nodes over [0, 2 pi] (relative to the fibre), light elevation nodes (uniform in
+#: cos) and light azimuth nodes over [0, 2 pi] (relative to the view's azimuth)
+SAMPLER_RES = (12, 12, 32, 64)
+
+
+def sampler_table(material: Any, psi: float, res=SAMPLER_RES, floor: float = 0.02) -> Dict[str, Any]:
+    """The proposal of the fast sampler, tabulated from ``material.eval`` (the exact model).
+
+    For each view direction on a grid (elevation nodes uniform in cos theta_v, azimuth nodes
+    phi_v over [0, 2 pi] in the fibre frame), the light directions' density is the luminance of
+    f cos theta_l on a grid in (x, y) = ((phi_l - phi_v) / 2 pi, 1 - cos theta_l), plus
+    ``floor`` x its mean x cos theta_l (a cosine-weighted part, so no direction the BRDF reaches
+    has zero density). (x, y) is area-preserving up to 2 pi (d omega = 2 pi dx dy), so the
+    solid-angle pdf is the table's normalised bilinear density / (2 pi); Mitsuba's
+    ``MarginalContinuous2D2`` samples that bilinear density exactly and interpolates it
+    linearly between the view nodes, so the pdf is exact for what is drawn.
+    Returns ``data`` (float32, (n_phi_v + 1, n_theta_v, n_theta_l, n_phi_l + 1)) and the
+    parameter node values ``phi_v`` and ``cos_v``.
+    """
+    n_tv, n_pv, n_tl, n_pl = res
+    eps = 1e-4
+    cos_v = np.linspace(1.0, 0.0, n_tv)  # parameter nodes must increase: 1 - cos
+    y_v = 1.0 - cos_v
+    phi_v = np.linspace(0.0, 2 * np.pi, n_pv + 1)
+    y_l = np.linspace(0.0, 1.0, n_tl)
+    x_l = np.linspace(0.0, 1.0, n_pl + 1)
+    cl = np.clip(1.0 - y_l, eps, 1.0)
+    CL, XL = np.meshgrid(cl, x_l, indexing="ij")
+    SL = np.sqrt(1.0 - CL * CL)
+    data = np.zeros((n_pv + 1, n_tv, n_tl, n_pl + 1), dtype=np.float64)
+    cv = np.clip(1.0 - y_v, eps, 1.0)[:, None, None]
+    sv = np.sqrt(1.0 - cv * cv)
+    for i, pv in enumerate(phi_v[:-1]):
+        # one view azimuth's grid of (view elevation, light direction) pairs a batch, in the
+        # swatch frame (the fibre frame turned by psi)
+        av = pv + psi
+        al = av + 2 * np.pi * XL
+        shape = (n_tv, n_tl, n_pl + 1)
+        v = np.stack(np.broadcast_arrays(sv * math.cos(av), sv * math.sin(av), cv + 0 * XL), axis=-1).reshape(-1, 3)
+        l = np.stack(np.broadcast_arrays(SL * np.cos(al), SL * np.sin(al), CL + 0 * al), axis=-1)
+        l = np.broadcast_to(l, shape + (3,)).reshape(-1, 3)
+        f = material.eval(l, v)
+        lum = f.mean(axis=1) if f.shape[1] > 1 else f[:, 0]
+        data[i] = np.clip(lum, 0.0, None).reshape(shape) * CL
+    data[-1] = data[0]  # phi_v = 2 pi is phi_v = 0
+    mean = data.mean(axis=(2, 3), keepdims=True)
+    mean = np.where(mean > 0, mean, 1.0)
+    data = data + floor * mean * (1.0 - y_l)[None, None, :, None]
+    return {"data": data.astype(np.float32), "phi_v": phi_v, "y_v": y_v}
