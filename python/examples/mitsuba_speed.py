@@ -29,6 +29,15 @@ import time
 ROOT = pathlib.Path(__file__).resolve().parents[2]
 FELT = ROOT / "tests/data/rgl/acrylic_felt_green_rgb.bsdf"
 BEGIN, END = "<!-- mitsuba_speed: begin -->", "<!-- mitsuba_speed: end -->"
+KINDS = ["fast", "measured", "roughconductor", "fast-evaluated", "measured-evaluated", "exact"]
+LABELS = {
+    "fast": "fibrefit fast (`register()`)",
+    "measured": "measured",
+    "roughconductor": "roughconductor",
+    "fast-evaluated": "fibrefit fast, symbolic off (`register(exact_flags=True)`)",
+    "measured-evaluated": "measured, symbolic off",
+    "exact": "fibrefit exact (`register(exact_flags=True)`)",
+}
 
 
 def scene_dict(mi, bsdf, size, spp):
@@ -58,21 +67,23 @@ def child(kind, fit, size, spp, runs):
     import numpy as np
 
     mi.set_variant("llvm_ad_rgb")
-    fm.register()
+    # Mitsuba's defaults (symbolic loops and calls on: what `register()` keeps), or those
+    # switched off as the exact mode needs (`register(exact_flags=True)`)
+    fm.register(exact_flags=kind in ("fast-evaluated", "exact", "measured-evaluated"))
     rss0 = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss * 1024
     bsdf = {
         "fast": {"type": "fibrefit", "filename": fit, "mode": "fast"},
+        "fast-evaluated": {"type": "fibrefit", "filename": fit, "mode": "fast"},
+        "measured-evaluated": {"type": "measured", "filename": str(FELT)},
         "exact": {"type": "fibrefit", "filename": fit, "mode": "exact"},
         "measured": {"type": "measured", "filename": str(FELT)},
         "roughconductor": {"type": "roughconductor", "distribution": "ggx", "alpha": 0.1},
     }[kind]
-    if kind == "exact":
-        fm.exact_flags()
     t0 = time.perf_counter()
     scene = mi.load_dict(scene_dict(mi, bsdf, size, spp))
     load_s = time.perf_counter() - t0
     extra = {}
-    if kind in ("fast", "exact"):
+    if kind in ("fast", "fast-evaluated", "exact"):
         b = scene.shapes()[0].bsdf()  # the plugin's Python object
         extra = {"table_bytes": b.table_bytes, "mode": b.mode, "check": b.fast_check}
         if b.mode == "fast":
@@ -129,7 +140,7 @@ def main():
     r.to_json(fit)
     rows = []
     for size, spp in [(256, 16), (512, 64)]:
-        for kind in ["fast", "exact", "measured", "roughconductor"]:
+        for kind in KINDS:
             runs = 3 if (kind == "exact" and size > 256) else a.runs
             print(f"{kind} {size} x {size}, {spp} spp ...", file=sys.stderr)
             p = subprocess.run(
@@ -171,8 +182,9 @@ def write(out, rows, r, fit_s):
         f"The felt `tests/data/rgl/acrylic_felt_green_rgb.bsdf` fitted with `--model auto` ({fit_s:.0f} s): {r.model} "
         f"(the choice's fuzz layer included). One scene: a sphere under a constant environment (0.5) and a directional light, "
         "perspective camera, `path` with max depth 3, `independent` sampler, variant `llvm_ad_rgb`; each BSDF and size in its own "
-        "process; the median of the timed renders after one that compiles the kernels (the exact mode with Dr.Jit's symbolic "
-        "loops and calls off, as it needs; the others with Mitsuba's defaults). `measured` renders the RGL file the fit came from; "
+        "process; the median of the timed renders after one that compiles the kernels. Mitsuba's defaults (symbolic loops and "
+        "calls on, which `register()` keeps) but in the rows marked symbolic off (`register(exact_flags=True)`: what the exact "
+        "mode needs, and what a scene with an exact instance renders under). `measured` renders the RGL file the fit came from; "
         "`roughconductor` is GGX, alpha 0.1.",
         "",
         "| size, spp | BSDF | median s (runs) | x fast | first render s | peak RSS MiB | RSS over the bare process MiB | mean RGB |",
@@ -180,10 +192,10 @@ def write(out, rows, r, fit_s):
     ]
     for size, spp in [(256, 16), (512, 64)]:
         base = by[("fast", size)]["median_s"]
-        for kind in ["fast", "exact", "measured", "roughconductor"]:
+        for kind in KINDS:
             x = by[(kind, size)]
             lines.append(
-                f"| {size} x {size}, {spp} | {kind if kind not in ('fast', 'exact') else 'fibrefit ' + kind} | "
+                f"| {size} x {size}, {spp} | {LABELS[kind]} | "
                 f"{x['median_s']:.3f} ({len(x['times'])}) | {x['median_s'] / base:.2f} | {x['first_s']:.2f} | "
                 f"{mb(x['rss_peak'])} | {mb(x['rss_peak'] - x['rss_base'])} | "
                 + ", ".join(f"{c:.4f}" for c in x["mean_rgb"])
@@ -192,13 +204,16 @@ def write(out, rows, r, fit_s):
     m256, m512 = by[("measured", 256)]["median_s"], by[("measured", 512)]["median_s"]
     e256, e512 = by[("exact", 256)]["median_s"], by[("exact", 512)]["median_s"]
     f512 = by[("fast", 512)]["median_s"]
+    mr256, mr512 = by[("measured-evaluated", 256)]["median_s"], by[("measured-evaluated", 512)]["median_s"]
+    fe256, fe512 = by[("fast-evaluated", 256)]["median_s"], by[("fast-evaluated", 512)]["median_s"]
     felt_bytes = (ROOT / "tests/data/rgl/acrylic_felt_green_rgb.bsdf").stat().st_size
     rss = lambda k, s: by[(k, s)]["rss_peak"] - by[(k, s)]["rss_base"]  # noqa: E731
     lines += [
         "",
         f"**Time.** The fast mode takes {fast['median_s'] / m256:.2f}x `measured`'s time at 256 x 256 / 16 spp and "
-        f"{f512 / m512:.2f}x at 512 x 512 / 64 spp (goal: at most 1x); the exact mode {e256 / fast['median_s']:.1f}x and "
-        f"{e512 / f512:.1f}x the fast mode's. The first render of each process compiles the kernels (the fast mode's "
+        f"{f512 / m512:.2f}x at 512 x 512 / 64 spp (goal: at most 1x); with symbolic recording off (a scene that also holds "
+        f"an exact instance) {fe256 / mr256:.2f}x / {fe512 / mr512:.2f}x `measured`'s under the same flags. The exact mode takes "
+        f"{e256 / fast['median_s']:.1f}x and {e512 / f512:.1f}x the fast mode's time. The first render of each process compiles the kernels (the fast mode's "
         "Python methods are traced into them; Dr.Jit caches the compiled kernels on disk between runs).",
         "",
         f"**Memory.** The fast mode's only table is its sampler's: {fast['table_bytes']} bytes of float32 density "
@@ -212,8 +227,10 @@ def write(out, rows, r, fit_s):
         f"fast {mb(rss('fast', 512))}, measured {mb(rss('measured', 512))} MiB (ratio "
         f"{rss('fast', 512) / max(rss('measured', 512), 1):.2f}) at 512 x 512. The fast mode's excess over `measured` "
         "is mostly its loading, not its table: fibrefit's native material and the load check's Dr.Jit kernel (compiled "
-        "once). The exact mode's is its evaluated (not symbolic) wavefront, every variable of every sample held at once: "
-        f"{rss('exact', 512) / 2**30:.1f} GiB at 512 x 512 / 64 spp.",
+        "once). Symbolic recording off costs any BSDF its evaluated wavefront, every variable of every sample held at once "
+        f"(at 512 x 512 / 64 spp: `measured` {rss('measured-evaluated', 512) / 2**30:.1f} GiB, the fast mode "
+        f"{rss('fast-evaluated', 512) / 2**30:.1f} GiB, the exact mode {rss('exact', 512) / 2**30:.1f} GiB): why "
+        "`register()` leaves it on unless asked.",
         "",
         f"**Accuracy.** The fast mode's load check ({check['cases']} direction pairs: uniform, both within 5 degrees of the "
         f"horizon, the normal against 0-89.9 degrees) against `fibrefit.Material.eval` (the Rust model, f64): largest error "

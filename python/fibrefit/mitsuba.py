@@ -261,7 +261,13 @@ class FibrefitBSDF:
             if self.fast_reason is not None:
                 if mode == "fast":
                     raise FibrefitError(f"{self.filename}: the fibrefit BSDF's fast mode: {self.fast_reason}")
-                _warnings.warn(f"{self.filename}: the fibrefit BSDF uses its exact path: {self.fast_reason}", stacklevel=2)
+                hint = "" if self._scalar else (
+                    "; render it after fibrefit.mitsuba.exact_flags() (or register(exact_flags=True)): "
+                    "the exact path needs Dr.Jit's symbolic loops and calls off"
+                )
+                _warnings.warn(
+                    f"{self.filename}: the fibrefit BSDF uses its exact path: {self.fast_reason}{hint}", stacklevel=2
+                )
         self.mode = "fast" if mode != "exact" and self.fast_reason is None else "exact"
         if self.mode == "exact" and not self._scalar:
             exact_flags()
