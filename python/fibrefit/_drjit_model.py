@@ -7,11 +7,16 @@ the sheen's albedo table, the spread's nodes, ...); :func:`parse_wgsl` reads the
 fibrefit.wgsl``, which ``fibrefit export --check`` proves equal to the Rust model) with Dr.Jit
 arrays, so a Mitsuba render compiles them into its kernels instead of calling back into numpy.
 
-Ported rungs: ``lambert``, ``hast-diffuse``, ``max-normal``, ``ward`` and ``gltf`` (its
-``khronos`` variant), each with the shader's common parts (the fibre-direction spread's nodes,
-Fresnel, the fuzz layer). The others (``poulin-fournier``, ``varying-topology``, the ``gltf``
-``threejs`` variant; ``openpbr``, ``principled`` and ``reference`` have no shader) are not:
-:func:`unsupported_reason` says why, and the plugin keeps its exact path for them.
+Ported rungs: ``lambert``, ``hast-diffuse``, ``max-normal``, ``ward``, ``gltf`` (its
+``khronos`` variant) and the cross-section rungs ``poulin-fournier`` and ``varying-topology``
+(the shader's ``cross_section`` section: the pair, the occlusion gaps, the closed-form diffuse,
+the Gauss-Legendre lobe, the substrate strip; the height histogram's nodes), each with the
+shader's common parts (the fibre-direction spread's nodes, Fresnel, the fuzz layer). The
+cross-section rungs' nested loops (spread nodes, height nodes and fibres, the merge of the seen
+and lit arcs) are Dr.Jit symbolic loops, so the kernel holds each body once whatever the node
+counts. The others (the ``gltf`` ``threejs`` variant; ``openpbr``, ``principled`` and
+``reference`` have no shader) are not: :func:`unsupported_reason` says why, and the plugin
+keeps its exact path for them.
 """
 
 from __future__ import annotations
@@ -29,9 +34,27 @@ PORTED = {
     "    return fibrefit_max_normal(l, v, p.shape.x);": "max_normal",
     "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);": "ward",
     "    return fibrefit_gltf(l, v, p);": "gltf",
+    "    let sp = fibrefit_pair(l, v, p.shape.w);\n"
+    "    let b = fibrefit_pattern(sp, p.shape.y, 0.0, 1.0, p.shape.x);\n"
+    "    return vec4<f32>(b, 0.0);": "poulin_fournier",
+    "    let sp = fibrefit_pair(l, v, p.shape.w);\n"
+    "    if (at_height) {\n"
+    "        return vec4<f32>(fibrefit_pattern(sp, p.shape.y, height, 1.0, p.shape.x), 0.0);\n"
+    "    }\n"
+    "    var heights = p.heights;\n"
+    "    var b = vec3<f32>(0.0);\n"
+    "    for (var k = 0u; k < FIBREFIT_HEIGHT_NODES; k++) {\n"
+    "        b += fibrefit_pattern(sp, p.shape.y, heights[k].x, heights[k].y, p.shape.x);\n"
+    "    }\n"
+    "    return vec4<f32>(b, 0.0);": "varying_topology",
 }
 
+#: the rungs evaluated by the shader's ``cross_section`` section
+CROSS_SECTION = ("poulin_fournier", "varying_topology")
+
 _VEC4 = re.compile(r"vec4<f32>\(([^()]*)\)")
+_VEC2 = re.compile(r"vec2<f32>\(([^()]*)\)")
+_GAUSS = re.compile(r"const FIBREFIT_GAUSS_LEGENDRE = array<vec2<f32>, \d+>\((.*?)\);", re.S)
 _CONST = re.compile(r"^const (FIBREFIT_\w+): (?:f32|u32) = ([-+0-9.eE]+)u?;", re.M)
 
 
@@ -39,7 +62,8 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
     """The parameters a fibrefit WGSL export bakes in: ``rung`` (the ported rung's name, or None),
     ``rung_body``, ``consts`` (the FIBREFIT_ constants), and the ``FibrefitParams`` members as
     float64 arrays: ``kd``, ``ks``, ``substrate``, ``fuzz`` (rgb), ``shape``, ``extra``,
-    ``topology`` (4), ``gltf`` (rows x 4), ``heights``, ``spread`` (nodes x 4)."""
+    ``topology`` (4), ``gltf`` (rows x 4), ``heights``, ``spread`` (nodes x 4); and the
+    specular lobe's Gauss-Legendre rule ``gauss_legendre`` (order x 2: node, weight)."""
     consts = {k: float(v) for k, v in _CONST.findall(src)}
     m = re.search(r"fn fibrefit_params\(\) -> FibrefitParams \{(.*?)\n\}", src, re.S)
     if m is None:
@@ -67,6 +91,9 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
         "heights": np.array(rows[7 + n_gltf : 7 + n_gltf + n_h]),
         "spread": np.array(rows[7 + n_gltf + n_h :]),
     }
+    g = _GAUSS.search(src)
+    gl = [[float(x) for x in r.split(",")] for r in _VEC2.findall(g.group(1))] if g else []
+    p["gauss_legendre"] = np.array(gl, dtype=np.float64).reshape(-1, 2)
     return p
 
 
@@ -76,7 +103,7 @@ def unsupported_reason(p: Dict[str, Any]) -> Optional[str]:
         name = re.search(r"fibrefit_(\w+)\(", p["rung_body"])
         return (
             f"its rung ({name.group(1) if name else 'unknown'}) is not ported to Dr.Jit "
-            "(ported: lambert, hast-diffuse, max-normal, ward, gltf khronos)"
+            "(ported: lambert, hast-diffuse, max-normal, ward, gltf khronos, poulin-fournier, varying-topology)"
         )
     if p["rung"] == "gltf" and p["gltf"][1][3] > 0.5:
         return "the gltf rung's threejs variant is not ported to Dr.Jit (its khronos variant is)"
@@ -114,6 +141,9 @@ class DrJitModel:
         self.g1 = [float(x) for x in g[1]]
         self.sheen_table = np.asarray(g[2:], dtype=np.float64).reshape(-1)
         self._sheen_e: Any = None
+        self._scalar = mi.variant().startswith("scalar")
+        if self.rung in CROSS_SECTION:
+            self._setup_cross_section(p)
         if self.rung == "gltf":
             scalar = mi.variant().startswith("scalar")
             # scalar variants: a list indexed by Python ints; JIT variants: an array gathered from
@@ -250,6 +280,299 @@ class DrJitModel:
             return k * diffuse, k * layers + sheen * dc * dr.clip(vs, 0.0, 1.0), 0.0
         return diffuse, layers, 0.0
 
+    # -- the cross-section rungs (the shader's cross_section section) ---------------------------
+
+    def _setup_cross_section(self, p: Dict[str, Any]) -> None:
+        """The constants of the cross-section rungs: the lobe's, the Gauss-Legendre rule, and a
+        list of jobs, one per (height node, fibre of the period) pattern evaluation, each with
+        the numbers of ``fibrefit_pattern`` that depend only on the height (computed in f64, as
+        the Rust model computes them)."""
+        import mitsuba as mi
+
+        self.spacing = float(p["shape"][1])
+        self.lobe_floor = float(p["shape"][3])
+        self.norm = (self.exponent + 2.0) / (2.0 * math.pi)
+        gl = p["gauss_legendre"]
+        if len(gl) == 0:
+            raise ValueError("the shader has no Gauss-Legendre rule")
+        self.gauss = [(float(x), float(w)) for x, w in gl]
+        d = self.spacing
+        heights = [(0.0, 1.0)] if self.rung == "poulin_fournier" else [(float(h), float(w)) for h, w, _, _ in p["heights"]]
+        # job: step, other row's height, count x weight, substrate weight, rise (for the substrate)
+        jobs: List[List[float]] = []
+        for h, w in heights:
+            phi = min(math.asin(min(max(h / d, 0.0), 1.0)), math.acos(min(max(1.0 / d, 0.0), 1.0)))
+            step, rise = d * math.cos(phi), d * math.sin(phi)
+            if rise == 0.0:
+                # the odd row is the even row moved by one step: one fibre, counted twice
+                jobs.append([step, 0.0, 2.0 * w, w, rise])
+            else:
+                jobs.append([step, rise, w, w, rise])
+                jobs.append([step, -rise, w, 0.0, rise])
+        self.jobs = jobs
+        cols = list(zip(*jobs))
+        if self._scalar:
+            self._job_cols = [list(c) for c in cols]
+            self._spread_cols = [list(c) for c in zip(*self.spread)]
+        else:
+            self._job_cols = [mi.Float(np.array(c, dtype=np.float32)) for c in cols]
+            self._spread_cols = [mi.Float(np.array(c, dtype=np.float32)) for c in zip(*self.spread)]
+
+    def _loop(self, state, cond, body, label):
+        """``dr.while_loop``, symbolic in the JIT variants whatever the flags (an evaluated loop
+        of loops would launch a kernel per iteration), a Python loop in the scalar ones."""
+        import drjit as dr
+
+        return dr.while_loop(state, cond, body, label=label, mode=None if self._scalar else "symbolic")
+
+    def _at(self, col, k):
+        import drjit as dr
+        import mitsuba as mi
+
+        if isinstance(col, list):
+            return col[int(k)]
+        return dr.gather(mi.Float, col, k)
+
+    @staticmethod
+    def _project(w):
+        """fibrefit_project: (alpha, s, c, len, tan, sec) of a direction in the cross-section
+        plane (w.z > 0)."""
+        import drjit as dr
+
+        ln = dr.sqrt(w.y * w.y + w.z * w.z)
+        return dr.atan2(w.y, w.z), w.y / ln, w.z / ln, ln, w.y / w.z, ln / w.z
+
+    @staticmethod
+    def _sort3(x):
+        """fibrefit_sort3: three (start, end) intervals sorted by their start."""
+        import drjit as dr
+
+        x = list(x)
+        for j in (0, 1, 0):
+            a, b = x[j], x[j + 1]
+            sw = b[0] < a[0]
+            x[j] = (dr.select(sw, b[0], a[0]), dr.select(sw, b[1], a[1]))
+            x[j + 1] = (dr.select(sw, a[0], b[0]), dr.select(sw, a[1], b[1]))
+        return x
+
+    def _gaps(self, sa, ca, step, other_row):
+        """fibrefit_gaps: the gaps (in s = sin(th - alpha)) that the pattern's occluders leave on
+        one fibre's front arc seen along a direction of sin ``sa``, cos ``ca``: four slots of
+        (start, end), the first ``n`` of them used, and n."""
+        import drjit as dr
+
+        none = 3.0
+        ds = 2.0 * step * ca
+        da = 2.0 * step * sa
+        own = (ds < 2.0) & (da != 0.0)
+        sh0 = (dr.select(own, dr.select(da > 0.0, ds - 1.0, -1.0), none), dr.select(own, dr.select(da > 0.0, 1.0, 1.0 - ds), none))
+        s0 = step * ca - other_row * sa
+        a0 = step * sa + other_row * ca
+        lo = dr.ceil((-2.0 - s0) / ds)
+        hi = dr.floor((2.0 - s0) / ds)
+        das = dr.select(da == 0.0, 1.0, da)
+        lo = dr.select(da > 0.0, dr.maximum(lo, dr.floor(-a0 / das) + 1.0), lo)
+        hi = dr.select(da < 0.0, dr.minimum(hi, dr.ceil(-a0 / das) - 1.0), hi)
+        ok = ((da != 0.0) | (a0 > 0.0)) & (lo <= hi)
+        s = s0 + lo * ds
+        narrow = ds <= 2.0
+        sh1 = (dr.select(ok, s - 1.0, none), dr.select(ok, dr.select(narrow, s0 + hi * ds + 1.0, s + 1.0), none))
+        two = ok & (ds > 2.0) & (hi > lo)
+        sh2 = (dr.select(two, s + ds - 1.0, none), dr.select(two, s + ds + 1.0, none))
+        sh = self._sort3([sh0, sh1, sh2])
+        # the complement of the union in (-1, 1), compacted into the first n slots
+        starts, ends = [1.0] * 4, [1.0] * 4
+        n = 0.0 * ds
+        cursor = -1.0 + 0.0 * ds
+        for k in range(4):
+            a = dr.minimum(sh[k][0], 1.0) if k < 3 else 1.0 + 0.0 * ds
+            emit = a > cursor
+            for m in range(k + 1):
+                put = emit & (n == float(m))
+                starts[m] = dr.select(put, cursor, starts[m])
+                ends[m] = dr.select(put, a, ends[m])
+            n = n + dr.select(emit, 1.0, 0.0)
+            if k < 3:
+                cursor = dr.maximum(cursor, sh[k][1])
+        return starts, ends, n
+
+    @staticmethod
+    def _diffuse_kernel(t0, t1, a, b, cos_ab):
+        """fibrefit_diffuse_kernel: the integral over [t0, t1] of cos(th - a) cos(th - b)."""
+        import drjit as dr
+
+        d = t1 - t0
+        u = t0 + t1 - a - b
+        long = 0.5 * (d * cos_ab + dr.cos(u) * dr.sin(d))
+        m = 0.5 * (t0 + t1)
+        d2 = d * d
+        d_minus_sin = d * d2 * (1.0 / 6.0 - d2 * (1.0 / 120.0 - d2 * (1.0 / 5040.0 - d2 / 362880.0)))
+        short = dr.maximum(d * dr.cos(m - a) * dr.cos(m - b) - 0.5 * dr.cos(u) * d_minus_sin, 0.0)
+        return dr.select(d > 0.5, long, short)
+
+    def _substrate(self, lp, vp, step, rise):
+        """fibrefit_substrate: the fraction of one period's substrate strip seen and lit."""
+        import drjit as dr
+
+        p = 2.0 * step
+        inv_p = 1.0 / p
+        wl, wv = 2.0 * lp[5], 2.0 * vp[5]
+        a0 = (-lp[4] - lp[5], wl)
+        a1 = (step - (1.0 + rise) * lp[4] - lp[5], wl)
+        a2 = (-vp[4] - vp[5], wv)
+        a3 = (step - (1.0 + rise) * vp[4] - vp[5], wv)
+        big = wl >= wv
+        origin = dr.select(big, a0[0], a2[0])
+        width = dr.select(big, wl, wv)
+        first = (dr.select(big, a1[0], a0[0]), dr.select(big, a1[1], a0[1]))
+        second = (dr.select(big, a2[0], a1[0]), dr.select(big, a2[1], a1[1]))
+        x = []
+        for start, w in (first, second, a3):
+            r = start - origin
+            r = r - p * dr.floor(r * inv_p)
+            r = dr.select((r >= p) | (r < 0.0), 0.0, r)
+            x.append((r, dr.minimum(r + w, p)))
+        x = self._sort3(x)
+        cursor = width
+        open_ = 0.0
+        for k in range(3):
+            open_ = open_ + dr.maximum(x[k][0] - cursor, 0.0)
+            cursor = dr.maximum(cursor, x[k][1])
+        open_ = open_ + dr.maximum(p - cursor, 0.0)
+        return dr.select(dr.maximum(wl, wv) >= p, 0.0, open_ * inv_p)
+
+    def _pair(self, l, v):
+        """fibrefit_pair: what the patterns share of a light/view pair."""
+        import drjit as dr
+
+        lp, vp = self._project(l), self._project(v)
+        cos_lv = dr.dot(l, v)
+        cos_delta = lp[2] * vp[2] + lp[1] * vp[1]
+        opc = 0.5 * ((lp[2] + vp[2]) ** 2 + (lp[1] + vp[1]) ** 2)
+        k = lp[3] * vp[3]
+        peak = k * opc - cos_lv
+        c = (self.lobe_floor * peak + cos_lv) / dr.select(k > 0.0, k, 1.0) - cos_delta
+        cc = dr.clip(c, -1.0, 1.0)
+        half = dr.atan2(dr.sqrt(1.0 - cc), dr.sqrt(1.0 + cc))
+        sigma = lp[0] + vp[0]
+        has = (peak > 0.0) & (k > 0.0) & (c < 1.0)
+        return {
+            "l": lp, "v": vp, "cos_lv": cos_lv, "cos_delta": cos_delta, "opc": opc, "sigma": sigma,
+            "k2": 2.0 * k, "win": (0.5 * sigma - half, 0.5 * sigma + half), "has": has,
+        }
+
+    def _lobe(self, a, b, sp):
+        """fibrefit_lobe: the lobe integral over [a, b] by the Gauss-Legendre rule."""
+        import drjit as dr
+
+        half = 0.5 * (b - a)
+        tms = (a + b) - sp["sigma"]
+        acc = 0.0
+        for x, w in self.gauss:
+            u = 2.0 * half * x + tms
+            h = dr.sin(0.5 * u)
+            cc = 0.5 * (sp["opc"] - 2.0 * h * h)
+            rv = sp["k2"] * cc - sp["cos_lv"]
+            acc = acc + dr.select(rv > 0.0, w * self._pow(rv, self.exponent) * cc, 0.0)
+        return half * acc
+
+    @staticmethod
+    def _pick(slots, i):
+        import drjit as dr
+
+        r = slots[3]
+        for m in (2, 1, 0):
+            r = dr.select(i == float(m), slots[m], r)
+        return r
+
+    def _fibre(self, sp, step, other_row, active):
+        """One fibre of ``fibrefit_pattern``: the sums over its seen-and-lit arcs of the diffuse
+        kernel and of the lobe integral (inside the lobe window), by the merge of the gaps seen
+        along v and lit along l (a symbolic loop: at most seen + lit - 1 arcs)."""
+        import drjit as dr
+
+        lp, vp = sp["l"], sp["v"]
+        ss, se, sn = self._gaps(vp[1], vp[2], step, other_row)
+        ls, le, ln = self._gaps(lp[1], lp[2], step, other_row)
+        # the arcs' ends as angles th (alpha + asin s), once per gap
+        ss = [vp[0] + dr.asin(dr.clip(x, -1.0, 1.0)) for x in ss]
+        se = [vp[0] + dr.asin(dr.clip(x, -1.0, 1.0)) for x in se]
+        ls = [lp[0] + dr.asin(dr.clip(x, -1.0, 1.0)) for x in ls]
+        le = [lp[0] + dr.asin(dr.clip(x, -1.0, 1.0)) for x in le]
+        zero = 0.0 * sn
+
+        def cond(i, j, dif, spec):
+            return (i < sn) & (j < ln) & active
+
+        def body(i, j, dif, spec):
+            xa, xb = self._pick(ss, i), self._pick(se, i)
+            ya, yb = self._pick(ls, j), self._pick(le, j)
+            lo, hi = dr.maximum(xa, ya), dr.minimum(xb, yb)
+            arc = hi > lo
+            dif = dif + dr.select(arc, self._diffuse_kernel(lo, hi, lp[0], vp[0], sp["cos_delta"]), 0.0)
+            wa, wb = dr.maximum(lo, sp["win"][0]), dr.minimum(hi, sp["win"][1])
+            lobe = arc & sp["has"] & (wb > wa)
+            spec = spec + dr.select(lobe, self._lobe(wa, dr.select(lobe, wb, wa), sp), 0.0)
+            adv = xb < yb
+            return dr.select(adv, i + 1.0, i), dr.select(adv, j, j + 1.0), dif, spec
+
+        _, _, dif, spec = self._loop((zero, zero, zero, zero), cond, body, "fibrefit_arcs")
+        return dif, spec
+
+    def _cross_section(self, l, v):
+        """The rung's (diffuse, specular, substrate) columns at one spread node: the jobs
+        (height nodes x fibres) summed, in a symbolic loop where there are several."""
+        import drjit as dr
+        import mitsuba as mi
+
+        sp = self._pair(l, v)
+        lp, vp = sp["l"], sp["v"]
+        zero = 0.0 * l.z
+
+        def job(k, d, s, b):
+            step, other, cw, sw, rise = [self._at(c, k) for c in self._job_cols]
+            denom = 2.0 * step * lp[2] * vp[2]
+            ok = denom > 0.0
+            dif, spec = self._fibre(sp, step, other, ok)
+            scale = cw / dr.select(ok, denom, 1.0)
+            d = d + dr.select(ok, scale * (1.0 / math.pi) * dif, 0.0)
+            s = s + dr.select(ok, scale * self.norm * spec, 0.0)
+            b = b + dr.select(ok & (sw > 0.0), sw * (1.0 / math.pi) * self._substrate(lp, vp, step, rise), 0.0)
+            return k + 1, d, s, b
+
+        if len(self.jobs) == 1:
+            _, d, s, b = job(0 if self._scalar else mi.UInt32(0), zero, zero, zero)
+            return d, s, b
+        k0 = 0 if self._scalar else dr.zeros(mi.UInt32, dr.width(l.z))
+        n = len(self.jobs)
+        _, d, s, b = self._loop((k0, zero, zero, zero), lambda k, d, s, b: k < n, job, "fibrefit_patterns")
+        return d, s, b
+
+    def _cross_section_spread(self, l, v):
+        """The spread's nodes of a cross-section rung, summed (a symbolic loop over the nodes
+        where there are several)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        zero = 0.0 * l.z
+        if len(self.spread) == 1:
+            c, s, w = self.spread[0]
+            if c == 1.0 and s == 0.0:
+                d, sp, b = self._cross_section(l, v)
+                return w * d, w * sp, w * b
+
+        def node(j, bx, by, bz):
+            c, s, w = [self._at(col, j) for col in self._spread_cols]
+            lr = dr.normalize(mi.Vector3f(l.x * c + l.y * s, -l.x * s + l.y * c, l.z))
+            vr = dr.normalize(mi.Vector3f(v.x * c + v.y * s, -v.x * s + v.y * c, v.z))
+            x, y, z = self._cross_section(lr, vr)
+            return j + 1, bx + w * x, by + w * y, bz + w * z
+
+        j0 = 0 if self._scalar else dr.zeros(mi.UInt32, dr.width(l.z))
+        n = len(self.spread)
+        _, bx, by, bz = self._loop((j0, zero, zero, zero), lambda j, bx, by, bz: j < n, node, "fibrefit_spread")
+        return bx, by, bz
+
     # -- the public entry ----------------------------------------------------------------------
 
     def eval(self, l, v, active=True):
@@ -264,16 +587,19 @@ class DrJitModel:
         vz = dr.select(up, v.z, 1.0)
         l = mi.Vector3f(l.x, l.y, lz)
         v = mi.Vector3f(v.x, v.y, vz)
-        rung = getattr(self, "_" + self.rung)
-        bx, by, bz = 0.0, 0.0, 0.0
-        for c, s, w in self.spread:
-            if c == 1.0 and s == 0.0:
-                lr, vr = l, v
-            else:
-                lr = dr.normalize(mi.Vector3f(l.x * c + l.y * s, -l.x * s + l.y * c, l.z))
-                vr = dr.normalize(mi.Vector3f(v.x * c + v.y * s, -v.x * s + v.y * c, v.z))
-            x, y, z = rung(lr, vr)
-            bx, by, bz = bx + w * x, by + w * y, bz + w * z
+        if self.rung in CROSS_SECTION:
+            bx, by, bz = self._cross_section_spread(l, v)
+        else:
+            rung = getattr(self, "_" + self.rung)
+            bx, by, bz = 0.0, 0.0, 0.0
+            for c, s, w in self.spread:
+                if c == 1.0 and s == 0.0:
+                    lr, vr = l, v
+                else:
+                    lr = dr.normalize(mi.Vector3f(l.x * c + l.y * s, -l.x * s + l.y * c, l.z))
+                    vr = dr.normalize(mi.Vector3f(v.x * c + v.y * s, -v.x * s + v.y * c, v.z))
+                x, y, z = rung(lr, vr)
+                bx, by, bz = bx + w * x, by + w * y, bz + w * z
         by = by * self._schlick(l, v)
         a, pz = self._fuzz(l, v)
         bx, by, bz, bw = bx * a, by * a, bz * a, pz
