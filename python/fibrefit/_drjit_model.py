@@ -476,6 +476,24 @@ class DrJitModel:
             acc = acc + dr.select(rv > 0.0, w * self._pow(rv, self.exponent) * cc, 0.0)
         return half * acc
 
+    def _lobe_where(self, need, a, b, sp):
+        """The lobe integral where ``need``, else 0. In the JIT variants it is the body of a
+        symbolic loop run at most once: the LLVM backend skips a loop's body for a packet of
+        lanes none of which enters it (a symbolic ``if`` evaluates both sides), and most arcs
+        miss the lobe's window."""
+        import drjit as dr
+        import mitsuba as mi
+
+        if self._scalar:
+            return self._lobe(a, b, sp) if need else 0.0
+
+        def body(go, acc):
+            return dr.zeros(mi.Bool, dr.width(go)), self._lobe(a, b, sp)
+
+        zero = dr.zeros(mi.Float, dr.width(need))
+        _, acc = self._loop((mi.Bool(need), zero), lambda go, acc: go, body, "fibrefit_lobe")
+        return acc
+
     @staticmethod
     def _pick(slots, i):
         import drjit as dr
@@ -512,7 +530,7 @@ class DrJitModel:
             dif = dif + dr.select(arc, self._diffuse_kernel(lo, hi, lp[0], vp[0], sp["cos_delta"]), 0.0)
             wa, wb = dr.maximum(lo, sp["win"][0]), dr.minimum(hi, sp["win"][1])
             lobe = arc & sp["has"] & (wb > wa)
-            spec = spec + dr.select(lobe, self._lobe(wa, dr.select(lobe, wb, wa), sp), 0.0)
+            spec = spec + self._lobe_where(lobe, wa, wb, sp)
             adv = xb < yb
             return dr.select(adv, i + 1.0, i), dr.select(adv, j, j + 1.0), dif, spec
 
