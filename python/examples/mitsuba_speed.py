@@ -15,9 +15,10 @@ symbolic loops and calls off (it converts arrays to numpy); the others with Mits
 Then the shipped synthetic goniometric tables, fitted with the rungs their captures were made
 with (data_synthetic/brushed/gonio.csv with poulin-fournier, data_synthetic/silk/gonio.csv with
 varying-topology: the cross-section rungs), in the same scene at a smaller size
-(`--synthetic-size`, `--synthetic-spp`: the silk's renders cost about 1000x the felt's fast
-mode's, and 256 x 256 / 16 spp is 64x the default 128 x 128 / 4 spp), fast against exact; there is no measured file for synthetic data, so the felt's fast mode
-and `measured` are rendered at that size too, as the yardstick.
+(`--synthetic-size`, `--synthetic-spp`; the silk's model evaluates 16 spread x 16 height
+nodes x 2 fibres of arcs per value), fast against exact; there is no measured file for
+synthetic data, so the felt's fast mode and `measured` are rendered at that size too, as the
+yardstick.
 
 Writes the section between the `mitsuba_speed` markers of OUT/mitsuba.md (the rest of that file
 is capture_side_by_side.py's) and OUT/mitsuba_speed.csv.
