@@ -14,7 +14,8 @@ the Gauss-Legendre lobe, the substrate strip; the height histogram's nodes), eac
 shader's common parts (the fibre-direction spread's nodes, Fresnel, the fuzz layer). The
 cross-section rungs' nested loops (spread nodes, height nodes and fibres, the merge of the seen
 and lit arcs) are Dr.Jit symbolic loops, so the kernel holds each body once whatever the node
-counts. The others (the ``gltf`` ``threejs`` variant; ``openpbr``, ``principled`` and
+counts. The ``gltf`` rung's ``threejs`` variant is ported too (the ``gltf_threejs`` section,
+three.js's DFG table read from the shader). The others (``openpbr``, ``principled`` and
 ``reference`` have no shader) are not: :func:`unsupported_reason` says why, and the plugin
 keeps its exact path for them.
 """
@@ -63,7 +64,8 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
     ``rung_body``, ``consts`` (the FIBREFIT_ constants), and the ``FibrefitParams`` members as
     float64 arrays: ``kd``, ``ks``, ``substrate``, ``fuzz`` (rgb), ``shape``, ``extra``,
     ``topology`` (4), ``gltf`` (rows x 4), ``heights``, ``spread`` (nodes x 4); and the
-    specular lobe's Gauss-Legendre rule ``gauss_legendre`` (order x 2: node, weight)."""
+    specular lobe's Gauss-Legendre rule ``gauss_legendre`` (order x 2: node, weight); for the gltf
+    rung's threejs variant, three.js's DFG table ``gltf_dfg`` (256 x 2: scale, bias)."""
     consts = {k: float(v) for k, v in _CONST.findall(src)}
     m = re.search(r"fn fibrefit_params\(\) -> FibrefitParams \{(.*?)\n\}", src, re.S)
     if m is None:
@@ -91,6 +93,9 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
         "heights": np.array(rows[7 + n_gltf : 7 + n_gltf + n_h]),
         "spread": np.array(rows[7 + n_gltf + n_h :]),
     }
+    dfg = re.search(r"const FIBREFIT_GLTF_DFG = array<vec2<f32>, 256>\((.*?)\);", src, re.S)
+    if dfg:
+        p["gltf_dfg"] = np.array([[float(x) for x in r.split(",")] for r in _VEC2.findall(dfg.group(1))], dtype=np.float64)
     g = _GAUSS.search(src)
     gl = [[float(x) for x in r.split(",")] for r in _VEC2.findall(g.group(1))] if g else []
     p["gauss_legendre"] = np.array(gl, dtype=np.float64).reshape(-1, 2)
@@ -103,10 +108,10 @@ def unsupported_reason(p: Dict[str, Any]) -> Optional[str]:
         name = re.search(r"fibrefit_(\w+)\(", p["rung_body"])
         return (
             f"its rung ({name.group(1) if name else 'unknown'}) is not ported to Dr.Jit "
-            "(ported: lambert, hast-diffuse, max-normal, ward, gltf khronos, poulin-fournier, varying-topology)"
+            "(ported: lambert, hast-diffuse, max-normal, ward, gltf, poulin-fournier, varying-topology)"
         )
-    if p["rung"] == "gltf" and p["gltf"][1][3] > 0.5:
-        return "the gltf rung's threejs variant is not ported to Dr.Jit (its khronos variant is)"
+    if p["rung"] == "gltf" and p["gltf"][1][3] > 0.5 and p.get("gltf_dfg") is None:
+        return "the gltf rung's threejs variant: the shader has no DFG table"
     return None
 
 
@@ -144,6 +149,9 @@ class DrJitModel:
         self._scalar = mi.variant().startswith("scalar")
         if self.rung in CROSS_SECTION:
             self._setup_cross_section(p)
+        if self.rung == "gltf" and self.g1[3] > 0.5:
+            self.rung = "gltf_threejs"
+            self._setup_threejs(p)
         if self.rung == "gltf":
             scalar = mi.variant().startswith("scalar")
             # scalar variants: a list indexed by Python ints; JIT variants: an array gathered from
@@ -279,6 +287,81 @@ class DrJitModel:
             vs = 1.0 / ((1.0 + self._sheen_lambda(v.z, a) + self._sheen_lambda(l.z, a)) * (4.0 * v.z * l.z))
             return k * diffuse, k * layers + sheen * dc * dr.clip(vs, 0.0, 1.0), 0.0
         return diffuse, layers, 0.0
+
+    # -- the gltf rung's threejs variant (the shader's gltf_threejs section) ---------------------
+
+    def _setup_threejs(self, p: Dict[str, Any]) -> None:
+        """E_ss of three.js's DFG table at this result's roughness: the table's bilinear lookup
+        at r = sqrt(alpha_t) (a constant) is a linear one along N.v between 16 values, computed
+        here once (f64)."""
+        import mitsuba as mi
+
+        t = p["gltf_dfg"].sum(axis=1).reshape(16, 16)  # dfg.x + dfg.y, rows along N.v
+        r = math.sqrt(self.g0[1])
+        x = min(max(min(max(r, 0.0), 1.0) * 16.0 - 0.5, 0.0), 15.0)
+        i = min(int(math.floor(x)), 14)
+        fx = x - i
+        col = t[:, i] * (1.0 - fx) + t[:, i + 1] * fx
+        self._dfg_col = col.tolist() if self._scalar else mi.Float(col.astype(np.float32))
+
+    def _threejs_ess(self, nv):
+        import drjit as dr
+        import mitsuba as mi
+
+        y = dr.clip(dr.clip(nv, 0.0, 1.0) * 16.0 - 0.5, 0.0, 15.0)
+        if isinstance(self._dfg_col, list):
+            j = min(int(math.floor(y)), 14)
+            fy = y - j
+            return self._dfg_col[j] * (1.0 - fy) + self._dfg_col[j + 1] * fy
+        j = dr.minimum(mi.UInt32(dr.floor(y)), 14)
+        fy = y - mi.Float(j)
+        return dr.gather(mi.Float, self._dfg_col, j) * (1.0 - fy) + dr.gather(mi.Float, self._dfg_col, j + 1) * fy
+
+    @staticmethod
+    def _threejs_sheen_e(mu, r: float):
+        import drjit as dr
+
+        inv = 1.0 / (r + 0.1)
+        a = -1.9362 + 1.0678 * r + 0.4573 * r * r - 0.8469 * inv
+        b = -0.6014 + 0.5538 * r - 0.4670 * r * r - 0.1255 * inv
+        return dr.clip(dr.exp(a * dr.clip(mu, 0.0, 1.0) + b), 0.0, 1.0)
+
+    def _gltf_threejs(self, l, v):
+        """fibrefit_gltf_threejs: three.js r187's BRDF; (base colour, layers, base colour
+        squared) columns."""
+        import drjit as dr
+        import mitsuba as mi
+
+        m, at, ab, sp = self.g0
+        f0, sheen, sheen_alpha = self.g1[0], self.g1[1], self.g1[2]
+        h = dr.normalize(l + v)
+        vh = dr.clip(dr.dot(v, h), 0.0, 1.0)
+        e = dr.exp2((-5.55473 * vh - 6.98316) * vh)
+        f0d = min(f0, 1.0) * sp
+        f90 = sp + (1.0 - sp) * m
+        fd = f0d * (1.0 - e) + f90 * e
+        pr = (1.0 - m) * f0d * (1.0 - e) + f90 * e
+        gm = 1.0 / self._threejs_ess(dr.clip(v.z, 0.0, 1.0)) - 1.0
+        rr = 1.0 + (1.0 - m) * f0d * gm
+        a2 = at * ab
+        fv = mi.Vector3f(ab * h.x, at * h.y, a2 * h.z)
+        w2 = a2 / dr.dot(fv, fv)
+        d = dr.select(h.z > 0.0, a2 * w2 * w2 / math.pi, 0.0)
+        vis_v = l.z * dr.norm(mi.Vector3f(at * v.x, ab * v.y, v.z))
+        vis_l = v.z * dr.norm(mi.Vector3f(at * l.x, ab * l.y, l.z))
+        s = d * 0.5 / (vis_v + vis_l)
+        k, sheen_term = 1.0, 0.0
+        if sheen > 0.0:
+            a = sheen_alpha
+            rho = math.sqrt(a)
+            k = 1.0 - sheen * dr.maximum(self._threejs_sheen_e(v.z, rho), self._threejs_sheen_e(l.z, rho))
+            nh = dr.clip(h.z, 0.0, 1.0)
+            sin2 = dr.maximum(1.0 - nh * nh, 0.0078125)
+            dc = (2.0 + 1.0 / a) * dr.exp(0.5 / a * dr.log(sin2)) / (2.0 * math.pi)
+            vn = dr.clip(1.0 / (4.0 * (l.z + v.z - l.z * v.z)), 0.0, 1.0)
+            sheen_term = sheen * dc * vn
+        diffuse = (1.0 - m) * (1.0 - fd) / math.pi + s * m * (pr * gm + (1.0 - e) * rr)
+        return k * diffuse, k * s * pr * rr + sheen_term, k * s * m * m * gm * (1.0 - e)
 
     # -- the cross-section rungs (the shader's cross_section section) ---------------------------
 

@@ -18,16 +18,16 @@ Two paths, chosen by the BSDF's ``mode`` property:
   eval x cos / pdf). On load the Dr.Jit model is checked against :class:`fibrefit.Material` at
   random and grazing direction pairs: each value within 1e-3 of the exact one, relative to
   max(|value|, 1e-4 of the largest) (the comparison of ``fibrefit export --check``). Ported:
-  lambert, hast-diffuse, max-normal, ward, gltf (khronos), poulin-fournier and
-  varying-topology, with the spread, Fresnel and the fuzz layer; no maps.
+  lambert, hast-diffuse, max-normal, ward, gltf (khronos and threejs), poulin-fournier and
+  varying-topology, with the spread, Fresnel and the fuzz layer; no maps (nor a topology map).
 * ``"exact"`` (or ``"exact": True``): :class:`fibrefit.Material` (the Rust model) through numpy
   at every call, the result's per-texel maps at the surface's uv, fibrefit's own importance
   sampler. Any rung, maps included. Converting Dr.Jit arrays to numpy needs evaluated (not
   symbolic) loops and virtual calls in the JIT variants, so an exact instance switches
   ``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off when it loads (renders are
   then slower than with symbolic recording, fast instances included).
-* ``"auto"`` (the default): fast where the result has no maps, its rung is ported and the load
-  check holds; exact otherwise (with a warning saying why).
+* ``"auto"`` (the default): fast where the result has no maps (and no topology map), its rung
+  is ported and the load check holds; exact otherwise (with a warning saying why).
 
 The fibre frame is the surface's shading frame (dp/du is the swatch's x axis; the fibres lie at
 the result's ``fibre_azimuth_deg`` from it). One-sided: zero from below. The LLVM variants need
@@ -279,6 +279,10 @@ class FibrefitBSDF:
 
         if self.material.has_maps:
             return "the result has per-texel maps (looked up at uv by the exact path only)"
+        if _topology_map(self.filename):
+            # the rung's heights per texel at uv (without uv, the map's histogram: the fast
+            # path's model), which has_maps does not count
+            return "the result has a topology map (per-texel heights looked up at uv by the exact path only)"
         try:
             shader = _native_call(_native.export, self.filename, "wgsl", False, "swatch", False, None, progress=False)["shader"]
         except FibrefitError as e:
@@ -501,6 +505,19 @@ def register(variant: Optional[str] = None, exact_flags: bool = False) -> None:
     cls = bsdf_class()
     mi.register_bsdf("fibrefit", lambda props: cls(props))
     _REGISTERED[v] = True
+
+
+def _topology_map(filename: str) -> Optional[str]:
+    """The topology map a result (``knobs.topology_map``) or parameter file (``topology_map``)
+    names, if any."""
+    try:
+        j = _json.loads(open(filename, encoding="utf-8").read())
+    except (OSError, ValueError):
+        return None
+    if not isinstance(j, dict):
+        return None
+    knobs = j.get("knobs") if isinstance(j.get("knobs"), dict) else {}
+    return knobs.get("topology_map") or j.get("topology_map")
 
 
 def _unit(a: np.ndarray) -> np.ndarray:
