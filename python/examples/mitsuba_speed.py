@@ -160,17 +160,7 @@ def main():
         for kind in KINDS:
             runs = 3 if (kind == "exact" and size > 256) else a.runs
             print(f"{kind} {size} x {size}, {spp} spp ...", file=sys.stderr)
-            p = subprocess.run(
-                [sys.executable, __file__, "--child", kind, str(fit), str(size), str(spp), str(runs)],
-                capture_output=True,
-                text=True,
-                env=dict(os.environ, PYTHONWARNINGS="ignore"),
-            )
-            line = [x for x in p.stdout.splitlines() if x.startswith("RESULT ")]
-            if p.returncode != 0 or not line:
-                sys.stderr.write(p.stderr)
-                raise SystemExit(f"{kind} at {size}: failed")
-            rows.append(json.loads(line[0][7:]))
+            rows.append(run_child(kind, fit, size, spp, runs))
     fits = {"felt": str(fit)}
     models = {}
     for name, (data, model) in SYNTHETIC.items():

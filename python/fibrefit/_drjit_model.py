@@ -253,6 +253,21 @@ class DrJitModel:
         b = dr.gather(mi.Float, self._sheen_e, k + 1)
         return a * (1.0 - f) + b * f
 
+    @staticmethod
+    def _ggx_specular(l, v, h, at, ab):
+        """The anisotropic GGX D x V (alphas ``at``, ``ab``; half vector ``h``), as glTF's
+        KHR_materials_anisotropy and three.js evaluate it."""
+        import drjit as dr
+        import mitsuba as mi
+
+        a2 = at * ab
+        fv = mi.Vector3f(ab * h.x, at * h.y, a2 * h.z)
+        w2 = a2 / dr.dot(fv, fv)
+        d = dr.select(h.z > 0.0, a2 * w2 * w2 / math.pi, 0.0)
+        vis_v = l.z * dr.norm(mi.Vector3f(at * v.x, ab * v.y, v.z))
+        vis_l = v.z * dr.norm(mi.Vector3f(at * l.x, ab * l.y, l.z))
+        return d * 0.5 / (vis_v + vis_l)
+
     def _gltf(self, l, v):
         import drjit as dr
         import mitsuba as mi
@@ -264,13 +279,7 @@ class DrJitModel:
         x1 = dr.clip(1.0 - vh, 0.0, 1.0)
         x2 = x1 * x1
         x = x2 * x2 * x1
-        a2 = at * ab
-        fv = mi.Vector3f(ab * h.x, at * h.y, a2 * h.z)
-        w2 = a2 / dr.dot(fv, fv)
-        d = dr.select(h.z > 0.0, a2 * w2 * w2 / math.pi, 0.0)
-        vis_v = l.z * dr.norm(mi.Vector3f(at * v.x, ab * v.y, v.z))
-        vis_l = v.z * dr.norm(mi.Vector3f(at * l.x, ab * l.y, l.z))
-        s = d * 0.5 / (vis_v + vis_l)
+        s = self._ggx_specular(l, v, h, at, ab)
         fr = f0 + (1.0 - f0) * x
         diffuse = (1.0 - m) * (1.0 - sp * fr) / math.pi + m * s * (1.0 - x)
         layers = (1.0 - m) * sp * fr * s + m * s * x
@@ -343,13 +352,7 @@ class DrJitModel:
         pr = (1.0 - m) * f0d * (1.0 - e) + f90 * e
         gm = 1.0 / self._threejs_ess(dr.clip(v.z, 0.0, 1.0)) - 1.0
         rr = 1.0 + (1.0 - m) * f0d * gm
-        a2 = at * ab
-        fv = mi.Vector3f(ab * h.x, at * h.y, a2 * h.z)
-        w2 = a2 / dr.dot(fv, fv)
-        d = dr.select(h.z > 0.0, a2 * w2 * w2 / math.pi, 0.0)
-        vis_v = l.z * dr.norm(mi.Vector3f(at * v.x, ab * v.y, v.z))
-        vis_l = v.z * dr.norm(mi.Vector3f(at * l.x, ab * l.y, l.z))
-        s = d * 0.5 / (vis_v + vis_l)
+        s = self._ggx_specular(l, v, h, at, ab)
         k, sheen_term = 1.0, 0.0
         if sheen > 0.0:
             a = sheen_alpha

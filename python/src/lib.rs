@@ -950,7 +950,7 @@ fn blender_script<'py>(
                 }
                 let mut outs = fibrefit::api::Outputs::new(&export_api::inputs(&req));
                 let id = outs.file(out, "out")?;
-                let m = export_api::stage_blender(&mut outs, id, &m, (out, "out"))?;
+                let m = export_api::stage_blender(&mut outs, id, &m, (out, "out"), &mut vec![])?;
                 outs.commit()?;
                 Ok(m)
             })
@@ -1008,9 +1008,10 @@ fn openpbr_material<'py>(
     let (m, error) = built
         .openpbr
         .ok_or_else(|| FibrefitError::new_err("no OpenPBR material was built"))?;
-    let (mut document, mut usda, mut written) = (m.document(), m.usda(), m.clone());
+    // the materials the document and the stage are written from (textures named after each)
+    let (mut mx, mut us) = (m.clone(), m.clone());
     if materialx.is_some() || usd.is_some() {
-        let (d, u, w) = py
+        (mx, us) = py
             .detach(|| -> anyhow::Result<_> {
                 let mut outs = fibrefit::api::Outputs::new(&export_api::inputs(&req));
                 let mut ids = vec![];
@@ -1025,27 +1026,22 @@ fn openpbr_material<'py>(
                         ids.push((outs.file(p, flag)?, p, flag, is_usd));
                     }
                 }
-                let (mut d, mut u, mut w) = (m.document(), m.usda(), m.clone());
+                let (mut mx, mut us) = (m.clone(), m.clone());
                 let mut shared = vec![];
                 for (id, p, flag, is_usd) in ids {
                     let to = (p.as_path(), flag, is_usd);
                     let staged = export_api::stage_openpbr(&mut outs, id, &m, to, &mut shared)?;
-                    if is_usd {
-                        u = staged.usda();
-                    } else {
-                        d = staged.document();
-                    }
-                    w = staged;
+                    *(if is_usd { &mut us } else { &mut mx }) = staged;
                 }
                 outs.commit()?;
-                Ok((d, u, w))
+                Ok((mx, us))
             })
             .map_err(err)?;
-        (document, usda, written) = (d, u, w);
     }
     let d = PyDict::new(py);
-    d.set_item("document", document)?;
-    d.set_item("usda", usda)?;
+    d.set_item("document", mx.document())?;
+    d.set_item("usda", us.usda())?;
+    let written = if usd.is_some() { &us } else { &mx };
     d.set_item("textures", textures_dict(py, &written.textures)?)?;
     d.set_item("name", &m.name)?;
     let inputs = PyDict::new(py);

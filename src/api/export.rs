@@ -246,16 +246,17 @@ pub struct GlbTextures {
 use crate::load::texel_maps::MAP_FILES;
 
 /// Stage the Blender script of `m` into `id` (reserved at `out`, a `.py`) with a maps fit's
-/// textures beside it (reserved here, `flag` naming the option); returns the material as
-/// written (its textures named after `out`).
+/// textures beside it (reserved here, `flag` naming the option; each (path, input) joins
+/// `written`); returns the material as written (its textures named after `out`).
 pub fn stage_blender(
     outs: &mut crate::export::atomic::Outputs,
     id: crate::export::atomic::OutputId,
     m: &BlenderMaterial,
     (out, flag): (&Path, &str),
+    written: &mut Vec<(PathBuf, &'static str)>,
 ) -> Result<BlenderMaterial> {
     let m = m.clone().beside(out);
-    m.textures.write_beside(outs, (out, flag), &mut vec![])?;
+    m.textures.write_beside(outs, (out, flag), written)?;
     outs.put(id, m.script().as_bytes())?;
     Ok(m)
 }
@@ -269,7 +270,7 @@ pub fn stage_openpbr(
     id: crate::export::atomic::OutputId,
     m: &OpenPbrMaterial,
     (out, flag, usd): (&Path, &str, bool),
-    written: &mut Vec<PathBuf>,
+    written: &mut Vec<(PathBuf, &'static str)>,
 ) -> Result<OpenPbrMaterial> {
     let m = m.clone().beside(out);
     m.textures.write_beside(outs, (out, flag), written)?;
@@ -575,17 +576,25 @@ fn renderer_material(
     Ok((name, provenance, source, maps))
 }
 
-/// A material's textures of `maps` (from `dir`): `(suffix, input, meaning)` of base colour,
-/// roughness, anisotropy and the fibre direction's input (`rotation`: its value of a fibre
-/// azimuth in degrees), each where the maps have it, the global value `p`'s in their gaps.
+/// The textures of material `stem` of `maps` (from `dir`): `(suffix, input, meaning)` of base
+/// colour, roughness, anisotropy and the fibre direction's input (`rotation`: its value of a
+/// fibre azimuth in degrees), each where the maps have it, the global value `p`'s in their
+/// gaps. No maps: none.
 fn material_textures(
-    (dir, maps): (&Path, &TexelMapsIn),
+    stem: &str,
+    maps: Option<(PathBuf, TexelMapsIn)>,
     p: &ModelParams,
     id: ModelId,
     inputs: [(&'static str, &'static str, &'static str); 4],
     rotation: impl Fn(f64) -> f64,
 ) -> MaterialTextures {
-    use crate::export::material_textures::MapTexture;
+    let stem = stem.to_string();
+    let Some((dir, maps)) = maps else {
+        return MaterialTextures {
+            stem,
+            ..Default::default()
+        };
+    };
     let size = (maps.width, maps.rows);
     let lobe = p.lobe(id);
     let grey = |v: f64| [v; 3];
@@ -626,9 +635,9 @@ fn material_textures(
     }
     MaterialTextures {
         textures,
-        stem: String::new(),
+        stem,
         dir: None,
-        maps: Some(dir.to_path_buf()),
+        maps: Some(dir),
     }
 }
 
@@ -648,25 +657,22 @@ fn blender_material(
     );
     let (name, provenance, source, maps) = renderer_material(req, id, params, rung, name, lines)?;
     let p = &source.params;
-    let textures = maps.map_or_else(MaterialTextures::default, |(dir, m)| {
-        let inputs = [
-            (
-                "base_color",
-                "Base Color",
-                "Base Color, scene-linear RGB (the fit's kd)",
-            ),
-            ("roughness", "Roughness", "Roughness"),
-            ("anisotropic", "Anisotropic", "Anisotropic"),
-            (
-                "anisotropic_rotation",
-                "Anisotropic Rotation",
-                "Anisotropic Rotation, a fraction of a turn: (fibre azimuth + 90 deg) / 360",
-            ),
-        ];
-        let turn = |psi: f64| crate::export::material_textures::turns(psi + 90.0);
-        material_textures((&dir, &m), p, source.id, inputs, turn)
-    });
-    let stem = name.clone();
+    let inputs = [
+        (
+            "base_color",
+            "Base Color",
+            "Base Color, scene-linear RGB (the fit's kd)",
+        ),
+        ("roughness", "Roughness", "Roughness"),
+        ("anisotropic", "Anisotropic", "Anisotropic"),
+        (
+            "anisotropic_rotation",
+            "Anisotropic Rotation",
+            "Anisotropic Rotation, a fraction of a turn: (fibre azimuth + 90 deg) / 360",
+        ),
+    ];
+    let turn = |psi: f64| crate::export::material_textures::turns(psi + 90.0);
+    let textures = material_textures(&name, maps, p, source.id, inputs, turn);
     Ok((
         BlenderMaterial {
             name,
@@ -674,7 +680,7 @@ fn blender_material(
             shape: p.principled,
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             provenance,
-            textures: MaterialTextures { stem, ..textures },
+            textures,
         },
         source.error,
     ))
@@ -693,8 +699,7 @@ fn openpbr_material(
     let rung = (flag, crate::model::Ability::OpenPbrMaterial, "openpbr");
     let (name, provenance, source, maps) = renderer_material(req, id, params, rung, name, lines)?;
     let p = &source.params;
-    let textures = maps.map_or_else(MaterialTextures::default, |(dir, m)| {
-        let inputs = [
+    let inputs = [
             ("base_color", "base_color", "base_color, linear RGB (the fit's kd)"),
             ("specular_roughness", "specular_roughness", "specular_roughness"),
             (
@@ -708,11 +713,9 @@ fn openpbr_material(
                 "rotate3d's amount turning the UV tangent across the fibres, degrees: -(fibre azimuth + 90)",
             ),
         ];
-        let amount = crate::export::materialx_out::rotation_amount;
-        material_textures((&dir, &m), p, source.id, inputs, amount)
-    });
     let name = OpenPbrMaterial::valid_name(&name);
-    let stem = name.clone();
+    let amount = crate::export::materialx_out::rotation_amount;
+    let textures = material_textures(&name, maps, p, source.id, inputs, amount);
     Ok((
         OpenPbrMaterial {
             name,
@@ -720,7 +723,7 @@ fn openpbr_material(
             shape: p.openpbr,
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             provenance,
-            textures: MaterialTextures { stem, ..textures },
+            textures,
         },
         source.error,
     ))

@@ -187,7 +187,7 @@ impl Material {
             ks: None,
             roughness: None,
             anisotropy: None,
-            lobe_names: vec![],
+            lobe_params: vec![],
             width: size.0,
             rows: size.1,
         });

@@ -8,7 +8,7 @@ use crate::export::atomic::Outputs;
 use crate::export::shader::Language;
 use anyhow::{anyhow, bail, Result};
 use clap::Args;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
 #[derive(Debug, Args)]
 #[command(after_help = "\
@@ -184,17 +184,17 @@ pub fn run(args: &ExportArgs) -> Result<()> {
         outs.put(id, bytes)?;
     }
     // a maps fit's textures beside each material file, named after it
+    let (mut blender_textures, mut openpbr_textures) = (vec![], vec![]);
     if let (Some((m, _, _)), Some(id), Some(path)) = (&blender, blender_out, &args.blender) {
-        export_api::stage_blender(&mut outs, id, m, (path, "--blender"))?;
+        export_api::stage_blender(&mut outs, id, m, (path, "--blender"), &mut blender_textures)?;
     }
-    let mut shared = vec![];
     if let (Some((m, _)), Some(id), Some(path)) = (&openpbr, materialx_out, &args.materialx) {
         let to = (path.as_path(), "--materialx", false);
-        export_api::stage_openpbr(&mut outs, id, m, to, &mut shared)?;
+        export_api::stage_openpbr(&mut outs, id, m, to, &mut openpbr_textures)?;
     }
     if let (Some((m, _)), Some(id), Some(path)) = (&openpbr, usd_out, &args.usd) {
         let to = (path.as_path(), "--usd", true);
-        export_api::stage_openpbr(&mut outs, id, m, to, &mut shared)?;
+        export_api::stage_openpbr(&mut outs, id, m, to, &mut openpbr_textures)?;
     }
     outs.commit()?;
     if !args.quiet {
@@ -206,7 +206,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 m.fibre_azimuth_deg
             );
             eprintln!("  error against the data: {}", error.text());
-            textures_said(&m.textures, path, &[]);
+            textures_said(&blender_textures);
         }
         if let Some((m, error)) = &openpbr {
             if let Some(path) = &args.materialx {
@@ -226,10 +226,7 @@ pub fn run(args: &ExportArgs) -> Result<()> {
                 );
             }
             eprintln!("  error against the data: {}", error.text());
-            let mut said = vec![];
-            for path in args.materialx.iter().chain(&args.usd) {
-                said.extend(textures_said(&m.textures, path, &said));
-            }
+            textures_said(&openpbr_textures);
         }
         for line in summary(args, lang, id, &glb, &textures) {
             eprintln!("{line}");
@@ -371,27 +368,9 @@ fn with_textures(mut lines: Vec<String>, textures: &Option<export_api::GlbTextur
     lines
 }
 
-/// The textures written beside the material file `path`, a line each (but those in `said`);
-/// returns their files.
-fn textures_said(
-    t: &crate::export::material_textures::MaterialTextures,
-    path: &Path,
-    said: &[PathBuf],
-) -> Vec<PathBuf> {
-    let t = t.clone().beside(path);
-    let mut files = vec![];
-    for (file, tex) in t.files(path) {
-        if said.contains(&file) {
-            continue;
-        }
-        eprintln!(
-            "  wrote {} ({} per texel, {}x{})",
-            file.display(),
-            tex.input,
-            tex.width,
-            tex.height
-        );
-        files.push(file);
+/// The textures an export wrote, a line each.
+fn textures_said(written: &[(PathBuf, &'static str)]) {
+    for (file, input) in written {
+        eprintln!("  wrote {} ({input} per texel)", file.display());
     }
-    files
 }

@@ -64,20 +64,9 @@ impl MapTexture {
             rgb,
         }
     }
-
-    /// Its value at pixel (x, y), RGB.
-    pub fn at(&self, x: usize, y: usize) -> [f32; 3] {
-        let i = 3 * (y * self.width + x);
-        [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
-    }
 }
 
 impl MaterialTextures {
-    /// Whether there is any texture.
-    pub fn is_empty(&self) -> bool {
-        self.textures.is_empty()
-    }
-
     /// The file name of `t`.
     pub fn file_name(&self, t: &MapTexture) -> String {
         format!("{}_{}.exr", self.stem, t.suffix)
@@ -88,13 +77,11 @@ impl MaterialTextures {
         self.stem = out
             .file_stem()
             .map_or("material".into(), |s| s.to_string_lossy().into_owned());
-        let dir = out.parent().filter(|p| !p.as_os_str().is_empty());
-        self.dir = Some(
-            dir.map(Path::to_path_buf)
-                .unwrap_or_else(|| PathBuf::from("."))
-                .canonicalize()
-                .unwrap_or_else(|_| dir.map_or(PathBuf::from("."), Path::to_path_buf)),
-        );
+        let dir = out
+            .parent()
+            .filter(|p| !p.as_os_str().is_empty())
+            .unwrap_or(Path::new("."));
+        self.dir = Some(dir.canonicalize().unwrap_or_else(|_| dir.to_path_buf()));
         self
     }
 
@@ -114,21 +101,22 @@ impl MaterialTextures {
 
     /// Reserve every texture's file beside the material file `out` in `outs` (`flag`: the
     /// option writing it), then write them (as RGB float EXRs): committed with the run's other
-    /// outputs. Files in `written` (the same material's textures for another file beside it:
-    /// a document and a stage of one stem) are not written twice; those written join it.
+    /// outputs. Files in `written` (path, input: the same material's textures for another file
+    /// beside it, a document and a stage of one stem) are not written twice; those written
+    /// join it.
     pub fn write_beside(
         &self,
         outs: &mut super::atomic::Outputs,
         (out, flag): (&Path, &str),
-        written: &mut Vec<PathBuf>,
+        written: &mut Vec<(PathBuf, &'static str)>,
     ) -> anyhow::Result<()> {
         let mut ids = vec![];
         for (path, t) in self.files(out) {
-            if written.contains(&path) {
+            if written.iter().any(|(p, _)| *p == path) {
                 continue;
             }
             ids.push((outs.file(&path, flag)?, t));
-            written.push(path);
+            written.push((path, t.input));
         }
         for (id, t) in ids {
             let (f, name) = outs.file_and_name(id);
@@ -179,8 +167,8 @@ mod tests {
             |x, y| (x != y).then(|| [0.5; 3]),
             [0.2; 3],
         );
-        assert_eq!(t.at(0, 0), [0.2; 3]);
-        assert_eq!(t.at(1, 0), [0.5; 3]);
+        assert_eq!(t.rgb[..3], [0.2; 3]);
+        assert_eq!(t.rgb[3..6], [0.5; 3]);
         let m = MaterialTextures {
             textures: vec![t],
             ..Default::default()

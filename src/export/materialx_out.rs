@@ -121,7 +121,7 @@ impl OpenPbrMaterial {
             s += &format!("  <image name=\"{n}_{}_map\" type=\"{ty}\">\n", t.suffix);
             s += &format!(
                 "    <input name=\"file\" type=\"filename\" value=\"{}\" />\n",
-                xml_attr(&self.textures.file_name(t))
+                super::view::html_escape(&self.textures.file_name(t))
             );
             s += "    <input name=\"filtertype\" type=\"string\" value=\"closest\" />\n";
             s += "    <input name=\"uaddressmode\" type=\"string\" value=\"clamp\" />\n";
@@ -187,14 +187,6 @@ pub fn rotation_amount(fibre_azimuth_deg: f64) -> f64 {
 /// A number as MaterialX reads it back to the same f64 (finite: the values are checked).
 pub fn num(x: f64) -> String {
     format!("{x:?}")
-}
-
-/// Text safe inside an XML attribute value.
-fn xml_attr(s: &str) -> String {
-    s.replace('&', "&amp;")
-        .replace('"', "&quot;")
-        .replace('<', "&lt;")
-        .replace('>', "&gt;")
 }
 
 /// Text safe inside an XML comment (no `--`, no markup surprises).

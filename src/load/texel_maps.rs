@@ -7,7 +7,7 @@
 //! texels take the global value.
 
 use super::image_io::{self, LinearImage};
-use crate::model::{LobeRole, ModelId};
+use crate::model::{LobeRole, ModelId, Param};
 use anyhow::{bail, Result};
 use std::path::Path;
 
@@ -24,15 +24,6 @@ pub const MAP_FILES: [&str; 9] = [
     "specular_roughness_anisotropy.exr",
 ];
 
-/// The lobe maps' names by role (a rung's own parameter names; one of each role at most).
-const LOBE_NAMES: [(LobeRole, &str); 5] = [
-    (LobeRole::Roughness, "roughness"),
-    (LobeRole::Roughness, "specular_roughness"),
-    (LobeRole::Anisotropy, "anisotropy_strength"),
-    (LobeRole::Anisotropy, "anisotropic"),
-    (LobeRole::Anisotropy, "specular_roughness_anisotropy"),
-];
-
 pub struct TexelMapsIn {
     pub height: Option<LinearImage>,
     pub psi: Option<LinearImage>,
@@ -42,8 +33,9 @@ pub struct TexelMapsIn {
     pub roughness: Option<LinearImage>,
     /// The lobe's anisotropy strength (`gltf`: KHR_materials_anisotropy's).
     pub anisotropy: Option<LinearImage>,
-    /// The lobe maps' names as found (without `.exr`), roughness first: which rung's they are.
-    pub lobe_names: Vec<&'static str>,
+    /// The parameters whose lobe maps were found (`<name>.exr`), roughness first: which rung's
+    /// they are.
+    pub lobe_params: Vec<Param>,
     pub width: usize,
     pub rows: usize,
 }
@@ -78,21 +70,24 @@ impl TexelMapsIn {
             read("kd.exr")?,
             read("ks.exr")?,
         );
+        // a lobe map is named as its rung names the parameter (the table's lobe roles)
         let mut lobe = [None, None];
-        let mut lobe_names: Vec<&'static str> = vec![];
+        let mut lobe_params: Vec<Param> = vec![];
         for role in LobeRole::BOTH {
-            for (r, name) in LOBE_NAMES.into_iter().filter(|(r, _)| *r == role) {
-                let Some(m) = read(&format!("{name}.exr"))? else {
+            for p in Param::all().filter(|p| p.lobe_role() == Some(role)) {
+                let Some(m) = read(&format!("{}.exr", p.name()))? else {
                     continue;
                 };
-                if let Some(first) = lobe_names.iter().find(|n| LOBE_NAMES.contains(&(r, **n))) {
+                if let Some(first) = lobe_params.iter().find(|q| q.lobe_role() == Some(role)) {
                     bail!(
-                        "{}: holds both {first}.exr and {name}.exr, maps of one lobe value for \
-                         two rungs; keep the one of the fit's rung",
-                        dir.display()
+                        "{}: holds both {}.exr and {}.exr, maps of one lobe value for two \
+                         rungs; keep the one of the fit's rung",
+                        dir.display(),
+                        first.name(),
+                        p.name()
                     );
                 }
-                lobe_names.push(name);
+                lobe_params.push(p);
                 lobe[role as usize] = Some(m);
             }
         }
@@ -115,23 +110,19 @@ impl TexelMapsIn {
             ks,
             roughness,
             anisotropy,
-            lobe_names,
+            lobe_params,
             width,
             rows,
         })
     }
 
-    /// Whether the maps carry a lobe (a roughness or anisotropy map); an error when they do
-    /// and `id` is not the rung whose parameters they are (`dir`: where they came from).
-    pub fn lobe_for(&self, id: ModelId, dir: &Path) -> Result<bool> {
-        for name in &self.lobe_names {
-            let role = LOBE_NAMES
-                .iter()
-                .find(|(_, n)| n == name)
-                .map(|(r, _)| *r)
-                .expect("a lobe name");
-            match id.lobe_param(role) {
-                Some(p) if p.name() == *name => {}
+    /// Check that the maps' lobe maps (if any) are model `id`'s: named as it names those
+    /// parameters (`dir`: where they came from).
+    pub fn lobe_for(&self, id: ModelId, dir: &Path) -> Result<()> {
+        for &found in &self.lobe_params {
+            let name = found.name();
+            match found.lobe_role().and_then(|role| id.lobe_param(role)) {
+                Some(p) if p == found => {}
                 Some(p) => bail!(
                     "{}: {name}.exr is another rung's lobe map; model `{id}` calls this value \
                      `{}` ({}.exr)",
@@ -141,12 +132,13 @@ impl TexelMapsIn {
                 ),
                 None => bail!(
                     "{}: {name}.exr is a lobe map, but model `{id}` has no such lobe (the \
-                     renderers' materials have: gltf, principled, openpbr)",
-                    dir.display()
+                     renderers' materials have: {})",
+                    dir.display(),
+                    ModelId::with_lobe_maps()
                 ),
             }
         }
-        Ok(!self.lobe_names.is_empty())
+        Ok(())
     }
 
     /// The map's value at (x, y), channel c (clamped to its channels), unless NaN.

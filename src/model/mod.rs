@@ -213,14 +213,6 @@ pub enum LobeRole {
 impl LobeRole {
     /// Both roles, roughness first.
     pub const BOTH: [LobeRole; 2] = [LobeRole::Roughness, LobeRole::Anisotropy];
-
-    /// This role's value of `lobe`.
-    pub fn of(self, lobe: &Lobe) -> f64 {
-        match self {
-            LobeRole::Roughness => lobe.roughness,
-            LobeRole::Anisotropy => lobe.anisotropy,
-        }
-    }
 }
 
 /// A BRDF per channel (1/sr) as a function of the swatch-frame directions (l, v); `None` where

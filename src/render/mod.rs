@@ -256,7 +256,6 @@ impl Material<'_> {
         let m = self.texel_maps?;
         let (x, y) = m.texel(hit.uv);
         m.lobe_at(x, y, self.lobe)
-            .filter(|_| self.model.id().lobe_param(crate::model::LobeRole::Roughness).is_some())
     }
 
     /// What shades a hit: its fibre frame (the texel maps' azimuth applied), albedos and height.

@@ -98,7 +98,8 @@ pub fn page(c: &ViewContent) -> Result<String> {
     ))
 }
 
-fn html_escape(s: &str) -> String {
+/// Text safe in HTML or XML text and attribute values.
+pub(crate) fn html_escape(s: &str) -> String {
     s.replace('&', "&amp;")
         .replace('<', "&lt;")
         .replace('>', "&gt;")

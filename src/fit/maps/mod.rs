@@ -40,7 +40,7 @@ use crate::load::capture_store::CaptureStore;
 use crate::load::samples::{DataKind, Origin, Sample, Samples};
 use crate::model::frame::FibreFrame;
 use crate::model::topology::max_height;
-use crate::model::{Basis, DirectionPair, ShadingModel};
+use crate::model::{Basis, DirectionPair, ModelId, ShadingModel};
 use anyhow::{bail, Result};
 use nalgebra::{DMatrix, DVector};
 use rayon::prelude::*;
@@ -183,7 +183,8 @@ pub fn check_request(cfg: &FitConfig, req: &MapsConfig) -> Result<()> {
             ),
             None => bail!(
                 "[maps] {key} = true: model `{id}` has no such lobe (the renderers' materials \
-                 have: gltf, principled, openpbr)"
+                 have: {})",
+                ModelId::with_lobe_maps()
             ),
         }
     }

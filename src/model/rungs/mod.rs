@@ -149,9 +149,17 @@ impl ModelId {
     /// The rung's parameter in lobe role `role` (what a roughness or anisotropy map of its
     /// fit carries, named as the rung names it); `None` for rungs without such a lobe.
     pub fn lobe_param(self, role: crate::model::LobeRole) -> Option<Param> {
-        self.parameters()
+        Param::all().find(|p| p.lobe_role() == Some(role) && p.is_fitted() && self.reads(*p))
+    }
+
+    /// The rungs with a lobe a texel map can carry, as the CLI names them (for messages).
+    pub fn with_lobe_maps() -> String {
+        ModelId::ALL
             .into_iter()
-            .find(|p| p.lobe_role() == Some(role))
+            .filter(|m| m.lobe_param(crate::model::LobeRole::Roughness).is_some())
+            .map(ModelId::as_str)
+            .collect::<Vec<_>>()
+            .join(", ")
     }
 
     /// Whether the rung (or the fuzz layer over it) reads parameter or knob `p`.
