@@ -81,6 +81,20 @@ const RUNGS: &[(&str, &str)] = &[
         "varying-topology, isotropic spread, uniform heights",
         "model = 'varying-topology'\nkd = [0.5, 0.3, 0.2]\nks = 0.3\nexponent = 40\nspacing = 3\nheight = 0.5\nmap_scale = 1\nazimuth_spread_deg = 180\nsubstrate_albedo = 0.7\nhistogram_bins = 8\nazimuth_nodes = 8",
     ),
+    // the renderers' materials: Cycles' tables read between their nodes, the sheen's skew at
+    // the range's low end, IOR level and tint remapping the Fresnel
+    (
+        "principled, anisotropic, IOR level, tint",
+        "model = 'principled'\nkd = [0.5, 0.3, 0.2]\nroughness = 0.23\nanisotropic = 0.85\nior = 1.45\nspecular_ior_level = 0.7\nspecular_tint = 0.8\nsheen_weight = 0.9\nsheen_roughness = 0.3\nfibre_azimuth_deg = 30",
+    ),
+    (
+        "principled, rough and isotropic, no sheen",
+        "model = 'principled'\nkd = 0.6\nroughness = 1\nanisotropic = 0\nior = 1.6\nsheen_weight = 0",
+    ),
+    (
+        "openpbr, anisotropic, half specular weight",
+        "model = 'openpbr'\nkd = [0.5, 0.3, 0.2]\nspecular_weight = 0.5\nspecular_roughness = 0.2\nspecular_roughness_anisotropy = 0.9\nspecular_ior = 1.6\nfuzz_weight = 0.8\nfuzz_roughness = 0.05\nfibre_azimuth_deg = 30",
+    ),
 ];
 
 #[test]
@@ -135,9 +149,17 @@ fn every_registered_rung_with_a_shader_equals_the_rust_model_at_its_example() {
 #[test]
 fn reciprocity_and_t_to_minus_t_hold_in_the_shader_output() {
     let gpu = gpu();
-    // max-normal and hast-diffuse have no viewer in their diffuse term: not reciprocal (in Rust
-    // either); T -> -T holds for every rung
-    for text in [RUNGS[1].1, RUNGS[4].1, RUNGS[5].1, RUNGS[7].1] {
+    // max-normal and hast-diffuse have no viewer in their diffuse term, and the renderers'
+    // materials weight their layers by the view's albedos: not reciprocal (in Rust either);
+    // T -> -T holds for every rung
+    for text in [
+        RUNGS[1].1,
+        RUNGS[4].1,
+        RUNGS[5].1,
+        RUNGS[7].1,
+        RUNGS[RUNGS.len() - 3].1,
+        RUNGS[RUNGS.len() - 1].1,
+    ] {
         let (id, p) = params(text);
         let src = shader::wgsl(id, &p, &[]).unwrap();
         let base = check::cases(3000, 11, max_height(p.spacing));
@@ -472,6 +494,51 @@ fn fitted_results_of_every_shipped_dataset_export_and_check_from_the_cli() {
             .as_f64()
             .unwrap();
         assert!((rough - want).abs() < 1e-6, "{data}: {rough} vs {want}");
+    }
+}
+
+/// The renderers' own materials fitted to data (issue 37 item 1): `principled` and `openpbr`
+/// fits of the shipped brushed table export shader code checked on the GPU driver against the
+/// model and at the result's own check values, and `view` draws them with that shader.
+#[test]
+fn fitted_renderer_materials_export_checked_shaders_and_view_pages() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    for model in ["principled", "openpbr"] {
+        let result = dir.path().join(format!("{model}.json"));
+        fibrefit()
+            .args(["fit", "-q", "--model", model])
+            .arg(root.join("data_synthetic/brushed/gonio.csv"))
+            .arg("--out")
+            .arg(&result)
+            .assert()
+            .success();
+        let out = dir.path().join(format!("{model}.glsl"));
+        let assert = fibrefit()
+            .args(["export"])
+            .arg(&result)
+            .args(["--shader", "glsl", "--check", "--out"])
+            .arg(&out)
+            .assert()
+            .success();
+        let stderr = String::from_utf8_lossy(&assert.get_output().stderr).to_string();
+        assert!(stderr.contains("checked on"), "{model}: {stderr}");
+        assert!(
+            stderr.contains("the result's 20 check values"),
+            "{model}: {stderr}"
+        );
+        let text = std::fs::read_to_string(&out).unwrap();
+        assert!(text.contains(&format!("fibrefit_{model}(")), "{model}");
+        let page = dir.path().join(format!("{model}.html"));
+        fibrefit()
+            .args(["view", "-q"])
+            .arg(&result)
+            .arg("--out")
+            .arg(&page)
+            .assert()
+            .success();
+        let html = std::fs::read_to_string(&page).unwrap();
+        assert!(html.contains(&format!("fibrefit_{model}(")), "{model}");
     }
 }
 
@@ -871,7 +938,7 @@ fn bench_shader_quick_measures_every_rung() {
     let headers = rdr.headers().unwrap().clone();
     let col = |name: &str| headers.iter().position(|h| h == name).unwrap();
     let rows: Vec<csv::StringRecord> = rdr.records().map(|r| r.unwrap()).collect();
-    assert_eq!(rows.len(), 8);
+    assert_eq!(rows.len(), 11);
     let num = |r: &csv::StringRecord, c: &str| r[col(c)].parse::<f64>().unwrap();
     for r in &rows {
         for c in [

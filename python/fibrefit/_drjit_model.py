@@ -15,9 +15,9 @@ shader's common parts (the fibre-direction spread's nodes, Fresnel, the fuzz lay
 cross-section rungs' nested loops (spread nodes, height nodes and fibres, the merge of the seen
 and lit arcs) are Dr.Jit symbolic loops, so the kernel holds each body once whatever the node
 counts. The ``gltf`` rung's ``threejs`` variant is ported too (the ``gltf_threejs`` section,
-three.js's DFG table read from the shader). The others (``openpbr``, ``principled`` and
-``reference`` have no shader) are not: :func:`unsupported_reason` says why, and the plugin
-keeps its exact path for them.
+three.js's DFG table read from the shader). The others (``openpbr`` and ``principled``, whose
+shader sections are not ported, and ``reference``, which has no shader) are not:
+:func:`unsupported_reason` says why, and the plugin keeps its exact path for them.
 """
 
 from __future__ import annotations
@@ -63,7 +63,7 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
     """The parameters a fibrefit WGSL export bakes in: ``rung`` (the ported rung's name, or None),
     ``rung_body``, ``consts`` (the FIBREFIT_ constants), and the ``FibrefitParams`` members as
     float64 arrays: ``kd``, ``ks``, ``substrate``, ``fuzz`` (rgb), ``shape``, ``extra``,
-    ``topology`` (4), ``gltf`` (rows x 4), ``heights``, ``spread`` (nodes x 4); and the
+    ``topology`` (4), ``gltf`` (the ``material`` member, rows x 4), ``heights``, ``spread`` (nodes x 4); and the
     specular lobe's Gauss-Legendre rule ``gauss_legendre`` (order x 2: node, weight); for the gltf
     rung's threejs variant, three.js's DFG table ``gltf_dfg`` (256 x 2: scale, bias)."""
     consts = {k: float(v) for k, v in _CONST.findall(src)}
@@ -71,7 +71,9 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
     if m is None:
         raise ValueError("no fibrefit_params() in the shader")
     rows = [np.array([float(x) for x in r.split(",")], dtype=np.float64) for r in _VEC4.findall(m.group(1))]
-    n_gltf = int(consts["FIBREFIT_GLTF_ROWS"])
+    # the renderer material's rows (FIBREFIT_GLTF_ROWS before the member was shared by the
+    # renderer-material rungs)
+    n_gltf = int(consts.get("FIBREFIT_MATERIAL_ROWS", consts.get("FIBREFIT_GLTF_ROWS", 0)))
     n_h = int(consts["FIBREFIT_HEIGHT_NODES"])
     n_s = int(consts["FIBREFIT_SPREAD_NODES"])
     if len(rows) != 7 + n_gltf + n_h + n_s:

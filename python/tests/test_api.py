@@ -99,6 +99,20 @@ def test_export_is_the_clis(silk_result, tmp_path):
     assert both.shader and both.glb[:4] == b"glTF"
 
 
+@needs_cli
+def test_renderer_materials_export_shaders_as_the_cli_does(tmp_path):
+    # principled and openpbr fits of the brushed table: the shader library of Blender's and
+    # MaterialX's own material, as `fibrefit export --shader` writes it
+    for model in ["principled", "openpbr"]:
+        r = fibrefit.fit(DATA / "brushed" / "gonio.csv", model=model)
+        r.to_json(tmp_path / f"{model}.json")
+        e = fibrefit.export(tmp_path / f"{model}.json", shader="glsl")
+        out = tmp_path / f"{model}.glsl"
+        run_cli("export", tmp_path / f"{model}.json", "--shader", "glsl", "--out", out, "-q")
+        assert e.shader == out.read_text() and e.model == model
+        assert f"fibrefit_{model}(" in e.shader
+
+
 def test_export_refusals(silk_result):
     with pytest.raises(fibrefit.FibrefitError, match="nothing to export"):
         fibrefit.export(silk_result)

@@ -242,14 +242,18 @@ def test_a_topology_map_keeps_the_exact_path(tmp_path):
     assert bsdf.mode == "exact" and "topology map" in bsdf.fast_reason
 
 
-def test_unported_rungs_keep_the_exact_path(tmp_path):
-    # openpbr has no shader export, so no fast path: auto says why and renders it exactly; fast
-    # refuses it
-    p = write_params(tmp_path, "o.json", '{"model": "openpbr", "kd": 0.5}')
+@pytest.mark.parametrize(
+    "model, why",
+    [("reference", "no shader export"), ("openpbr", "not ported to Dr.Jit")],
+)
+def test_unported_rungs_keep_the_exact_path(tmp_path, model, why):
+    # the reference has no shader export, openpbr a shader but no Dr.Jit port: no fast path;
+    # auto says why and renders it exactly; fast refuses it
+    p = write_params(tmp_path, "o.json", f'{{"model": "{model}", "kd": 0.5}}')
     with pytest.warns(UserWarning, match="exact path"):
         bsdf = load_bsdf(p)
-    assert bsdf.mode == "exact" and "no shader export" in bsdf.fast_reason
-    with pytest.raises(Exception, match="no shader export"):
+    assert bsdf.mode == "exact" and why in bsdf.fast_reason
+    with pytest.raises(Exception, match=why):
         load_bsdf(p, mode="fast")
 
 

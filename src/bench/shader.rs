@@ -15,7 +15,8 @@ use rayon::prelude::*;
 use std::time::Instant;
 
 /// (label, parameters as TOML): every rung, the cross-section ones at a single height (what a
-/// renderer feeding per-texel maps pays per evaluation) and with a 16-bin height histogram.
+/// renderer feeding per-texel maps pays per evaluation) and with a 16-bin height histogram, the
+/// renderers' own materials last.
 pub const RUNGS: &[(&str, &str)] = &[
     ("lambert", "model = 'lambert'\nkd = 0.5"),
     ("hast-diffuse", "model = 'hast-diffuse'\nkd = 0.5"),
@@ -25,6 +26,9 @@ pub const RUNGS: &[(&str, &str)] = &[
     ("varying-topology, one height (per texel)", "model = 'varying-topology'\nkd = 0.5\nks = 0.3\nexponent = 60\nspacing = 2\nheight = 0.9"),
     ("varying-topology, 16 height bins", "model = 'varying-topology'\nkd = 0.5\nks = 0.3\nexponent = 60\nspacing = 2\nheight = 0.9\nmap_scale = 0.5"),
     ("varying-topology, 16 bins, spread 16 nodes", "model = 'varying-topology'\nkd = 0.5\nks = 0.3\nexponent = 60\nspacing = 2\nheight = 0.9\nmap_scale = 0.5\nazimuth_spread_deg = 20"),
+    ("gltf", "model = 'gltf'\nkd = 0.4\nroughness = 0.45\nanisotropy_strength = 0.6\nsheen = 0.3\nsheen_roughness = 0.5"),
+    ("principled", "model = 'principled'\nkd = 0.4\nroughness = 0.45\nanisotropic = 0.6\nsheen_weight = 0.5\nsheen_roughness = 0.5"),
+    ("openpbr", "model = 'openpbr'\nkd = 0.4\nspecular_roughness = 0.45\nspecular_roughness_anisotropy = 0.6\nfuzz_weight = 0.5\nfuzz_roughness = 0.5"),
 ];
 
 #[derive(Clone, Debug, serde::Serialize)]

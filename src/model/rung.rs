@@ -72,6 +72,9 @@ pub enum ShaderSection {
     Sections {
         sections: &'static [&'static str],
         body: &'static str,
+        /// The rows of `FibrefitParams::material` it bakes (a renderer material's values and
+        /// its tables at them); `None`: one row of zeros.
+        material_rows: Option<fn(&crate::model::ModelParams) -> Vec<[f64; 4]>>,
     },
     /// No shader, and why.
     None(&'static str),

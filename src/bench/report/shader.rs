@@ -45,7 +45,9 @@ pub fn write(dir: &Path, run: &ShaderCostRun, command: &str, seconds: f64) -> Re
     }
     md += "\n## Choosing a rung for real time\n\n\
          A fragment costs one `fibrefit_brdf` per light. The closed forms (lambert, hast-diffuse, \
-         max-normal, ward) are a few dozen instructions with no loops. The cross-section rungs \
+         max-normal, ward) are a few dozen instructions with no loops; the renderers' own \
+         materials (gltf, principled, openpbr) a few hundred to a thousand, without loops (their \
+         tables are read at two nodes). The cross-section rungs \
          solve the occlusion of both fibres seen and lit (a few dozen instructions per fibre, no \
          loops over neighbours: every occluder of the infinite pattern in O(1)), then integrate \
          the lobe with N nodes on each seen-and-lit arc: per height, ~2-4 arcs x N nodes. A \

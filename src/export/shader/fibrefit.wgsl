@@ -172,7 +172,11 @@ fn fibrefit_ward(l: vec3<f32>, v: vec3<f32>, ax: f32, ay: f32) -> vec4<f32> {
 // @section gltf
 // The glTF 2.0 metallic-roughness BRDF with KHR_materials_sheen, _anisotropy (along t),
 // _specular and _ior (src/model/rungs/gltf.rs, which cites the specifications): x the base
-// colour's column, y the layers' (specular lobes and sheen).
+// colour's column, y the layers' (specular lobes and sheen). p.material: [0] metallic, GGX alpha
+// along t, alpha along b (the anisotropy direction), specular factor; [1] dielectric F0 from the
+// ior, sheen, sheen alpha, variant (0 khronos, 1 threejs: three.js r187's BRDF, whose base colour
+// squared's column is z); [2..] the sheen's directional albedo E at N.v = k / 31, k = 0..31,
+// four a row.
 fn fibrefit_gltf_lambda_l(x: f32, a: f32) -> f32 {
     let t = (1.0 - a) * (1.0 - a);
     let pa = mix(21.5473, 25.3245, t);
@@ -196,7 +200,7 @@ fn fibrefit_gltf_sheen_lambda(c: f32, a: f32) -> f32 {
 
 // The sheen's directional albedo E at cos theta, linear between the table's nodes.
 fn fibrefit_gltf_sheen_e(p: FibrefitParams, mu: f32) -> f32 {
-    var g = p.gltf;
+    var g = p.material;
     let x = clamp(mu, 0.0, 1.0) * 31.0;
     let k = min(u32(floor(x)), 30u);
     let f = x - f32(k);
@@ -206,8 +210,8 @@ fn fibrefit_gltf_sheen_e(p: FibrefitParams, mu: f32) -> f32 {
 }
 
 fn fibrefit_gltf(l: vec3<f32>, v: vec3<f32>, p: FibrefitParams) -> vec4<f32> {
-    let g0 = p.gltf[0];
-    let g1 = p.gltf[1];
+    let g0 = p.material[0];
+    let g1 = p.material[1];
     if (g1.w > 0.5) {
         // gltf_variant = threejs
         return fibrefit_gltf_threejs(l, v, p);
@@ -350,8 +354,8 @@ fn fibrefit_gltf_threejs_sheen_e(mu: f32, r: f32) -> f32 {
 }
 
 fn fibrefit_gltf_threejs(l: vec3<f32>, v: vec3<f32>, p: FibrefitParams) -> vec4<f32> {
-    let g0 = p.gltf[0];
-    let g1 = p.gltf[1];
+    let g0 = p.material[0];
+    let g1 = p.material[1];
     let m = g0.x;
     let at = g0.y;
     let ab = g0.z;
@@ -665,4 +669,235 @@ fn fibrefit_pattern(sp: FibrefitPair, spacing: f32, height: f32, weight: f32, ex
     let substrate = fibrefit_substrate(sp.l, sp.v, step, rise);
     return vec3<f32>(weight * FIBREFIT_FRAC_1_PI * diffuse / denom, specular,
         weight * FIBREFIT_FRAC_1_PI * substrate);
+}
+
+// @section principled
+// Blender 5.0's Principled BSDF as Cycles evaluates it, opaque dielectric subset
+// (src/model/rungs/principled.rs names the Cycles kernel function each line follows): the sheen
+// (Zeltner's LTC from Cycles' table), the dielectric GGX with the remapped real Fresnel and the
+// multiple-scattering energy scale, the base colour's Lambertian diffuse, each lower layer
+// weighted by closure_layering_weight. Not reciprocal: v is Cycles' wi (towards the camera).
+// x the base colour's column, y the layers' (specular and sheen). p.material: [0] GGX alpha
+// across the fibres (Blender's tangent, the fibres' b), alpha along them (t), E_avg, 1 with a
+// specular closure; [1] eta, F0 (tinted), F0 of eta, Fss; [2] x the sheen weight; then Cycles'
+// tables at this material by cos theta_v, read as lookup_table_read reads (clamped, linear
+// between nodes): [3 + k] at k / 31, k = 0..31: GGX E, the sheen LTC's a, b and albedo;
+// [35..39) ggx_gen_schlick_ior_s at k / 15, k = 0..15, four a row.
+
+// closure_layering_weight for grey weights.
+fn fibrefit_principled_layering(albedo: f32, weight: f32) -> f32 {
+    var ratio = 0.0;
+    if (weight != 0.0) {
+        ratio = albedo / weight;
+    }
+    return weight * clamp(1.0 - ratio, 0.0, 1.0);
+}
+
+// fresnel_dielectric: unpolarised Fresnel reflectance for relative IOR eta.
+fn fibrefit_principled_fresnel(cos_i: f32, eta: f32) -> f32 {
+    let ect = eta * eta - (1.0 - cos_i * cos_i);
+    if (ect <= 0.0) {
+        return 1.0;
+    }
+    let ci = abs(cos_i);
+    let ct = -sqrt(ect) / eta;
+    let rs = (ci + eta * ct) / (ci - eta * ct);
+    let rp = (ct + eta * ci) / (eta * ci - ct);
+    return 0.5 * (rs * rs + rp * rp);
+}
+
+// The single-scattering GGX BRDF with the remapped Fresnel: F D G2 / (4 cos theta_v cos theta_l).
+fn fibrefit_principled_ggx(l: vec3<f32>, v: vec3<f32>, m0: vec4<f32>, m1: vec4<f32>) -> f32 {
+    let hs = l + v;
+    let len = length(hs);
+    if (len == 0.0) {
+        return 0.0;
+    }
+    let h = hs / len;
+    let f_real = fibrefit_principled_fresnel(dot(h, v), m1.x);
+    let f = m1.y + (1.0 - m1.y) * clamp((f_real - m1.z) / (1.0 - m1.z), 0.0, 1.0);
+    // bsdf_aniso_D: x along Blender's tangent (b), y along the fibres
+    let ax = m0.x;
+    let ay = m0.y;
+    let hx = h.y / ax;
+    let hy = h.x / ay;
+    let q = hx * hx + hy * hy + h.z * h.z;
+    let d = FIBREFIT_FRAC_1_PI / (ax * ay * q * q);
+    let sl = ((ax * l.y) * (ax * l.y) + (ay * l.x) * (ay * l.x)) / (l.z * l.z);
+    let sv = ((ax * v.y) * (ax * v.y) + (ay * v.x) * (ay * v.x)) / (v.z * v.z);
+    let g2 = 1.0 / (1.0 + 0.5 * (sqrt(1.0 + sl) - 1.0) + 0.5 * (sqrt(1.0 + sv) - 1.0));
+    return f * d * g2 / (4.0 * v.z * l.z);
+}
+
+fn fibrefit_principled(l: vec3<f32>, v: vec3<f32>, p: FibrefitParams) -> vec4<f32> {
+    var m = p.material;
+    let m0 = m[0];
+    let m1 = m[1];
+    // the tables at cos theta_v: (GGX E, sheen a, b, albedo) and the specular's albedo table
+    let y = clamp(v.z, 0.0, 1.0) * 31.0;
+    let i = min(u32(y), 31u);
+    let t = y - f32(i);
+    var tab = m[3u + i];
+    if (t != 0.0) {
+        tab = (1.0 - t) * tab + t * m[3u + min(i + 1u, 31u)];
+    }
+    let ys = clamp(v.z, 0.0, 1.0) * 15.0;
+    let k = min(u32(ys), 15u);
+    let ts = ys - f32(k);
+    var albedo_s = m[35u + k / 4u][k % 4u];
+    if (ts != 0.0) {
+        let k1 = min(k + 1u, 15u);
+        albedo_s = (1.0 - ts) * albedo_s + ts * m[35u + k1 / 4u][k1 % 4u];
+    }
+    // 1. the sheen (bsdf_sheen_setup, bsdf_sheen_eval)
+    var weight = 1.0;
+    var sheen = 0.0;
+    let a = tab.y;
+    if (m[2].x > 1e-5 && abs(a) >= 1e-5 && tab.w >= 1e-5) {
+        let w = m[2].x * tab.w;
+        // the frame of N and the view: B = N x v, T = B x N; at normal view the skew b is
+        // dropped (Cycles' frame there is the world's)
+        var b = tab.z;
+        var lo = l;
+        let bl = sqrt(v.y * v.y + v.x * v.x);
+        if (bl > 0.0) {
+            let bx = -v.y / bl;
+            let by = v.x / bl;
+            lo = vec3<f32>(l.x * by - l.y * bx, l.x * bx + l.y * by, l.z);
+        } else {
+            b = 0.0;
+        }
+        let x = a * lo.x + b * lo.z;
+        let yy = a * lo.y;
+        let len2 = x * x + yy * yy + lo.z * lo.z;
+        if (lo.z > 0.0) {
+            sheen = w * FIBREFIT_FRAC_1_PI * (a / len2) * (a / len2);
+        }
+        weight = fibrefit_principled_layering(w, weight);
+    }
+    // 2. the dielectric specular, with microfacet_ggx_preserve_energy
+    var specular = 0.0;
+    if (m0.w > 0.5) {
+        let e = tab.x;
+        let missing = (1.0 - e) / e;
+        let energy_scale = 1.0 + missing;
+        var darkening = 1.0;
+        if (m1.w != 1.0) {
+            let fms = m1.w * m0.z / (1.0 - m1.w * (1.0 - m0.z));
+            darkening = (1.0 + fms * missing) / energy_scale;
+        }
+        let w = weight * darkening;
+        if (m0.x * m0.y > 2e-10) {
+            specular = w * energy_scale * fibrefit_principled_ggx(l, v, m0, m1);
+        }
+        weight = fibrefit_principled_layering(w * (m1.y + (1.0 - m1.y) * albedo_s), weight);
+    }
+    // 3. the base colour's Lambertian diffuse
+    return vec4<f32>(weight * FIBREFIT_FRAC_1_PI, specular + sheen, 0.0, 0.0);
+}
+
+// @section openpbr
+// OpenPBR Surface as MaterialX 1.39 implements it, opaque dielectric subset
+// (src/model/rungs/openpbr.rs names the MaterialX node or GLSL function each part follows): the
+// fuzz (mx_sheen_bsdf, Zeltner's LTC from its rational fits) over the dielectric GGX with Turquin's
+// energy compensation from the analytic albedo fit, over the Lambertian base colour, each layer
+// below scaled by the throughput 1 - albedo x weight above it. Not reciprocal: v is MaterialX's
+// V (towards the camera). x the base colour's column, y the layers' (specular and fuzz).
+// p.material: [0] GGX alpha across the fibres (OpenPBR's tangent, the fibres' b), alpha along
+// them (t), their geometric mean, the modulated eta; [1] x its F0, y the fuzz weight, z the fuzz
+// roughness (clamped to [0.01, 1]).
+const FIBREFIT_OPENPBR_EPS: f32 = 1e-8;
+
+// mx_fresnel_dielectric.
+fn fibrefit_openpbr_fresnel(c: f32, ior: f32) -> f32 {
+    let g2 = ior * ior + c * c - 1.0;
+    if (g2 < 0.0) {
+        return 1.0;
+    }
+    let g = sqrt(g2);
+    let a = (g - c) / (g + c);
+    let b = ((g + c) * c - 1.0) / ((g - c) * c + 1.0);
+    return 0.5 * a * a * (1.0 + b * b);
+}
+
+// mx_ggx_dir_albedo_analytic's (A, B): the GGX directional albedo is F0 A + F90 B.
+fn fibrefit_openpbr_albedo_ab(x: f32, y: f32) -> vec2<f32> {
+    let x2 = x * x;
+    let y2 = y * y;
+    let r = vec4<f32>(0.1003, 0.9345, 1.0, 1.0)
+        + vec4<f32>(-0.6303, -2.323, -1.765, 0.2281) * x
+        + vec4<f32>(9.748, 2.229, 8.263, 15.94) * y
+        + vec4<f32>(-2.038, -3.748, 11.53, -55.83) * (x * y)
+        + vec4<f32>(29.34, 1.424, 28.96, 13.08) * x2
+        + vec4<f32>(-8.245, -0.7684, -7.507, 41.26) * y2
+        + vec4<f32>(-26.44, 1.436, -36.11, 54.9) * (x2 * y)
+        + vec4<f32>(19.99, 0.2913, 15.86, 300.2) * (x * y2)
+        + vec4<f32>(-5.448, 0.6286, 33.37, -285.1) * (x2 * y2);
+    return clamp(vec2<f32>(r.x / r.z, r.y / r.w), vec2<f32>(0.0), vec2<f32>(1.0));
+}
+
+// mx_zeltner_sheen_dir_albedo.
+fn fibrefit_openpbr_sheen_albedo(x: f32, y: f32) -> f32 {
+    let s = y * (0.0206607 + 1.58491 * y) / (0.0379424 + y * (1.32227 + y));
+    let m = y * (-0.193854 + y * (-1.14885 + y * (1.7932 - 0.95943 * y * y))) / (0.046391 + y);
+    let o = y * (0.000654023 + (-0.0207818 + 0.119681 * y) * y) / (1.26264 + y * (-1.92021 + y));
+    let z = (x - m) / s;
+    return exp(-0.5 * z * z) / (s * 2.50662827463) + o;
+}
+
+// mx_zeltner_sheen_brdf: the LTC's density of l (the cosine included) in the frame of N and v.
+fn fibrefit_openpbr_sheen(l: vec3<f32>, v: vec3<f32>, n_v: f32, r: f32) -> f32 {
+    let a_inv = (2.58126 * n_v + 0.813703 * r) * r / (1.0 + 0.310327 * n_v * n_v + 2.60994 * n_v * r);
+    let b_inv = sqrt(1.0 - n_v) * (r - 1.0) * r * r * r
+        / (0.0000254053 + 1.71228 * n_v - 1.71506 * n_v * r + 1.34174 * r * r);
+    // mx_orthonormal_basis_ltc: X = V - N (N.V) normalised, Y = N x X
+    let xs = vec3<f32>(v.x, v.y, v.z - n_v);
+    let len2 = dot(xs, xs);
+    var w = l;
+    if (len2 > 0.0) {
+        let x = xs / sqrt(len2);
+        w = vec3<f32>(dot(l, x), l.y * x.x - l.x * x.y, l.z);
+    }
+    let wo = vec3<f32>(a_inv * w.x + b_inv * w.z, a_inv * w.y, w.z);
+    let q = a_inv / dot(wo, wo);
+    return max(wo.z, 0.0) * FIBREFIT_FRAC_1_PI * q * q;
+}
+
+fn fibrefit_openpbr(l: vec3<f32>, v: vec3<f32>, p: FibrefitParams) -> vec4<f32> {
+    let m0 = p.material[0];
+    let m1 = p.material[1];
+    let n_v = clamp(v.z, FIBREFIT_OPENPBR_EPS, 1.0);
+    let n_l = clamp(l.z, FIBREFIT_OPENPBR_EPS, 1.0);
+    // fuzz_bsdf: response and throughput
+    var fuzz = 0.0;
+    var t_fuzz = 1.0;
+    if (!(m1.y < FIBREFIT_OPENPBR_EPS)) {
+        let albedo = fibrefit_openpbr_sheen_albedo(n_v, m1.z);
+        fuzz = albedo * fibrefit_openpbr_sheen(l, v, n_v, m1.z) * m1.y;
+        t_fuzz = 1.0 - albedo * m1.y;
+    }
+    // dielectric_reflection (mx_dielectric_bsdf, reflection): response and throughput
+    let hs = l + v;
+    let len = length(hs);
+    var h = vec3<f32>(0.0, 0.0, 1.0);
+    if (len > 0.0) {
+        h = hs / len;
+    }
+    let f = fibrefit_openpbr_fresnel(clamp(dot(h, v), FIBREFIT_OPENPBR_EPS, 1.0), m0.w);
+    // mx_ggx_NDF with X the tangent (b, across the fibres), Y = N x X (-t)
+    let hx = h.y / m0.x;
+    let hy = -h.x / m0.y;
+    let q = hx * hx + hy * hy + h.z * h.z;
+    let d = 1.0 / (FIBREFIT_PI * m0.x * m0.y * q * q);
+    // mx_ggx_smith_G2 at the average alpha
+    let a2 = m0.z * m0.z;
+    let lambda_l = sqrt(a2 + (1.0 - a2) * n_l * n_l);
+    let lambda_v = sqrt(a2 + (1.0 - a2) * n_v * n_v);
+    let g = 2.0 * n_l * n_v / (lambda_l * n_v + lambda_v * n_l);
+    let ab = fibrefit_openpbr_albedo_ab(n_v, m0.z);
+    let ess = ab.x + ab.y;
+    let comp = 1.0 + f * (1.0 - ess) / ess;
+    let spec = d * f * g * comp / (4.0 * n_v);
+    let t_spec = 1.0 - (m1.x * ab.x + ab.y) * comp;
+    return vec4<f32>(t_fuzz * t_spec * FIBREFIT_FRAC_1_PI, (t_fuzz * spec + fuzz) / n_l, 0.0, 0.0);
 }

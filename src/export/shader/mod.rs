@@ -11,7 +11,7 @@ pub mod gpu;
 
 use crate::model::azimuth_spread::spread_nodes;
 use crate::model::numerics::quadrature::GaussLegendre;
-use crate::model::rungs::{gltf, ShaderSection};
+use crate::model::rungs::ShaderSection;
 use crate::model::topology::max_height;
 use crate::model::{Ability, ModelId, ModelParams};
 use anyhow::{anyhow, bail, Result};
@@ -109,11 +109,9 @@ struct FibrefitParams {
     extra: vec4<f32>,
     // x: base height H0, y: map scale s, z: H_max = sqrt(d^2 - 1) (fibre radii); w unused
     topology: vec4<f32>,
-    // the gltf rung (zeros for the others): [0] metallic, GGX alpha along t, alpha along b (the anisotropy direction),
-    // specular factor; [1] dielectric F0 from the ior, sheen, sheen alpha, variant (0 khronos,
-    // 1 threejs: three.js r187's BRDF, whose base colour squared's column is z); [2..] the
-    // sheen's directional albedo E at N.v = k / 31, k = 0..31, four a row
-    gltf: array<vec4<f32>, FIBREFIT_GLTF_ROWS>,
+    // a renderer material's values and its tables at them (one row of zeros for the fibre
+    // rungs); the rung's section above says what each row holds
+    material: array<vec4<f32>, FIBREFIT_MATERIAL_ROWS>,
     // the spot's height distribution: x height H (fibre radii), y weight (summing to 1)
     heights: array<vec4<f32>, FIBREFIT_HEIGHT_NODES>,
     // the fibre-direction spread's nodes: x cos, y sin of the turn from t, z weight
@@ -121,11 +119,21 @@ struct FibrefitParams {
 }
 ";
 
-/// The sections of the master each rung needs, after `common`, and the body of its
-/// `fibrefit_rung` (the rung's [`ShaderSection`]).
-fn sections(id: ModelId) -> Result<(&'static [&'static str], &'static str)> {
+/// The sections of the master each rung needs, after `common`, the body of its
+/// `fibrefit_rung` and its material rows (the rung's [`ShaderSection`]).
+type RungShader = (
+    &'static [&'static str],
+    &'static str,
+    Option<fn(&ModelParams) -> Vec<[f64; 4]>>,
+);
+
+fn sections(id: ModelId) -> Result<RungShader> {
     match id.rung().shader {
-        ShaderSection::Sections { sections, body } => Ok((sections, body)),
+        ShaderSection::Sections {
+            sections,
+            body,
+            material_rows,
+        } => Ok((sections, body, material_rows)),
         ShaderSection::None(why) => bail!("{why}"),
     }
 }
@@ -172,11 +180,17 @@ pub struct Baked {
     /// (cos, sin, weight) of the spread's nodes (one identity node without a spread).
     pub spread: Vec<(f64, f64, f64)>,
     pub quadrature_order: usize,
+    /// The rows of `FibrefitParams::material` (at least one).
+    pub material: Vec<[f64; 4]>,
 }
 
 impl Baked {
     pub fn new(id: ModelId, p: &ModelParams) -> Result<Self> {
-        sections(id)?;
+        let (_, _, material_rows) = sections(id)?;
+        let material = match material_rows {
+            Some(rows) => rows(p),
+            None => vec![[0.0; 4]],
+        };
         let heights = if id.has(Ability::HeightHistogram) {
             p.topology.discretise(p.spacing, p.histogram_bins)
         } else {
@@ -196,6 +210,7 @@ impl Baked {
             } else {
                 1
             },
+            material,
         })
     }
 }
@@ -220,11 +235,7 @@ fn params_rows(p: &ModelParams, baked: &Baked) -> Vec<[f64; 4]> {
             0.0,
         ],
     ];
-    if baked.id.has(Ability::GltfMaterial) {
-        rows.extend(gltf::Gltf::new(&p.gltf).shader_rows());
-    } else {
-        rows.extend([[0.0; 4]; gltf::SHADER_ROWS]);
-    }
+    rows.extend(&baked.material);
     rows.extend(baked.heights.iter().map(|&(h, w)| [h, w, 0.0, 0.0]));
     rows.extend(baked.spread.iter().map(|&(c, s, w)| [c, s, w, 0.0]));
     rows
@@ -278,8 +289,8 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     )?;
     writeln!(
         s,
-        "const FIBREFIT_GLTF_ROWS: u32 = {}u;\nconst FIBREFIT_SPREAD_NODES: u32 = {}u;",
-        gltf::SHADER_ROWS,
+        "const FIBREFIT_MATERIAL_ROWS: u32 = {}u;\nconst FIBREFIT_SPREAD_NODES: u32 = {}u;",
+        baked.material.len(),
         baked.spread.len()
     )?;
     writeln!(
@@ -305,7 +316,7 @@ pub fn wgsl(id: ModelId, p: &ModelParams, provenance: &[String]) -> Result<Strin
     let rows = params_rows(p, &baked);
     let fmt = |r: &[[f64; 4]]| -> Vec<String> { r.iter().map(|v| vec4(*v)).collect() };
     let (fixed, arrays) = rows.split_at(7);
-    let (gltf_rows, arrays) = arrays.split_at(gltf::SHADER_ROWS);
+    let (material_rows, arrays) = arrays.split_at(baked.material.len());
     let (heights, spread) = arrays.split_at(baked.heights.len());
     let f = fmt(fixed);
     writeln!(
@@ -333,15 +344,15 @@ fn fibrefit_params() -> FibrefitParams {{
         f[4],
         f[5],
         f[6],
-        gltf_rows.len(),
-        fmt(gltf_rows).join(",\n            "),
+        material_rows.len(),
+        fmt(material_rows).join(",\n            "),
         heights.len(),
         fmt(heights).join(",\n            "),
         spread.len(),
         fmt(spread).join(",\n            "),
     )?;
     s.push_str(section("common"));
-    let (names, body) = sections(id)?;
+    let (names, body, _) = sections(id)?;
     for name in names {
         s.push_str(section(name));
     }

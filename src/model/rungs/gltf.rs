@@ -157,6 +157,7 @@ pub static RUNG: Rung = Rung {
     shader: ShaderSection::Sections {
         sections: &["gltf", "gltf_threejs"],
         body: "    return fibrefit_gltf(l, v, p);\n",
+        material_rows: Some(|p| Gltf::new(&p.gltf).shader_rows()),
     },
     cost: Cost::ClosedForm,
     auto_rank: Some(6),
@@ -222,7 +223,7 @@ impl Gltf {
         }
     }
 
-    /// The rows the shader export bakes for this material (`FibrefitParams::gltf`): metallic,
+    /// The rows the shader export bakes for this material (`FibrefitParams::material`): metallic,
     /// alpha along T, alpha along B, specular; F0, sheen, sheen alpha, the variant (0 khronos,
     /// 1 threejs); then the E table, four a row.
     pub fn shader_rows(&self) -> Vec<[f64; 4]> {
@@ -250,9 +251,6 @@ impl Gltf {
         self.sheen_e[k] * (1.0 - f) + self.sheen_e[k + 1] * f
     }
 }
-
-/// Rows of the shader's `gltf` member: 2 + the E table's.
-pub const SHADER_ROWS: usize = 2 + SHEEN_E_NODES / 4;
 
 /// The GGX alphas along the fibres (T) and across them (B, the anisotropy direction):
 /// KHR_materials_anisotropy's alpha_b = alpha = roughness^2 along T and

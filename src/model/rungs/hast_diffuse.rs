@@ -36,6 +36,7 @@ pub static RUNG: Rung = Rung {
     shader: ShaderSection::Sections {
         sections: &["hast_diffuse"],
         body: "    return fibrefit_hast_diffuse(l, v);\n",
+        material_rows: None,
     },
     cost: Cost::ClosedForm,
     auto_rank: Some(1),

@@ -25,6 +25,7 @@ pub static RUNG: Rung = Rung {
     shader: ShaderSection::Sections {
         sections: &["lambert"],
         body: "    return fibrefit_lambert(l, v);\n",
+        material_rows: None,
     },
     cost: Cost::ClosedForm,
     auto_rank: Some(0),

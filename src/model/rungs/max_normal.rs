@@ -31,6 +31,7 @@ pub static RUNG: Rung = Rung {
     shader: ShaderSection::Sections {
         sections: &["max_normal"],
         body: "    return fibrefit_max_normal(l, v, p.shape.x);\n",
+        material_rows: None,
     },
     cost: Cost::ClosedForm,
     auto_rank: Some(3),

@@ -32,7 +32,10 @@
 //!   base diffuse roughness 0 it is Lambert's `c / pi` plus a multiple-scattering term of
 //!   `c^2 x 1e-8` (MaterialX's `M_FLOAT_EPS` guards), below single precision, left out.
 //!
-//! Every cosine is clamped to [1e-8, 1] as MaterialX's GLSL clamps it. The response MaterialX
+//! Every cosine is clamped to [1e-8, 1] as MaterialX's GLSL clamps it. The fuzz's albedo fit
+//! has a negative offset for fuzz roughness in (0.041, 0.132): there, at views where its
+//! Gaussian vanishes, the fuzz's response is slightly negative (at most 1.8e-4 /sr at full
+//! weight, 0.6 % of the BRDF over a base colour of 0.1), as MaterialX renders it; kept. The response MaterialX
 //! returns is the BRDF times cos theta_l; the rung returns the BRDF.
 //!
 //! MaterialX's OpenPBR is **not reciprocal**: each layer's throughput and the fuzz's frame
@@ -69,12 +72,11 @@ pub static RUNG: Rung = Rung {
         lobe_albedo: LobeAlbedo::Normalised,
         cone_from: None,
     },
-    shader: ShaderSection::None(
-        "model `openpbr` is OpenPBR Surface: MaterialX renders it (export --materialx writes the \
-         document, from which MaterialX generates GLSL, OSL and MDL; export --usd a USD stage; \
-         docs/guide/materialx.md), fibrefit has no shader or WebGL view of it of its own; for \
-         web engines fit and export the `gltf` rung",
-    ),
+    shader: ShaderSection::Sections {
+        sections: &["openpbr"],
+        body: "    return fibrefit_openpbr(l, v, p);\n",
+        material_rows: Some(|p| OpenPbr::new(&p.openpbr).shader_rows()),
+    },
     cost: Cost::ClosedForm,
     auto_rank: Some(8),
     example: &[
@@ -134,6 +136,16 @@ impl OpenPbr {
         self.alpha_b = ab.clamp(EPS, 1.0);
         self.alpha_t = at.clamp(EPS, 1.0);
         self.alpha_avg = (self.alpha_b * self.alpha_t).sqrt();
+    }
+
+    /// The rows the shader export bakes (`FibrefitParams::material`, read by the `openpbr`
+    /// section of `fibrefit.wgsl`): [0] alpha across the fibres (OpenPBR's tangent), alpha along
+    /// them, their geometric mean, the modulated eta; [1] its F0, the fuzz weight and roughness.
+    pub fn shader_rows(&self) -> Vec<[f64; 4]> {
+        vec![
+            [self.alpha_b, self.alpha_t, self.alpha_avg, self.eta],
+            [self.f0, self.fuzz_weight, self.fuzz_roughness, 0.0],
+        ]
     }
 
     /// The BRDF's parts at (l, v), v towards the camera: (diffuse per unit base colour, the
@@ -438,6 +450,40 @@ mod tests {
             let v = dir(tv, 40.0);
             let a = albedo(&m, &v, |p| p.0 + p.1 + p.2);
             assert!(a < 1.03 && a > 0.8, "view {tv}: {a}");
+        }
+    }
+
+    #[test]
+    fn the_fuzz_dips_below_zero_only_where_materialx_albedo_fit_does() {
+        // mx_zeltner_sheen_dir_albedo's offset o(r) is negative for r in (0.0413, 0.1324): where
+        // its Gaussian vanishes (views near the normal) the albedo, and so the fuzz's response,
+        // is slightly negative, as MaterialX renders it; elsewhere the fuzz is non-negative
+        let o = |y: f64| y * (0.000654023 + (-0.0207818 + 0.119681 * y) * y);
+        for r in [0.01, 0.04, 0.14, 0.3, 1.0] {
+            assert!(o(r) > 0.0, "{r}");
+        }
+        for r in [0.01, 0.05, 0.08, 0.12, 0.3, 1.0] {
+            let m = OpenPbr::new(&OpenPbrShape {
+                fuzz_weight: 1.0,
+                fuzz_roughness: r,
+                ..shape()
+            });
+            // the most negative fuzz, and the most negative fuzz over the BRDF at the same pair
+            let (mut low, mut share) = (0.0f64, 0.0f64);
+            for tv in (0..90).step_by(5) {
+                for tl in (0..90).step_by(5) {
+                    for pl in (0..360).step_by(30) {
+                        let (d, s, f) = m.parts(&dir(tl as f64, pl as f64), &dir(tv as f64, 0.0));
+                        low = low.min(f);
+                        share = share.min(f / (0.1 * d + s + f));
+                    }
+                }
+            }
+            eprintln!("fuzz roughness {r}: lowest fuzz {low:.2e}, of the BRDF (base 0.1) {share:.2e}");
+            if o(r) > 0.0 {
+                assert!(low >= 0.0, "{r}: {low}");
+            }
+            assert!(share > -1e-2, "{r}: {low}, {share}");
         }
     }
 

@@ -39,6 +39,7 @@ pub static RUNG: Rung = Rung {
         body: "    let sp = fibrefit_pair(l, v, p.shape.w);
     let b = fibrefit_pattern(sp, p.shape.y, 0.0, 1.0, p.shape.x);
     return vec4<f32>(b, 0.0);\n",
+        material_rows: None,
     },
     cost: Cost::Quadrature,
     auto_rank: Some(4),

@@ -72,11 +72,11 @@ pub static RUNG: Rung = Rung {
         lobe_albedo: LobeAlbedo::Normalised,
         cone_from: None,
     },
-    shader: ShaderSection::None(
-        "model `principled` is Blender's Principled BSDF: Blender renders it (export --blender \
-         writes the material; docs/guide/blender.md), fibrefit has no shader or WebGL view of it; \
-         for web engines fit and export the `gltf` rung",
-    ),
+    shader: ShaderSection::Sections {
+        sections: &["principled"],
+        body: "    return fibrefit_principled(l, v, p);\n",
+        material_rows: Some(|p| Principled::new(&p.principled).shader_rows()),
+    },
     cost: Cost::ClosedForm,
     auto_rank: Some(7),
     example: &[
@@ -171,6 +171,63 @@ impl Principled {
         (self.alpha_b, self.alpha_t) = alphas(roughness, anisotropic);
         self.rough = (self.alpha_b * self.alpha_t).sqrt().sqrt();
         self.e_avg = lookup_1d(&GGX_EAVG, self.rough);
+    }
+
+    /// The rows the shader export bakes (`FibrefitParams::material`, read by the `principled`
+    /// section of `fibrefit.wgsl`): [0] alpha across the fibres (Blender's tangent), alpha along
+    /// them, E_avg, 1 with a specular closure; [1] eta, F0 (tinted), F0 of eta, Fss; [2] the
+    /// sheen weight; then this material's slices of Cycles' tables by cos theta_v: [3 + k] at
+    /// cos theta_v = k / 31 (k = 0..31) GGX E at its roughness and the sheen LTC's a, b and
+    /// albedo at its sheen roughness; [35..39) `ggx_gen_schlick_ior_s` at its roughness and eta
+    /// at k / 15, four a row. Each slice is the table's bilinear interpolation along its other
+    /// axes, so linear interpolation along cos theta_v gives what `parts` reads (the same
+    /// bilinear form, summed in another order).
+    pub fn shader_rows(&self) -> Vec<[f64; 4]> {
+        let blend = |d0: f64, d1: f64, t: f64| if t == 0.0 { d0 } else { (1.0 - t) * d0 + t * d1 };
+        // the node below `x` in [0, 1] over `n` nodes, the one above and the fraction
+        let at = |x: f64, n: usize| {
+            let y = x.clamp(0.0, 1.0) * (n - 1) as f64;
+            let i = (y as usize).min(n - 1);
+            (i, (i + 1).min(n - 1), y - i as f64)
+        };
+        let ggx_e: Vec<f64> = (0..32)
+            .map(|j| lookup_1d(&GGX_E[j * 32..(j + 1) * 32], self.rough))
+            .collect();
+        let albedo_s: Vec<f64> = match &self.specular {
+            Some(s) => {
+                let (i, next, t) = at(s.z, 16);
+                let row = |plane: usize, j: usize| {
+                    let start = plane * 256 + j * 16;
+                    lookup_1d(&GGX_GEN_SCHLICK_IOR_S[start..start + 16], self.rough)
+                };
+                (0..16).map(|j| blend(row(i, j), row(next, j), t)).collect()
+            }
+            None => vec![0.0; 16],
+        };
+        let (i, next, t) = at(self.sheen_roughness, 32);
+        let sheen = |k: usize| -> Vec<f64> {
+            let plane = &SHEEN_LTC[k * 1024..(k + 1) * 1024];
+            (0..32)
+                .map(|x| blend(plane[i * 32 + x] as f64, plane[next * 32 + x] as f64, t))
+                .collect()
+        };
+        let s = self.specular.unwrap_or(Specular {
+            eta: 1.0,
+            f0: 0.0,
+            f0_real: 0.0,
+            z: 0.0,
+            fss: 0.0,
+        });
+        let flag = if self.specular.is_some() { 1.0 } else { 0.0 };
+        let mut rows = vec![
+            [self.alpha_b, self.alpha_t, self.e_avg, flag],
+            [s.eta, s.f0, s.f0_real, s.fss],
+            [self.sheen_weight, 0.0, 0.0, 0.0],
+        ];
+        let (a, b, albedo) = (sheen(0), sheen(1), sheen(2));
+        rows.extend((0..32).map(|k| [ggx_e[k], a[k], b[k], albedo[k]]));
+        rows.extend(albedo_s.chunks(4).map(|c| [c[0], c[1], c[2], c[3]]));
+        rows
     }
 
     /// The BRDF's parts at (l, v), v towards the camera: (diffuse per unit base colour, the

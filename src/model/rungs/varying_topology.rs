@@ -71,6 +71,7 @@ pub static RUNG: Rung = Rung {
         b += fibrefit_pattern(sp, p.shape.y, heights[k].x, heights[k].y, p.shape.x);
     }
     return vec4<f32>(b, 0.0);\n",
+        material_rows: None,
     },
     cost: Cost::HeightHistogram,
     auto_rank: Some(5),

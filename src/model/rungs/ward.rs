@@ -33,6 +33,7 @@ pub static RUNG: Rung = Rung {
     shader: ShaderSection::Sections {
         sections: &["ward"],
         body: "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);\n",
+        material_rows: None,
     },
     cost: Cost::ClosedForm,
     auto_rank: Some(2),
