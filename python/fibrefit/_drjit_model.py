@@ -7,7 +7,8 @@ the sheen's albedo table, the spread's nodes, ...); :func:`parse_wgsl` reads the
 fibrefit.wgsl``, which ``fibrefit export --check`` proves equal to the Rust model) with Dr.Jit
 arrays, so a Mitsuba render compiles them into its kernels instead of calling back into numpy.
 
-Ported rungs: ``lambert``, ``hast-diffuse``, ``max-normal``, ``ward``, ``gltf`` (its
+Ported rungs: ``lambert``, ``hast-diffuse``, ``max-normal``, ``ward``, the renderers' materials
+``principled`` and ``openpbr`` (Cycles' tables read from the shader), ``gltf`` (its
 ``khronos`` variant) and the cross-section rungs ``poulin-fournier`` and ``varying-topology``
 (the shader's ``cross_section`` section: the pair, the occlusion gaps, the closed-form diffuse,
 the Gauss-Legendre lobe, the substrate strip; the height histogram's nodes), each with the
@@ -15,9 +16,8 @@ shader's common parts (the fibre-direction spread's nodes, Fresnel, the fuzz lay
 cross-section rungs' nested loops (spread nodes, height nodes and fibres, the merge of the seen
 and lit arcs) are Dr.Jit symbolic loops, so the kernel holds each body once whatever the node
 counts. The ``gltf`` rung's ``threejs`` variant is ported too (the ``gltf_threejs`` section,
-three.js's DFG table read from the shader). The others (``openpbr`` and ``principled``, whose
-shader sections are not ported, and ``reference``, which has no shader) are not:
-:func:`unsupported_reason` says why, and the plugin keeps its exact path for them.
+three.js's DFG table read from the shader). The ``reference`` has no shader and is not ported:
+:func:`unsupported_reason` says why, and the plugin keeps its exact path for it.
 """
 
 from __future__ import annotations
@@ -35,6 +35,8 @@ PORTED = {
     "    return fibrefit_max_normal(l, v, p.shape.x);": "max_normal",
     "    return fibrefit_ward(l, v, p.extra.x, p.extra.y);": "ward",
     "    return fibrefit_gltf(l, v, p);": "gltf",
+    "    return fibrefit_principled(l, v, p);": "principled",
+    "    return fibrefit_openpbr(l, v, p);": "openpbr",
     "    let sp = fibrefit_pair(l, v, p.shape.w);\n"
     "    let b = fibrefit_pattern(sp, p.shape.y, 0.0, 1.0, p.shape.x);\n"
     "    return vec4<f32>(b, 0.0);": "poulin_fournier",
@@ -110,7 +112,8 @@ def unsupported_reason(p: Dict[str, Any]) -> Optional[str]:
         name = re.search(r"fibrefit_(\w+)\(", p["rung_body"])
         return (
             f"its rung ({name.group(1) if name else 'unknown'}) is not ported to Dr.Jit "
-            "(ported: lambert, hast-diffuse, max-normal, ward, gltf, poulin-fournier, varying-topology)"
+            "(ported: lambert, hast-diffuse, max-normal, ward, gltf, principled, openpbr, poulin-fournier, "
+            "varying-topology)"
         )
     if p["rung"] == "gltf" and p["gltf"][1][3] > 0.5 and p.get("gltf_dfg") is None:
         return "the gltf rung's threejs variant: the shader has no DFG table"
@@ -143,9 +146,10 @@ class DrJitModel:
         self.alpha_x, self.alpha_y = float(p["extra"][0]), float(p["extra"][1])
         self.fuzz_depth, self.fuzz_g = float(p["extra"][2]), float(p["extra"][3])
         self.spread = [(float(c), float(s), float(w)) for c, s, w, _ in p["spread"]]
+        # the material rows (one row of zeros for the fibre rungs)
         g = p["gltf"]
         self.g0 = [float(x) for x in g[0]]
-        self.g1 = [float(x) for x in g[1]]
+        self.g1 = [float(x) for x in g[1]] if len(g) > 1 else [0.0] * 4
         self.sheen_table = np.asarray(g[2:], dtype=np.float64).reshape(-1)
         self._sheen_e: Any = None
         self._scalar = mi.variant().startswith("scalar")
@@ -154,6 +158,8 @@ class DrJitModel:
         if self.rung == "gltf" and self.g1[3] > 0.5:
             self.rung = "gltf_threejs"
             self._setup_threejs(p)
+        if self.rung in ("principled", "openpbr"):
+            self._setup_material(g)
         if self.rung == "gltf":
             scalar = mi.variant().startswith("scalar")
             # scalar variants: a list indexed by Python ints; JIT variants: an array gathered from
@@ -298,6 +304,193 @@ class DrJitModel:
             vs = 1.0 / ((1.0 + self._sheen_lambda(v.z, a) + self._sheen_lambda(l.z, a)) * (4.0 * v.z * l.z))
             return k * diffuse, k * layers + sheen * dc * dr.clip(vs, 0.0, 1.0), 0.0
         return diffuse, layers, 0.0
+
+    # -- the renderers' materials (the shader's principled and openpbr sections) ---------------
+
+    def _setup_material(self, rows) -> None:
+        import mitsuba as mi
+
+        rows = np.asarray(rows, dtype=np.float64)
+        self.m0 = [float(x) for x in rows[0]]
+        self.m1 = [float(x) for x in rows[1]]
+        self.m2 = [float(x) for x in rows[2]] if len(rows) > 2 else [0.0] * 4
+        if self.rung != "principled":
+            return
+        # Cycles' tables at the material by cos theta_v: GGX E, the sheen LTC's a, b, albedo (32
+        # nodes, rows 3..35), the specular's albedo table (16 nodes, rows 35..39)
+        cols = [rows[3:35, k] for k in range(4)] + [rows[35:39].reshape(-1)]
+        if self._scalar:
+            self._tables = [c.tolist() for c in cols]
+        else:
+            self._tables = [mi.Float(c.astype(np.float32)) for c in cols]
+
+    def _table(self, k: int, nodes: int, mu):
+        """Table ``k`` at ``mu`` as the shader reads it (clamped, linear between nodes)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        x = dr.clip(mu, 0.0, 1.0) * float(nodes - 1)
+        data = self._tables[k]
+        if isinstance(data, list):
+            i = min(int(x), nodes - 1)
+            t = x - i
+            return data[i] if t == 0.0 else (1.0 - t) * data[i] + t * data[min(i + 1, nodes - 1)]
+        i = dr.minimum(mi.UInt32(x), nodes - 1)
+        t = x - mi.Float(i)
+        a = dr.gather(mi.Float, data, i)
+        b = dr.gather(mi.Float, data, dr.minimum(i + 1, nodes - 1))
+        return (1.0 - t) * a + t * b
+
+    @staticmethod
+    def _layering(albedo, weight):
+        """closure_layering_weight for grey weights."""
+        import drjit as dr
+
+        if isinstance(weight, float):
+            ratio = albedo / weight if weight != 0.0 else 0.0 * albedo
+        else:
+            ratio = dr.select(weight != 0.0, albedo / dr.select(weight != 0.0, weight, 1.0), 0.0)
+        return weight * dr.clip(1.0 - ratio, 0.0, 1.0)
+
+    def _principled_ggx(self, l, v):
+        import drjit as dr
+
+        m0, m1 = self.m0, self.m1
+        h = dr.normalize(l + v)
+        c = dr.dot(h, v)
+        eta = m1[0]
+        ect = eta * eta - (1.0 - c * c)
+        ci = dr.abs(c)
+        ct = -dr.sqrt(dr.maximum(ect, 0.0)) / eta
+        rs = (ci + eta * ct) / (ci - eta * ct)
+        rp = (ct + eta * ci) / (eta * ci - ct)
+        f_real = dr.select(ect <= 0.0, 1.0, 0.5 * (rs * rs + rp * rp))
+        f = m1[1] + (1.0 - m1[1]) * dr.clip((f_real - m1[2]) / (1.0 - m1[2]), 0.0, 1.0)
+        ax, ay = m0[0], m0[1]
+        hx, hy = h.y / ax, h.x / ay
+        q = hx * hx + hy * hy + h.z * h.z
+        d = 1.0 / (math.pi * ax * ay * q * q)
+        sl = ((ax * l.y) ** 2 + (ay * l.x) ** 2) / (l.z * l.z)
+        sv = ((ax * v.y) ** 2 + (ay * v.x) ** 2) / (v.z * v.z)
+        g2 = 1.0 / (1.0 + 0.5 * (dr.sqrt(1.0 + sl) - 1.0) + 0.5 * (dr.sqrt(1.0 + sv) - 1.0))
+        return f * d * g2 / (4.0 * v.z * l.z)
+
+    def _principled(self, l, v):
+        """fibrefit_principled: Blender's Principled BSDF as Cycles evaluates it."""
+        import drjit as dr
+
+        m0, m1, m2 = self.m0, self.m1, self.m2
+        mu = v.z
+        weight = 1.0
+        sheen = 0.0
+        if m2[0] > 1e-5:
+            a = self._table(1, 32, mu)
+            albedo = self._table(3, 32, mu)
+            on = (dr.abs(a) >= 1e-5) & (albedo >= 1e-5)
+            w = m2[0] * albedo
+            # the frame of N and the view; at normal view the skew b is dropped
+            bl = dr.sqrt(v.y * v.y + v.x * v.x)
+            has = bl > 0.0
+            bls = dr.select(has, bl, 1.0)
+            bx, by = -v.y / bls, v.x / bls
+            lox = dr.select(has, l.x * by - l.y * bx, l.x)
+            loy = dr.select(has, l.x * bx + l.y * by, l.y)
+            b = dr.select(has, self._table(2, 32, mu), 0.0)
+            x = a * lox + b * l.z
+            y = a * loy
+            len2 = x * x + y * y + l.z * l.z
+            val = dr.select(l.z > 0.0, w / math.pi * (a / len2) ** 2, 0.0)
+            sheen = dr.select(on, val, 0.0)
+            weight = dr.select(on, self._layering(w, 1.0), 1.0)
+        specular = 0.0
+        if m0[3] > 0.5:
+            e = self._table(0, 32, mu)
+            missing = (1.0 - e) / e
+            energy_scale = 1.0 + missing
+            darkening = 1.0
+            if m1[3] != 1.0:
+                fms = m1[3] * m0[2] / (1.0 - m1[3] * (1.0 - m0[2]))
+                darkening = (1.0 + fms * missing) / energy_scale
+            w = weight * darkening
+            if m0[0] * m0[1] > 2e-10:
+                specular = w * energy_scale * self._principled_ggx(l, v)
+            ts = self._table(4, 16, mu)
+            weight = self._layering(w * (m1[1] + (1.0 - m1[1]) * ts), weight)
+        return weight / math.pi, specular + sheen, 0.0
+
+    def _openpbr(self, l, v):
+        """fibrefit_openpbr: OpenPBR Surface as MaterialX 1.39 implements it."""
+        import drjit as dr
+        import mitsuba as mi
+
+        eps = 1e-8
+        m0, m1 = self.m0, self.m1
+        n_v = dr.clip(v.z, eps, 1.0)
+        n_l = dr.clip(l.z, eps, 1.0)
+        fuzz = 0.0
+        t_fuzz = 1.0
+        if not (m1[1] < eps):
+            r = m1[2]
+            # mx_zeltner_sheen_dir_albedo
+            sg = r * (0.0206607 + 1.58491 * r) / (0.0379424 + r * (1.32227 + r))
+            mg = r * (-0.193854 + r * (-1.14885 + r * (1.7932 - 0.95943 * r * r))) / (0.046391 + r)
+            og = r * (0.000654023 + (-0.0207818 + 0.119681 * r) * r) / (1.26264 + r * (-1.92021 + r))
+            z = (n_v - mg) / sg
+            albedo = dr.exp(-0.5 * z * z) / (sg * math.sqrt(2.0 * math.pi)) + og
+            # mx_zeltner_sheen_brdf in the frame of N and v
+            a_inv = (2.58126 * n_v + 0.813703 * r) * r / (1.0 + 0.310327 * n_v * n_v + 2.60994 * n_v * r)
+            b_inv = dr.sqrt(1.0 - n_v) * (r - 1.0) * r * r * r / (
+                0.0000254053 + 1.71228 * n_v - 1.71506 * n_v * r + 1.34174 * r * r
+            )
+            xs = mi.Vector3f(v.x, v.y, v.z - n_v)
+            len2 = dr.dot(xs, xs)
+            has = len2 > 0.0
+            xn = xs / dr.sqrt(dr.select(has, len2, 1.0))
+            w0 = dr.select(has, dr.dot(l, xn), l.x)
+            w1 = dr.select(has, l.y * xn.x - l.x * xn.y, l.y)
+            wo = mi.Vector3f(a_inv * w0 + b_inv * l.z, a_inv * w1, l.z)
+            q = a_inv / dr.dot(wo, wo)
+            d = dr.maximum(l.z, 0.0) / math.pi * q * q
+            fuzz = albedo * d * m1[1]
+            t_fuzz = 1.0 - albedo * m1[1]
+        h = dr.normalize(l + v)
+        c = dr.clip(dr.dot(h, v), eps, 1.0)
+        ior = m0[3]
+        g2 = ior * ior + c * c - 1.0
+        g = dr.sqrt(dr.maximum(g2, 0.0))
+        fa = (g - c) / (g + c)
+        fb = ((g + c) * c - 1.0) / ((g - c) * c + 1.0)
+        f = dr.select(g2 < 0.0, 1.0, 0.5 * fa * fa * (1.0 + fb * fb))
+        hx, hy = h.y / m0[0], -h.x / m0[1]
+        qd = hx * hx + hy * hy + h.z * h.z
+        dd = 1.0 / (math.pi * m0[0] * m0[1] * qd * qd)
+        a2 = m0[2] * m0[2]
+        lambda_l = dr.sqrt(a2 + (1.0 - a2) * n_l * n_l)
+        lambda_v = dr.sqrt(a2 + (1.0 - a2) * n_v * n_v)
+        gg = 2.0 * n_l * n_v / (lambda_l * n_v + lambda_v * n_l)
+        # mx_ggx_dir_albedo_analytic
+        x, y = n_v, m0[2]
+        x2, y2 = x * x, y * y
+        coef = [
+            (0.1003, 0.9345, 1.0, 1.0),
+            (-0.6303, -2.323, -1.765, 0.2281),
+            (9.748, 2.229, 8.263, 15.94),
+            (-2.038, -3.748, 11.53, -55.83),
+            (29.34, 1.424, 28.96, 13.08),
+            (-8.245, -0.7684, -7.507, 41.26),
+            (-26.44, 1.436, -36.11, 54.9),
+            (19.99, 0.2913, 15.86, 300.2),
+            (-5.448, 0.6286, 33.37, -285.1),
+        ]
+        mono = [1.0, x, y, x * y, x2, y2, x2 * y, x * y2, x2 * y2]
+        rr = [sum(cf[k] * mn for cf, mn in zip(coef, mono)) for k in range(4)]
+        aa = dr.clip(rr[0] / rr[2], 0.0, 1.0)
+        bb = dr.clip(rr[1] / rr[3], 0.0, 1.0)
+        ess = aa + bb
+        comp = 1.0 + f * (1.0 - ess) / ess
+        spec = dd * f * gg * comp / (4.0 * n_v)
+        t_spec = 1.0 - (m1[0] * aa + bb) * comp
+        return t_fuzz * t_spec / math.pi, (t_fuzz * spec + fuzz) / n_l, 0.0
 
     # -- the gltf rung's threejs variant (the shader's gltf_threejs section) ---------------------
 

@@ -18,8 +18,9 @@ Two paths, chosen by the BSDF's ``mode`` property:
   eval x cos / pdf). On load the Dr.Jit model is checked against :class:`fibrefit.Material` at
   random and grazing direction pairs: each value within 1e-3 of the exact one, relative to
   max(|value|, 1e-4 of the largest) (the comparison of ``fibrefit export --check``). Ported:
-  lambert, hast-diffuse, max-normal, ward, gltf (khronos and threejs), poulin-fournier and
-  varying-topology, with the spread, Fresnel and the fuzz layer; no maps (nor a topology map).
+  lambert, hast-diffuse, max-normal, ward, gltf (khronos and threejs), principled, openpbr,
+  poulin-fournier and varying-topology, with the spread, Fresnel and the fuzz layer; no maps
+  (nor a topology map).
 * ``"exact"`` (or ``"exact": True``): :class:`fibrefit.Material` (the Rust model) through numpy
   at every call, the result's per-texel maps at the surface's uv, fibrefit's own importance
   sampler. Any rung, maps included. Converting Dr.Jit arrays to numpy needs evaluated (not
