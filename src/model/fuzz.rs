@@ -61,6 +61,14 @@ pub struct FuzzFactor {
     asymmetry: f64,
 }
 
+impl FuzzFactor {
+    /// The layer of optical depth `depth` and asymmetry `asymmetry`; `None` when `depth` is 0
+    /// (no layer, as [`crate::model::with_fuzz`] builds none).
+    pub fn of(depth: f64, asymmetry: f64) -> Option<Self> {
+        (depth > 0.0).then_some(Self { depth, asymmetry })
+    }
+}
+
 impl BasisTransform for FuzzFactor {
     fn apply(&self, pair: &DirectionPair, b: Basis) -> Basis {
         let (a, p) = layer(pair, self.depth, self.asymmetry);

@@ -27,7 +27,7 @@ impl<'p, 'a> ArgminProblem<'p, 'a> {
                 return Ok(r.clone());
             }
         }
-        let r = self.inner.evaluate(theta, &self.base)?.0;
+        let r = self.inner.evaluate_keeping(theta, &self.base, true)?.0;
         *self.last.lock().expect("not poisoned") = Some((theta.clone(), r.clone()));
         Ok(r)
     }

@@ -66,6 +66,11 @@ pub struct FitProblem<'a> {
     free_shapes: Vec<usize>,
     free_albedos: Vec<(usize, usize)>,
     pub evaluations: AtomicUsize,
+    /// The model's bases under the fuzz layer (everything but the layer) at the last point the
+    /// optimiser evaluated ([`FitProblem::evaluate_keeping`]), keyed by the shape values the
+    /// layer does not read: a Jacobian column of `fuzz_depth` or `fuzz_asymmetry` reuses them
+    /// and applies only the layer (the same numbers, bit for bit, at a fraction of the cost).
+    under_fuzz: std::sync::Mutex<Option<(Vec<u64>, Arc<Vec<Basis>>)>>,
 }
 
 /// The residual scale of sample `s` per channel in `metric`: 1/sigma or sqrt(weight), times
@@ -202,6 +207,7 @@ impl<'a> FitProblem<'a> {
             free_shapes,
             free_albedos,
             evaluations: AtomicUsize::new(0),
+            under_fuzz: std::sync::Mutex::new(None),
         }
     }
 
@@ -427,8 +433,86 @@ impl<'a> FitProblem<'a> {
 
     /// Model columns of every sample at `set`'s shape parameters.
     pub fn columns(&self, set: &ParamSet) -> Result<Vec<Columns>, anyhow::Error> {
+        self.columns_keeping(set, false)
+    }
+
+    /// [`FitProblem::columns`]; `keep`: remember the bases under the fuzz layer for the
+    /// Jacobian columns of the layer's parameters at this point.
+    fn columns_keeping(&self, set: &ParamSet, keep: bool) -> Result<Vec<Columns>, anyhow::Error> {
         self.evaluations.fetch_add(1, Ordering::Relaxed);
-        let m = self.model_for(set);
+        let key: Vec<u64> = set
+            .shapes
+            .iter()
+            .filter(|s| !matches!(s.kind, Param::FuzzDepth | Param::FuzzAsymmetry))
+            .map(|s| s.value.to_bits())
+            .collect();
+        let cached = self
+            .under_fuzz
+            .lock()
+            .expect("not poisoned")
+            .as_ref()
+            .filter(|(k, _)| *k == key)
+            .map(|(_, b)| b.clone());
+        let bases = match cached {
+            Some(b) => b,
+            None => {
+                let b = Arc::new(self.bases_under_fuzz(set)?);
+                if keep {
+                    *self.under_fuzz.lock().expect("not poisoned") = Some((key, b.clone()));
+                }
+                b
+            }
+        };
+        let psi = set.shape_value(Param::Azimuth).to_radians();
+        let layer = model::fuzz::FuzzFactor::of(
+            set.shape_value(Param::FuzzDepth),
+            set.shape_value(Param::FuzzAsymmetry),
+        );
+        let tied = set.substrate_tied;
+        let cols: Vec<Columns> = self
+            .samples
+            .par_iter()
+            .zip(bases.par_iter())
+            .map(|(s, b)| {
+                let mut b = *b;
+                if let Some(layer) = &layer {
+                    // the layer as `FuzzLayer` applies it, at the pair the bases were made at
+                    let frame = FibreFrame::from_azimuth(s.fibre_azimuth.unwrap_or(psi));
+                    let pair = DirectionPair::new(&frame, &s.l, &s.v);
+                    b = if pair.above_horizon() {
+                        model::BasisTransform::apply(layer, &pair, b)
+                    } else {
+                        Basis::default()
+                    };
+                }
+                if tied {
+                    [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
+                } else {
+                    [b.diffuse, b.specular, b.substrate, b.fuzz]
+                }
+            })
+            .collect();
+        if let Some(i) = cols.iter().position(|c| c.iter().any(|x| !x.is_finite())) {
+            anyhow::bail!(
+                "the model gave a non-finite value for sample {} ({:?}) at {}",
+                i,
+                self.samples[i].origin,
+                describe(set)
+            );
+        }
+        Ok(cols)
+    }
+
+    /// The bases of every sample at `set`'s shape parameters under the fuzz layer (the rung
+    /// with its Fresnel factor and spread; the layer is applied by the caller).
+    fn bases_under_fuzz(&self, set: &ParamSet) -> Result<Vec<Basis>, anyhow::Error> {
+        let m = model_under_fuzz(
+            set,
+            self.quadrature_order,
+            self.histogram_bins,
+            self.azimuth_nodes,
+            self.map.clone(),
+        );
         let psi = set.shape_value(Param::Azimuth).to_radians();
         let d = set.shape_value(Param::Spacing);
         let topology = Topology {
@@ -437,7 +521,6 @@ impl<'a> FitProblem<'a> {
             map: None,
         };
         let has_topology = set.rung.has_topology();
-        let tied = set.substrate_tied;
         // Chunks of samples go through `basis_many` (the cross-section rungs batch their lobe
         // quadrature); samples with a topology texel are evaluated at their own height.
         let heights = self
@@ -448,7 +531,7 @@ impl<'a> FitProblem<'a> {
         let lobes = self.sample_maps.as_ref().and_then(|m| m.lobe.as_deref());
         let h_max = crate::model::topology::max_height(d);
         let index: Vec<usize> = (0..self.samples.len()).collect();
-        let cols: Vec<Columns> = self
+        let bases: Vec<Basis> = self
             .samples
             .par_chunks(512)
             .zip(index.par_chunks(512))
@@ -506,24 +589,10 @@ impl<'a> FitProblem<'a> {
                 } else {
                     m.basis_many(&pairs, &mut bases);
                 }
-                bases.into_iter().map(move |b| {
-                    if tied {
-                        [b.diffuse + b.substrate, b.specular, 0.0, b.fuzz]
-                    } else {
-                        [b.diffuse, b.specular, b.substrate, b.fuzz]
-                    }
-                })
+                bases
             })
             .collect();
-        if let Some(i) = cols.iter().position(|c| c.iter().any(|x| !x.is_finite())) {
-            anyhow::bail!(
-                "the model gave a non-finite value for sample {} ({:?}) at {}",
-                i,
-                self.samples[i].origin,
-                describe(set)
-            );
-        }
-        Ok(cols)
+        Ok(bases)
     }
 
     /// Solve the albedos exactly for fixed columns: bounded linear least squares per channel,
@@ -757,8 +826,19 @@ impl<'a> FitProblem<'a> {
         theta: &DVector<f64>,
         base: &ParamSet,
     ) -> Result<(DVector<f64>, ParamSet), anyhow::Error> {
+        self.evaluate_keeping(theta, base, false)
+    }
+
+    /// [`FitProblem::evaluate`]; `keep`: a point the optimiser may take the Jacobian at next
+    /// (its bases under the fuzz layer are kept for the layer's columns).
+    pub fn evaluate_keeping(
+        &self,
+        theta: &DVector<f64>,
+        base: &ParamSet,
+        keep: bool,
+    ) -> Result<(DVector<f64>, ParamSet), anyhow::Error> {
         let mut set = self.set_at(theta, base);
-        let cols = self.columns(&set)?;
+        let cols = self.columns_keeping(&set, keep)?;
         if self.separable {
             self.solve_albedos(&cols, &mut set);
         }

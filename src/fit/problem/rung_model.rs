@@ -13,17 +13,29 @@ pub fn model_for(
     map: Option<Arc<TopologyMap>>,
 ) -> Box<dyn ShadingModel> {
     model::with_fuzz(
-        model::with_spread(
-            model::with_fresnel(
-                aligned_model_for(set, quadrature_order, histogram_bins, map),
-                set.shape_value(Param::FresnelIor),
-            ),
-            set.shape_value(Param::AzimuthSpread),
-            azimuth_nodes,
-            set.shape_value(Param::Azimuth).to_radians(),
-        ),
+        model_under_fuzz(set, quadrature_order, histogram_bins, azimuth_nodes, map),
         set.shape_value(Param::FuzzDepth),
         set.shape_value(Param::FuzzAsymmetry),
+    )
+}
+
+/// [`model_for`] without its fuzz layer (the layer is the outermost part: it applies to the
+/// bases of this model pair by pair).
+pub fn model_under_fuzz(
+    set: &ParamSet,
+    quadrature_order: usize,
+    histogram_bins: usize,
+    azimuth_nodes: usize,
+    map: Option<Arc<TopologyMap>>,
+) -> Box<dyn ShadingModel> {
+    model::with_spread(
+        model::with_fresnel(
+            aligned_model_for(set, quadrature_order, histogram_bins, map),
+            set.shape_value(Param::FresnelIor),
+        ),
+        set.shape_value(Param::AzimuthSpread),
+        azimuth_nodes,
+        set.shape_value(Param::Azimuth).to_radians(),
     )
 }
 

@@ -243,3 +243,60 @@ mod nan_tests {
         assert!(crate::fit::fit(&data, &cfg, &crate::progress::Progress::quiet()).is_err());
     }
 }
+
+mod fuzz_reuse_tests {
+    use super::super::*;
+    use crate::fit::config::FitConfig;
+    use crate::load::samples::Origin;
+    use crate::model::frame::direction_from_angles;
+
+    #[test]
+    fn the_fuzz_layers_columns_reuse_the_bases_under_it_bit_for_bit() {
+        // samples all over the hemisphere, some below the horizon
+        let samples: Vec<Sample> = (0..40)
+            .map(|k| Sample {
+                l: direction_from_angles(0.04 * k as f64, 0.7 * k as f64),
+                v: direction_from_angles(1.6 - 0.035 * k as f64, 2.0 + 0.3 * k as f64),
+                fibre_azimuth: None,
+                map_value: None,
+                texel_height: None,
+                value: [0.1 + 0.01 * k as f64; 3],
+                sigma: None,
+                weight: 1.0,
+                origin: Origin::Line(k + 2),
+            })
+            .collect();
+        let cfg: FitConfig = toml::from_str(
+            "model = \"poulin-fournier\"\n[parameters]\nexponent = { value = 12 }\n\
+             spacing = { value = 2.5 }\nfuzz_depth = { value = 0.3 }\n\
+             fuzz_asymmetry = { value = 0.4 }\n",
+        )
+        .unwrap();
+        let set = ParamSet::from_config(&cfg, 1).unwrap();
+        let settings = Settings {
+            metric: Metric::Log,
+            quadrature_order: 16,
+            histogram_bins: 16,
+            separable: false,
+        };
+        let problem = || FitProblem::new(samples.iter().collect(), set.clone(), settings, None);
+        let kept = problem();
+        let theta = kept.theta_of(&set);
+        let names = kept.theta_names();
+        let at = |p: &str| names.iter().position(|n| n.contains(p)).unwrap();
+        let depth = at("fuzz_depth");
+        let g = at("fuzz_asymmetry");
+        let exponent = at("exponent");
+        kept.evaluate_keeping(&theta, &set, true).unwrap();
+        assert!(kept.under_fuzz.lock().unwrap().is_some());
+        // the layer's columns from the kept bases; another parameter's from a fresh evaluation
+        for (k, h) in [(depth, 1e-3), (g, -2e-3), (exponent, 1e-2)] {
+            let mut t = theta.clone();
+            t[k] += h;
+            let (reused, _) = kept.evaluate(&t, &set).unwrap();
+            let (fresh, _) = problem().evaluate(&t, &set).unwrap();
+            assert_eq!(reused, fresh, "{}", names[k]);
+            assert_ne!(reused, kept.evaluate(&theta, &set).unwrap().0, "{}", names[k]);
+        }
+    }
+}
