@@ -168,6 +168,13 @@ class Material:
         """Whether per-texel maps are looked up at ``uv``."""
         return self._m.has_maps
 
+    def topology_heights(self) -> Optional[Tuple[int, int, np.ndarray]]:
+        """The height (fibre radii) of every texel of the result's topology map as :meth:`eval`
+        reads it at ``uv`` (texel x = floor(u W), y = floor((1 - v) H), clamped; row 0 the
+        map's top row): ``(W, H, heights)`` with ``heights`` of shape (H * W,), row by row; None
+        without a topology map or with per-texel maps."""
+        return self._m.topology_heights()
+
     @property
     def maps_size(self) -> Optional[Tuple[int, int]]:
         """(width, height) of the maps in texels, or None."""

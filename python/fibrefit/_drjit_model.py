@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 import re
-from typing import Any, Dict, List, Optional
+from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
 
@@ -129,7 +129,11 @@ class DrJitModel:
     albedo table (32 values) is the one array gathered from.
     """
 
-    def __init__(self, p: Dict[str, Any]):
+    def __init__(self, p: Dict[str, Any], texel_heights: Optional[Tuple[int, int, Any]] = None):
+        """``texel_heights``: a topology map's heights per texel (``Material.topology_heights()``:
+        width, height, heights row by row), for a varying-topology result: :meth:`eval` then
+        takes the texel's height at ``uv`` (one pattern per spread node) instead of the map's
+        height histogram."""
         import mitsuba as mi
 
         why = unsupported_reason(p)
@@ -153,8 +157,13 @@ class DrJitModel:
         self.sheen_table = np.asarray(g[2:], dtype=np.float64).reshape(-1)
         self._sheen_e: Any = None
         self._scalar = mi.variant().startswith("scalar")
+        self._texels: Optional[Tuple[int, int]] = None
         if self.rung in CROSS_SECTION:
             self._setup_cross_section(p)
+            if texel_heights is not None:
+                if self.rung != "varying_topology":
+                    raise ValueError(f"texel heights for rung {self.rung}: only varying-topology has a topology")
+                self._setup_texel_jobs(*texel_heights)
         if self.rung == "gltf" and self.g1[3] > 0.5:
             self.rung = "gltf_threejs"
             self._setup_threejs(p)
@@ -599,6 +608,44 @@ class DrJitModel:
             self._job_cols = [mi.Float(np.array(c, dtype=np.float32)) for c in cols]
             self._spread_cols = [mi.Float(np.array(c, dtype=np.float32)) for c in zip(*self.spread)]
 
+    def _setup_texel_jobs(self, width: int, height: int, heights: Any) -> None:
+        """Two jobs per texel of a topology map (its two fibres; one fibre counted twice and a
+        weightless one where the rows are level), as ``_setup_cross_section`` makes them per
+        height node: job 2 t + k of texel t = y W + x."""
+        import mitsuba as mi
+
+        hs = np.asarray(heights, dtype=np.float64).reshape(-1)
+        if hs.size != width * height:
+            raise ValueError(f"texel heights: {hs.size} values for {width} x {height} texels")
+        d = self.spacing
+        phi = np.minimum(np.arcsin(np.clip(hs / d, 0.0, 1.0)), math.acos(min(max(1.0 / d, 0.0), 1.0)))
+        step, rise = d * np.cos(phi), d * np.sin(phi)
+        level = rise == 0.0
+        one = np.ones_like(hs)
+        first = [step, rise, np.where(level, 2.0, 1.0), one, rise]
+        second = [step, -rise, np.where(level, 0.0, 1.0), 0.0 * one, rise]
+        cols = [np.stack([a, b], axis=1).reshape(-1) for a, b in zip(first, second)]
+        self._texels = (int(width), int(height))
+        if self._scalar:
+            self._texel_cols = [c.tolist() for c in cols]
+        else:
+            self._texel_cols = [mi.Float(c.astype(np.float32)) for c in cols]
+
+    def _texel(self, uv):
+        """The texel index at ``uv`` as ``Material.eval`` finds it (x = floor(u W), y =
+        floor((1 - v) H), clamped to the map)."""
+        import drjit as dr
+        import mitsuba as mi
+
+        w, h = self._texels
+        if self._scalar:
+            x = min(max(math.floor(float(uv[0]) * w), 0), w - 1)
+            y = min(max(math.floor((1.0 - float(uv[1])) * h), 0), h - 1)
+            return int(y) * w + int(x)
+        x = mi.UInt32(dr.clip(dr.floor(uv.x * w), 0.0, float(w - 1)))
+        y = mi.UInt32(dr.clip(dr.floor((1.0 - uv.y) * h), 0.0, float(h - 1)))
+        return y * w + x
+
     def _loop(self, state, cond, body, label):
         """``dr.while_loop``, symbolic in the JIT variants whatever the flags (an evaluated loop
         of loops would launch a kernel per iteration), a Python loop in the scalar ones."""
@@ -818,18 +865,21 @@ class DrJitModel:
         _, _, dif, spec = self._loop((zero, zero, zero, zero), cond, body, "fibrefit_arcs")
         return dif, spec
 
-    def _cross_section(self, l, v):
+    def _cross_section(self, l, v, texel=None):
         """The rung's (diffuse, specular, substrate) columns at one spread node: the jobs
-        (height nodes x fibres) summed, in a symbolic loop where there are several."""
+        (height nodes x fibres, or a texel's two fibres) summed, in a symbolic loop where there
+        are several."""
         import drjit as dr
         import mitsuba as mi
 
         sp = self._pair(l, v)
         lp, vp = sp["l"], sp["v"]
         zero = 0.0 * l.z
+        cols = self._job_cols if texel is None else self._texel_cols
 
         def job(k, d, s, b):
-            step, other, cw, sw, rise = [self._at(c, k) for c in self._job_cols]
+            idx = k if texel is None else 2 * texel + k
+            step, other, cw, sw, rise = [self._at(c, idx) for c in cols]
             denom = 2.0 * step * lp[2] * vp[2]
             ok = denom > 0.0
             dif, spec = self._fibre(sp, step, other, ok)
@@ -839,15 +889,15 @@ class DrJitModel:
             b = b + dr.select(ok & (sw > 0.0), sw * (1.0 / math.pi) * self._substrate(lp, vp, step, rise), 0.0)
             return k + 1, d, s, b
 
-        if len(self.jobs) == 1:
+        if texel is None and len(self.jobs) == 1:
             _, d, s, b = job(0 if self._scalar else mi.UInt32(0), zero, zero, zero)
             return d, s, b
         k0 = 0 if self._scalar else dr.zeros(mi.UInt32, dr.width(l.z))
-        n = len(self.jobs)
+        n = len(self.jobs) if texel is None else 2
         _, d, s, b = self._loop((k0, zero, zero, zero), lambda k, d, s, b: k < n, job, "fibrefit_patterns")
         return d, s, b
 
-    def _cross_section_spread(self, l, v):
+    def _cross_section_spread(self, l, v, texel=None):
         """The spread's nodes of a cross-section rung, summed (a symbolic loop over the nodes
         where there are several)."""
         import drjit as dr
@@ -857,14 +907,14 @@ class DrJitModel:
         if len(self.spread) == 1:
             c, s, w = self.spread[0]
             if c == 1.0 and s == 0.0:
-                d, sp, b = self._cross_section(l, v)
+                d, sp, b = self._cross_section(l, v, texel)
                 return w * d, w * sp, w * b
 
         def node(j, bx, by, bz):
             c, s, w = [self._at(col, j) for col in self._spread_cols]
             lr = dr.normalize(mi.Vector3f(l.x * c + l.y * s, -l.x * s + l.y * c, l.z))
             vr = dr.normalize(mi.Vector3f(v.x * c + v.y * s, -v.x * s + v.y * c, v.z))
-            x, y, z = self._cross_section(lr, vr)
+            x, y, z = self._cross_section(lr, vr, texel)
             return j + 1, bx + w * x, by + w * y, bz + w * z
 
         j0 = 0 if self._scalar else dr.zeros(mi.UInt32, dr.width(l.z))
@@ -874,9 +924,9 @@ class DrJitModel:
 
     # -- the public entry ----------------------------------------------------------------------
 
-    def eval(self, l, v, active=True):
+    def eval(self, l, v, active=True, uv=None):
         """f(l, v) in 1/sr (``mi.Color3f``) at fibre-frame unit directions; 0 at and below either
-        horizon."""
+        horizon. ``uv``: the texture coordinates, read where the model has texel heights."""
         import drjit as dr
         import mitsuba as mi
 
@@ -887,7 +937,12 @@ class DrJitModel:
         l = mi.Vector3f(l.x, l.y, lz)
         v = mi.Vector3f(v.x, v.y, vz)
         if self.rung in CROSS_SECTION:
-            bx, by, bz = self._cross_section_spread(l, v)
+            texel = None
+            if self._texels is not None:
+                if uv is None:
+                    raise ValueError("this model has texel heights: eval needs uv")
+                texel = self._texel(uv)
+            bx, by, bz = self._cross_section_spread(l, v, texel)
         else:
             rung = getattr(self, "_" + self.rung)
             bx, by, bz = 0.0, 0.0, 0.0

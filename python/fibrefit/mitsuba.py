@@ -19,16 +19,17 @@ Two paths, chosen by the BSDF's ``mode`` property:
   random and grazing direction pairs: each value within 1e-3 of the exact one, relative to
   max(|value|, 1e-4 of the largest) (the comparison of ``fibrefit export --check``). Ported:
   lambert, hast-diffuse, max-normal, ward, gltf (khronos and threejs), principled, openpbr,
-  poulin-fournier and varying-topology, with the spread, Fresnel and the fuzz layer; no maps
-  (nor a topology map).
+  poulin-fournier and varying-topology, with the spread, Fresnel and the fuzz layer, and a
+  varying-topology result's topology map (each texel's height read at uv, as ``Material.eval``
+  reads it; the check then at texel centres); no per-texel maps.
 * ``"exact"`` (or ``"exact": True``): :class:`fibrefit.Material` (the Rust model) through numpy
   at every call, the result's per-texel maps at the surface's uv, fibrefit's own importance
   sampler. Any rung, maps included. Converting Dr.Jit arrays to numpy needs evaluated (not
   symbolic) loops and virtual calls in the JIT variants, so an exact instance switches
   ``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off when it loads (renders are
   then slower than with symbolic recording, fast instances included).
-* ``"auto"`` (the default): fast where the result has no maps (and no topology map), its rung
-  is ported and the load check holds; exact otherwise (with a warning saying why).
+* ``"auto"`` (the default): fast where the result has no per-texel maps, its rung is ported and
+  the load check holds; exact otherwise (with a warning saying why).
 
 The fibre frame is the surface's shading frame (dp/du is the swatch's x axis; the fibres lie at
 the result's ``fibre_azimuth_deg`` from it). One-sided: zero from below. The LLVM variants need
@@ -139,26 +140,40 @@ def check_pairs(n: int = 20000, seed: int = 12345) -> Tuple[np.ndarray, np.ndarr
     return l, v
 
 
-def check_fast(model: Any, material: Material, cs: Tuple[float, float], pairs=None) -> Dict[str, Any]:
+def check_fast(
+    model: Any, material: Material, cs: Tuple[float, float], pairs=None, texels: Optional[Tuple[int, int]] = None
+) -> Dict[str, Any]:
     """How far the fast path's Dr.Jit model is from ``material.eval`` (the exact model): over
     the pairs (default :func:`check_pairs`), the largest and 99th-percentile error of each value
     relative to max(|exact value|, 1e-4 of the largest exact value), the largest absolute error
-    (1/sr) and the largest exact value."""
+    (1/sr) and the largest exact value. ``texels`` (W, H): a model with texel heights, each pair
+    at a seeded texel's centre."""
     import mitsuba as mi
 
     l, v = check_pairs() if pairs is None else pairs
-    ref = material.eval(l, v)
+    uv = None
+    if texels is not None:
+        w, h = texels
+        rng = np.random.default_rng(777)
+        x, y = rng.integers(0, w, len(l)), rng.integers(0, h, len(l))
+        uv = np.stack([(x + 0.5) / w, 1.0 - (y + 0.5) / h], axis=1)
+    ref = material.eval(l, v, uv)
     if mi.variant().startswith("scalar"):
         idx = np.linspace(0, len(l) - 1, 400).astype(int)
         l, v, ref = l[idx], v[idx], ref[idx]
+        uvs = [None] * len(idx) if uv is None else [tuple(uv[i]) for i in idx]
         got = np.array(
-            [np.array(model.eval(_dm.fibre_frame(mi.Vector3f(*a), *cs), _dm.fibre_frame(mi.Vector3f(*b), *cs))) for a, b in zip(l, v)],
+            [
+                np.array(model.eval(_dm.fibre_frame(mi.Vector3f(*a), *cs), _dm.fibre_frame(mi.Vector3f(*b), *cs), True, c))
+                for a, b, c in zip(l, v, uvs)
+            ],
             dtype=np.float64,
         )
     else:
         L = mi.Vector3f(*[mi.Float(np.ascontiguousarray(l[:, k], dtype=np.float32)) for k in range(3)])
         V = mi.Vector3f(*[mi.Float(np.ascontiguousarray(v[:, k], dtype=np.float32)) for k in range(3)])
-        got = np.array(model.eval(_dm.fibre_frame(L, *cs), _dm.fibre_frame(V, *cs)), dtype=np.float64).T
+        UV = None if uv is None else mi.Point2f(*[mi.Float(np.ascontiguousarray(uv[:, k], dtype=np.float32)) for k in range(2)])
+        got = np.array(model.eval(_dm.fibre_frame(L, *cs), _dm.fibre_frame(V, *cs), True, UV), dtype=np.float64).T
     got = got[:, : ref.shape[1]]
     err = np.abs(got - ref)
     largest = float(np.abs(ref).max())
@@ -280,10 +295,13 @@ class FibrefitBSDF:
 
         if self.material.has_maps:
             return "the result has per-texel maps (looked up at uv by the exact path only)"
+        texel_heights = None
         if _topology_map(self.filename):
-            # the rung's heights per texel at uv (without uv, the map's histogram: the fast
-            # path's model), which has_maps does not count
-            return "the result has a topology map (per-texel heights looked up at uv by the exact path only)"
+            # the rung's heights per texel at uv (has_maps does not count them): the fast path
+            # reads the same heights at uv (without them it would evaluate the map's histogram)
+            texel_heights = self.material.topology_heights()
+            if texel_heights is None:
+                return "the result has a topology map whose heights the material does not give per texel"
         try:
             shader = _native_call(_native.export, self.filename, "wgsl", False, "swatch", False, None, progress=False)["shader"]
         except FibrefitError as e:
@@ -292,10 +310,12 @@ class FibrefitBSDF:
         why = _dm.unsupported_reason(p)
         if why is not None:
             return why
-        self.model = _dm.DrJitModel(p)
+        self.model = _dm.DrJitModel(p, texel_heights)
         psi = float(np.radians(self.material.fibre_azimuth_deg))
         self._cs = (float(np.cos(psi)), float(np.sin(psi)))
-        self.fast_check = check_fast(self.model, self.material, self._cs)
+        self.fast_check = check_fast(
+            self.model, self.material, self._cs, texels=None if texel_heights is None else texel_heights[:2]
+        )
         if self.fast_check["max_relative"] > FAST_TOLERANCE:
             return (
                 f"the Dr.Jit model is {self.fast_check['max_relative']:.2g} from the exact one "
@@ -329,7 +349,7 @@ class FibrefitBSDF:
         import drjit as dr
 
         l, v = self._fibre(wo), self._fibre(si.wi)
-        return self.model.eval(l, v, active) * dr.maximum(l.z, 0.0)
+        return self.model.eval(l, v, active, si.uv) * dr.maximum(l.z, 0.0)
 
     def pdf(self, ctx, si, wo, active=True):
         if self.mode == "exact":
@@ -342,7 +362,7 @@ class FibrefitBSDF:
         import drjit as dr
 
         l, v = self._fibre(wo), self._fibre(si.wi)
-        return self.model.eval(l, v, active) * dr.maximum(l.z, 0.0), self._fast_pdf(l, v, active)
+        return self.model.eval(l, v, active, si.uv) * dr.maximum(l.z, 0.0), self._fast_pdf(l, v, active)
 
     def sample(self, ctx, si, sample1, sample2, active=True):
         if self.mode == "exact":
@@ -368,7 +388,7 @@ class FibrefitBSDF:
         # the value at the direction returned (turned back to the fibre frame, as eval turns it),
         # so weight x pdf is eval(bs.wo) to rounding, even in a sharp lobe
         l = self._fibre(bs.wo)
-        value = self.model.eval(l, v, ok) * dr.maximum(l.z, 0.0)
+        value = self.model.eval(l, v, ok, si.uv) * dr.maximum(l.z, 0.0)
         return bs, dr.select(ok, value / dr.select(ok, pdf, 1.0), 0.0)
 
     # -- the fast path's frames and the sampler's coordinates -----------------------------------

@@ -204,6 +204,18 @@ impl Material {
         self.inner.maps_size()
     }
 
+    /// The height (fibre radii) of every texel of the result's topology map as `eval` reads it
+    /// at uv: (width, height, heights row by row from the map's top row), or None (no topology
+    /// map, or per-texel maps).
+    fn topology_heights<'py>(
+        &self,
+        py: Python<'py>,
+    ) -> Option<(usize, usize, Bound<'py, PyArray1<f64>>)> {
+        self.inner
+            .topology_heights()
+            .map(|(w, h, v)| (w, h, v.into_pyarray(py)))
+    }
+
     /// The maps directory used, or None.
     #[getter]
     fn maps_dir(&self) -> Option<String> {

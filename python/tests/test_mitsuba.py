@@ -237,15 +237,42 @@ def test_fast_path_on_the_cross_section_fits(real_fits, name):
     assert rel.max() <= 1e-2, rel.max()
 
 
-def test_a_topology_map_keeps_the_exact_path(tmp_path):
-    # a varying-topology result with a topology map looks its heights up per texel at uv (the
-    # shader's histogram of them is the spot's BRDF, not a texel's): auto renders it exactly
-    # (the silk capture's fit: its reproduction is test_capture_reproduced_by_mitsuba[silk])
+def test_a_topology_map_renders_fast_at_each_texels_height(tmp_path):
+    # a varying-topology result with a topology map: each texel's height read at uv, as
+    # Material.eval reads it (without uv the map's histogram would be the spot's BRDF, not a
+    # texel's); the load check runs at texel centres
     text = FAST["varying-topology"].replace("}", f', "topology_map": "{DATA / "silk" / "topology.png"}"}}')
     p = write_params(tmp_path, "vt_map.json", text)
-    with pytest.warns(UserWarning, match="topology map"):
-        bsdf = load_bsdf(p)
-    assert bsdf.mode == "exact" and "topology map" in bsdf.fast_reason
+    bsdf = load_bsdf(p, **SMALL_TABLE)
+    assert bsdf.mode == "fast", bsdf.fast_reason
+    assert bsdf.fast_check["max_relative"] <= 1e-3, bsdf.fast_check
+    m = fibrefit.load(p)
+    w, h, heights = m.topology_heights()
+    assert heights.shape == (w * h,) and heights.min() < heights.max()
+    # through Mitsuba's eval at random uv (texel centres) and pairs: f cos against the exact
+    # model at that uv
+    rng = np.random.default_rng(3)
+    l, v = fm.check_pairs(20_000, 9)
+    x, y = rng.integers(0, w, len(l)), rng.integers(0, h, len(l))
+    uv = np.stack([(x + 0.5) / w, 1.0 - (y + 0.5) / h], axis=1)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(l))
+    si.wi = vectors(v)
+    si.uv = mi.Point2f(*[mi.Float(np.ascontiguousarray(uv[:, k], dtype=np.float32)) for k in range(2)])
+    got = np.array(bsdf.eval(mi.BSDFContext(), si, vectors(l)), dtype=np.float64).T[:, :3]
+    ref = m.eval(l, v, uv) * l[:, 2:3]
+    rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
+    assert rel.max() <= 1e-3, rel.max()
+    # the texels differ: the same pairs at one uv are not the spot's values
+    spot = m.eval(l, v) * l[:, 2:3]
+    assert np.abs(ref - spot).max() > 1e-2 * np.abs(spot).max()
+    # the weight is eval cos / pdf at the texel the sample is drawn at
+    bs, weight = bsdf.sample(mi.BSDFContext(), si, mi.Float(rng.random(len(l)).astype(np.float32)),
+                             mi.Point2f(*[mi.Float(rng.random(len(l)).astype(np.float32)) for _ in range(2)]))
+    value = np.array(bsdf.eval(mi.BSDFContext(), si, bs.wo), dtype=np.float64).T
+    pdf = np.array(bs.pdf, dtype=np.float64)
+    ok = pdf > 0
+    w_ = np.array(weight, dtype=np.float64).T
+    assert np.allclose(w_[ok] * pdf[ok, None], value[ok], rtol=1e-4, atol=1e-6 * np.abs(value).max())
 
 
 def test_unported_rungs_keep_the_exact_path(tmp_path):

@@ -221,6 +221,27 @@ impl Material {
         self.texel_maps.as_ref().map(|m| (m.width, m.rows))
     }
 
+    /// The height H (fibre radii) of every texel of the result's topology map, as `eval` at a
+    /// uv reads it (the texel x = floor(u W), y = floor((1 - v) H), clamped to the map; row 0
+    /// the map's top row; H0 + map_scale (2 m - 1) clamped to [0, H_max]): (W, H, heights row
+    /// by row). `None` without a topology map, or with per-texel maps (which take precedence).
+    pub fn topology_heights(&self) -> Option<(usize, usize, Vec<f64>)> {
+        if self.texel_maps.is_some() || !self.model.has_topology() {
+            return None;
+        }
+        let p = &self.params;
+        let map = p.topology.map.as_deref()?;
+        let h_max = model::topology::max_height(p.spacing);
+        let heights = (0..map.height)
+            .flat_map(|y| (0..map.width).map(move |x| (x, y)))
+            .map(|(x, y)| {
+                (p.topology.height + p.topology.map_scale * (2.0 * map.texel(x, y) - 1.0))
+                    .clamp(0.0, h_max)
+            })
+            .collect();
+        Some((map.width, map.height, heights))
+    }
+
     fn shading(&self) -> Shading<'_> {
         let p = &self.params;
         Shading {
