@@ -110,7 +110,7 @@ struct FibrefitParams {
     // x: base height H0, y: map scale s, z: H_max = sqrt(d^2 - 1) (fibre radii); w unused
     topology: vec4<f32>,
     // a renderer material's values and its tables at them (one row of zeros for the fibre
-    // rungs); the rung's section above says what each row holds
+    // rungs); the rung's section below says what each row holds
     material: array<vec4<f32>, FIBREFIT_MATERIAL_ROWS>,
     // the spot's height distribution: x height H (fibre radii), y weight (summing to 1)
     heights: array<vec4<f32>, FIBREFIT_HEIGHT_NODES>,
