@@ -168,12 +168,15 @@ class Material:
         """Whether per-texel maps are looked up at ``uv``."""
         return self._m.has_maps
 
-    def topology_heights(self) -> Optional[Tuple[int, int, np.ndarray]]:
-        """The height (fibre radii) of every texel of the result's topology map as :meth:`eval`
-        reads it at ``uv`` (texel x = floor(u W), y = floor((1 - v) H), clamped; row 0 the
-        map's top row): ``(W, H, heights)`` with ``heights`` of shape (H * W,), row by row; None
-        without a topology map or with per-texel maps."""
-        return self._m.topology_heights()
+    def texel_fields(self) -> Optional[Dict[str, Any]]:
+        """What :meth:`eval` reads at each texel of the result's per-texel maps or topology map
+        (texel x = floor(u W), y = floor((1 - v) H), clamped; row 0 the top row), for renderers
+        that look it up themselves: ``width``, ``rows`` and, per texel row by row, ``height``
+        (fibre radii; NaN: the spot's height distribution), ``kd``, ``ks``, ``substrate``
+        ((W H, 3)) and ``azimuth_offset`` (radians from ``fibre_azimuth_deg``, turning the
+        fibres towards N x T). None without maps, with lobe maps (roughness, anisotropy), or
+        with a topology map on another grid than the maps'."""
+        return self._m.texel_fields()
 
     @property
     def maps_size(self) -> Optional[Tuple[int, int]]:

@@ -129,11 +129,11 @@ class DrJitModel:
     albedo table (32 values) is the one array gathered from.
     """
 
-    def __init__(self, p: Dict[str, Any], texel_heights: Optional[Tuple[int, int, Any]] = None):
-        """``texel_heights``: a topology map's heights per texel (``Material.topology_heights()``:
-        width, height, heights row by row), for a varying-topology result: :meth:`eval` then
-        takes the texel's height at ``uv`` (one pattern per spread node) instead of the map's
-        height histogram."""
+    def __init__(self, p: Dict[str, Any], texels: Optional[Dict[str, Any]] = None):
+        """``texels``: what the result's per-texel maps or topology map give each texel
+        (``Material.texel_fields()``): :meth:`eval` then reads at ``uv`` the texel's albedos, its
+        fibre azimuth and, for varying-topology, its height (one pattern per spread node instead
+        of the spot's height histogram; every texel must have one)."""
         import mitsuba as mi
 
         why = unsupported_reason(p)
@@ -158,12 +158,11 @@ class DrJitModel:
         self._sheen_e: Any = None
         self._scalar = mi.variant().startswith("scalar")
         self._texels: Optional[Tuple[int, int]] = None
+        self._texel_heights = False
         if self.rung in CROSS_SECTION:
             self._setup_cross_section(p)
-            if texel_heights is not None:
-                if self.rung != "varying_topology":
-                    raise ValueError(f"texel heights for rung {self.rung}: only varying-topology has a topology")
-                self._setup_texel_jobs(*texel_heights)
+        if texels is not None:
+            self._setup_texels(texels)
         if self.rung == "gltf" and self.g1[3] > 0.5:
             self.rung = "gltf_threejs"
             self._setup_threejs(p)
@@ -608,10 +607,28 @@ class DrJitModel:
             self._job_cols = [mi.Float(np.array(c, dtype=np.float32)) for c in cols]
             self._spread_cols = [mi.Float(np.array(c, dtype=np.float32)) for c in zip(*self.spread)]
 
+    def _setup_texels(self, f: Dict[str, Any]) -> None:
+        """The texels' albedos and fibre-azimuth offsets as arrays gathered at uv, and for
+        varying-topology their heights as jobs."""
+        import mitsuba as mi
+
+        w, h = int(f["width"]), int(f["rows"])
+        self._texels = (w, h)
+        cols = {k: np.asarray(f[k], dtype=np.float64).reshape(w * h, 3) for k in ("kd", "ks", "substrate")}
+        offset = np.asarray(f["azimuth_offset"], dtype=np.float64).reshape(-1)
+        conv = (lambda a: a.tolist()) if self._scalar else (lambda a: mi.Float(np.ascontiguousarray(a, dtype=np.float32)))
+        self._texel_albedos = {k: [conv(v[:, c]) for c in range(3)] for k, v in cols.items()}
+        self._texel_offset = None if not np.any(offset) else (conv(np.cos(offset)), conv(np.sin(offset)))
+        heights = np.asarray(f["height"], dtype=np.float64).reshape(-1)
+        if self.rung == "varying_topology":
+            if np.isnan(heights).any():
+                raise ValueError("some texels have no height (the spot's height distribution there)")
+            self._setup_texel_jobs(w, h, heights)
+
     def _setup_texel_jobs(self, width: int, height: int, heights: Any) -> None:
-        """Two jobs per texel of a topology map (its two fibres; one fibre counted twice and a
-        weightless one where the rows are level), as ``_setup_cross_section`` makes them per
-        height node: job 2 t + k of texel t = y W + x."""
+        """Two jobs per texel (its two fibres; one fibre counted twice and a weightless one
+        where the rows are level), as ``_setup_cross_section`` makes them per height node: job
+        2 t + k of texel t = y W + x."""
         import mitsuba as mi
 
         hs = np.asarray(heights, dtype=np.float64).reshape(-1)
@@ -625,7 +642,7 @@ class DrJitModel:
         first = [step, rise, np.where(level, 2.0, 1.0), one, rise]
         second = [step, -rise, np.where(level, 0.0, 1.0), 0.0 * one, rise]
         cols = [np.stack([a, b], axis=1).reshape(-1) for a, b in zip(first, second)]
-        self._texels = (int(width), int(height))
+        self._texel_heights = True
         if self._scalar:
             self._texel_cols = [c.tolist() for c in cols]
         else:
@@ -936,13 +953,20 @@ class DrJitModel:
         vz = dr.select(up, v.z, 1.0)
         l = mi.Vector3f(l.x, l.y, lz)
         v = mi.Vector3f(v.x, v.y, vz)
+        texel = None
+        kd, ks, substrate = self.kd, self.ks, self.substrate
+        if self._texels is not None:
+            if uv is None:
+                raise ValueError("this model reads texel fields: eval needs uv")
+            texel = self._texel(uv)
+            kd, ks, substrate = ([self._at(col, texel) for col in self._texel_albedos[k]] for k in ("kd", "ks", "substrate"))
+            if self._texel_offset is not None:
+                # the texel's fibres turned by its azimuth offset, from T towards B
+                c, s = (self._at(col, texel) for col in self._texel_offset)
+                l = mi.Vector3f(l.x * c + l.y * s, l.y * c - l.x * s, l.z)
+                v = mi.Vector3f(v.x * c + v.y * s, v.y * c - v.x * s, v.z)
         if self.rung in CROSS_SECTION:
-            texel = None
-            if self._texels is not None:
-                if uv is None:
-                    raise ValueError("this model has texel heights: eval needs uv")
-                texel = self._texel(uv)
-            bx, by, bz = self._cross_section_spread(l, v, texel)
+            bx, by, bz = self._cross_section_spread(l, v, texel if self._texel_heights else None)
         else:
             rung = getattr(self, "_" + self.rung)
             bx, by, bz = 0.0, 0.0, 0.0
@@ -959,7 +983,7 @@ class DrJitModel:
         bx, by, bz, bw = bx * a, by * a, bz * a, pz
         out = []
         for ch in range(3):
-            val = bx * self.kd[ch] + by * self.ks[ch] + bz * self.substrate[ch] + bw * self.fuzz[ch]
+            val = bx * kd[ch] + by * ks[ch] + bz * substrate[ch] + bw * self.fuzz[ch]
             out.append(dr.select(up, val, 0.0) if not isinstance(val, float) else dr.select(up, mi.Float(val), 0.0))
         return mi.Color3f(out[0], out[1], out[2])
 

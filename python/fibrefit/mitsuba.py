@@ -19,17 +19,18 @@ Two paths, chosen by the BSDF's ``mode`` property:
   random and grazing direction pairs: each value within 1e-3 of the exact one, relative to
   max(|value|, 1e-4 of the largest) (the comparison of ``fibrefit export --check``). Ported:
   lambert, hast-diffuse, max-normal, ward, gltf (khronos and threejs), principled, openpbr,
-  poulin-fournier and varying-topology, with the spread, Fresnel and the fuzz layer, and a
-  varying-topology result's topology map (each texel's height read at uv, as ``Material.eval``
-  reads it; the check then at texel centres); no per-texel maps.
+  poulin-fournier and varying-topology, with the spread, Fresnel and the fuzz layer; and the
+  result's per-texel maps (albedos, fibre direction, height) and topology map, each texel's
+  values read at uv as ``Material.eval`` reads them (``Material.texel_fields()``; the check then
+  at texel centres), lobe maps (roughness, anisotropy) aside.
 * ``"exact"`` (or ``"exact": True``): :class:`fibrefit.Material` (the Rust model) through numpy
   at every call, the result's per-texel maps at the surface's uv, fibrefit's own importance
   sampler. Any rung, maps included. Converting Dr.Jit arrays to numpy needs evaluated (not
   symbolic) loops and virtual calls in the JIT variants, so an exact instance switches
   ``dr.JitFlag.SymbolicLoops`` and ``dr.JitFlag.SymbolicCalls`` off when it loads (renders are
   then slower than with symbolic recording, fast instances included).
-* ``"auto"`` (the default): fast where the result has no per-texel maps, its rung is ported and
-  the load check holds; exact otherwise (with a warning saying why).
+* ``"auto"`` (the default): fast where the rung is ported, the result has no lobe maps and the
+  load check holds; exact otherwise (with a warning saying why).
 
 The fibre frame is the surface's shading frame (dp/du is the swatch's x axis; the fibres lie at
 the result's ``fibre_azimuth_deg`` from it). One-sided: zero from below. The LLVM variants need
@@ -293,15 +294,17 @@ class FibrefitBSDF:
         be used, or None."""
         import mitsuba as mi
 
-        if self.material.has_maps:
-            return "the result has per-texel maps (looked up at uv by the exact path only)"
-        texel_heights = None
-        if _topology_map(self.filename):
-            # the rung's heights per texel at uv (has_maps does not count them): the fast path
-            # reads the same heights at uv (without them it would evaluate the map's histogram)
-            texel_heights = self.material.topology_heights()
-            if texel_heights is None:
-                return "the result has a topology map whose heights the material does not give per texel"
+        texels = None
+        if self.material.has_maps or _topology_map(self.filename):
+            # per-texel maps, or a topology map's heights (has_maps does not count them): the
+            # fast path reads what Material.eval reads at each texel (without them it would
+            # evaluate the spot: the global values, the map's height histogram)
+            texels = self.material.texel_fields()
+            if texels is None:
+                return (
+                    "the result's per-texel maps include lobe maps (roughness, anisotropy) or a topology map "
+                    "on another grid (looked up at uv by the exact path only)"
+                )
         try:
             shader = _native_call(_native.export, self.filename, "wgsl", False, "swatch", False, None, progress=False)["shader"]
         except FibrefitError as e:
@@ -310,11 +313,14 @@ class FibrefitBSDF:
         why = _dm.unsupported_reason(p)
         if why is not None:
             return why
-        self.model = _dm.DrJitModel(p, texel_heights)
+        try:
+            self.model = _dm.DrJitModel(p, texels)
+        except ValueError as e:
+            return f"the fast path cannot read the result's texels: {e}"
         psi = float(np.radians(self.material.fibre_azimuth_deg))
         self._cs = (float(np.cos(psi)), float(np.sin(psi)))
         self.fast_check = check_fast(
-            self.model, self.material, self._cs, texels=None if texel_heights is None else texel_heights[:2]
+            self.model, self.material, self._cs, texels=None if texels is None else (texels["width"], texels["rows"])
         )
         if self.fast_check["max_relative"] > FAST_TOLERANCE:
             return (

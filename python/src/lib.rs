@@ -204,16 +204,24 @@ impl Material {
         self.inner.maps_size()
     }
 
-    /// The height (fibre radii) of every texel of the result's topology map as `eval` reads it
-    /// at uv: (width, height, heights row by row from the map's top row), or None (no topology
-    /// map, or per-texel maps).
-    fn topology_heights<'py>(
-        &self,
-        py: Python<'py>,
-    ) -> Option<(usize, usize, Bound<'py, PyArray1<f64>>)> {
-        self.inner
-            .topology_heights()
-            .map(|(w, h, v)| (w, h, v.into_pyarray(py)))
+    /// What `eval` reads at each texel of the result's per-texel maps or topology map (texel x =
+    /// floor(u W), y = floor((1 - v) H), clamped; row 0 the top row), or None (no maps, lobe
+    /// maps, or a topology map on another grid): a dict of `width`, `rows` and, per texel row by
+    /// row, `height` (fibre radii; NaN: the spot's height distribution), `kd`, `ks`,
+    /// `substrate` ((W H, 3)) and `azimuth_offset` (radians from the result's fibre azimuth).
+    fn texel_fields<'py>(&self, py: Python<'py>) -> PyResult<Option<Bound<'py, PyDict>>> {
+        let Some(f) = self.inner.texel_fields() else {
+            return Ok(None);
+        };
+        let d = PyDict::new(py);
+        d.set_item("width", f.width)?;
+        d.set_item("rows", f.rows)?;
+        d.set_item("height", f.height.into_pyarray(py))?;
+        d.set_item("kd", table(py, &f.kd, 3)?)?;
+        d.set_item("ks", table(py, &f.ks, 3)?)?;
+        d.set_item("substrate", table(py, &f.substrate, 3)?)?;
+        d.set_item("azimuth_offset", f.azimuth_offset.into_pyarray(py))?;
+        Ok(Some(d))
     }
 
     /// The maps directory used, or None.

@@ -247,7 +247,8 @@ def test_a_topology_map_renders_fast_at_each_texels_height(tmp_path):
     assert bsdf.mode == "fast", bsdf.fast_reason
     assert bsdf.fast_check["max_relative"] <= 1e-3, bsdf.fast_check
     m = fibrefit.load(p)
-    w, h, heights = m.topology_heights()
+    f = m.texel_fields()
+    w, h, heights = f["width"], f["rows"], f["height"]
     assert heights.shape == (w * h,) and heights.min() < heights.max()
     # through Mitsuba's eval at random uv (texel centres) and pairs: f cos against the exact
     # model at that uv
@@ -262,6 +263,16 @@ def test_a_topology_map_renders_fast_at_each_texels_height(tmp_path):
     ref = m.eval(l, v, uv) * l[:, 2:3]
     rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
     assert rel.max() <= 1e-3, rel.max()
+    # lobe maps (a renderer material's roughness per texel) keep the exact path, saying why
+    cfg.write_text(
+        'model = "gltf"\n[maps]\nkd = true\nroughness = true\n'
+    )
+    r = fibrefit.fit(DATA / "silk" / "capture.toml", config=cfg, maps=tmp_path / "lobe_maps")
+    r.to_json(tmp_path / "lobe.json")
+    assert fibrefit.load(tmp_path / "lobe.json").texel_fields() is None
+    with pytest.warns(UserWarning, match="lobe maps"):
+        bsdf = load_bsdf(tmp_path / "lobe.json")
+    assert bsdf.mode == "exact" and "lobe maps" in bsdf.fast_reason
     # the texels differ: the same pairs at one uv are not the spot's values
     spot = m.eval(l, v) * l[:, 2:3]
     assert np.abs(ref - spot).max() > 1e-2 * np.abs(spot).max()
@@ -437,6 +448,34 @@ def test_maps_capture_reproduced_by_mitsuba(tmp_path):
     r.to_json(tmp_path / "fit.json")
     assert fibrefit.load(tmp_path / "fit.json").has_maps
     check_reproduction(tmp_path, capture, tmp_path / "fit.json")
+
+
+def test_a_maps_fit_renders_fast_at_each_texel(tmp_path):
+    # a --maps fit of the silk capture (height, fibre direction and kd per texel): the fast
+    # path reads each texel's values at uv as Material.eval does
+    cfg = tmp_path / "maps.toml"
+    text = (CONFIGS / "fit_silk.toml").read_text().replace("../data_synthetic", str(DATA))
+    cfg.write_text(text + "\n[maps]\nheight = true\nfibre_azimuth = true\nkd = true\n")
+    r = fibrefit.fit(DATA / "silk" / "capture.toml", config=cfg, maps=tmp_path / "maps")
+    r.to_json(tmp_path / "fit.json")
+    m = fibrefit.load(tmp_path / "fit.json")
+    f = m.texel_fields()
+    assert m.has_maps and np.ptp(f["azimuth_offset"]) > 0 and np.ptp(f["kd"][:, 0]) > 0
+    bsdf = load_bsdf(tmp_path / "fit.json", **SMALL_TABLE)
+    assert bsdf.mode == "fast", bsdf.fast_reason
+    assert bsdf.fast_check["max_relative"] <= 1e-3, bsdf.fast_check
+    w, h = f["width"], f["rows"]
+    rng = np.random.default_rng(4)
+    l, v = fm.check_pairs(20_000, 11)
+    x, y = rng.integers(0, w, len(l)), rng.integers(0, h, len(l))
+    uv = np.stack([(x + 0.5) / w, 1.0 - (y + 0.5) / h], axis=1)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(l))
+    si.wi = vectors(v)
+    si.uv = mi.Point2f(*[mi.Float(np.ascontiguousarray(uv[:, k], dtype=np.float32)) for k in range(2)])
+    got = np.array(bsdf.eval(mi.BSDFContext(), si, vectors(l)), dtype=np.float64).T[:, :3]
+    ref = m.eval(l, v, uv) * l[:, 2:3]
+    rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
+    assert rel.max() <= 1e-3, rel.max()
 
 
 def test_pinhole_and_point_light_scene_matches_fibrefit(tmp_path):

@@ -26,6 +26,26 @@ use std::path::{Path, PathBuf};
 /// How far from unit length a given direction may be (it is normalised).
 pub const UNIT_TOLERANCE: f64 = 1e-3;
 
+/// What `eval` reads at each texel ([`Material::texel_fields`]), row by row from the top row.
+#[derive(Clone, Debug)]
+pub struct TexelFields {
+    /// Texels per row, and rows.
+    pub width: usize,
+    /// Rows of texels.
+    pub rows: usize,
+    /// The fibres' height H (fibre radii) where the texel fixes one; NaN: the spot's height
+    /// distribution (rungs without a topology: NaN everywhere).
+    pub height: Vec<f64>,
+    /// The fibres' diffuse albedo per channel (a grey result repeats its value).
+    pub kd: Vec<[f64; 3]>,
+    /// The specular lobe's weight per channel.
+    pub ks: Vec<[f64; 3]>,
+    /// The substrate's albedo per channel (kd where it is tied to it).
+    pub substrate: Vec<[f64; 3]>,
+    /// The texel's fibre azimuth minus the result's (radians), turning T towards B = N x T.
+    pub azimuth_offset: Vec<f64>,
+}
+
 /// A loaded material (see the module docs).
 pub struct Material {
     /// The rung of the result.
@@ -221,25 +241,56 @@ impl Material {
         self.texel_maps.as_ref().map(|m| (m.width, m.rows))
     }
 
-    /// The height H (fibre radii) of every texel of the result's topology map, as `eval` at a
-    /// uv reads it (the texel x = floor(u W), y = floor((1 - v) H), clamped to the map; row 0
-    /// the map's top row; H0 + map_scale (2 m - 1) clamped to [0, H_max]): (W, H, heights row
-    /// by row). `None` without a topology map, or with per-texel maps (which take precedence).
-    pub fn topology_heights(&self) -> Option<(usize, usize, Vec<f64>)> {
-        if self.texel_maps.is_some() || !self.model.has_topology() {
-            return None;
+    /// What `eval` reads at each texel of the result's per-texel maps or topology map, so that a
+    /// renderer can look it up itself: [`TexelFields`] on the maps' grid (a texel x =
+    /// floor(u W), y = floor((1 - v) H), clamped; row 0 the top row), made by shading each
+    /// texel's centre as `eval` does. `None` without maps or topology map, and where a texel's
+    /// values are not fields of this kind: lobe maps (roughness, anisotropy: the renderers'
+    /// materials rebuild their tables per texel), or a topology map on another grid than the
+    /// maps'.
+    pub fn texel_fields(&self) -> Option<TexelFields> {
+        let topology = self.params.topology.map.as_deref();
+        let (width, rows) = match (&self.texel_maps, topology) {
+            (Some(m), _) if m.roughness.is_some() || m.anisotropy.is_some() => return None,
+            (Some(m), Some(t)) if m.height.is_none() && self.model.has_topology() => {
+                if (t.width, t.height) != (m.width, m.rows) {
+                    return None;
+                }
+                (m.width, m.rows)
+            }
+            (Some(m), _) => (m.width, m.rows),
+            (None, Some(t)) if self.model.has_topology() => (t.width, t.height),
+            (None, _) => return None,
+        };
+        let shading = self.shading();
+        let psi = self.params.fibre_azimuth;
+        let channel = |c: usize| c.min(self.channels - 1);
+        let mut f = TexelFields {
+            width,
+            rows,
+            height: Vec::with_capacity(width * rows),
+            kd: Vec::with_capacity(width * rows),
+            ks: Vec::with_capacity(width * rows),
+            substrate: Vec::with_capacity(width * rows),
+            azimuth_offset: Vec::with_capacity(width * rows),
+        };
+        for y in 0..rows {
+            for x in 0..width {
+                let uv = [
+                    (x as f64 + 0.5) / width as f64,
+                    1.0 - (y as f64 + 0.5) / rows as f64,
+                ];
+                let sp = self.point(&shading, Some(uv));
+                let a = &sp.albedos;
+                f.height.push(sp.height.unwrap_or(f64::NAN));
+                f.kd.push(std::array::from_fn(|c| a.diffuse[channel(c)]));
+                f.ks.push(std::array::from_fn(|c| a.specular[channel(c)]));
+                f.substrate
+                    .push(std::array::from_fn(|c| a.substrate[channel(c)]));
+                f.azimuth_offset.push(sp.t.y.atan2(sp.t.x) - psi);
+            }
         }
-        let p = &self.params;
-        let map = p.topology.map.as_deref()?;
-        let h_max = model::topology::max_height(p.spacing);
-        let heights = (0..map.height)
-            .flat_map(|y| (0..map.width).map(move |x| (x, y)))
-            .map(|(x, y)| {
-                (p.topology.height + p.topology.map_scale * (2.0 * map.texel(x, y) - 1.0))
-                    .clamp(0.0, h_max)
-            })
-            .collect();
-        Some((map.width, map.height, heights))
+        Some(f)
     }
 
     fn shading(&self) -> Shading<'_> {
