@@ -237,6 +237,19 @@ def test_fast_path_on_the_cross_section_fits(real_fits, name):
     assert rel.max() <= 1e-2, rel.max()
 
 
+def at_texel_centres(bsdf, m, w, h, rng, seed):
+    """The BSDF's eval (f cos) and the exact model's at 25 000 pairs (``fm.check_pairs(20_000,
+    seed)``), each at a random texel's centre of a w x h grid: (si, l, v, got, ref)."""
+    l, v = fm.check_pairs(20_000, seed)
+    x, y = rng.integers(0, w, len(l)), rng.integers(0, h, len(l))
+    uv = np.stack([(x + 0.5) / w, 1.0 - (y + 0.5) / h], axis=1)
+    si = dr.zeros(mi.SurfaceInteraction3f, len(l))
+    si.wi = vectors(v)
+    si.uv = mi.Point2f(*[mi.Float(np.ascontiguousarray(uv[:, k], dtype=np.float32)) for k in range(2)])
+    got = np.array(bsdf.eval(mi.BSDFContext(), si, vectors(l)), dtype=np.float64).T[:, :3]
+    return si, l, v, got, m.eval(l, v, uv) * l[:, 2:3]
+
+
 def test_a_topology_map_renders_fast_at_each_texels_height(tmp_path):
     # a varying-topology result with a topology map: each texel's height read at uv, as
     # Material.eval reads it (without uv the map's histogram would be the spot's BRDF, not a
@@ -253,14 +266,7 @@ def test_a_topology_map_renders_fast_at_each_texels_height(tmp_path):
     # through Mitsuba's eval at random uv (texel centres) and pairs: f cos against the exact
     # model at that uv
     rng = np.random.default_rng(3)
-    l, v = fm.check_pairs(20_000, 9)
-    x, y = rng.integers(0, w, len(l)), rng.integers(0, h, len(l))
-    uv = np.stack([(x + 0.5) / w, 1.0 - (y + 0.5) / h], axis=1)
-    si = dr.zeros(mi.SurfaceInteraction3f, len(l))
-    si.wi = vectors(v)
-    si.uv = mi.Point2f(*[mi.Float(np.ascontiguousarray(uv[:, k], dtype=np.float32)) for k in range(2)])
-    got = np.array(bsdf.eval(mi.BSDFContext(), si, vectors(l)), dtype=np.float64).T[:, :3]
-    ref = m.eval(l, v, uv) * l[:, 2:3]
+    si, l, v, got, ref = at_texel_centres(bsdf, m, w, h, rng, 9)
     rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
     assert rel.max() <= 1e-3, rel.max()
     # the texels differ: the same pairs at one uv are not the spot's values
@@ -454,16 +460,7 @@ def test_a_maps_fit_renders_fast_at_each_texel(tmp_path):
     bsdf = load_bsdf(tmp_path / "fit.json", **SMALL_TABLE)
     assert bsdf.mode == "fast", bsdf.fast_reason
     assert bsdf.fast_check["max_relative"] <= 1e-3, bsdf.fast_check
-    w, h = f["width"], f["rows"]
-    rng = np.random.default_rng(4)
-    l, v = fm.check_pairs(20_000, 11)
-    x, y = rng.integers(0, w, len(l)), rng.integers(0, h, len(l))
-    uv = np.stack([(x + 0.5) / w, 1.0 - (y + 0.5) / h], axis=1)
-    si = dr.zeros(mi.SurfaceInteraction3f, len(l))
-    si.wi = vectors(v)
-    si.uv = mi.Point2f(*[mi.Float(np.ascontiguousarray(uv[:, k], dtype=np.float32)) for k in range(2)])
-    got = np.array(bsdf.eval(mi.BSDFContext(), si, vectors(l)), dtype=np.float64).T[:, :3]
-    ref = m.eval(l, v, uv) * l[:, 2:3]
+    _, _, _, got, ref = at_texel_centres(bsdf, m, f["width"], f["rows"], np.random.default_rng(4), 11)
     rel = np.abs(got - ref) / np.maximum(np.abs(ref), 1e-4 * np.abs(ref).max())
     assert rel.max() <= 1e-3, rel.max()
     # lobe maps (a renderer material's roughness per texel) keep the exact path, saying why
