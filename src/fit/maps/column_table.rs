@@ -25,9 +25,57 @@ pub(super) struct ColumnTable {
     pub(super) np: usize,
     pub(super) nobs: usize,
     pub(super) cols: Vec<[f64; 4]>,
+    /// The columns at the grid's points alone ([`Self::at_grid`]), a copy of theirs in `cols`
+    /// kept together: the grid reads every one of them for every texel, and read from `cols`
+    /// they lie a whole psi grid step apart (4 kB at 8 observations), each cache line and
+    /// page a miss where the texels read a lattice's four tables.
+    grid: Vec<[f64; 4]>,
 }
 
 impl ColumnTable {
+    /// The table of `nobs` observations at `nh` x `np` nodes, `cols` node-major.
+    pub(super) fn new(nh: usize, np: usize, nobs: usize, cols: Vec<[f64; 4]>) -> Self {
+        let (gh, gp) = Self::grid_dims(nh, np);
+        let mut grid = Vec::with_capacity(gh * gp * nobs);
+        for i in 0..gh {
+            for l in 0..gp {
+                let (j, k) = Self::grid_node(nh, np, i, l);
+                let at = (j * np + k) * nobs;
+                grid.extend_from_slice(&cols[at..at + nobs]);
+            }
+        }
+        Self {
+            nh,
+            np,
+            nobs,
+            cols,
+            grid,
+        }
+    }
+
+    /// Grid points (H, psi) of a table of `nh` x `np` nodes: the grid's where a value is free.
+    fn grid_dims(nh: usize, np: usize) -> (usize, usize) {
+        (
+            if nh > 1 { HEIGHT_GRID } else { 1 },
+            if np > 1 { PSI_GRID } else { 1 },
+        )
+    }
+
+    /// The table node of grid point (i, l): (i [`TABLE_H_PER_GRID`], l [`TABLE_PSI_PER_GRID`]).
+    pub(super) fn grid_node(nh: usize, np: usize, i: usize, l: usize) -> (usize, usize) {
+        (
+            i * if nh > 1 { TABLE_H_PER_GRID } else { 0 },
+            l * if np > 1 { TABLE_PSI_PER_GRID } else { 0 },
+        )
+    }
+
+    /// The columns at grid point (i, l), node [`Self::grid_node`] (equal to [`Self::at`] there).
+    pub(super) fn at_grid(&self, i: usize, l: usize) -> &[[f64; 4]] {
+        let gp = Self::grid_dims(self.nh, self.np).1;
+        let at = (i * gp + l) * self.nobs;
+        &self.grid[at..at + self.nobs]
+    }
+
     pub(super) fn dims(free: Free) -> (usize, usize) {
         (
             if free.height {
@@ -86,12 +134,40 @@ impl ColumnTable {
                 cols.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi, None));
             }
         }
+        Self::new(nh, np, dirs.len(), cols)
+    }
+
+    /// [`Self::build_for`] at the grid's points alone ([`Self::at_grid`]; [`Self::at`] and the
+    /// interpolation have no nodes to read): what a grid needs, for ~1/60 of the model
+    /// batches, where few texels read the table (the global stage's sample).
+    pub(super) fn build_grid_for(
+        dirs: &[(Vec3, Vec3)],
+        free: Free,
+        g: &Globals,
+        start: &TexelValues,
+    ) -> Self {
+        let (nh, np) = Self::dims(free);
+        let (gh, gp) = Self::grid_dims(nh, np);
+        let mut grid = Vec::with_capacity(gh * gp * dirs.len());
+        for i in 0..gh {
+            for l in 0..gp {
+                let (j, k) = Self::grid_node(nh, np, i, l);
+                let (h, psi) = Self::node(nh, np, g, start, j, k);
+                grid.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi, None));
+            }
+        }
         Self {
             nh,
             np,
             nobs: dirs.len(),
-            cols,
+            cols: Vec::new(),
+            grid,
         }
+    }
+
+    /// Whether the table has its nodes between the grid's points ([`Self::interpolate`]).
+    pub(super) fn interpolates(&self) -> bool {
+        !self.cols.is_empty()
     }
 
     pub(super) fn at(&self, j: usize, k: usize) -> &[[f64; 4]] {
@@ -100,7 +176,12 @@ impl ColumnTable {
     }
 
     /// The four nodes around (H, psi) with their weights: (j0, j1, t in H; k0, k1, u in psi).
-    fn around(&self, g: &Globals, h: f64, psi: f64) -> (usize, usize, f64, usize, usize, f64) {
+    pub(super) fn around(
+        &self,
+        g: &Globals,
+        h: f64,
+        psi: f64,
+    ) -> (usize, usize, f64, usize, usize, f64) {
         let (j0, t) = if self.nh > 1 {
             let f = (h.clamp(0.0, g.h_max) / g.h_max.max(1e-300)) * (self.nh - 1) as f64;
             let j0 = (f.floor() as usize).min(self.nh - 2);
@@ -138,17 +219,17 @@ impl ColumnTable {
     }
 
     /// Add `weight` times the interpolation at (H, psi) of the observations `rows` to `out`
-    /// (one entry per row): the lattice's blend ([`DirectionLattice`]).
+    /// (one entry per row; `None`: the table's own rows, in order): the lattice's blend
+    /// ([`DirectionLattice`]), whose tables share their nodes, so [`Self::around`] is found
+    /// once for all of them.
     pub(super) fn accumulate(
         &self,
-        g: &Globals,
-        h: f64,
-        psi: f64,
-        rows: &[usize],
+        around: (usize, usize, f64, usize, usize, f64),
+        rows: Option<&[usize]>,
         weight: f64,
         out: &mut [[f64; 4]],
     ) {
-        let (j0, j1, t, k0, k1, u) = self.around(g, h, psi);
+        let (j0, j1, t, k0, k1, u) = around;
         let (a, b, c, d) = (
             self.at(j0, k0),
             self.at(j0, k1),
@@ -161,9 +242,23 @@ impl ColumnTable {
             weight * t * (1.0 - u),
             weight * t * u,
         ];
-        for (o, &r) in out.iter_mut().zip(rows) {
+        let add = |o: &mut [f64; 4], (a, b, c, d): (&[f64; 4], &[f64; 4], &[f64; 4], &[f64; 4])| {
             for m in 0..4 {
-                o[m] += w[0] * a[r][m] + w[1] * b[r][m] + w[2] * c[r][m] + w[3] * d[r][m];
+                o[m] += w[0] * a[m] + w[1] * b[m] + w[2] * c[m] + w[3] * d[m];
+            }
+        };
+        match rows {
+            None => {
+                let n = out.len();
+                let nodes = a[..n].iter().zip(&b[..n]).zip(&c[..n]).zip(&d[..n]);
+                for (o, (((a, b), c), d)) in out.iter_mut().zip(nodes) {
+                    add(o, (a, b, c, d));
+                }
+            }
+            Some(rows) => {
+                for (o, &r) in out.iter_mut().zip(rows) {
+                    add(o, (&a[r], &b[r], &c[r], &d[r]));
+                }
             }
         }
     }
@@ -180,10 +275,11 @@ pub(super) enum Tabled {
 }
 
 impl Tabled {
-    pub(super) fn at(&self, j: usize, k: usize) -> std::borrow::Cow<'_, [[f64; 4]]> {
+    /// The columns at grid point (i, l) (table node [`ColumnTable::grid_node`]).
+    pub(super) fn at_grid(&self, i: usize, l: usize) -> std::borrow::Cow<'_, [[f64; 4]]> {
         match self {
-            Tabled::Shared(t) => std::borrow::Cow::Borrowed(t.at(j, k)),
-            Tabled::Blend(b) => std::borrow::Cow::Owned(b.at(j, k)),
+            Tabled::Shared(t) => std::borrow::Cow::Borrowed(t.at_grid(i, l)),
+            Tabled::Blend(b) => std::borrow::Cow::Owned(b.at_grid(i, l)),
         }
     }
 
@@ -191,6 +287,14 @@ impl Tabled {
         match self {
             Tabled::Shared(t) => t.interpolate(g, h, psi),
             Tabled::Blend(b) => b.interpolate(g, h, psi),
+        }
+    }
+
+    /// Whether the coarse searches can interpolate the table (not a grid-only lattice's).
+    pub(super) fn interpolates(&self) -> bool {
+        match self {
+            Tabled::Shared(t) => t.interpolates(),
+            Tabled::Blend(b) => b.interpolates(),
         }
     }
 
@@ -336,12 +440,7 @@ mod tests {
         let built = AtomicUsize::new(0);
         let make = || {
             built.fetch_add(1, Ordering::SeqCst);
-            ColumnTable {
-                nh: 1,
-                np: 1,
-                nobs: 1,
-                cols: vec![[0.5; 4]],
-            }
+            ColumnTable::new(1, 1, 1, vec![[0.5; 4]])
         };
         let tables: Vec<Arc<ColumnTable>> = (0..16)
             .into_par_iter()

@@ -51,6 +51,8 @@ pub(super) struct DirectionLattice {
     directions: Vec<NodeDirections>,
     /// Per node: its table, built on first use (`None` where an image has no direction there).
     tables: Vec<OnceLock<Option<Arc<ColumnTable>>>>,
+    /// Whether the tables hold the grid's points alone ([`Self::grid_only`]).
+    grid_only: bool,
 }
 
 /// The four nodes around a texel with their weights, and which table row (image) each of the
@@ -58,6 +60,9 @@ pub(super) struct DirectionLattice {
 pub(super) struct Blend {
     corners: Vec<(Arc<ColumnTable>, f64)>,
     rows: Vec<usize>,
+    /// Whether `rows` are the tables' own rows in order (every image observed once, in
+    /// order): the blend then reads the tables' slices as they are.
+    in_order: bool,
 }
 
 /// Angle between unit vectors, degrees.
@@ -161,7 +166,24 @@ impl DirectionLattice {
             ys,
             directions,
             tables,
+            grid_only: false,
         })
+    }
+
+    /// The same lattice with no table built yet, whose tables hold the grid's points alone
+    /// ([`ColumnTable::build_grid_for`]): for the global stage, whose few hundred sampled
+    /// texels would not pay for the full tables of every node at every round (each a model
+    /// batch per table node), but whose grids, read from the model texel by texel, cost most
+    /// of its extra time over orthographic cameras. The coarse searches then evaluate the
+    /// model.
+    pub(super) fn grid_only(&self) -> Self {
+        Self {
+            xs: self.xs.clone(),
+            ys: self.ys.clone(),
+            directions: self.directions.clone(),
+            tables: (0..self.directions.len()).map(|_| OnceLock::new()).collect(),
+            grid_only: true,
+        }
     }
 
     /// The lattice of a capture (its geometry per pixel, [`CaptureStore::geometry`]).
@@ -193,7 +215,14 @@ impl DirectionLattice {
                     roughness: false,
                     anisotropy: false,
                 };
-                dirs.map(|d| Arc::new(ColumnTable::build_for(&d, free, g, &TexelValues::default())))
+                let start = TexelValues::default();
+                dirs.map(|d| {
+                    Arc::new(if self.grid_only {
+                        ColumnTable::build_grid_for(&d, free, g, &start)
+                    } else {
+                        ColumnTable::build_for(&d, free, g, &start)
+                    })
+                })
             })
             .clone()
     }
@@ -274,30 +303,67 @@ impl DirectionLattice {
             .into_iter()
             .map(|(n, w)| self.table(g, n).map(|t| (t, w)))
             .collect::<Option<Vec<_>>>()?;
-        Some(Blend { corners, rows })
+        let in_order = rows.iter().enumerate().all(|(i, &r)| i == r)
+            && corners.iter().all(|(t, _)| t.nobs == rows.len());
+        Some(Blend {
+            corners,
+            rows,
+            in_order,
+        })
     }
 }
 
 impl Blend {
     /// The texel's columns at table node (j, k): the nodes' columns there, blended.
     pub(super) fn at(&self, j: usize, k: usize) -> Vec<[f64; 4]> {
+        self.blended(|t| t.at(j, k))
+    }
+
+    /// [`Self::at`] grid point (i, l) (table node [`ColumnTable::grid_node`]), read from the
+    /// tables' grid copies.
+    pub(super) fn at_grid(&self, i: usize, l: usize) -> Vec<[f64; 4]> {
+        self.blended(|t| t.at_grid(i, l))
+    }
+
+    /// The nodes' columns `of` each table, blended.
+    fn blended<'a>(&'a self, of: impl Fn(&'a ColumnTable) -> &'a [[f64; 4]]) -> Vec<[f64; 4]> {
         let mut out = vec![[0.0; 4]; self.rows.len()];
         for (t, w) in &self.corners {
-            let cols = t.at(j, k);
-            for (o, &r) in out.iter_mut().zip(&self.rows) {
+            let cols = of(t);
+            let add = |o: &mut [f64; 4], c: &[f64; 4]| {
                 for m in 0..4 {
-                    o[m] += w * cols[r][m];
+                    o[m] += w * c[m];
+                }
+            };
+            if self.in_order {
+                for (o, c) in out.iter_mut().zip(&cols[..self.rows.len()]) {
+                    add(o, c);
+                }
+            } else {
+                for (o, &r) in out.iter_mut().zip(&self.rows) {
+                    add(o, &cols[r]);
                 }
             }
         }
         out
     }
 
+    /// Whether the blend can interpolate between the grid's points (not a grid-only lattice's).
+    pub(super) fn interpolates(&self) -> bool {
+        self.corners.iter().all(|(t, _)| t.interpolates())
+    }
+
     /// The texel's columns at (H, psi): each node's table interpolated there, blended.
     pub(super) fn interpolate(&self, g: &Globals, h: f64, psi: f64) -> Vec<[f64; 4]> {
         let mut out = vec![[0.0; 4]; self.rows.len()];
+        let Some((first, _)) = self.corners.first() else {
+            return out;
+        };
+        // the tables share their nodes: one lookup serves them all
+        let around = first.around(g, h, psi);
+        let rows = (!self.in_order).then_some(self.rows.as_slice());
         for (t, w) in &self.corners {
-            t.accumulate(g, h, psi, &self.rows, *w, &mut out);
+            t.accumulate(around, rows, *w, &mut out);
         }
         out
     }

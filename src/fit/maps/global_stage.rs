@@ -96,6 +96,9 @@ struct Sampled<'a> {
     all: Vec<usize>,
     cfg: &'a FitConfig,
     free: Free,
+    /// The capture's direction lattice (pinhole cameras, point lights), whose grid-only
+    /// tables serve the texels' grids at every round.
+    lattice: Option<DirectionLattice>,
 }
 
 /// Where the alternation of the global stage ended.
@@ -128,6 +131,7 @@ impl<'a> Sampled<'a> {
             all,
             cfg,
             free,
+            lattice: DirectionLattice::of_store(store, free),
         })
     }
 
@@ -203,12 +207,17 @@ impl<'a> Sampled<'a> {
         let problems = self
             .layout
             .problems(&self.sub, &self.all, values, self.free, smoothness);
-        // tables decided before the texels are fitted, in their order (not the threads')
+        // tables decided before the texels are fitted, in their order (not the threads'); the
+        // texels a lattice serves read none
+        let g = Globals::of(set, model.as_ref(), self.sub.channels)
+            .with_grid_lattice(self.lattice.as_ref());
         let mut plan = TablePlan::default();
         for (p, v) in problems.iter().zip(values.iter()) {
-            plan.meet(p.grid_key(v));
+            if !g.lattice_serves(p) {
+                plan.meet(p.grid_key(v));
+            }
         }
-        let g = Globals::of(set, model.as_ref(), self.sub.channels).with_tables(plan);
+        let g = g.with_tables(plan);
         let fitted: Vec<(TexelValues, f64)> = problems
             .par_iter()
             .zip(values.par_iter())

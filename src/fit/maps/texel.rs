@@ -74,6 +74,13 @@ impl<'m> Globals<'m> {
         self
     }
 
+    /// With a grid-only copy of `lattice` ([`DirectionLattice::grid_only`]), where there is
+    /// one: the global stage's.
+    pub(super) fn with_grid_lattice(mut self, lattice: Option<&DirectionLattice>) -> Self {
+        self.lattice = lattice.map(DirectionLattice::grid_only);
+        self
+    }
+
     /// With the column tables of `plan` (none without one: every texel then evaluates the
     /// model in its grid and coarse searches).
     pub(super) fn with_tables(mut self, plan: TablePlan) -> Self {
@@ -452,15 +459,9 @@ impl Texel {
             if self.free.height { HEIGHT_GRID } else { 1 },
             if self.free.psi { PSI_GRID } else { 1 },
         );
-        // grid point (i, j) is table node (i TABLE_H_PER_GRID, j TABLE_PSI_PER_GRID)
-        let node_of = |k: usize| {
-            (
-                (k / np) * if nh > 1 { TABLE_H_PER_GRID } else { 0 },
-                (k % np) * if np > 1 { TABLE_PSI_PER_GRID } else { 0 },
-            )
-        };
+        // grid point k = (k / np, k % np) is table node ColumnTable::grid_node of it
         let point = |k: usize| {
-            let (j, l) = node_of(k);
+            let (j, l) = ColumnTable::grid_node(th, tp, k / np, k % np);
             let (h, psi) = ColumnTable::node(th, tp, g, start, j, l);
             let mut v = *start;
             v.height = h;
@@ -471,10 +472,7 @@ impl Texel {
             .map(|k| {
                 let mut v = point(k);
                 let r = match table {
-                    Some(t) => {
-                        let (j, l) = node_of(k);
-                        self.solve(g, &t.at(j, l), &mut v)
-                    }
+                    Some(t) => self.solve(g, &t.at_grid(k / np, k % np), &mut v),
                     None => {
                         let cols = self.columns(g, &v);
                         self.solve(g, &cols, &mut v)
@@ -506,6 +504,8 @@ impl Texel {
         table: Option<&Tabled>,
     ) -> Vec<(TexelValues, f64)> {
         let mut minima: Vec<(TexelValues, f64)> = Vec::new();
+        // a grid-only table serves the grid alone
+        let table = table.filter(|t| t.interpolates());
         for (v, c) in candidates {
             // on the table where there is one, then the model's own cost there
             let (v, c) = self.compass(g, start, v, c, (1.0, COMPASS_COARSE), table);
