@@ -735,8 +735,9 @@ pub fn memory_rows(
     Ok(rows)
 }
 
-/// RMS error of the recovered H and psi against the truth, and how the errors compare with
-/// the reported standard errors.
+/// RMS and largest error of the recovered H and psi against the truth, how the errors compare
+/// with the reported standard errors, and the share of texels flagged (from the result
+/// `maps.json` beside the maps folder).
 fn map_accuracy(data: &Path, maps: &Path) -> Result<String> {
     let read = |name: &str| crate::load::image_io::read(&maps.join(name), None, None);
     let (h, hse, p, pse) = (
@@ -764,9 +765,19 @@ fn map_accuracy(data: &Path, maps: &Path) -> Result<String> {
     }
     let (rh, _, mzh, wh) = super::maps::stats(&eh, &zh);
     let (rp, _, mzp, wp) = super::maps::stats(&ep, &zp);
+    let largest = |e: &[f64]| e.iter().fold(0.0f64, |m, x| m.max(x.abs()));
+    let result: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(maps.with_extension("json"))?)?;
+    let flagged = result["maps"]["summary"]
+        .as_array()
+        .and_then(|s| s.iter().find_map(|m| m["flagged_fraction"].as_f64()))
+        .unwrap_or(f64::NAN);
     Ok(format!(
-        "RMS error H {rh:.4} radii (median |z| {mzh:.2}, {:.1} % within 3 se), psi {rp:.3} deg (median |z| {mzp:.2}, {:.1} % within 3 se)",
+        "RMS error H {rh:.4} radii (largest {:.3}; median |z| {mzh:.2}, {:.1} % within 3 se), psi {rp:.3} deg (largest {:.2}; median |z| {mzp:.2}, {:.1} % within 3 se); {:.1} % of texels flagged",
+        largest(&eh),
         100.0 * wh,
-        100.0 * wp
+        largest(&ep),
+        100.0 * wp,
+        100.0 * flagged
     ))
 }

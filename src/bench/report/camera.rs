@@ -208,10 +208,17 @@ fn ratio_section(run: &CameraRun) -> String {
          The same 20 mm swatch, 8 images, maps + globals, once with directional lights and \
          orthographic cameras and once with the near rig (below), one after the other; wall time \
          of each `fibrefit fit --maps` and their ratio (goal of issue 41: at most {PINHOLE_RATIO_GOAL}x, \
-         with equal accuracy). Where the small sizes' extra cost goes: a fixed number of lattice \
-         tables (each 65 x 192 model batches per image, as many nodes at 160 px as at 1024 px: the \
-         directions turn by the same angles over the swatch), and each texel's columns blended \
-         from four tables instead of read from one.\n\n\
+         with equal accuracy). Where the pinhole capture's extra cost goes (perf, 160 and 512 px): \
+         the lattice's tables (each 65 x 192 model batches per image, as many nodes at 160 px as \
+         at 1024 px: the directions turn by the same angles over the swatch, ~0.3 s on 2 cores), \
+         each texel's columns blended from four tables instead of read from one (the grid reads \
+         a compact copy of each table's grid points: read across the full tables, a cache miss \
+         per point had cost more than the blend itself), and the global stage's sampled texels, \
+         whose grids read grid-only lattice tables (before: the model, 12 % of the 160 px run). \
+         Texels fitting over 3x worse than the noise search a grid 4x finer in psi \
+         (`RESEARCH_ABOVE`): the pinhole capture's sharp lobe left ten texels at 512 px in a \
+         wrong valley (H off by ~1 radius within a tiny standard error), which was its whole \
+         excess RMS error.\n\n\
          | size | orthographic [s] | pinhole [s] | ratio | lattice nodes | orthographic maps | pinhole maps |\n\
          |---|---|---|---|---|---|---|\n"
     );

@@ -275,6 +275,14 @@ pub(super) enum Tabled {
 }
 
 impl Tabled {
+    /// The columns at table node (j, k) (a table that [`Self::interpolates`]).
+    pub(super) fn at(&self, j: usize, k: usize) -> std::borrow::Cow<'_, [[f64; 4]]> {
+        match self {
+            Tabled::Shared(t) => std::borrow::Cow::Borrowed(t.at(j, k)),
+            Tabled::Blend(b) => std::borrow::Cow::Owned(b.at(j, k)),
+        }
+    }
+
     /// The columns at grid point (i, l) (table node [`ColumnTable::grid_node`]).
     pub(super) fn at_grid(&self, i: usize, l: usize) -> std::borrow::Cow<'_, [[f64; 4]]> {
         match self {

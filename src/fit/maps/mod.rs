@@ -68,6 +68,14 @@ pub use texel_stage::*;
 pub use uncertainty::GlobalSchur;
 use uncertainty::*;
 
+/// A texel whose best cost is above this many times the residual variance the texel stage
+/// expects (over its degrees of freedom) searches again from the minima of a grid
+/// [`FINE_PSI`] times finer in psi: a chi-square of ~20 degrees of freedom passes 3x its mean
+/// about once in 10^5 texels, while a texel of the pinhole benchmark whose true minimum lay
+/// between the grid's azimuths was left 20x above it (`reports/camera_resolution.md`).
+pub const RESEARCH_ABOVE: f64 = 3.0;
+/// Azimuths of the finer grid per azimuth of the grid (3.75 degrees apart).
+pub const FINE_PSI: usize = 4;
 /// Grid minima a per-texel fit polishes (besides its start).
 pub const TEXEL_STARTS: usize = 3;
 /// Heights of the per-texel grid, from 0 to H_max.

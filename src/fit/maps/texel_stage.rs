@@ -84,7 +84,9 @@ pub fn texel_stage(
     let free = free_of(req);
     let set = fix_mapped(r.set, req);
     let model = rung_of(&set, cfg);
-    let g = Globals::of(&set, model.as_ref(), store.channels).with_lattice(store, free);
+    let g = Globals::of(&set, model.as_ref(), store.channels)
+        .with_lattice(store, free)
+        .with_variance(variance_hint);
     // the globals free in the global stage are those its Schur complement names (a result read
     // back holds every global fixed)
     let steps = GlobalSteps::new(&freed(&set, schur), cfg);
