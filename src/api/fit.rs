@@ -653,6 +653,8 @@ fn renderer_stage(
     let id = cfg.model_id()?;
     let fuzz = cfg.listed_fuzz_parameter().is_some();
     let mut out = Vec::new();
+    // large data: a seeded subset (fit::CHECK_SAMPLES), which each entry's `data` counts
+    let samples = fit::check_subset(&data.samples, cfg.seed);
     for rid in crate::model::ModelId::ALL {
         let Some(renderer) = rid.rung().renderer else {
             continue;
@@ -669,7 +671,7 @@ fn renderer_stage(
         rc.free_unlisted_shapes(rid);
         let started = std::time::Instant::now();
         let quiet = crate::progress::Progress::quiet();
-        let fitted = fit::fit_with_hints(&data.samples, &rc, &quiet, &[]).and_then(|o| {
+        let fitted = fit::fit_with_hints(&samples, &rc, &quiet, &[]).and_then(|o| {
             let model = model_for(
                 &o.set,
                 rc.knobs.quadrature_order,
@@ -681,7 +683,7 @@ fn renderer_stage(
                 config: &rc,
                 outcome: &o,
                 model: model.as_ref(),
-                samples: &data.samples,
+                samples: &samples,
                 data: &req.data,
                 data_sha256: req.held.as_ref().map(|h| h.sha256.clone()),
                 stride: req.load.subsample.stride,
@@ -766,9 +768,15 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         }
     }
     // the floor: what the data themselves allow, on the held-out samples (not for maps)
+    // (on a seeded subset of large data, fit::CHECK_SAMPLES, unless a selection's folds measured
+    // the model's held-out error on all of them)
     if global_work.is_none() {
         let sel = selection.as_ref();
-        fit::floor::judge::fit_stage(&data.samples, &cfg, &mut outcome, sel, &req.progress);
+        let checked = match sel {
+            Some(_) => std::borrow::Cow::Borrowed(&data.samples),
+            None => fit::check_subset(&data.samples, cfg.seed),
+        };
+        fit::floor::judge::fit_stage(&checked, &cfg, &mut outcome, sel, &req.progress);
     }
     // parameters recovered per texel are not fixed: say so
     if global_work.is_some() {

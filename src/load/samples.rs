@@ -107,6 +107,22 @@ pub struct Samples {
     pub scale_rel_se: Option<[f64; 3]>,
 }
 
+impl Samples {
+    /// These samples' description (kind, source, channels, ...) with no sample in it.
+    pub fn clone_without_samples(&self) -> Self {
+        Self {
+            samples: Vec::new(),
+            channels: self.channels,
+            kind: self.kind.clone(),
+            source: self.source.clone(),
+            dropped: self.dropped.clone(),
+            skipped_examples: self.skipped_examples.clone(),
+            image_size: self.image_size,
+            scale_rel_se: self.scale_rel_se,
+        }
+    }
+}
+
 /// The largest BRDF value a measured file (RGL `.bsdf`, MERL `.binary`) may give, in 1/sr: a
 /// measured mirror-like peak stays in the thousands (the MERL and RGL databases' largest are
 /// below 10^4); beyond 10^6 the file is not a measurement.
