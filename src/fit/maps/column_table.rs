@@ -127,14 +127,22 @@ impl ColumnTable {
         start: &TexelValues,
     ) -> Self {
         let (nh, np) = Self::dims(free);
-        let mut cols = Vec::with_capacity(nh * np * dirs.len());
-        for j in 0..nh {
-            for k in 0..np {
-                let (h, psi) = Self::node(nh, np, g, start, j, k);
-                cols.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi, None));
-            }
-        }
+        let nodes = (0..nh).flat_map(|j| (0..np).map(move |k| (j, k)));
+        let cols = Self::columns_at(dirs, g, nodes.map(|(j, k)| Self::node(nh, np, g, start, j, k)));
         Self::new(nh, np, dirs.len(), cols)
+    }
+
+    /// The model columns of the observations `dirs` at each (H, psi) of `points`, in turn.
+    fn columns_at(
+        dirs: &[(Vec3, Vec3)],
+        g: &Globals,
+        points: impl Iterator<Item = (f64, f64)>,
+    ) -> Vec<[f64; 4]> {
+        let mut cols = Vec::new();
+        for (h, psi) in points {
+            cols.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi, None));
+        }
+        cols
     }
 
     /// [`Self::build_for`] at the grid's points alone ([`Self::at_grid`]; [`Self::at`] and the
@@ -148,14 +156,15 @@ impl ColumnTable {
     ) -> Self {
         let (nh, np) = Self::dims(free);
         let (gh, gp) = Self::grid_dims(nh, np);
-        let mut grid = Vec::with_capacity(gh * gp * dirs.len());
-        for i in 0..gh {
-            for l in 0..gp {
+        let points = (0..gh).flat_map(|i| (0..gp).map(move |l| (i, l)));
+        let grid = Self::columns_at(
+            dirs,
+            g,
+            points.map(|(i, l)| {
                 let (j, k) = Self::grid_node(nh, np, i, l);
-                let (h, psi) = Self::node(nh, np, g, start, j, k);
-                grid.extend(model_columns(g, dirs.iter().map(|(l, v)| (l, v)), h, psi, None));
-            }
-        }
+                Self::node(nh, np, g, start, j, k)
+            }),
+        );
         Self {
             nh,
             np,

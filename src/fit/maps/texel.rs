@@ -485,19 +485,35 @@ impl Texel {
             if self.free.psi { PSI_GRID } else { 1 },
         );
         // grid point k = (k / np, k % np) is table node ColumnTable::grid_node of it
-        let point = |k: usize| {
-            let (j, l) = ColumnTable::grid_node(th, tp, k / np, k % np);
-            let (h, psi) = ColumnTable::node(th, tp, g, start, j, l);
-            let mut v = *start;
-            v.height = h;
-            v.psi = psi;
-            v
-        };
+        self.grid_over(
+            g,
+            start,
+            (nh, np),
+            |k| ColumnTable::grid_node(th, tp, k / np, k % np),
+            |k, _| table.map(|t| t.at_grid(k / np, k % np)),
+        )
+    }
+
+    /// The cost and solved values at `nh` x `np` points, point k at table node `node(k)`, its
+    /// columns `read(k, node)` where that gives them, else the model's.
+    fn grid_over<'t>(
+        &self,
+        g: &Globals,
+        start: &TexelValues,
+        (nh, np): (usize, usize),
+        node: impl Fn(usize) -> (usize, usize),
+        read: impl Fn(usize, (usize, usize)) -> Option<std::borrow::Cow<'t, [[f64; 4]]>>,
+    ) -> Grid {
+        let (th, tp) = ColumnTable::dims(self.free);
         let points = (0..nh * np)
             .map(|k| {
-                let mut v = point(k);
-                let r = match table {
-                    Some(t) => self.solve(g, &t.at_grid(k / np, k % np), &mut v),
+                let (j, l) = node(k);
+                let (h, psi) = ColumnTable::node(th, tp, g, start, j, l);
+                let mut v = *start;
+                v.height = h;
+                v.psi = psi;
+                let r = match read(k, (j, l)) {
+                    Some(cols) => self.solve(g, &cols, &mut v),
                     None => {
                         let cols = self.columns(g, &v);
                         self.solve(g, &cols, &mut v)
@@ -532,25 +548,13 @@ impl Texel {
         let np = PSI_GRID * FINE_PSI;
         let step = TABLE_PSI_PER_GRID / FINE_PSI;
         let table = table.filter(|t| t.interpolates());
-        let points = (0..nh * np)
-            .map(|k| {
-                let (j, _) = ColumnTable::grid_node(th, tp, k / np, 0);
-                let l = (k % np) * step;
-                let (h, psi) = ColumnTable::node(th, tp, g, start, j, l);
-                let mut v = *start;
-                v.height = h;
-                v.psi = psi;
-                let r = match table {
-                    Some(t) => self.solve(g, &t.at(j, l), &mut v),
-                    None => {
-                        let cols = self.columns(g, &v);
-                        self.solve(g, &cols, &mut v)
-                    }
-                };
-                (r.iter().map(|x| x * x).sum(), v)
-            })
-            .collect();
-        Grid { nh, np, points }
+        self.grid_over(
+            g,
+            start,
+            (nh, np),
+            |k| (ColumnTable::grid_node(th, tp, k / np, 0).0, (k % np) * step),
+            |_, (j, l)| table.map(|t| t.at(j, l)),
+        )
     }
 
     /// Whether `w` and `v` are one minimum: H within 2% of H_max, psi within a degree, the
