@@ -271,9 +271,7 @@ pub fn check_subset(samples: &Samples, seed: u64) -> std::borrow::Cow<'_, Sample
     idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed ^ 0x6368_6563_6b73));
     idx.truncate(CHECK_SAMPLES);
     idx.sort_unstable();
-    let mut sub = samples.clone_without_samples();
-    sub.samples = idx.iter().map(|&i| samples.samples[i].clone()).collect();
-    std::borrow::Cow::Owned(sub)
+    std::borrow::Cow::Owned(samples.subset(&idx))
 }
 
 /// Azimuths are defined modulo 180 degrees: report them in [-90, 90).

@@ -108,10 +108,11 @@ pub struct Samples {
 }
 
 impl Samples {
-    /// These samples' description (kind, source, channels, ...) with no sample in it.
-    pub fn clone_without_samples(&self) -> Self {
+    /// The samples at `idx`, in that order, with these samples' description (kind, source,
+    /// channels, ...); the other samples are not copied.
+    pub fn subset(&self, idx: &[usize]) -> Self {
         Self {
-            samples: Vec::new(),
+            samples: idx.iter().map(|&i| self.samples[i].clone()).collect(),
             channels: self.channels,
             kind: self.kind.clone(),
             source: self.source.clone(),

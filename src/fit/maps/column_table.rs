@@ -228,13 +228,12 @@ impl ColumnTable {
     }
 
     /// Add `weight` times the interpolation at (H, psi) of the observations `rows` to `out`
-    /// (one entry per row; `None`: the table's own rows, in order): the lattice's blend
-    /// ([`DirectionLattice`]), whose tables share their nodes, so [`Self::around`] is found
-    /// once for all of them.
+    /// (one entry per row), the nodes `around` it ([`Self::around`]): the lattice's blend
+    /// ([`DirectionLattice`]), whose tables share their nodes, so that is found once for all.
     pub(super) fn accumulate(
         &self,
         around: (usize, usize, f64, usize, usize, f64),
-        rows: Option<&[usize]>,
+        rows: &[usize],
         weight: f64,
         out: &mut [[f64; 4]],
     ) {
@@ -251,23 +250,9 @@ impl ColumnTable {
             weight * t * (1.0 - u),
             weight * t * u,
         ];
-        let add = |o: &mut [f64; 4], (a, b, c, d): (&[f64; 4], &[f64; 4], &[f64; 4], &[f64; 4])| {
+        for (o, &r) in out.iter_mut().zip(rows) {
             for m in 0..4 {
-                o[m] += w[0] * a[m] + w[1] * b[m] + w[2] * c[m] + w[3] * d[m];
-            }
-        };
-        match rows {
-            None => {
-                let n = out.len();
-                let nodes = a[..n].iter().zip(&b[..n]).zip(&c[..n]).zip(&d[..n]);
-                for (o, (((a, b), c), d)) in out.iter_mut().zip(nodes) {
-                    add(o, (a, b, c, d));
-                }
-            }
-            Some(rows) => {
-                for (o, &r) in out.iter_mut().zip(rows) {
-                    add(o, (&a[r], &b[r], &c[r], &d[r]));
-                }
+                o[m] += w[0] * a[r][m] + w[1] * b[r][m] + w[2] * c[r][m] + w[3] * d[r][m];
             }
         }
     }

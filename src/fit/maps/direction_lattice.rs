@@ -60,9 +60,6 @@ pub(super) struct DirectionLattice {
 pub(super) struct Blend {
     corners: Vec<(Arc<ColumnTable>, f64)>,
     rows: Vec<usize>,
-    /// Whether `rows` are the tables' own rows in order (every image observed once, in
-    /// order): the blend then reads the tables' slices as they are.
-    in_order: bool,
 }
 
 /// Angle between unit vectors, degrees.
@@ -303,13 +300,7 @@ impl DirectionLattice {
             .into_iter()
             .map(|(n, w)| self.table(g, n).map(|t| (t, w)))
             .collect::<Option<Vec<_>>>()?;
-        let in_order = rows.iter().enumerate().all(|(i, &r)| i == r)
-            && corners.iter().all(|(t, _)| t.nobs == rows.len());
-        Some(Blend {
-            corners,
-            rows,
-            in_order,
-        })
+        Some(Blend { corners, rows })
     }
 }
 
@@ -330,18 +321,9 @@ impl Blend {
         let mut out = vec![[0.0; 4]; self.rows.len()];
         for (t, w) in &self.corners {
             let cols = of(t);
-            let add = |o: &mut [f64; 4], c: &[f64; 4]| {
+            for (o, &r) in out.iter_mut().zip(&self.rows) {
                 for m in 0..4 {
-                    o[m] += w * c[m];
-                }
-            };
-            if self.in_order {
-                for (o, c) in out.iter_mut().zip(&cols[..self.rows.len()]) {
-                    add(o, c);
-                }
-            } else {
-                for (o, &r) in out.iter_mut().zip(&self.rows) {
-                    add(o, &cols[r]);
+                    o[m] += w * cols[r][m];
                 }
             }
         }
@@ -361,9 +343,8 @@ impl Blend {
         };
         // the tables share their nodes: one lookup serves them all
         let around = first.around(g, h, psi);
-        let rows = (!self.in_order).then_some(self.rows.as_slice());
         for (t, w) in &self.corners {
-            t.accumulate(around, rows, *w, &mut out);
+            t.accumulate(around, &self.rows, *w, &mut out);
         }
         out
     }

@@ -535,9 +535,15 @@ impl Texel {
         if !self.free.psi || self.free.lobe() {
             return false;
         }
+        cost > RESEARCH_ABOVE * variance * self.dof(g) as f64
+    }
+
+    /// The texel's residuals less its unknowns (at least 1).
+    fn dof(&self, g: &Globals) -> usize {
         let residuals = self.obs.len() * g.channels;
-        let dof = residuals.saturating_sub(per_texel_unknowns(self.free, g.channels));
-        cost > RESEARCH_ABOVE * variance * dof.max(1) as f64
+        residuals
+            .saturating_sub(per_texel_unknowns(self.free, g.channels))
+            .max(1)
     }
 
     /// The grid with [`FINE_PSI`] times as many azimuths (every 3.75 degrees, a table node
@@ -619,9 +625,7 @@ impl Texel {
         profiles: &mut [(TexelValues, f64)],
         best_cost: f64,
     ) {
-        let residuals = self.obs.len() * g.channels;
-        let dof = residuals.saturating_sub(per_texel_unknowns(self.free, g.channels));
-        let margin = MINIMA_MARGIN * AMBIGUITY_DELTA * best_cost / dof.max(1) as f64;
+        let margin = MINIMA_MARGIN * AMBIGUITY_DELTA * best_cost / self.dof(g) as f64;
         for m in profiles.iter_mut().filter(|m| m.1 - best_cost <= margin) {
             let (c, v) = self.cost_at(g, start, &self.nonlinear(&m.0));
             *m = (v, c);

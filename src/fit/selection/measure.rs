@@ -3,13 +3,6 @@
 
 use super::*;
 
-pub(super) fn subset(s: &Samples, idx: &[usize]) -> Samples {
-    Samples {
-        samples: idx.iter().map(|&i| s.samples[i].clone()).collect(),
-        ..s.clone()
-    }
-}
-
 /// The least-squares problem of `samples` at the fitted outcome `o` (its set and topology map)
 /// with the knobs of `cfg`: how a fit is evaluated on other samples.
 pub fn problem_at<'a>(o: &FitOutcome, cfg: &FitConfig, samples: &'a Samples) -> FitProblem<'a> {
@@ -304,8 +297,8 @@ pub(super) fn measure(
                 true => complement(n, fold),
                 false => plan.anchor.clone(),
             };
-            let train = subset(samples, &train_idx);
-            let test = subset(samples, fold);
+            let train = samples.subset(&train_idx);
+            let test = samples.subset(fold);
             let (_, e, v) = refit_and_predict(&train, &test, rc, anchor, iterations)?;
             Ok((e, v))
         })

@@ -17,7 +17,7 @@ pub fn select_with(
     }
     let plan = plan(n, cfg);
     let mut run = Run {
-        anchor_samples: subset(samples, &plan.anchor),
+        anchor_samples: samples.subset(&plan.anchor),
         counts: Counts::of(&plan, n),
         plan,
         samples,
