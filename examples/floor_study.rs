@@ -66,6 +66,7 @@ fn study(
                             k,
                             method,
                             coordinates,
+                            reciprocal: false,
                         },
                     },
                 )?;

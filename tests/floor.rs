@@ -2,7 +2,9 @@
 //! out on the model's own split, is what a model is judged against when the data carry no
 //! sigmas. On synthetic fibres with known noise the floor is close to the noise and the right
 //! model's ratio to it near 1; a model that lacks the sheen misses structure, and says where.
-//! The floor is finite and repeatable.
+//! The floor is finite and repeatable. Data that are not reciprocal (an instrument whose light
+//! and view responses differ; the shipped felt file) get a reciprocal predictor's floor beside
+//! it, and a reciprocal model within 1.2x of that is told so, not that it misses structure.
 
 use fibrefit::api::fit::{FitOptions, LoadFlags, Maps};
 use fibrefit::fit::config::{Metric, Selection};
@@ -264,4 +266,114 @@ fn score_gives_the_floor_of_the_data_it_scores_and_judges_by_it() {
         .as_str()
         .unwrap()
         .starts_with("misses structure the data hold"));
+}
+
+/// `data` (a goniometric CSV) as an instrument whose light and view responses differ would
+/// measure it: every value times exp(a (cos theta_i - cos theta_o)), not reciprocal.
+fn skewed(data: &Path, a: f64) -> PathBuf {
+    let text = std::fs::read_to_string(data).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+    let (ti, to) = (col("theta_i"), col("theta_o"));
+    let values: Vec<usize> = (0..header.len())
+        .filter(|&k| header[k].starts_with("brdf"))
+        .collect();
+    let mut csv = header.join(",") + "\n";
+    for l in lines {
+        let mut f: Vec<String> = l.split(',').map(str::to_string).collect();
+        let cos = |k: usize| f[k].parse::<f64>().unwrap().to_radians().cos();
+        let factor = (a * (cos(ti) - cos(to))).exp();
+        for &k in &values {
+            f[k] = format!("{:e}", f[k].parse::<f64>().unwrap() * factor);
+        }
+        csv += &(f.join(",") + "\n");
+    }
+    let path = data.with_file_name("skewed.csv");
+    std::fs::write(&path, csv).unwrap();
+    path
+}
+
+fn reciprocal_floor_of(samples: &Samples) -> f64 {
+    let (splits, validation) = splits_for(samples.samples.len(), &Selection::default(), 0).unwrap();
+    let choice = Choice {
+        reciprocal: true,
+        ..Choice::default()
+    };
+    floor_on(
+        samples,
+        &FloorRequest {
+            splits: &splits,
+            metric: Metric::Log,
+            eps: None,
+            seed: 0,
+            validation,
+            choice,
+        },
+    )
+    .unwrap()
+    .floor
+    .error
+}
+
+#[test]
+fn data_that_are_not_reciprocal_are_told_apart_and_a_material_is_judged_by_what_it_can_reach() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = synth_without_sigmas(dir.path(), 4000);
+    let load = |p: &Path| load_data(p, &LoadOptions::default()).unwrap();
+    // reciprocal data: the reciprocal predictor does about as well as the best
+    let plain = load(&data);
+    let (floor, reciprocal) = (floor_of(&plain, 0), reciprocal_floor_of(&plain));
+    eprintln!("reciprocal data: floor {floor:.4}, reciprocal floor {reciprocal:.4}");
+    assert!(reciprocal < 1.1 * floor, "{reciprocal} against {floor}");
+    // skewed by exp(0.6 (cos theta_i - cos theta_o)): ln f(l, v) - ln f(v, l) has an RMS of
+    // about 0.5, so no reciprocal model comes closer than about half that, beside the noise
+    let skewed = skewed(&data, 0.6);
+    let s = load(&skewed);
+    let (floor, reciprocal) = (floor_of(&s, 0), reciprocal_floor_of(&s));
+    eprintln!("skewed data: floor {floor:.4}, reciprocal floor {reciprocal:.4}");
+    assert!(reciprocal > 1.5 * floor, "{reciprocal} against {floor}");
+    // the right (reciprocal) model: beyond 1.2x the data's floor, within 1.2x of what a
+    // material can reach, and said so (no "misses structure")
+    let right = fit(&skewed, "poulin-fournier", Some(true));
+    let f = right.outcome.quality.floor.as_ref().expect("a floor");
+    eprintln!(
+        "right model, skewed data: {}",
+        fibrefit::fit::floor::text(f)
+    );
+    let r = f.reciprocal.as_ref().expect("a reciprocal floor");
+    assert!(
+        f.ratio > 1.2 && r.over_floor > 1.2,
+        "{} {}",
+        f.ratio,
+        r.over_floor
+    );
+    assert!(
+        r.within && r.ratio > 0.7,
+        "ratio to the reciprocal floor {}",
+        r.ratio
+    );
+    let v = &right.outcome.quality.verdict;
+    assert!(
+        v.starts_with("within 1.2x of what a material can reach: the data are not reciprocal"),
+        "{v}"
+    );
+    let w = &right.outcome.quality.warnings;
+    assert!(
+        w.iter()
+            .any(|w| w.starts_with("the data are not reciprocal")),
+        "{w:?}"
+    );
+    assert!(!w.iter().any(|w| w.contains("misses structure")), "{w:?}");
+    let q = serde_json::to_value(&right.result).unwrap()["quality"].clone();
+    assert_eq!(q["floor"]["reciprocal"]["floor"].as_f64(), Some(r.floor));
+    assert!(right.report_text.contains("reciprocal floor   ="));
+    // the shipped felt file is not reciprocal either: f(l, v) and f(v, l) differ by ~0.1 (log
+    // RMS) at its drawn pairs
+    let felt = load(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/data/rgl/acrylic_felt_green_rgb.bsdf"),
+    );
+    let (floor, reciprocal) = (floor_of(&felt, 0), reciprocal_floor_of(&felt));
+    eprintln!("the felt: floor {floor:.4}, reciprocal floor {reciprocal:.4}");
+    assert!(reciprocal > 1.5 * floor, "{reciprocal} against {floor}");
 }

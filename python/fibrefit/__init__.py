@@ -383,6 +383,16 @@ class Result:
         return self._r.floor_ratio
 
     @property
+    def reciprocal_floor(self) -> Optional[float]:
+        """Where the floor's predictor is not reciprocal, the same predictor made reciprocal
+        (each training sample also standing for its pair with light and view swapped): what any
+        material, a reciprocal BRDF, can reach. Above 1.2x the floor the data are not reciprocal
+        (a measurement's light and view responses differ), and a model within 1.2x of this is
+        "within 1.2x of what a material can reach". ``None`` where the floor is reciprocal
+        already or was not measured; details in ``result["quality"]["floor"]["reciprocal"]``."""
+        return self._r.reciprocal_floor
+
+    @property
     def undetermined(self) -> Dict[str, str]:
         """The values the data do not determine, label (``"spacing"``, ``"kd[b]"``) -> why (at a
         bound, held by a degeneracy, or a flat cost): the fit used them, but they are not

@@ -519,6 +519,15 @@ impl FitResult {
         self.run.outcome.quality.floor.as_ref().map(|f| f.ratio)
     }
 
+    /// Where the floor's predictor is not reciprocal: the same predictor made reciprocal (each
+    /// training sample also at its pair with light and view swapped), what any material can
+    /// reach; None where the floor is already reciprocal or was not measured.
+    #[getter]
+    fn reciprocal_floor(&self) -> Option<f64> {
+        let f = self.run.outcome.quality.floor.as_ref()?;
+        f.reciprocal.as_ref().map(|r| r.floor)
+    }
+
     /// Whether per-texel maps were recovered (written by `to_json`).
     #[getter]
     fn has_maps(&self) -> bool {

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 import fibrefit
-from conftest import CONFIGS, DATA, cli_binary
+from conftest import CONFIGS, DATA, ROOT, cli_binary
 
 CLI = cli_binary()
 needs_cli = pytest.mark.skipif(CLI is None, reason="no fibrefit command line built (cargo build)")
@@ -186,6 +186,18 @@ def test_fit_and_score_carry_the_verdict_and_the_floor(tmp_path):
     s = fibrefit.score(tmp_path / "fit.json", no_sigmas)
     assert s.floor is not None and s.floor_ratio is not None
     assert s.verdict == s.result["verdict"]
+
+
+def test_the_felt_is_not_reciprocal_and_the_floor_says_so():
+    """The shipped felt file is not reciprocal (f(l, v) and f(v, l) differ by 0.1 in log RMS):
+    the floor's predictor made reciprocal, what any material can reach, lies well above the
+    data's own floor, and the result carries both."""
+    felt = ROOT / "tests" / "data" / "rgl" / "acrylic_felt_green_rgb.bsdf"
+    r = fibrefit.fit(felt, model="lambert", fuzz=True, metric="log")
+    rec = r.result["quality"]["floor"]["reciprocal"]
+    assert r.reciprocal_floor == pytest.approx(rec["floor"])
+    assert r.reciprocal_floor > 1.2 * r.floor
+    assert rec["ratio"] == pytest.approx(r.result["quality"]["floor"]["heldout_error"] / rec["floor"])
 
 
 def test_undetermined_values_are_said(tmp_path):

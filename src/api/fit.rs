@@ -949,7 +949,8 @@ impl FitRun {
     /// sample count, the quality verdict, the errors, the spread of the residuals under its own
     /// name (`reduced_chi_square` with sigmas, `residual_variance` without: chi-square is not
     /// defined then, as the report says), the held-out error, the floor and their ratio
-    /// (`heldout_error`, `floor`, `floor_ratio`, when the floor was measured), the labels of the
+    /// (`heldout_error`, `floor`, `floor_ratio`, when the floor was measured; `reciprocal_floor`
+    /// where the floor's predictor is not reciprocal), the labels of the
     /// values the data do not determine (`undetermined`: `spacing`, `kd[b]`), and the work
     /// done.
     pub fn summary_json(&self, out: Option<&Path>) -> serde_json::Value {
@@ -981,6 +982,10 @@ impl FitRun {
             v["heldout_error"] = f.heldout_error.into();
             v["floor"] = f.floor.into();
             v["floor_ratio"] = f.ratio.into();
+            // data that are not reciprocal: what any material can reach
+            if let Some(r) = &f.reciprocal {
+                v["reciprocal_floor"] = r.floor.into();
+            }
         }
         v
     }

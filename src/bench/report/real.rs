@@ -34,6 +34,10 @@ struct CsvRow<'a> {
     ratio_to_floor: f64,
     chosen: bool,
     run_seconds: f64,
+    /// What a material can reach: a reciprocal predictor's floor where the floor's own
+    /// predictor is not reciprocal, else the floor.
+    reciprocal_floor: f64,
+    ratio_to_reciprocal_floor: f64,
 }
 
 fn fmt(x: Option<f64>, digits: usize) -> String {
@@ -49,6 +53,14 @@ fn floor_of(r: &RealRow) -> Option<f64> {
 
 fn ratio_of(r: &RealRow) -> Option<f64> {
     r.floor.as_ref().map(|f| f.ratio)
+}
+
+/// The chosen model's ratio to what a material can reach: a reciprocal predictor's floor where
+/// the floor's own is not reciprocal, else the floor itself.
+fn reciprocal_ratio_of(r: &RealRow) -> Option<f64> {
+    r.floor
+        .as_ref()
+        .map(|f| f.reciprocal.as_ref().map_or(f.ratio, |x| x.ratio))
 }
 
 /// Write `real_fabrics.md`, `real_fabrics.csv` and the drawn fit's hemisphere maps into `dir`;
@@ -100,6 +112,9 @@ fn write_csv(dir: &Path, rows: &[RealRow]) -> Result<()> {
         .iter()
         .flat_map(|r| {
             let floor = floor_of(r).unwrap_or(f64::NAN);
+            let reciprocal = r.floor.as_ref().map_or(f64::NAN, |f| {
+                f.reciprocal.as_ref().map_or(f.floor, |x| x.floor)
+            });
             r.candidates.iter().map(move |c| CsvRow {
                 data: &r.data,
                 kind: r.kind,
@@ -115,6 +130,8 @@ fn write_csv(dir: &Path, rows: &[RealRow]) -> Result<()> {
                 ratio_to_floor: c.cv_error / floor,
                 chosen: c.chosen,
                 run_seconds: r.seconds,
+                reciprocal_floor: reciprocal,
+                ratio_to_reciprocal_floor: c.cv_error / reciprocal,
             })
         })
         .collect();
@@ -135,6 +152,10 @@ fn intro(command: &str, seconds: f64) -> String {
          material's symmetric coordinates, nothing fitted) on the same folds or split, its own \
          share of the noise removed (`fit::floor`, [docs/fit-method.md](../docs/fit-method.md)). \
          **Ratio**: held-out error / floor; at most 1.2 is \"within what the data allow\". \
+         **Reciprocal floor**: where the floor's chart is not reciprocal, the same predictor \
+         with each training sample also at its reciprocal pair (light and view swapped): what any \
+         material, a reciprocal BRDF, can reach; above 1.2x the floor the data are not \
+         reciprocal (\"-\": the floor's own chart is reciprocal). \
          Measured files are drawn at seeded direction pairs (seed 23, theta up to 78 deg); CUReT \
          samples are their 205 geometries less the unmeasured ones (grey). The CUReT data are \
          read from the path given and are not in the repository (no redistribution licence).\n\n"
@@ -155,6 +176,14 @@ fn goals(rows: &[RealRow]) -> String {
         .filter(|r| r.kind == "CUReT" && r.fibrous)
         .filter_map(RealRow::simple_ratio)
         .collect();
+    let within_reciprocal = rows
+        .iter()
+        .filter(|r| reciprocal_ratio_of(r).is_some_and(|x| x <= FLOOR_GOAL))
+        .count();
+    let worst_reciprocal = rows
+        .iter()
+        .filter_map(|r| reciprocal_ratio_of(r).map(|x| (x, r.data.as_str())))
+        .max_by(|a, b| a.0.total_cmp(&b.0));
     let n_curet = curet.len();
     let med = median(curet.clone());
     let worst_curet = curet.iter().copied().fold(f64::NAN, f64::max);
@@ -169,6 +198,13 @@ fn goals(rows: &[RealRow]) -> String {
             .unwrap_or_else(|| "-".into()),
         met(within.len() == rows.len() && !rows.is_empty())
     );
+    md += &format!(
+        "| (beside it) within {FLOOR_GOAL}x of what a material can reach (the reciprocal floor where the data are not reciprocal) | {within_reciprocal} of {} within; worst {} | (figure) |\n",
+        rows.len(),
+        worst_reciprocal
+            .map(|(x, d)| format!("{x:.2}x ({d})"))
+            .unwrap_or_else(|| "-".into()),
+    );
     if n_curet > 0 {
         md += &format!(
             "| CUReT's fibrous samples: median held-out error at most {SIMPLE_GOAL}x the better of {} | median {med:.2}x over {n_curet} samples, worst {worst_curet:.2}x | {} |\n",
@@ -182,21 +218,31 @@ fn goals(rows: &[RealRow]) -> String {
 fn summary(rows: &[RealRow]) -> String {
     let mut md = String::from(
         "## Summary\n\n| data | samples | validation | chosen | held-out error | floor | ratio | \
-         where the excess lies | better simple fit | chosen / simple | time [s] |\n\
-         |---|---|---|---|---|---|---|---|---|---|---|\n",
+         reciprocal floor (x floor) | ratio to it | where the excess lies | better simple fit | \
+         chosen / simple | time [s] |\n\
+         |---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let c = r.chosen_candidate();
         let (where_text, ratio) = match &r.floor {
             Some(f) if f.within => ("within what the data allow".to_string(), format!("{:.2}", f.ratio)),
+            // the data are not reciprocal, and the model is as close as a material can come
+            Some(f) if f.verdict.starts_with("within") => (f.verdict.clone(), format!("**{:.2}**", f.ratio)),
             Some(f) => (f.where_text.clone(), format!("**{:.2}**", f.ratio)),
             None => (
                 format!("floor not measured: {}", r.floor_error.as_deref().unwrap_or("-")),
                 "-".into(),
             ),
         };
+        let (reciprocal, reciprocal_ratio) = match r.floor.as_ref().and_then(|f| f.reciprocal.as_ref()) {
+            Some(x) => (
+                format!("{:.4} ({:.2}x)", x.floor, x.over_floor),
+                format!("{:.2}", x.ratio),
+            ),
+            None => ("-".into(), "-".into()),
+        };
         md += &format!(
-            "| {}{} | {} | {} | **{}** | {} +- {} | {} | {ratio} | {where_text} | {} | {} | {:.1} |\n",
+            "| {}{} | {} | {} | **{}** | {} +- {} | {} | {ratio} | {reciprocal} | {reciprocal_ratio} | {where_text} | {} | {} | {:.1} |\n",
             r.data,
             if r.fibrous { "" } else { " (control)" },
             r.samples,

@@ -66,17 +66,47 @@ pub fn apply(q: &mut Quality, warnings: &mut Vec<String>, c: FloorCheck, sigmas_
     q.floor = Some(c);
 }
 
-/// The warning of a model beyond the floor's limit.
+/// The warning of a model beyond the floor's limit: one that misses structure the data hold,
+/// or, where the data are not reciprocal and the model is within the limit of a reciprocal
+/// predictor's floor, what no material can follow.
 pub fn misses_warning(c: &FloorCheck) -> String {
-    format!(
-        "the model misses structure the data hold: its held-out error {:.4} is {:.2}x the floor \
-         {:.4} ({} on the same {}; within {}x is what the data allow): {}",
-        c.heldout_error,
-        c.ratio,
-        c.floor,
-        c.estimate.predictor,
-        c.estimate.validation,
-        c.limit,
-        c.where_text
-    )
+    let not_reciprocal = c
+        .reciprocal
+        .as_ref()
+        .filter(|r| r.over_floor > super::NOT_RECIPROCAL);
+    match not_reciprocal {
+        Some(r) if r.within => format!(
+            "the data are not reciprocal: the model's held-out error {:.4} is {:.2}x the floor \
+             {:.4} ({} on the same {}), but {:.2}x the floor of the same predictor made \
+             reciprocal ({:.4}), what any material (a reciprocal BRDF) can reach: within {}x \
+             of that. The rest is the measurement's own asymmetry between light and view",
+            c.heldout_error,
+            c.ratio,
+            c.floor,
+            c.estimate.predictor,
+            c.estimate.validation,
+            r.ratio,
+            r.floor,
+            c.limit
+        ),
+        _ => format!(
+            "the model misses structure the data hold: its held-out error {:.4} is {:.2}x the floor \
+             {:.4} ({} on the same {}; within {}x is what the data allow{}): {}",
+            c.heldout_error,
+            c.ratio,
+            c.floor,
+            c.estimate.predictor,
+            c.estimate.validation,
+            c.limit,
+            match not_reciprocal {
+                Some(r) => format!(
+                    "; the data are not reciprocal, and {:.2}x the floor of the same predictor \
+                     made reciprocal ({:.4}: what any material can reach)",
+                    r.ratio, r.floor
+                ),
+                None => String::new(),
+            },
+            c.where_text
+        ),
+    }
 }

@@ -38,6 +38,13 @@ pub const ALL: [Coordinates; 4] = [
     Coordinates::DirectionsSymmetric,
 ];
 
+/// The embeddings whose predictions are reciprocal (each training sample also stands for its
+/// pair with light and view swapped): what a material, a reciprocal BRDF, can be compared with.
+pub const RECIPROCAL: [Coordinates; 2] = [
+    Coordinates::IsotropicReciprocal,
+    Coordinates::DirectionsSymmetric,
+];
+
 /// The azimuthal equidistant coordinates of a unit vector rotated by -`a` about the normal.
 fn chart(w: &crate::model::frame::Vec3, a: f64) -> [f64; 2] {
     let (sa, ca) = a.sin_cos();
@@ -49,6 +56,11 @@ fn chart(w: &crate::model::frame::Vec3, a: f64) -> [f64; 2] {
 }
 
 impl Coordinates {
+    /// Whether the predictor in these coordinates is reciprocal ([`RECIPROCAL`]).
+    pub fn is_reciprocal(self) -> bool {
+        RECIPROCAL.contains(&self)
+    }
+
     /// In words, for the report.
     pub fn text(self) -> &'static str {
         match self {

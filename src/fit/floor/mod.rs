@@ -24,6 +24,13 @@
 //! - **The verdict.** A model whose held-out error is within [`WITHIN`] times the floor is
 //!   "within 1.2x of what the data allow"; beyond, it "misses structure the data hold", and
 //!   where the excess concentrates is said in words ([`regions`]).
+//! - **Reciprocity.** A material is reciprocal, f(l, v) = f(v, l); measurements need not be (a
+//!   gonioreflectometer's light and view responses differ; a measured file's incidence slices
+//!   are measured one by one). Where the chosen chart is not reciprocal, the same predictor is
+//!   measured again among the reciprocal charts ([`ReciprocalFloor`]): what any BRDF can
+//!   reach. Above [`NOT_RECIPROCAL`] times the floor the data are not reciprocal, and a model
+//!   within [`WITHIN`] times that floor (but not the data's own) is "within 1.2x of what a
+//!   material can reach", not a model that misses structure.
 
 pub mod judge;
 pub mod knn;
@@ -162,6 +169,9 @@ pub struct Choice {
     pub method: Method,
     /// The embedding; `None`: the one that predicts the training samples better left-one-out.
     pub coordinates: Option<Coordinates>,
+    /// Choose among the reciprocal embeddings only ([`knn::RECIPROCAL`]; with `coordinates`
+    /// `None`): the floor of what a material, a reciprocal BRDF, can reach.
+    pub reciprocal: bool,
 }
 
 impl Default for Choice {
@@ -170,6 +180,7 @@ impl Default for Choice {
             k: NEIGHBOURS,
             method: METHOD,
             coordinates: None,
+            reciprocal: false,
         }
     }
 }
@@ -191,9 +202,10 @@ fn chosen_predictor(train: &[&Sample], space: &Space, seed: u64, c: &Choice) -> 
     let mut idx: Vec<usize> = (0..train.len()).collect();
     idx.shuffle(&mut rand::rngs::StdRng::seed_from_u64(seed ^ 0xf100));
     idx.truncate(MAX_CHOICE);
-    let candidates = match c.coordinates {
-        Some(x) => vec![x],
-        None => knn::ALL.to_vec(),
+    let candidates = match (c.coordinates, c.reciprocal) {
+        (Some(x), _) => vec![x],
+        (None, true) => knn::RECIPROCAL.to_vec(),
+        (None, false) => knn::ALL.to_vec(),
     };
     let mut best: Option<(f64, Predictor)> = None;
     for coordinates in candidates {
@@ -409,22 +421,70 @@ pub struct FloorCheck {
     pub half_vector_bins: Vec<regions::Region>,
     /// How the floor was measured.
     pub estimate: Floor,
+    /// Where the floor's predictor is not reciprocal: the same predictor among the reciprocal
+    /// embeddings, what any material (a reciprocal BRDF) can reach on these data.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reciprocal: Option<ReciprocalFloor>,
+}
+
+/// The floor of a reciprocal predictor (each training sample also standing for its pair with
+/// light and view swapped): data that are not reciprocal (a measurement's light and view
+/// responses differ) hold structure no material can follow, so a BRDF cannot come closer than
+/// this.
+#[derive(Clone, Debug, Serialize)]
+pub struct ReciprocalFloor {
+    /// Its held-out error ([`Floor::error`]).
+    pub floor: f64,
+    /// Its standard error.
+    pub standard_error: f64,
+    /// The reciprocal embedding chosen.
+    pub coordinates: Coordinates,
+    /// This floor over the data's own: how far the data are from reciprocal (near 1: they
+    /// are).
+    pub over_floor: f64,
+    /// The model's held-out error over this floor.
+    pub ratio: f64,
+    /// ratio <= [`WITHIN`]: as close as a material can come.
+    pub within: bool,
+}
+
+/// Above this many times the data's own floor, a reciprocal predictor's says the data are not
+/// reciprocal (below it, the two differ by about their standard errors).
+pub const NOT_RECIPROCAL: f64 = 1.2;
+
+/// The floor of `req` among the reciprocal embeddings when `floor`'s predictor is not one
+/// (`None` when it is, or when it cannot be measured).
+fn reciprocal_floor(samples: &Samples, req: &FloorRequest, floor: &Floor) -> Option<Floor> {
+    if floor.coordinates.is_reciprocal() || req.choice.coordinates.is_some() {
+        return None;
+    }
+    let choice = Choice {
+        reciprocal: true,
+        ..req.choice
+    };
+    let req = FloorRequest {
+        splits: req.splits,
+        metric: req.metric,
+        eps: req.eps,
+        seed: req.seed,
+        validation: req.validation.clone(),
+        choice,
+    };
+    floor_on(samples, &req).ok().map(|r| r.floor)
 }
 
 /// The model's held-out errors `model` against the floor on the same splits (each training
 /// part's log floors, as the model's fold fits were judged).
 pub fn check(samples: &Samples, metric: Metric, model: &HeldOut, seed: u64) -> Result<FloorCheck> {
-    let run = floor_on(
-        samples,
-        &FloorRequest {
-            splits: &model.splits,
-            metric,
-            eps: None,
-            seed,
-            validation: model.validation.clone(),
-            choice: Choice::default(),
-        },
-    )?;
+    let req = FloorRequest {
+        splits: &model.splits,
+        metric,
+        eps: None,
+        seed,
+        validation: model.validation.clone(),
+        choice: Choice::default(),
+    };
+    let run = floor_on(samples, &req)?;
     let mut per_sample = vec![None; samples.samples.len()];
     let tests = model.splits.iter().flat_map(|s| s.test.iter());
     for ((&i, e), m) in tests.zip(&model.errors).zip(&model.values) {
@@ -443,23 +503,45 @@ pub fn check(samples: &Samples, metric: Metric, model: &HeldOut, seed: u64) -> R
         })
         .collect();
     let (regs, bins) = regions::regions(&rows, samples.channels);
-    Ok(compare(model.error, model.standard_error, run.floor, regs, bins))
+    let reciprocal = reciprocal_floor(samples, &req, &run.floor);
+    Ok(compare(model.error, model.standard_error, run.floor, reciprocal, regs, bins))
 }
 
-/// The check of a model error `error` (standard error `se`) against `floor`.
+/// The check of a model error `error` (standard error `se`) against `floor` (and `reciprocal`,
+/// a reciprocal predictor's floor where `floor`'s is not one).
 pub fn compare(
     error: f64,
     se: f64,
     floor: Floor,
+    reciprocal: Option<Floor>,
     regions: Vec<regions::Region>,
     half_vector_bins: Vec<regions::Region>,
 ) -> FloorCheck {
     let ratio = error / floor.error.max(f64::MIN_POSITIVE);
     let within = ratio <= WITHIN;
+    let reciprocal = reciprocal.map(|r| {
+        let ratio = error / r.error.max(f64::MIN_POSITIVE);
+        ReciprocalFloor {
+            floor: r.error,
+            standard_error: r.standard_error,
+            coordinates: r.coordinates,
+            over_floor: r.error / floor.error.max(f64::MIN_POSITIVE),
+            ratio,
+            within: ratio <= WITHIN,
+        }
+    });
     let where_text = regions::words(&regions, &half_vector_bins);
-    let verdict = match within {
-        true => format!("within {WITHIN}x of what the data allow"),
-        false => format!(
+    let not_reciprocal = reciprocal
+        .as_ref()
+        .filter(|r| r.over_floor > NOT_RECIPROCAL);
+    let verdict = match (within, not_reciprocal) {
+        (true, _) => format!("within {WITHIN}x of what the data allow"),
+        (false, Some(r)) if r.within => format!(
+            "within {WITHIN}x of what a material can reach: the data are not reciprocal (a \
+             reciprocal predictor's floor is {:.2}x theirs), and no BRDF follows that",
+            r.over_floor
+        ),
+        (false, _) => format!(
             "misses structure the data hold: {}",
             regions::short(&regions).unwrap_or_else(|| format!(
                 "held-out error {ratio:.1}x the floor, spread over every region"
@@ -478,6 +560,7 @@ pub fn compare(
         regions,
         half_vector_bins,
         estimate: floor,
+        reciprocal,
     }
 }
 
@@ -487,18 +570,17 @@ pub fn compare(
 pub fn of_scored(samples: &Samples, metric: Metric, eps: [f64; 3], error: f64) -> Result<FloorCheck> {
     let sel = crate::fit::config::Selection::default();
     let (splits, validation) = super::selection::splits_for(samples.samples.len(), &sel, 0)?;
-    let run = floor_on(
-        samples,
-        &FloorRequest {
-            splits: &splits,
-            metric,
-            eps: Some(eps),
-            seed: 0,
-            validation,
-            choice: Choice::default(),
-        },
-    )?;
-    Ok(compare(error, f64::NAN, run.floor, vec![], vec![]))
+    let req = FloorRequest {
+        splits: &splits,
+        metric,
+        eps: Some(eps),
+        seed: 0,
+        validation,
+        choice: Choice::default(),
+    };
+    let run = floor_on(samples, &req)?;
+    let reciprocal = reciprocal_floor(samples, &req, &run.floor);
+    Ok(compare(error, f64::NAN, run.floor, reciprocal, vec![], vec![]))
 }
 
 /// The floor lines of the report's [[Quality]] (and of `fibrefit score`): the model's held-out error, the floor, their ratio, where the
@@ -545,6 +627,22 @@ pub fn text(f: &FloorCheck) -> String {
             ""
         }
     );
+    if let Some(r) = &f.reciprocal {
+        let _ = writeln!(
+            t,
+            "    reciprocal floor   = {:.4} +/- {:.4} ({:.2}x the floor; ratio {:.2}: the same predictor, each training sample also at its reciprocal pair, {} coordinates: what a material, a reciprocal BRDF, can reach{})",
+            r.floor,
+            r.standard_error,
+            r.over_floor,
+            r.ratio,
+            r.coordinates.text(),
+            if r.over_floor > NOT_RECIPROCAL {
+                "; the data are not reciprocal"
+            } else {
+                ""
+            }
+        );
+    }
     let _ = writeln!(t, "    where              = {}", f.where_text);
     for (name, p) in [
         ("reciprocal pairs", &e.reciprocal_pairs),
