@@ -5,7 +5,8 @@
 //!
 //! Writes OUTDIR/<set>.csv (a goniometric table: theta_i, phi_i, theta_o, phi_o in degrees,
 //! brdf_r, brdf_g, brdf_b in 1/sr, and `fold`: the split whose held-out part holds the sample,
-//! -1 where it only trains) and OUTDIR/floors.csv (set, samples, floor, validation). A measured
+//! -1 where it only trains) and OUTDIR/floors.csv (set, samples, floor, the reciprocal floor:
+//! what a material can reach, validation). A measured
 //! file is drawn as `bench real` draws it (3000 pairs, seed 23, theta up to 78 deg); a CUReT
 //! folder gives each of its samples. The splits and the floor are `--model auto`'s (seed 0).
 use fibrefit::fit::config::{Metric, Selection};
@@ -45,14 +46,33 @@ fn dump(s: &Samples, dir: &Path, name: &str, floors: &mut std::fs::File) -> anyh
             choice: Choice::default(),
         },
     )?;
+    // what a material can reach: the same predictor among the reciprocal charts
+    let reciprocal = match run.floor.coordinates.is_reciprocal() {
+        true => run.floor.error,
+        false => {
+            let choice = Choice {
+                reciprocal: true,
+                ..Choice::default()
+            };
+            let req = FloorRequest {
+                splits: &splits,
+                metric: Metric::Log,
+                eps: None,
+                seed: 0,
+                validation: validation.clone(),
+                choice,
+            };
+            floor_on(s, &req)?.floor.error
+        }
+    };
     writeln!(
         floors,
-        "{name},{},{:.6},\"{validation}\"",
+        "{name},{},{:.6},{reciprocal:.6},\"{validation}\"",
         s.samples.len(),
         run.floor.error
     )?;
     eprintln!(
-        "{name}: {} samples, {validation}, floor {:.4}",
+        "{name}: {} samples, {validation}, floor {:.4}, reciprocal floor {reciprocal:.4}",
         s.samples.len(),
         run.floor.error
     );
@@ -67,7 +87,7 @@ fn main() -> anyhow::Result<()> {
     let dir = Path::new(dir);
     std::fs::create_dir_all(dir)?;
     let mut floors = std::fs::File::create(dir.join("floors.csv"))?;
-    writeln!(floors, "set,samples,floor,validation")?;
+    writeln!(floors, "set,samples,floor,reciprocal_floor,validation")?;
     let path = Path::new(file);
     let name = path
         .file_stem()
