@@ -24,6 +24,22 @@ fn the_felt_is_inspected_fitted_and_scored() {
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("500") && text.contains("measured"), "{text}");
+    // the file is not reciprocal: f(l, v) and f(v, l) differ by ~0.1 in log (RMS) at its pairs
+    let j: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let r = &j["reciprocity"];
+    let all = r["rms_log_ratio_all"].as_f64().unwrap();
+    assert!(
+        r["pairs"].as_u64().unwrap() > 400 && all > 0.05 && all < 0.3,
+        "{r}"
+    );
+    assert_eq!(r["least_log_error"].as_f64(), Some(all / 2.0));
+    let o = fibrefit()
+        .args(["inspect", "--directions", "500"])
+        .arg(felt())
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("not reciprocal: no material"), "{text}");
 
     let dir = tempfile::tempdir().unwrap();
     let cfg = dir.path().join("lambert.toml");
@@ -95,6 +111,12 @@ fn a_merl_table_is_inspected_and_fitted() {
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    // MERL's half/difference layout is reciprocal by construction
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("RMS of the log ratio") && text.contains("(reciprocal)"),
+        "{text}"
+    );
     let out = dir.path().join("fit.json");
     let o = fibrefit()
         .arg("fit")

@@ -35,6 +35,60 @@ pub struct Summary {
     /// Goniometric CSV: the delimiter sniffed from the header (comma, tab, semicolon, whitespace).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub delimiter: Option<&'static str>,
+    /// Measured-BRDF files: how far the file is from reciprocal at the drawn pairs.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub reciprocity: Option<Reciprocity>,
+}
+
+/// A measured file evaluated both ways, f(l, v) and f(v, l), at the drawn direction pairs whose
+/// light and view both lie within its measured incidence. A material is reciprocal; a
+/// measurement need not be (its light and view responses differ, its incidence slices are
+/// measured one by one), and a model's log error on a pair and its swap is then at least half
+/// their log ratio.
+#[derive(Clone, Debug, Serialize)]
+pub struct Reciprocity {
+    /// Pairs evaluated both ways (both values positive).
+    pub pairs: usize,
+    /// Per channel, RMS over the pairs of ln f(l, v) - ln f(v, l).
+    pub rms_log_ratio: Vec<f64>,
+    /// The same over every channel.
+    pub rms_log_ratio_all: f64,
+    /// About the least RMS log error any reciprocal model (a material) can make on these pairs
+    /// and their swaps: half of `rms_log_ratio_all`.
+    pub least_log_error: f64,
+}
+
+/// Above this RMS log ratio a measured file is called not reciprocal (its own interpolation
+/// and rounding stay far below it).
+pub const RECIPROCAL_WITHIN: f64 = 0.01;
+
+impl Reciprocity {
+    /// `f` (a measured file; `None` outside its measured incidence) at `samples`' pairs, both
+    /// ways; `None` with no pair measured both ways.
+    pub fn of(f: &crate::model::BrdfFn, samples: &[Sample], channels: usize) -> Option<Self> {
+        let ratios: Vec<[f64; 3]> = samples
+            .par_iter()
+            .filter_map(|s| {
+                let (a, b) = (f(&s.l, &s.v)?, f(&s.v, &s.l)?);
+                let ok = (0..channels).all(|c| a[c] > 0.0 && b[c] > 0.0);
+                ok.then(|| std::array::from_fn(|c| (a[c] / b[c]).ln()))
+            })
+            .collect();
+        if ratios.is_empty() {
+            return None;
+        }
+        let n = ratios.len() as f64;
+        let rms_log_ratio: Vec<f64> = (0..channels)
+            .map(|c| (ratios.iter().map(|r| r[c] * r[c]).sum::<f64>() / n).sqrt())
+            .collect();
+        let all = (rms_log_ratio.iter().map(|x| x * x).sum::<f64>() / channels as f64).sqrt();
+        Some(Self {
+            pairs: ratios.len(),
+            rms_log_ratio,
+            rms_log_ratio_all: all,
+            least_log_error: all / 2.0,
+        })
+    }
 }
 
 /// The counts and ranges of [`Summary`], samples added one at a time.
@@ -127,6 +181,7 @@ impl Tally {
             skipped_examples: skipped_examples.to_vec(),
             format: None,
             delimiter: None,
+            reciprocity: None,
         }
     }
 }
@@ -146,6 +201,9 @@ pub fn summarise(path: &Path, opts: &LoadOptions) -> Result<Summary> {
     if let Some(f) = format {
         summary.delimiter = Some(f.delimiter.name());
         summary.format = Some(f.describe());
+    }
+    if let Some(f) = super::measured_brdf(path)? {
+        summary.reciprocity = Reciprocity::of(&f, &samples.samples, samples.channels);
     }
     Ok(summary)
 }
@@ -243,6 +301,21 @@ impl Summary {
         );
         for e in &self.skipped_examples {
             t += &format!("    skipped: {e}\n");
+        }
+        if let Some(r) = &self.reciprocity {
+            let per: Vec<String> = r.rms_log_ratio.iter().map(|x| format!("{x:.4}")).collect();
+            t += &format!(
+                "  reciprocity      f(l, v) against f(v, l) at {} drawn pairs: RMS of the log ratio {} ({})\n",
+                r.pairs,
+                per.join(" / "),
+                match r.rms_log_ratio_all > RECIPROCAL_WITHIN {
+                    true => format!(
+                        "not reciprocal: no material, a reciprocal BRDF, comes closer than about {:.4} RMS log error",
+                        r.least_log_error
+                    ),
+                    false => "reciprocal".to_string(),
+                }
+            );
         }
         t
     }
