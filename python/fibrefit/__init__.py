@@ -384,12 +384,13 @@ class Result:
 
     @property
     def reciprocal_floor(self) -> Optional[float]:
-        """Where the floor's predictor is not reciprocal, the same predictor made reciprocal
-        (each training sample also standing for its pair with light and view swapped): what any
-        material, a reciprocal BRDF, can reach. Above 1.2x the floor the data are not reciprocal
-        (a measurement's light and view responses differ), and a model within 1.2x of this is
-        "within 1.2x of what a material can reach". ``None`` where the floor is reciprocal
-        already or was not measured; details in ``result["quality"]["floor"]["reciprocal"]``."""
+        """Where the floor's predictor is not reciprocal and the model is beyond 1.2x the floor,
+        the same predictor made reciprocal (each training sample also standing for its pair with
+        light and view swapped): what any material, a reciprocal BRDF, can reach. Above 1.2x the
+        floor the data are not reciprocal (a measurement's light and view responses differ), and
+        a model within 1.2x of this is "within 1.2x of what a material can reach". ``None`` where
+        the floor is reciprocal already, the model within 1.2x of it, or no floor was measured;
+        details in ``result["quality"]["floor"]["reciprocal"]``."""
         return self._r.reciprocal_floor
 
     @property

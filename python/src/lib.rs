@@ -519,7 +519,8 @@ impl FitResult {
         self.run.outcome.quality.floor.as_ref().map(|f| f.ratio)
     }
 
-    /// Where the floor's predictor is not reciprocal: the same predictor made reciprocal (each
+    /// Where the floor's predictor is not reciprocal and the model is beyond 1.2x the floor:
+    /// the same predictor made reciprocal (each
     /// training sample also at its pair with light and view swapped), what any material can
     /// reach; None where the floor is already reciprocal or was not measured.
     #[getter]

@@ -152,10 +152,11 @@ fn intro(command: &str, seconds: f64) -> String {
          material's symmetric coordinates, nothing fitted) on the same folds or split, its own \
          share of the noise removed (`fit::floor`, [docs/fit-method.md](../docs/fit-method.md)). \
          **Ratio**: held-out error / floor; at most 1.2 is \"within what the data allow\". \
-         **Reciprocal floor**: where the floor's chart is not reciprocal, the same predictor \
-         with each training sample also at its reciprocal pair (light and view swapped): what any \
-         material, a reciprocal BRDF, can reach; above 1.2x the floor the data are not \
-         reciprocal (\"-\": the floor's own chart is reciprocal). \
+         **Reciprocal floor**: where the floor's chart is not reciprocal and the model is \
+         beyond 1.2x the floor, the same predictor with each training sample also at its \
+         reciprocal pair (light and view swapped): what any material, a reciprocal BRDF, can \
+         reach; above 1.2x the floor the data are not reciprocal (\"-\": the floor's own chart \
+         is reciprocal, or the model is within 1.2x of it). \
          Measured files are drawn at seeded direction pairs (seed 23, theta up to 78 deg); CUReT \
          samples are their 205 geometries less the unmeasured ones (grey). The CUReT data are \
          read from the path given and are not in the repository (no redistribution licence).\n\n"
