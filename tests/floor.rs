@@ -59,6 +59,11 @@ fn synth_noised(dir: &Path, count: usize, seed: u64) -> PathBuf {
 }
 
 fn floor_of(samples: &Samples, seed: u64) -> f64 {
+    floor_with(samples, seed, Choice::default())
+}
+
+/// The floor of `samples` on auto's splits with the predictor's settings `choice`.
+fn floor_with(samples: &Samples, seed: u64, choice: Choice) -> f64 {
     let (splits, validation) = splits_for(samples.samples.len(), &Selection::default(), 0).unwrap();
     floor_on(
         samples,
@@ -68,7 +73,7 @@ fn floor_of(samples: &Samples, seed: u64) -> f64 {
             eps: None,
             seed,
             validation,
-            choice: Choice::default(),
+            choice,
         },
     )
     .unwrap()
@@ -295,25 +300,11 @@ fn skewed(data: &Path, a: f64) -> PathBuf {
 }
 
 fn reciprocal_floor_of(samples: &Samples) -> f64 {
-    let (splits, validation) = splits_for(samples.samples.len(), &Selection::default(), 0).unwrap();
     let choice = Choice {
         reciprocal: true,
         ..Choice::default()
     };
-    floor_on(
-        samples,
-        &FloorRequest {
-            splits: &splits,
-            metric: Metric::Log,
-            eps: None,
-            seed: 0,
-            validation,
-            choice,
-        },
-    )
-    .unwrap()
-    .floor
-    .error
+    floor_with(samples, 0, choice)
 }
 
 #[test]

@@ -163,28 +163,27 @@ fn intro(command: &str, seconds: f64) -> String {
     )
 }
 
-fn goals(rows: &[RealRow]) -> String {
-    let within: Vec<&RealRow> = rows
+/// How many `rows` have `ratio` at most [`FLOOR_GOAL`], and the worst ratio with its data.
+fn within_goal(rows: &[RealRow], ratio: fn(&RealRow) -> Option<f64>) -> (usize, Option<(f64, &str)>) {
+    let within = rows
         .iter()
-        .filter(|r| ratio_of(r).is_some_and(|x| x <= FLOOR_GOAL))
-        .collect();
+        .filter(|r| ratio(r).is_some_and(|x| x <= FLOOR_GOAL))
+        .count();
     let worst = rows
         .iter()
-        .filter_map(|r| ratio_of(r).map(|x| (x, r.data.as_str())))
+        .filter_map(|r| ratio(r).map(|x| (x, r.data.as_str())))
         .max_by(|a, b| a.0.total_cmp(&b.0));
+    (within, worst)
+}
+
+fn goals(rows: &[RealRow]) -> String {
+    let (within, worst) = within_goal(rows, ratio_of);
     let curet: Vec<f64> = rows
         .iter()
         .filter(|r| r.kind == "CUReT" && r.fibrous)
         .filter_map(RealRow::simple_ratio)
         .collect();
-    let within_reciprocal = rows
-        .iter()
-        .filter(|r| reciprocal_ratio_of(r).is_some_and(|x| x <= FLOOR_GOAL))
-        .count();
-    let worst_reciprocal = rows
-        .iter()
-        .filter_map(|r| reciprocal_ratio_of(r).map(|x| (x, r.data.as_str())))
-        .max_by(|a, b| a.0.total_cmp(&b.0));
+    let (within_reciprocal, worst_reciprocal) = within_goal(rows, reciprocal_ratio_of);
     let n_curet = curet.len();
     let med = median(curet.clone());
     let worst_curet = curet.iter().copied().fold(f64::NAN, f64::max);
@@ -192,12 +191,12 @@ fn goals(rows: &[RealRow]) -> String {
     let mut md = String::from("## Issue 39's goals\n\n| goal | now | |\n|---|---|---|\n");
     md += &format!(
         "| every real file's chosen model within {FLOOR_GOAL}x of its floor | {} of {} within; worst {} | {} |\n",
-        within.len(),
+        within,
         rows.len(),
         worst
             .map(|(x, d)| format!("{x:.2}x ({d})"))
             .unwrap_or_else(|| "-".into()),
-        met(within.len() == rows.len() && !rows.is_empty())
+        met(within == rows.len() && !rows.is_empty())
     );
     md += &format!(
         "| (beside it) within {FLOOR_GOAL}x of what a material can reach (the reciprocal floor where the data are not reciprocal) | {within_reciprocal} of {} within; worst {} | (figure) |\n",

@@ -70,10 +70,7 @@ pub fn apply(q: &mut Quality, warnings: &mut Vec<String>, c: FloorCheck, sigmas_
 /// or, where the data are not reciprocal and the model is within the limit of a reciprocal
 /// predictor's floor, what no material can follow.
 pub fn misses_warning(c: &FloorCheck) -> String {
-    let not_reciprocal = c
-        .reciprocal
-        .as_ref()
-        .filter(|r| r.over_floor > super::NOT_RECIPROCAL);
+    let not_reciprocal = c.reciprocal.as_ref().filter(|r| r.data_not_reciprocal());
     match not_reciprocal {
         Some(r) if r.within => format!(
             "the data are not reciprocal: the model's held-out error {:.4} is {:.2}x the floor \

@@ -28,9 +28,10 @@
 //!   gonioreflectometer's light and view responses differ; a measured file's incidence slices
 //!   are measured one by one). Where the chosen chart is not reciprocal and the model is
 //!   beyond [`WITHIN`] times the floor, the same predictor is measured again among the
-//!   reciprocal charts ([`ReciprocalFloor`]): what any BRDF can reach. Above [`NOT_RECIPROCAL`] times the floor the data are not reciprocal, and a model
-//!   within [`WITHIN`] times that floor (but not the data's own) is "within 1.2x of what a
-//!   material can reach", not a model that misses structure.
+//!   reciprocal charts ([`ReciprocalFloor`]): what any BRDF can reach. Above
+//!   [`NOT_RECIPROCAL`] times the floor the data are not reciprocal, and a model within
+//!   [`WITHIN`] times that floor (but not the data's own) is "within 1.2x of what a material
+//!   can reach", not a model that misses structure.
 
 pub mod judge;
 pub mod knn;
@@ -256,6 +257,7 @@ fn held_out(splits: &[Split], seed: u64) -> Vec<Vec<usize>> {
 
 /// What [`floor_on`] measures on: the splits, the metric, log floors for every split (`None`:
 /// each split's training part's), the seed and the validation in words.
+#[derive(Clone)]
 pub struct FloorRequest<'a> {
     /// The folds or split (the model's).
     pub splits: &'a [Split],
@@ -453,6 +455,13 @@ pub struct ReciprocalFloor {
 /// reciprocal (below it, the two differ by about their standard errors).
 pub const NOT_RECIPROCAL: f64 = 1.2;
 
+impl ReciprocalFloor {
+    /// Whether it says the data are not reciprocal ([`NOT_RECIPROCAL`]).
+    pub fn data_not_reciprocal(&self) -> bool {
+        self.over_floor > NOT_RECIPROCAL
+    }
+}
+
 /// The floor of `req` among the reciprocal embeddings when `floor`'s predictor is not one and
 /// the model's error `error` is beyond [`WITHIN`] times `floor` (where the verdict can change;
 /// within, it costs a second predictor for nothing: 1.3x the wall time of a capture's global
@@ -467,12 +476,8 @@ fn reciprocal_floor(samples: &Samples, req: &FloorRequest, floor: &Floor, error:
         ..req.choice
     };
     let req = FloorRequest {
-        splits: req.splits,
-        metric: req.metric,
-        eps: req.eps,
-        seed: req.seed,
-        validation: req.validation.clone(),
         choice,
+        ..req.clone()
     };
     floor_on(samples, &req).ok().map(|r| r.floor)
 }
@@ -535,9 +540,7 @@ pub fn compare(
         }
     });
     let where_text = regions::words(&regions, &half_vector_bins);
-    let not_reciprocal = reciprocal
-        .as_ref()
-        .filter(|r| r.over_floor > NOT_RECIPROCAL);
+    let not_reciprocal = reciprocal.as_ref().filter(|r| r.data_not_reciprocal());
     let verdict = match (within, not_reciprocal) {
         (true, _) => format!("within {WITHIN}x of what the data allow"),
         (false, Some(r)) if r.within => format!(
@@ -640,7 +643,7 @@ pub fn text(f: &FloorCheck) -> String {
             r.over_floor,
             r.ratio,
             r.coordinates.text(),
-            if r.over_floor > NOT_RECIPROCAL {
+            if r.data_not_reciprocal() {
                 "; the data are not reciprocal"
             } else {
                 ""
