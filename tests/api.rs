@@ -150,6 +150,7 @@ fn held_arrays_and_tables_fit_as_their_file() {
         maps: Maps::None,
         progress: fibrefit::progress::Progress::quiet(),
         gltf_variant: None,
+        correction: None,
     };
     let from_file = fit::fit(&options.request(&file).unwrap()).unwrap();
     let samples = &from_file.samples.samples;

@@ -199,6 +199,19 @@ class Material:
         return list(self._m.warnings)
 
     @property
+    def correction(self) -> Optional[Dict[str, float]]:
+        """The smooth reciprocal correction kept on the rung where the rung missed what the data
+        hold and the correction paid held out: ``{"degree", "heldout_error", "rung_heldout_error"}``
+        (log metric); ``None`` when none was kept. Not a physical parameter: the rung's BRDF per
+        channel times exp(a Legendre series in cos theta_i, cos theta_o, cos dphi), symmetric in
+        light and view. ``Material`` of the result applies it (eval, sample); the coefficients
+        are ``result["correction"]["series"]``."""
+        c = self._r.correction
+        if c is None:
+            return None
+        return {"degree": c[0], "heldout_error": c[1], "rung_heldout_error": c[2]}
+
+    @property
     def undetermined(self) -> Dict[str, str]:
         """The result's values its data did not determine, label -> why (at a bound, held by a
         degeneracy, a flat cost): the material uses them as given, but they are not
@@ -443,6 +456,7 @@ def fit(
     progress: bool = False,
     threads: Optional[int] = None,
     gltf_variant: Optional[str] = None,
+    correction: Optional[bool] = None,
     stride: Optional[int] = None,
     fraction: Optional[float] = None,
     subsample_seed: Optional[int] = None,
@@ -474,7 +488,10 @@ def fit(
     ``threads``: worker threads (``None``: one per core, or ``RAYON_NUM_THREADS``);
     ``gltf_variant``: the ``gltf`` rung's, ``"khronos"`` (the Khronos specification) or
     ``"threejs"`` (what stock three.js r187 renders; ``--gltf-variant``), ``None`` the config's
-    ``knobs.gltf_variant`` or ``"khronos"``. The loading
+    ``knobs.gltf_variant`` or ``"khronos"``; ``correction``: ``False`` never fits a smooth
+    correction on the rung (``--no-correction``), ``None`` the config's (by default one is kept
+    where the rung misses what data without sigmas hold and it pays held out:
+    :attr:`Result.correction`). The loading
     flags as :func:`load_data`'s; ``stride``, ``fraction``, ``columns`` and ``angles`` merged
     with the config's as the command line merges them (the library does it, once for both).
     """
@@ -508,6 +525,7 @@ def fit(
             progress=progress,
             threads=threads,
             gltf_variant=gltf_variant,
+            correction=correction,
             stride=stride,
             fraction=fraction,
             subsample_seed=subsample_seed,

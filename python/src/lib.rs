@@ -529,6 +529,14 @@ impl FitResult {
         f.reciprocal.as_ref().map(|r| r.floor)
     }
 
+    /// The smooth correction kept on the rung: (degree, held-out error with it, the rung's
+    /// own); None when none paid or none was tried.
+    #[getter]
+    fn correction(&self) -> Option<(usize, f64, f64)> {
+        let c = self.run.outcome.correction.as_ref()?;
+        Some((c.correction.degree, c.error, c.rung_error))
+    }
+
     /// Whether per-texel maps were recovered (written by `to_json`).
     #[getter]
     fn has_maps(&self) -> bool {
@@ -581,12 +589,14 @@ impl FitResult {
 /// (overrides the config's), `metric` (linear, log, cosine), `fuzz` (True: `--fuzz`; False:
 /// `--no-fuzz`; None: the config's), `maps` a directory for per-texel maps (captures),
 /// `progress` (bars on stderr), `threads` (worker threads; None: one per core), `gltf_variant`
-/// (the gltf rung's: "khronos" or "threejs", as `--gltf-variant`), the loading
+/// (the gltf rung's: "khronos" or "threejs", as `--gltf-variant`), `correction` (False:
+/// `--no-correction`; None: the config's), the loading
 /// flags as `load_data`'s (merged with the config's as the command line merges them).
 #[pyfunction]
 #[pyo3(signature = (
     data=None, config=None, model=None, *, table=None, l=None, v=None, values=None, sigma=None,
     metric=None, fuzz=None, maps=None, progress=false, threads=None, gltf_variant=None,
+    correction=None,
     stride=None, fraction=None, subsample_seed=None, directions=None, direction_seed=None,
     max_theta=None, skip_bad_rows=false, small_angles_ok=false, columns=None, angles=None
 ))]
@@ -607,6 +617,7 @@ fn fit(
     progress: bool,
     threads: Option<usize>,
     gltf_variant: Option<String>,
+    correction: Option<bool>,
     stride: Option<usize>,
     fraction: Option<f64>,
     subsample_seed: Option<u64>,
@@ -641,6 +652,7 @@ fn fit(
         },
         progress: fibrefit::Progress::new(!progress),
         gltf_variant,
+        correction,
     };
     let source = FitSource::of(data, table, [l, v, values, sigma])?;
     let request = py

@@ -150,10 +150,14 @@ impl Evaluation {
                     Some(h) => shading.basis_at_height(&pair, h).unwrap_or_default(),
                     None => shading.basis(&pair),
                 };
+                let factor = match &params.correction {
+                    Some(k) => k.factor(&pair),
+                    None => [1.0; 3],
+                };
                 let mut brdf = [0.0; 3];
                 let mut intensity = [0.0; 3];
                 for c in 0..3 {
-                    brdf[c] = basis.brdf(&albedos, c);
+                    brdf[c] = basis.brdf(&albedos, c) * factor[c];
                     intensity[c] = match &preview {
                         Some(p) => albedos.diffuse[c] * preview_intensity(p, l.z),
                         None => model::intensity(brdf[c], &pair),

@@ -332,6 +332,18 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
             crate::fit::determined::warning(u)
         )
     }));
+    // a smooth correction on the rung: fibrefit applies it, the renderers' materials do not
+    if let Some(k) = &params.correction {
+        let w = format!(
+            "{}: the result's smooth correction of the rung (degree {}, `correction`) is not in \
+             this export: the renderer shows the rung alone (fibrefit's eval, render, score and \
+             Material apply it; the result's `correction.heldout` gives both errors)",
+            req.result.display(),
+            k.degree
+        );
+        req.progress.warn(&w);
+        lines.push(format!("NOT CARRIED: {w}"));
+    }
     // everything is built in memory first: a failure writes nothing
     let shader_text = match req.shader {
         Some(lang) => Some(shader_source(req, id, &params, lines.clone(), lang)?),

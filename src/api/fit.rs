@@ -125,6 +125,10 @@ pub struct FitOptions {
     /// The `gltf` rung's variant (`khronos` or `threejs`), overriding the config's
     /// `knobs.gltf_variant` ([`FitConfig::apply_gltf_variant`]).
     pub gltf_variant: Option<String>,
+    /// The smooth correction of the rung (`fit::correction`): `Some(false)` never
+    /// (`--no-correction`), `Some(true)` where it pays, `None` the config's
+    /// (`[components] correction`, true by default).
+    pub correction: Option<bool>,
 }
 
 impl FitOptions {
@@ -148,6 +152,9 @@ impl FitOptions {
             })
             .transpose()?;
         config.apply_gltf_variant(variant)?;
+        if let Some(c) = self.correction {
+            config.components.correction = c;
+        }
         config
             .validate()
             .map_err(|e| anyhow!("--gltf-variant: {e}"))?;
@@ -950,7 +957,8 @@ impl FitRun {
     /// name (`reduced_chi_square` with sigmas, `residual_variance` without: chi-square is not
     /// defined then, as the report says), the held-out error, the floor and their ratio
     /// (`heldout_error`, `floor`, `floor_ratio`, when the floor was measured; `reciprocal_floor`
-    /// where the floor's predictor is not reciprocal), the labels of the
+    /// where the floor's predictor is not reciprocal; `correction_degree` and the rung's own
+    /// `rung_heldout_error` where a smooth correction was kept), the labels of the
     /// values the data do not determine (`undetermined`: `spacing`, `kd[b]`), and the work
     /// done.
     pub fn summary_json(&self, out: Option<&Path>) -> serde_json::Value {
@@ -986,6 +994,12 @@ impl FitRun {
             if let Some(r) = &f.reciprocal {
                 v["reciprocal_floor"] = r.floor.into();
             }
+        }
+        // a smooth correction kept on the rung (fit::correction): its degree and the rung's
+        // own held-out error (`heldout_error` is the corrected model's)
+        if let Some(c) = &o.correction {
+            v["correction_degree"] = c.correction.degree.into();
+            v["rung_heldout_error"] = c.rung_error.into();
         }
         v
     }

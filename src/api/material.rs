@@ -307,6 +307,7 @@ impl Material {
             fibre_azimuth_deg: p.fibre_azimuth.to_degrees(),
             ward_curvature: None,
             lobe: p.lobe(self.model),
+            correction: p.correction.as_ref(),
         }
     }
 
@@ -370,6 +371,17 @@ impl Material {
         };
         let l = sp.world(&Vec3::new(s.l.t, s.l.b, s.l.n));
         let mut weight = s.weight;
+        if self.params.correction.is_some() {
+            // the proposal is the rung's; its pdf stays exact, the weight carries the factor
+            let pair = model::DirectionPair {
+                l: s.l,
+                v: local(&sp, v),
+            };
+            let f = shading.factor(&pair);
+            for c in 0..3 {
+                weight[c] *= f[c];
+            }
+        }
         for c in self.channels..3 {
             weight[c] = weight[0];
         }

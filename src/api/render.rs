@@ -159,6 +159,7 @@ impl Render {
             fibre_azimuth_deg: params.fibre_azimuth.to_degrees(),
             ward_curvature: self.ward_curvature_alpha,
             lobe: params.lobe(self.model),
+            correction: params.correction.as_ref(),
         };
         let scene = &self.scene;
         let bar = self.progress.bar(scene.camera.height as u64, "render");
@@ -395,6 +396,7 @@ pub fn paper_figures(
             fibre_azimuth_deg: 0.0,
             ward_curvature: None,
             lobe: params.lobe(id),
+            correction: None,
         };
         for lights in &lightings {
             let camera = Camera {

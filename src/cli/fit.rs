@@ -68,6 +68,14 @@ pub struct FitArgs {
     /// parameter)
     #[arg(long)]
     pub no_fuzz: bool,
+    /// Never a smooth correction on the rung. By default, where data without sigmas hold
+    /// structure the fitted rung misses (its held-out error beyond 1.2x the floor), a smooth
+    /// reciprocal factor exp(Legendre series in cos theta_i, cos theta_o, cos dphi) is fitted
+    /// on it, its degree chosen held out, and kept only where it pays: `eval`, `render`,
+    /// `score` and `Material` apply it; renderer exports carry the rung alone and say so (as
+    /// `[components] correction = false`)
+    #[arg(long)]
+    pub no_correction: bool,
     /// Result JSON for renderers (and `fibrefit eval --params`) [default: none: the report is
     /// printed, nothing is written; not with --tile]
     #[arg(long, value_name = "FILE", conflicts_with = "tile")]
@@ -152,6 +160,7 @@ fn options(args: &FitArgs) -> Result<FitOptions> {
         },
         progress: crate::progress::Progress::new(args.quiet || args.json),
         gltf_variant: args.gltf_variant.clone(),
+        correction: args.no_correction.then_some(false),
     })
 }
 

@@ -109,6 +109,11 @@ pub fn text(outcome: &FitOutcome, model: &str, data: &str, metric: Option<&str>)
         }
     }
     let _ = write!(t, "{}", quality_text(&outcome.quality));
+    if let Some(c) = &outcome.correction {
+        for line in crate::fit::correction::text(c).lines() {
+            let _ = writeln!(t, "    {line}");
+        }
+    }
     if !outcome.warnings.is_empty() {
         let _ = writeln!(t, "[[Warnings]]");
         for w in &outcome.warnings {

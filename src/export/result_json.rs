@@ -220,11 +220,20 @@ pub fn result_from_value(
                 .and_then(|g| g.as_bool())
                 .unwrap_or(false);
     }
+    let correction = match v.get("correction").and_then(|c| c.get("series")) {
+        Some(series) => {
+            let k: crate::model::correction::Correction = serde_json::from_value(series.clone())
+                .map_err(|e| at(&format!("`correction.series`: {e}")))?;
+            Some(k.checked().map_err(|e| at(&format!("`correction.series`: {e}")))?)
+        }
+        None => None,
+    };
     Ok(FittedResult {
         set,
         metric,
         knobs,
         free_parameters: free,
+        correction,
     })
 }
 
@@ -352,6 +361,9 @@ pub fn params_of_result(v: &serde_json::Value) -> Result<RawParams> {
             }
         }
     }
+    if let Some(series) = v.get("correction").and_then(|c| c.get("series")) {
+        flat.insert("correction".into(), series.clone());
+    }
     serde_json::from_value(serde_json::Value::Object(flat)).map_err(|e| anyhow!("{e}"))
 }
 
@@ -394,6 +406,12 @@ pub struct ResultFile {
     /// which was chosen.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub selection: Option<serde_json::Value>,
+    /// The smooth reciprocal correction kept on the rung (`fit::correction`), absent when none
+    /// paid: `series` (what `eval`, `render` and `Material` multiply the rung by), `terms`,
+    /// the held-out errors with and without it, the degrees tried, and `check_values` of the
+    /// corrected BRDF at the directions of `check_values`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction: Option<serde_json::Value>,
     /// Fit quality: noise verdict, distinct minima, residual structure (absent in files written
     /// before it existed).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -730,6 +748,52 @@ pub fn check_values(
         .collect()
 }
 
+/// A result's `correction` block of the kept correction `c`, with the rung's `check_values`
+/// times its factor.
+pub fn correction_block(
+    c: &crate::fit::correction::CorrectionFit,
+    rung: &[CheckValue],
+) -> Result<serde_json::Value> {
+    let k = &c.correction;
+    let checks: Vec<serde_json::Value> = rung
+        .iter()
+        .map(|r| {
+            let (ti, pi, to, po) = (
+                r.theta_i.to_radians(),
+                r.phi_i.to_radians(),
+                r.theta_o.to_radians(),
+                r.phi_o.to_radians(),
+            );
+            let f = k.factor_at(ti.cos(), to.cos(), (pi - po).cos());
+            let brdf: Vec<f64> = r.brdf.iter().enumerate().map(|(ch, b)| b * f[ch.min(2)]).collect();
+            serde_json::json!({
+                "theta_i": r.theta_i, "phi_i": r.phi_i, "theta_o": r.theta_o, "phi_o": r.phi_o,
+                "brdf": brdf,
+            })
+        })
+        .collect();
+    Ok(serde_json::json!({
+        "note": "not a physical parameter: the rung's BRDF per channel times exp(sum_k c_k B_k), \
+                 B_k = P_a(2 cos theta_i - 1) P_b(2 cos theta_o - 1) P_c(cos(phi_i - phi_o)) \
+                 + P_b(2 cos theta_i - 1) P_a(2 cos theta_o - 1) P_c(cos(phi_i - phi_o)) for the \
+                 term (a, b, c) (one product when a = b), P_n Legendre polynomials; cosines \
+                 clamped to cos_range, the exponent to log_range per channel. Structure the \
+                 rung misses and the data hold; the rung's parameters keep their meaning",
+        "series": k,
+        "terms": crate::model::correction::terms(k.degree),
+        "heldout": {
+            "error": c.error,
+            "standard_error": c.standard_error,
+            "rung_error": c.rung_error,
+            "rung_standard_error": c.rung_standard_error,
+            "validation": c.validation,
+            "metric": "log",
+        },
+        "tried": c.tried,
+        "check_values": checks,
+    }))
+}
+
 /// The result file of a fit (its maps block, if any, added by the maps stage).
 pub fn assemble(p: ResultParts) -> Result<ResultFile> {
     use crate::load::samples::DataKind;
@@ -826,6 +890,10 @@ pub fn assemble(p: ResultParts) -> Result<ResultFile> {
                 "renderer_routes": crate::fit::selection::renderer_routes(s),
             })
         }),
+        correction: match &outcome.correction {
+            Some(c) => Some(correction_block(c, &check_values(p.model, outcome, channels))?),
+            None => None,
+        },
         quality: Some(serde_json::to_value(&outcome.quality)?),
         maps: None,
         warnings: p.warnings,

@@ -101,6 +101,7 @@ pub fn finish(
         elapsed_seconds: 0.0,
         fitted,
         map: None,
+        correction: None,
     };
     super::determined::apply(&mut outcome);
     Ok(outcome)

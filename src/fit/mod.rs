@@ -11,6 +11,7 @@
 pub mod all_pixels;
 pub mod basins;
 pub mod config;
+pub mod correction;
 pub mod determined;
 pub mod encoding_check;
 pub mod finish;
@@ -118,6 +119,8 @@ pub struct FitOutcome {
     pub fitted: Vec<[f64; 3]>,
     /// The topology map fitted with, if any.
     pub map: Option<Arc<TopologyMap>>,
+    /// The smooth reciprocal correction kept on the rung (`fit::correction`), if any.
+    pub correction: Option<correction::CorrectionFit>,
 }
 
 /// Fit `samples` as `cfg` says.

@@ -30,6 +30,9 @@ pub struct FittedResult {
     pub metric: Metric,
     pub knobs: Knobs,
     pub free_parameters: usize,
+    /// The smooth correction the result keeps on its rung (`correction.series`), if any: the
+    /// model scored is the rung times its factor.
+    pub correction: Option<crate::model::correction::Correction>,
 }
 
 #[derive(Clone, Debug, Serialize)]
@@ -182,6 +185,41 @@ fn problem_for<'a>(
     }
 }
 
+/// The model values of `problem` times the correction `k`'s factor, and their residuals in
+/// the result's metric (the log floors `eps`).
+fn corrected(
+    problem: &FitProblem,
+    cols: &[crate::fit::problem::Columns],
+    result: &FittedResult,
+    k: &crate::model::correction::Correction,
+    eps: &[f64; 3],
+) -> (Vec<[f64; 3]>, nalgebra::DVector<f64>) {
+    let ch = problem.channels();
+    let mut model = problem.model_values(cols, &result.set);
+    for (m, s) in model.iter_mut().zip(&problem.samples) {
+        let (ci, co, cd) = crate::fit::correction::sample_point(s);
+        let f = k.factor_at(ci, co, cd);
+        for c in 0..3 {
+            m[c] *= f[c];
+        }
+    }
+    let scale = problem.scale();
+    let mut r = nalgebra::DVector::zeros(model.len() * ch);
+    for (i, (m, s)) in model.iter().zip(&problem.samples).enumerate() {
+        for c in 0..ch {
+            r[i * ch + c] = crate::fit::problem::metric_residual(
+                result.metric,
+                scale[i][c],
+                eps[c],
+                s,
+                c,
+                m[c],
+            );
+        }
+    }
+    (model, r)
+}
+
 /// A score's sums over the samples, added a piece at a time in the samples' order.
 struct Running {
     channels: usize,
@@ -216,8 +254,13 @@ impl Running {
     fn add(&mut self, result: &FittedResult, problem: &FitProblem) -> Result<()> {
         let ch = self.channels;
         let cols = problem.columns(&result.set)?;
-        let r = problem.residuals(&cols, &result.set);
-        let model = problem.model_values(&cols, &result.set);
+        let (model, r) = match &result.correction {
+            None => (
+                problem.model_values(&cols, &result.set),
+                problem.residuals(&cols, &result.set),
+            ),
+            Some(k) => corrected(problem, &cols, result, k, &self.eps),
+        };
         drop(cols);
         self.chi_square += r.norm_squared();
         for (m, s) in model.iter().zip(&problem.samples) {

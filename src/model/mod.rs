@@ -5,6 +5,7 @@
 //! can solve those exactly (separable least squares).
 
 pub mod azimuth_spread;
+pub mod correction;
 pub mod cross_section;
 pub mod frame;
 pub mod fresnel;

@@ -100,6 +100,10 @@ pub struct RawParams {
     /// `gltf`: the layers' weight over the base colour's diffuse (1: glTF).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub gltf_layers: Option<Albedo>,
+    /// A smooth reciprocal correction of the rung (`model::correction`; a result's
+    /// `correction.series`), every rung: the BRDF per channel times its factor.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub correction: Option<super::correction::Correction>,
     /// `gltf`: metallic factor in [0, 1].
     #[serde(skip_serializing_if = "Option::is_none")]
     pub metallic: Option<f64>,
@@ -197,6 +201,9 @@ pub struct ModelParams {
     pub principled: PrincipledShape,
     /// The `openpbr` rung's material (its defaults for other rungs).
     pub openpbr: OpenPbrShape,
+    /// The smooth reciprocal correction on the rung, if any (`model::correction`): the BRDF
+    /// per channel times its factor wherever fibrefit shades (eval, render, `Material`).
+    pub correction: Option<super::correction::Correction>,
 }
 
 fn check_range(name: Param, v: f64, lo: f64, hi: f64) -> Result<f64> {
@@ -369,6 +376,10 @@ impl ModelParams {
                 gltf: GltfShape::from_raw(raw)?,
                 principled: PrincipledShape::from_raw(raw)?,
                 openpbr: OpenPbrShape::from_raw(raw)?,
+                correction: match &raw.correction {
+                    Some(c) => Some(c.checked().map_err(|e| anyhow!("`correction`: {e}"))?),
+                    None => None,
+                },
             },
             warnings,
         ))

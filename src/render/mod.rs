@@ -183,6 +183,9 @@ pub struct Material<'a> {
     /// Ward only: alpha_x = f |k1|, alpha_y = f |k2| (clamped to [0.01, 1]) where the hit has
     /// curvatures (seed 004); the plain Ward lobe there.
     pub ward_curvature: Option<f64>,
+    /// The result's smooth correction of the rung, if any: the BRDF per channel times its
+    /// factor.
+    pub correction: Option<&'a crate::model::correction::Correction>,
 }
 
 impl Material<'_> {
@@ -294,11 +297,23 @@ impl Material<'_> {
     pub fn brdf(&self, sp: &ShadingPoint, l: &Vec3, v: &Vec3) -> [f64; 3] {
         let pair = DirectionPair::new(&FibreFrame::from_azimuth(0.0), &sp.local(l), &sp.local(v));
         let basis = self.basis(sp, &pair);
+        let factor = self.factor(&pair);
         let mut out = [0.0; 3];
         for (c, o) in out.iter_mut().enumerate() {
-            *o = basis.brdf(&sp.albedos, c.min(self.channels - 1));
+            *o = basis.brdf(&sp.albedos, c.min(self.channels - 1)) * factor[c];
         }
         out
+    }
+
+    /// The correction's factor per channel at a pair (1 without one).
+    pub fn factor(&self, pair: &DirectionPair) -> [f64; 3] {
+        match self.correction {
+            Some(c) => {
+                let f = c.factor(pair);
+                std::array::from_fn(|k| f[k.min(self.channels - 1)])
+            }
+            None => [1.0; 3],
+        }
     }
 
     /// [`Material::basis`] of every pair at one shading point, into `out`: as one batch
@@ -342,9 +357,13 @@ impl Material<'_> {
         let mut bases = vec![Basis::default(); pairs.len()];
         self.bases(&sp, &pairs, &mut bases);
         let mut out = [0.0; 3];
-        for (basis, &(irradiance, cos_i)) in bases.iter().zip(&weights) {
+        for ((basis, pair), &(irradiance, cos_i)) in bases.iter().zip(&pairs).zip(&weights) {
+            let factor = self.factor(pair);
             for (c, o) in out.iter_mut().enumerate() {
-                *o += basis.brdf(&sp.albedos, c.min(self.channels - 1)) * irradiance * cos_i;
+                *o += basis.brdf(&sp.albedos, c.min(self.channels - 1))
+                    * factor[c]
+                    * irradiance
+                    * cos_i;
             }
         }
         out

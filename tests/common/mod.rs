@@ -352,3 +352,48 @@ pub fn snapshot(d: &std::path::Path) -> Vec<(String, Vec<u8>)> {
     v.sort();
     v
 }
+
+/// The relative noise of the synthetic data without sigmas (tests/floor.rs,
+/// tests/correction.rs): their log values scatter by about this much.
+pub const NOISE: f64 = 0.08;
+
+/// A sheen-y fibre swatch (poulin-fournier with the fuzz layer) at `count` random directions,
+/// noised by [`NOISE`] relative, written without its sigma columns (a measurement that gives
+/// none).
+pub fn synth_without_sigmas(dir: &std::path::Path, count: usize) -> std::path::PathBuf {
+    synth_noised(dir, count, 5)
+}
+
+/// [`synth_without_sigmas`] with the noise seeded by `seed` (the same directions).
+pub fn synth_noised(dir: &std::path::Path, count: usize, seed: u64) -> std::path::PathBuf {
+    let dir = &dir.join(format!("noise{seed}"));
+    std::fs::create_dir_all(dir).unwrap();
+    let cfg = dir.join("s.toml");
+    std::fs::write(
+        &cfg,
+        format!(
+            "model = \"poulin-fournier\"\n[params]\nkd = [0.5, 0.35, 0.2]\nks = 0.2\nexponent = 8\n\
+             spacing = 2.4\nfibre_azimuth_deg = 10\nfuzz = 3.0\nfuzz_depth = 0.3\nfuzz_asymmetry = 0.6\n\
+             [gonio]\nrandom = {{ count = {count}, seed = 3, max_theta_deg = 80 }}\n\
+             [noise]\nrelative = {NOISE}\nseed = {seed}\n"
+        ),
+    )
+    .unwrap();
+    let out = dir.join("d");
+    fibrefit::synth::run(&cfg, &out, &fibrefit::progress::Progress::quiet()).unwrap();
+    let text = std::fs::read_to_string(out.join("gonio.csv")).unwrap();
+    let mut lines = text.lines().filter(|l| !l.trim_start().starts_with('#'));
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let keep: Vec<usize> = (0..header.len())
+        .filter(|&k| !header[k].starts_with("sigma"))
+        .collect();
+    let mut csv = String::new();
+    for l in std::iter::once(header.join(",").as_str()).chain(lines) {
+        let f: Vec<&str> = l.split(',').collect();
+        csv += &keep.iter().map(|&k| f[k]).collect::<Vec<_>>().join(",");
+        csv.push('\n');
+    }
+    let path = dir.join("no_sigmas.csv");
+    std::fs::write(&path, csv).unwrap();
+    path
+}

@@ -303,6 +303,11 @@ pub struct Components {
     /// false: spacing fixed at 2 (touching fibres).
     #[serde(default)]
     pub spacing_free: Option<bool>,
+    /// false (`--no-correction`): never a smooth correction on the rung (`fit::correction`);
+    /// true (the default) keeps one where the rung misses what data without sigmas hold and
+    /// the correction pays held out.
+    #[serde(default = "yes")]
+    pub correction: bool,
 }
 
 impl Default for Components {
@@ -312,6 +317,7 @@ impl Default for Components {
             topology_map: true,
             substrate: None,
             spacing_free: None,
+            correction: true,
         }
     }
 }

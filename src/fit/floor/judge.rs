@@ -24,14 +24,55 @@ pub fn fit_stage(
         Some(h) => Ok(h),
         None => selection::of_fit(samples, cfg, &outcome.set),
     };
-    match heldout.and_then(|h| check(samples, cfg.metric, &h, cfg.seed)) {
-        Ok(c) => {
+    let checked = heldout.and_then(|h| Ok((check(samples, cfg.metric, &h, cfg.seed)?, h)));
+    match checked {
+        Ok((c, h)) => {
             let sigmas = outcome.statistics.sigmas_given;
+            let c = match correct(samples, cfg, outcome, &c, &h, progress) {
+                Some(corrected) => corrected,
+                None => c,
+            };
             apply(&mut outcome.quality, &mut outcome.warnings, c, sigmas);
         }
         Err(e) => outcome.warnings.push(format!(
             "the floor (what the data themselves allow) could not be measured: {e:#}"
         )),
+    }
+}
+
+/// The correction stage ([`crate::fit::correction`]) where the rung misses what data judged
+/// by the floor hold (`log` metric, the correction not switched off): a kept correction goes
+/// into `outcome`, and the floor check of the corrected model is returned.
+fn correct(
+    samples: &Samples,
+    cfg: &FitConfig,
+    outcome: &mut FitOutcome,
+    c: &FloorCheck,
+    h: &crate::fit::selection::HeldOut,
+    progress: &crate::progress::Progress,
+) -> Option<FloorCheck> {
+    let wanted = cfg.components.correction
+        && cfg.metric == crate::fit::config::Metric::Log
+        && !c.within
+        && judged_by_floor(&outcome.quality, outcome.statistics.sigmas_given);
+    if !wanted {
+        return None;
+    }
+    progress.line("fit: a smooth correction of the rung (held out, kept only where it pays)");
+    let full = match selection::model_values_on(outcome, cfg, samples) {
+        Ok((_, v)) => v,
+        Err(e) => {
+            outcome.warnings.push(format!("the correction could not be tried: {e:#}"));
+            return None;
+        }
+    };
+    match crate::fit::correction::choose(samples, h, &full, outcome.channels) {
+        crate::fit::correction::Decision::NotKept(_) => None,
+        crate::fit::correction::Decision::Kept(fit, corrected) => {
+            let checked = check(samples, cfg.metric, &corrected, cfg.seed).ok()?;
+            outcome.correction = Some(fit);
+            Some(checked)
+        }
     }
 }
 

@@ -1,0 +1,242 @@
+//! The correction stage: where a fit of data without sigmas misses structure the data hold
+//! (beyond [`crate::fit::floor::WITHIN`] the floor), a smooth reciprocal factor
+//! ([`crate::model::correction`]) on the fitted rung, its degree chosen held out as `--model
+//! auto` chooses a rung: on the same folds (or split), the fewest terms within one standard
+//! error of the best, no correction among the candidates. Kept only where it pays.
+//!
+//! Each fold's series is fitted to the training part's log residuals of the fit to all samples
+//! (the rung's parameters hardly move between folds) and judged on the fold's held-out values
+//! of the rung's own fold fit, times the series. The kept series is then fitted to every
+//! sample's log residual.
+
+use crate::fit::selection::{rms_and_se, HeldOut};
+use crate::load::samples::{Sample, Samples};
+use crate::model::correction::{coordinates, terms, Correction, MAX_DEGREE};
+use crate::model::frame::Local;
+use serde::Serialize;
+
+/// Each fold's training part holds at least this many samples per term of a series tried.
+pub const SAMPLES_PER_TERM: usize = 5;
+
+/// One degree tried: its held-out error (RMS in the `log` metric) and standard error.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct Tried {
+    /// Total degree; `None`: no correction (the rung alone).
+    pub degree: Option<usize>,
+    /// Coefficients per channel (0 for none).
+    pub terms: usize,
+    pub error: f64,
+    pub standard_error: f64,
+}
+
+/// A kept correction and how it was chosen.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub struct CorrectionFit {
+    /// The series, fitted to every sample.
+    pub correction: Correction,
+    /// The rung's held-out error alone and its standard error.
+    pub rung_error: f64,
+    pub rung_standard_error: f64,
+    /// The held-out error with the correction, and its standard error.
+    pub error: f64,
+    pub standard_error: f64,
+    /// Every degree tried, none first.
+    pub tried: Vec<Tried>,
+    /// How samples were held out (auto's words).
+    pub validation: String,
+}
+
+/// What the stage decided.
+pub enum Decision {
+    /// A correction pays: it, and the model's held-out errors with it.
+    Kept(CorrectionFit, HeldOut),
+    /// None does (the degrees tried, none first).
+    NotKept(Vec<Tried>),
+}
+
+fn local(v: &crate::model::Vec3) -> Local {
+    Local {
+        t: v.x,
+        b: v.y,
+        n: v.z,
+    }
+}
+
+/// The series' coordinates of a sample (swatch frame; z the normal).
+pub fn sample_point(s: &Sample) -> (f64, f64, f64) {
+    coordinates(&local(&s.l), &local(&s.v))
+}
+
+fn log_floors(samples: &[&Sample]) -> [f64; 3] {
+    let raw: Vec<[f64; 3]> = samples.iter().map(|s| s.value).collect();
+    [0, 1, 2].map(|c| crate::fit::problem::log_floor(&raw, c))
+}
+
+/// Mean over channels of the weighted squared log error of `value` against `s` (the `log`
+/// metric's residual without sigmas).
+fn log_term(s: &Sample, value: &[f64; 3], eps: &[f64; 3], channels: usize) -> f64 {
+    (0..channels)
+        .map(|c| {
+            let r = (value[c].max(0.0) + eps[c]).ln() - (s.value[c].max(0.0) + eps[c]).ln();
+            s.weight * r * r
+        })
+        .sum::<f64>()
+        / channels as f64
+}
+
+/// Log residuals ln(y + eps) - ln(m + eps) of `idx` at the full fit's values `full`.
+fn targets(samples: &Samples, idx: &[usize], full: &[[f64; 3]], eps: &[f64; 3]) -> Vec<[f64; 3]> {
+    idx.iter()
+        .map(|&i| {
+            let (s, m) = (&samples.samples[i], &full[i]);
+            [0, 1, 2].map(|c| {
+                (s.value[c].max(0.0) + eps[c]).ln() - (m[c].max(0.0) + eps[c]).ln()
+            })
+        })
+        .collect()
+}
+
+fn fit_on(
+    samples: &Samples,
+    idx: &[usize],
+    full: &[[f64; 3]],
+    degree: usize,
+    channels: usize,
+) -> Option<Correction> {
+    let refs: Vec<&Sample> = idx.iter().map(|&i| &samples.samples[i]).collect();
+    let eps = log_floors(&refs);
+    let pts: Vec<_> = refs.iter().map(|s| sample_point(s)).collect();
+    let w: Vec<f64> = refs.iter().map(|s| s.weight).collect();
+    Correction::fit(degree, &pts, &targets(samples, idx, full, &eps), &w, channels)
+}
+
+/// Choose a correction of the fit whose values on every sample are `full` and whose held-out
+/// errors are `heldout` (its splits, its held-out values); `channels` fitted.
+pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels: usize) -> Decision {
+    let n_train = heldout.splits.iter().map(|s| s.train.len()).min().unwrap_or(0);
+    let degrees: Vec<usize> = (0..=MAX_DEGREE)
+        .filter(|&d| terms(d).len() * SAMPLES_PER_TERM <= n_train)
+        .collect();
+    // Per candidate (none, then each degree), the held-out terms and values in the splits' order.
+    let mut errors: Vec<Vec<f64>> = vec![Vec::new(); degrees.len() + 1];
+    let mut values: Vec<Vec<[f64; 3]>> = vec![Vec::new(); degrees.len() + 1];
+    let mut offset = 0;
+    let mut failed = vec![false; degrees.len()];
+    for split in &heldout.splits {
+        let train: Vec<&Sample> = split.train.iter().map(|&i| &samples.samples[i]).collect();
+        let eps = log_floors(&train);
+        let fold_values = &heldout.values[offset..offset + split.test.len()];
+        offset += split.test.len();
+        for (&i, v) in split.test.iter().zip(fold_values) {
+            errors[0].push(log_term(&samples.samples[i], v, &eps, channels));
+            values[0].push(*v);
+        }
+        for (k, &d) in degrees.iter().enumerate() {
+            let corr = fit_on(samples, &split.train, full, d, channels);
+            failed[k] |= corr.is_none();
+            let corr = corr.unwrap_or_else(Correction::identity);
+            for (&i, v) in split.test.iter().zip(fold_values) {
+                let s = &samples.samples[i];
+                let (ci, co, cd) = sample_point(s);
+                let f = corr.factor_at(ci, co, cd);
+                let m = [0, 1, 2].map(|c| v[c] * f[c]);
+                errors[k + 1].push(log_term(s, &m, &eps, channels));
+                values[k + 1].push(m);
+            }
+        }
+    }
+    let tried: Vec<Tried> = (0..=degrees.len())
+        .map(|k| {
+            let (error, standard_error) = rms_and_se(&errors[k]);
+            let degree = k.checked_sub(1).map(|j| degrees[j]);
+            Tried {
+                degree,
+                terms: degree.map_or(0, |d| terms(d).len()),
+                error: match k > 0 && failed[k - 1] {
+                    true => f64::INFINITY,
+                    false => error,
+                },
+                standard_error,
+            }
+        })
+        .collect();
+    let Some(best) = (0..tried.len())
+        .filter(|&k| tried[k].error.is_finite())
+        .min_by(|&a, &b| tried[a].error.total_cmp(&tried[b].error))
+    else {
+        return Decision::NotKept(tried);
+    };
+    let threshold = tried[best].error + tried[best].standard_error;
+    let chosen = (0..tried.len())
+        .find(|&k| tried[k].error <= threshold)
+        .unwrap_or(best);
+    let Some(degree) = tried[chosen].degree else {
+        return Decision::NotKept(tried);
+    };
+    let all: Vec<usize> = (0..samples.samples.len()).collect();
+    let Some(correction) = fit_on(samples, &all, full, degree, channels) else {
+        return Decision::NotKept(tried);
+    };
+    let (error, standard_error) = (tried[chosen].error, tried[chosen].standard_error);
+    let (rung_error, rung_standard_error) = (tried[0].error, tried[0].standard_error);
+    let corrected = HeldOut {
+        splits: heldout.splits.clone(),
+        errors: errors.swap_remove(chosen),
+        values: values.swap_remove(chosen),
+        error,
+        standard_error,
+        validation: heldout.validation.clone(),
+    };
+    Decision::Kept(
+        CorrectionFit {
+            correction,
+            rung_error,
+            rung_standard_error,
+            error,
+            standard_error,
+            tried,
+            validation: heldout.validation.clone(),
+        },
+        corrected,
+    )
+}
+
+/// The correction's lines of a report: what it is, the rung's held-out error and the
+/// corrected one, the degrees tried.
+pub fn text(c: &CorrectionFit) -> String {
+    use std::fmt::Write;
+    let mut t = String::new();
+    let _ = writeln!(
+        t,
+        "correction    a reciprocal smooth factor on the rung, exp(series of degree {} in \
+         cos theta_i, cos theta_o, cos dphi; {} terms per channel): structure the rung misses, \
+         not a physical parameter",
+        c.correction.degree,
+        c.correction.terms()
+    );
+    let _ = writeln!(
+        t,
+        "              held-out log error {:.4} +- {:.4} with it, {:.4} +- {:.4} the rung alone ({:.2}x; {})",
+        c.error,
+        c.standard_error,
+        c.rung_error,
+        c.rung_standard_error,
+        c.error / c.rung_error.max(f64::MIN_POSITIVE),
+        c.validation
+    );
+    let tried: Vec<String> = c
+        .tried
+        .iter()
+        .map(|x| match x.degree {
+            None => format!("none {:.4}", x.error),
+            Some(d) => format!("{d}: {:.4}", x.error),
+        })
+        .collect();
+    let _ = writeln!(
+        t,
+        "              degrees tried (held-out error; the fewest terms within one standard \
+         error of the best kept): {}",
+        tried.join(", ")
+    );
+    t
+}
