@@ -242,25 +242,30 @@ fn a_rung_that_misses_smooth_structure_is_corrected_and_every_consumer_applies_i
     let (corrected, alone) = (score(&out), score(&plain_out));
     eprintln!("score: {corrected:.4} corrected, {alone:.4} the rung alone");
     assert!(corrected < 0.7 * alone, "{corrected} against {alone}");
-    // exports carry the rung alone, and say so
+    // the shader carries it (tests/shader_export.rs checks it on the GPU driver); the glTF
+    // material cannot, and says so
     let shader = dir.path().join("s.wgsl");
+    let glb = dir.path().join("s.glb");
     let o = bin()
+        .args(["export", out.to_str().unwrap(), "--shader", "wgsl"])
         .args([
-            "export",
-            out.to_str().unwrap(),
-            "--shader",
-            "wgsl",
             "--out",
             shader.to_str().unwrap(),
+            "--gltf",
+            glb.to_str().unwrap(),
         ])
         .output()
         .unwrap();
     assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
     let err = String::from_utf8_lossy(&o.stderr);
     assert!(
-        err.contains("smooth correction of the rung") && err.contains("not in this export"),
+        err.contains("smooth correction of the rung") && err.contains("is not in --gltf"),
         "{err}"
     );
+    let wgsl = std::fs::read_to_string(&shader).unwrap();
+    let terms = fibrefit::model::correction::terms(series.degree).len();
+    assert!(wgsl.contains(&format!("const FIBREFIT_CORRECTION_TERMS: u32 = {terms}u;")));
+    assert!(wgsl.contains("* fibrefit_correction(l, v, n)"));
 }
 
 /// The rung the data were made with is within the floor: no correction is tried, none kept.

@@ -46,6 +46,16 @@ fn params(text: &str) -> (ModelId, ModelParams) {
 const RUNGS: &[(&str, &str)] = &[
     ("lambert", "model = 'lambert'\nkd = [0.5, 0.3, 0.2]"),
     (
+        "poulin-fournier, spread, smooth correction of degree 3",
+        "model = 'poulin-fournier'\nkd = [0.5, 0.35, 0.2]\nks = 0.2\nexponent = 8\nazimuth_spread_deg = 20\n\
+         [correction]\ndegree = 3\ncos_range = [0.15, 0.98]\n\
+         log_range = [[-0.8, 0.9], [-0.6, 0.7], [-1.0, 1.1]]\n\
+         coefficients = [[0.1, 0.05, -0.1], [0.2, 0.1, 0.0], [-0.15, 0.1, 0.05], [0.05, -0.1, 0.1], \
+         [0.1, 0.1, 0.1], [-0.05, 0.02, 0.03], [0.08, -0.04, 0.02], [0.03, 0.06, -0.05], \
+         [-0.07, 0.02, 0.04], [0.02, -0.03, 0.05], [0.06, 0.01, -0.02], [-0.04, 0.05, 0.01], \
+         [0.05, -0.02, 0.03]]",
+    ),
+    (
         "max-normal, spread, Fresnel",
         "model = 'max-normal'\nkd = 0.4\nks = 0.3\nexponent = 40\nazimuth_spread_deg = 25\nfresnel_ior = 1.5",
     ),

@@ -103,7 +103,41 @@ def parse_wgsl(src: str) -> Dict[str, Any]:
     g = _GAUSS.search(src)
     gl = [[float(x) for x in r.split(",")] for r in _VEC2.findall(g.group(1))] if g else []
     p["gauss_legendre"] = np.array(gl, dtype=np.float64).reshape(-1, 2)
+    p["correction"] = _parse_correction(src, consts)
     return p
+
+
+_VEC3 = re.compile(r"vec3<f32>\(([^()]*)\)")
+_UVEC3 = re.compile(r"vec3<u32>\(([^()]*)\)")
+
+
+def _parse_correction(src: str, consts: Dict[str, float]) -> Optional[Dict[str, Any]]:
+    """The result's smooth correction the shader bakes in (``fibrefit_correction``): ``degree``,
+    ``terms`` ((a, b, c) per term), ``coefficients`` (terms x 3), ``cos_range``, ``log_lo``,
+    ``log_hi``; None without one."""
+    if "FIBREFIT_CORRECTION_TERMS" not in consts:
+        return None
+
+    def block(name: str) -> str:
+        m = re.search(rf"const {name}(?:: [^=]+)? = (.*?);", src, re.S)
+        if m is None:
+            raise ValueError(f"the shader's correction has no {name}")
+        return m.group(1)
+
+    terms = [tuple(int(x.strip().rstrip("u")) for x in r.split(",")) for r in _UVEC3.findall(block("FIBREFIT_CORRECTION_TERM"))]
+    coeff = [[float(x) for x in r.split(",")] for r in _VEC3.findall(block("FIBREFIT_CORRECTION_COEFF"))]
+    vec = lambda name, rx: [float(x) for x in rx.findall(block(name))[0].split(",")]  # noqa: E731
+    n = int(consts["FIBREFIT_CORRECTION_TERMS"])
+    if len(terms) != n or len(coeff) != n:
+        raise ValueError(f"the shader's correction: {len(terms)} terms and {len(coeff)} coefficients, expected {n}")
+    return {
+        "degree": int(consts["FIBREFIT_CORRECTION_DEGREE"]),
+        "terms": terms,
+        "coefficients": coeff,
+        "cos_range": vec("FIBREFIT_CORRECTION_COS", _VEC2),
+        "log_lo": vec("FIBREFIT_CORRECTION_LOG_LO", _VEC3),
+        "log_hi": vec("FIBREFIT_CORRECTION_LOG_HI", _VEC3),
+    }
 
 
 def unsupported_reason(p: Dict[str, Any]) -> Optional[str]:
@@ -981,11 +1015,42 @@ class DrJitModel:
         by = by * self._schlick(l, v)
         a, pz = self._fuzz(l, v)
         bx, by, bz, bw = bx * a, by * a, bz * a, pz
+        factor = self._correction(l, v) if self.p.get("correction") else None
         out = []
         for ch in range(3):
             val = bx * kd[ch] + by * ks[ch] + bz * substrate[ch] + bw * self.fuzz[ch]
+            if factor is not None:
+                val = val * factor[ch]
             out.append(dr.select(up, val, 0.0) if not isinstance(val, float) else dr.select(up, mi.Float(val), 0.0))
         return mi.Color3f(out[0], out[1], out[2])
+
+    def _correction(self, l, v):
+        """The shader's ``fibrefit_correction`` per channel at fibre-frame directions above both
+        horizons (turning about the normal changes neither cosine nor the azimuth difference)."""
+        import drjit as dr
+
+        k = self.p["correction"]
+        lo, hi = k["cos_range"]
+        q = dr.sqrt((l.x * l.x + l.y * l.y) * (v.x * v.x + v.y * v.y))
+        y = dr.select(q > 1e-12, dr.clip((l.x * v.x + l.y * v.y) / dr.maximum(q, 1e-30), -1.0, 1.0), 1.0)
+
+        def legendre(x):
+            p = [1.0 + 0.0 * x, x]
+            for n in range(2, k["degree"] + 1):
+                p.append(((2 * n - 1) * x * p[n - 1] - (n - 1) * p[n - 2]) / n)
+            return p
+
+        pl = legendre(2.0 * dr.clip(l.z, lo, hi) - 1.0)
+        pv = legendre(2.0 * dr.clip(v.z, lo, hi) - 1.0)
+        py = legendre(y)
+        s = [0.0, 0.0, 0.0]
+        for (a, b, c), coeff in zip(k["terms"], k["coefficients"]):
+            t = pl[a] * pv[b]
+            if a != b:
+                t = t + pl[b] * pv[a]
+            t = t * py[c]
+            s = [s[ch] + t * coeff[ch] for ch in range(3)]
+        return [dr.exp(dr.clip(s[ch], k["log_lo"][ch], k["log_hi"][ch])) for ch in range(3)]
 
 
 def fibre_frame(w, cos_psi: float, sin_psi: float):

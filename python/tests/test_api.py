@@ -200,6 +200,33 @@ def test_the_felt_is_not_reciprocal_and_the_floor_says_so():
     assert rec["ratio"] == pytest.approx(r.result["quality"]["floor"]["heldout_error"] / rec["floor"])
 
 
+def test_the_felt_fit_keeps_a_smooth_correction_that_material_applies(tmp_path):
+    """gltf + fuzz misses structure the felt holds: a smooth reciprocal correction is kept on it
+    (held out, it roughly halves the error); Material of the result evaluates the corrected BRDF
+    (its check values), and correction=False judges the rung alone."""
+    felt = ROOT / "tests" / "data" / "rgl" / "acrylic_felt_green_rgb.bsdf"
+    r = fibrefit.fit(felt, model="gltf", fuzz=True, metric="log", directions=1500)
+    c = r.correction
+    assert c is not None and c["degree"] >= 1
+    assert c["heldout_error"] < 0.8 * c["rung_heldout_error"]
+    assert r.result["correction"]["heldout"]["error"] == pytest.approx(c["heldout_error"])
+    assert r.result["quality"]["floor"]["heldout_error"] == pytest.approx(c["heldout_error"])
+    r.to_json(tmp_path / "fit.json")
+    m = fibrefit.load(tmp_path / "fit.json")
+    checks = r.result["correction"]["check_values"]
+    rad = np.radians
+    d = lambda t, p: np.array([np.sin(rad(t)) * np.cos(rad(p)), np.sin(rad(t)) * np.sin(rad(p)), np.cos(rad(t))])  # noqa: E731
+    l = np.array([d(x["theta_i"], x["phi_i"]) for x in checks])
+    v = np.array([d(x["theta_o"], x["phi_o"]) for x in checks])
+    want = np.array([x["brdf"] for x in checks])
+    np.testing.assert_allclose(m.eval(l, v), want, rtol=1e-9, atol=1e-12)
+    # reciprocal: light and view swapped give the same values
+    np.testing.assert_allclose(m.eval(v, l), want, rtol=1e-9, atol=1e-12)
+    alone = fibrefit.fit(felt, model="gltf", fuzz=True, metric="log", directions=1500, correction=False)
+    assert alone.correction is None and "correction" not in alone.result
+    assert alone.result["quality"]["floor"]["heldout_error"] == pytest.approx(c["rung_heldout_error"])
+
+
 def test_undetermined_values_are_said(tmp_path):
     """Ward fitted to data without a lobe (a matte surface): the lobe's widths are undetermined,
     with why; the result, the material a renderer loads and the exports say so."""

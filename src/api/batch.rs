@@ -169,6 +169,10 @@ fn row_of(run: &FitRun, input: &Path, name: &str, seconds: f64) -> Row {
         Some(_) => " + fuzz",
         None => "",
     };
+    let fuzz = match &run.outcome.correction {
+        Some(c) => format!("{fuzz} + correction (degree {})", c.correction.degree),
+        None => fuzz.to_string(),
+    };
     Row {
         name: name.to_string(),
         input: input.display().to_string(),

@@ -334,15 +334,32 @@ pub fn export(req: &ExportRequest) -> Result<ExportOutcome> {
     }));
     // a smooth correction on the rung: fibrefit applies it, the renderers' materials do not
     if let Some(k) = &params.correction {
-        let w = format!(
-            "{}: the result's smooth correction of the rung (degree {}, `correction`) is not in \
-             this export: the renderer shows the rung alone (fibrefit's eval, render, score and \
-             Material apply it; the result's `correction.heldout` gives both errors)",
-            req.result.display(),
+        lines.push(format!(
+            "CORRECTION: the result's smooth correction of the rung (degree {}, `correction`): \
+             the shader's fibrefit_brdf includes it (fibrefit_correction); the glTF, Blender and \
+             MaterialX/USD materials do not",
             k.degree
-        );
-        req.progress.warn(&w);
-        lines.push(format!("NOT CARRIED: {w}"));
+        ));
+        let mut not_carried = Vec::new();
+        if req.gltf {
+            not_carried.push("--gltf");
+        }
+        if req.blender.is_some() {
+            not_carried.push("--blender");
+        }
+        if let Some((_, flag)) = &req.openpbr {
+            not_carried.push(*flag);
+        }
+        if !not_carried.is_empty() {
+            req.progress.warn(&format!(
+                "{}: the result's smooth correction of the rung (degree {}, `correction`) is not \
+                 in {}: that renderer's material shows the rung alone (the shader export, eval, \
+                 render, score and Material apply it; `correction.heldout` gives both errors)",
+                req.result.display(),
+                k.degree,
+                not_carried.join(", ")
+            ));
+        }
     }
     // everything is built in memory first: a failure writes nothing
     let shader_text = match req.shader {

@@ -200,17 +200,20 @@ fn content(
 }
 
 /// The rung's BRDF per channel at swatch-frame directions (the fibres at the fitted azimuth),
-/// as `eval` computes it.
+/// times its smooth correction where the result keeps one, as `eval` computes it.
 fn model_brdf(id: ModelId, params: &ModelParams) -> Result<BrdfFn> {
     let m = model::build(id, params)?;
     let albedos = params.albedos;
     let channels = albedos.channels();
     let frame = FibreFrame::from_azimuth(params.fibre_azimuth);
+    let correction = params.correction.clone();
     Ok(Box::new(move |l: &Vec3, v: &Vec3| {
-        let b = m.basis(&DirectionPair::new(&frame, l, v));
+        let pair = DirectionPair::new(&frame, l, v);
+        let b = m.basis(&pair);
+        let f = correction.as_ref().map_or([1.0; 3], |k| k.factor(&pair));
         let mut out = [0.0; 3];
         for (c, o) in out.iter_mut().enumerate() {
-            *o = b.brdf(&albedos, c.min(channels - 1));
+            *o = b.brdf(&albedos, c.min(channels - 1)) * f[c.min(channels - 1)];
         }
         Some(out)
     }))

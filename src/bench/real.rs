@@ -9,7 +9,7 @@
 use crate::bench::selection::auto_fit;
 use crate::fit::config::{FitConfig, Metric};
 use crate::fit::floor::FloorCheck;
-use crate::fit::selection::{self, Candidate};
+use crate::fit::selection::Candidate;
 use crate::fit::FitOutcome;
 use crate::load::rgl::MeasuredOptions;
 use crate::load::samples::Samples;
@@ -39,8 +39,11 @@ pub struct RealRow {
     pub metric: String,
     pub candidates: Vec<Candidate>,
     pub chosen: String,
-    /// The floor check of the chosen candidate (None: it could not be measured, `floor_error`).
+    /// The floor check of the chosen candidate, with its smooth correction where one was kept
+    /// (None: it could not be measured, `floor_error`).
     pub floor: Option<FloorCheck>,
+    /// The smooth correction kept on the chosen candidate (`fit::correction`), if any.
+    pub correction: Option<crate::fit::correction::CorrectionFit>,
     pub floor_error: Option<String>,
     /// The better of [`SIMPLE`]: its name and held-out error.
     pub simple: Option<(String, f64)>,
@@ -54,10 +57,18 @@ impl RealRow {
         self.candidates.iter().find(|c| c.chosen)
     }
 
-    /// The chosen candidate's held-out error over the better simple fit's.
+    /// The chosen model's held-out error (with its correction, where one was kept).
+    pub fn heldout_error(&self) -> Option<f64> {
+        match &self.floor {
+            Some(f) => Some(f.heldout_error),
+            None => self.chosen_candidate().map(|c| c.cv_error),
+        }
+    }
+
+    /// The chosen model's held-out error over the better simple fit's.
     pub fn simple_ratio(&self) -> Option<f64> {
-        let c = self.chosen_candidate()?;
-        self.simple.as_ref().map(|(_, e)| c.cv_error / e)
+        let e = self.heldout_error()?;
+        self.simple.as_ref().map(|(_, s)| e / s)
     }
 }
 
@@ -136,10 +147,16 @@ pub fn run(
         ));
         let t = std::time::Instant::now();
         let quiet = crate::progress::Progress::quiet();
-        let (s, o, cfg, _, _) = auto_fit(&data, false, Some(Metric::Log), &quiet)?;
-        let heldout = selection::of_selection(&s)
-            .ok_or_else(|| anyhow!("the chosen candidate has no held-out errors"));
-        let floor = heldout.and_then(|h| crate::fit::floor::check(&data, cfg.metric, &h, cfg.seed));
+        let (s, mut o, cfg, _, _) = auto_fit(&data, false, Some(Metric::Log), &quiet)?;
+        // the floor and the smooth correction, as a fit measures them
+        let warned = o.warnings.len();
+        crate::fit::floor::judge::fit_stage(&data, &cfg, &mut o, Some(&s), &quiet);
+        let floor = o.quality.floor.clone().ok_or_else(|| {
+            anyhow!(
+                "{}",
+                o.warnings.get(warned).map_or("not measured", String::as_str)
+            )
+        });
         let simple = s
             .candidates
             .iter()
@@ -157,6 +174,7 @@ pub fn run(
             chosen: s.chosen.clone(),
             floor_error: floor.as_ref().err().map(|e| format!("{e:#}")),
             floor: floor.ok(),
+            correction: o.correction.clone(),
             candidates: s.candidates,
             simple,
             seconds: t.elapsed().as_secs_f64(),

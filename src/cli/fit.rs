@@ -72,7 +72,8 @@ pub struct FitArgs {
     /// structure the fitted rung misses (its held-out error beyond 1.2x the floor), a smooth
     /// reciprocal factor exp(Legendre series in cos theta_i, cos theta_o, cos dphi) is fitted
     /// on it, its degree chosen held out, and kept only where it pays: `eval`, `render`,
-    /// `score` and `Material` apply it; renderer exports carry the rung alone and say so (as
+    /// `score`, `Material` and the shader export apply it; the glTF, Blender and MaterialX/USD
+    /// materials carry the rung alone and say so (as
     /// `[components] correction = false`)
     #[arg(long)]
     pub no_correction: bool,

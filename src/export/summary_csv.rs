@@ -26,7 +26,8 @@ pub struct Row {
     pub input: String,
     /// `ok`, or `failed` (then `error` says why and nothing was written for it).
     pub status: String,
-    /// The rung fitted (auto's choice, `+ fuzz` with the fuzz layer).
+    /// The rung fitted (auto's choice, `+ fuzz` with the fuzz layer, `+ correction (degree d)`
+    /// with a smooth correction kept on it).
     pub model: String,
     /// The fit quality verdict (as `fit --json`'s `verdict`).
     pub verdict: String,

@@ -96,18 +96,20 @@ fn targets(samples: &Samples, idx: &[usize], full: &[[f64; 3]], eps: &[f64; 3]) 
         .collect()
 }
 
+/// The series of each of `degrees` fitted to the log residuals of the samples `idx` at the
+/// full fit's values `full` (their own log floors).
 fn fit_on(
     samples: &Samples,
     idx: &[usize],
     full: &[[f64; 3]],
-    degree: usize,
+    degrees: &[usize],
     channels: usize,
-) -> Option<Correction> {
+) -> Vec<Option<Correction>> {
     let refs: Vec<&Sample> = idx.iter().map(|&i| &samples.samples[i]).collect();
     let eps = log_floors(&refs);
     let pts: Vec<_> = refs.iter().map(|s| sample_point(s)).collect();
     let w: Vec<f64> = refs.iter().map(|s| s.weight).collect();
-    Correction::fit(degree, &pts, &targets(samples, idx, full, &eps), &w, channels)
+    Correction::fit_degrees(degrees, &pts, &targets(samples, idx, full, &eps), &w, channels)
 }
 
 /// Choose a correction of the fit whose values on every sample are `full` and whose held-out
@@ -131,8 +133,8 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
             errors[0].push(log_term(&samples.samples[i], v, &eps, channels));
             values[0].push(*v);
         }
-        for (k, &d) in degrees.iter().enumerate() {
-            let corr = fit_on(samples, &split.train, full, d, channels);
+        let fitted = fit_on(samples, &split.train, full, &degrees, channels);
+        for (k, corr) in fitted.into_iter().enumerate() {
             failed[k] |= corr.is_none();
             let corr = corr.unwrap_or_else(Correction::identity);
             for (&i, v) in split.test.iter().zip(fold_values) {
@@ -174,7 +176,7 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
         return Decision::NotKept(tried);
     };
     let all: Vec<usize> = (0..samples.samples.len()).collect();
-    let Some(correction) = fit_on(samples, &all, full, degree, channels) else {
+    let Some(correction) = fit_on(samples, &all, full, &[degree], channels).pop().flatten() else {
         return Decision::NotKept(tried);
     };
     let (error, standard_error) = (tried[chosen].error, tried[chosen].standard_error);
@@ -216,7 +218,9 @@ pub fn text(c: &CorrectionFit) -> String {
     );
     let _ = writeln!(
         t,
-        "              held-out log error {:.4} +- {:.4} with it, {:.4} +- {:.4} the rung alone ({:.2}x; {})",
+        "              held-out log error {:.4} +- {:.4} with it, {:.4} +- {:.4} the rung alone ({:.2}x; {}); \
+         the verdict, the floor and the residual bins are the corrected model's, the fit \
+         statistics the rung's",
         c.error,
         c.standard_error,
         c.rung_error,

@@ -283,7 +283,8 @@ pub fn wrap_azimuth(deg: f64) -> f64 {
 }
 
 /// The fitted BRDF (1/sr per channel) of an outcome as a function of the swatch-frame directions,
-/// at the fitted fibre azimuth and with the knobs of `cfg` (for plots and comparisons).
+/// at the fitted fibre azimuth and with the knobs of `cfg` (for plots and comparisons), times
+/// its smooth correction where it keeps one.
 pub fn fitted_brdf(o: &FitOutcome, cfg: &FitConfig) -> crate::model::BrdfFn {
     let m = problem::model_for(
         &o.set,
@@ -296,11 +297,14 @@ pub fn fitted_brdf(o: &FitOutcome, cfg: &FitConfig) -> crate::model::BrdfFn {
     let frame =
         crate::model::FibreFrame::from_azimuth(o.set.shape_value(Param::Azimuth).to_radians());
     let channels = o.channels;
+    let correction = o.correction.as_ref().map(|c| c.correction.clone());
     Box::new(move |l, v| {
-        let b = m.basis(&crate::model::DirectionPair::new(&frame, l, v));
+        let pair = crate::model::DirectionPair::new(&frame, l, v);
+        let b = m.basis(&pair);
+        let f = correction.as_ref().map_or([1.0; 3], |k| k.factor(&pair));
         let mut out = [0.0; 3];
         for (c, x) in out.iter_mut().enumerate() {
-            *x = b.brdf(&albedos, c.min(channels - 1));
+            *x = b.brdf(&albedos, c.min(channels - 1)) * f[c.min(channels - 1)];
         }
         Some(out)
     })

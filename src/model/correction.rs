@@ -37,15 +37,39 @@ pub struct Correction {
 /// by total degree then (a, b, c).
 pub fn terms(degree: usize) -> Vec<(usize, usize, usize)> {
     let mut t = Vec::new();
+    for_each_term(degree, |a, b, c| t.push((a, b, c)));
+    t
+}
+
+/// Call `f(a, b, c)` for each term of [`terms`]`(degree)`, in its order (no allocation).
+fn for_each_term(degree: usize, mut f: impl FnMut(usize, usize, usize)) {
     for total in 0..=degree {
         for a in 0..=total {
             for b in a..=total - a {
-                let c = total - a - b;
-                t.push((a, b, c));
+                f(a, b, total - a - b);
             }
         }
     }
+}
+
+/// The Legendre values at the three coordinates, up to degree `d`.
+type Tables = [[f64; MAX_DEGREE + 1]; 3];
+
+fn tables(d: usize, cos_i: f64, cos_o: f64, cos_dphi: f64) -> Tables {
+    let mut t = [[0.0; MAX_DEGREE + 1]; 3];
+    legendre(2.0 * cos_i - 1.0, &mut t[0][..=d]);
+    legendre(2.0 * cos_o - 1.0, &mut t[1][..=d]);
+    legendre(cos_dphi, &mut t[2][..=d]);
     t
+}
+
+/// The term (a, b, c)'s value from the tables.
+fn term(t: &Tables, a: usize, b: usize, c: usize) -> f64 {
+    let sym = match a == b {
+        true => t[0][a] * t[1][b],
+        false => t[0][a] * t[1][b] + t[0][b] * t[1][a],
+    };
+    sym * t[2][c]
 }
 
 /// Legendre polynomials P_0 .. P_n at x into `out` (length n + 1).
@@ -77,21 +101,10 @@ pub fn coordinates(l: &Local, v: &Local) -> (f64, f64, f64) {
 
 /// The values of [`terms`]`(degree)` at (cos theta_i, cos theta_o, cos dphi), into `out`.
 pub fn features(degree: usize, cos_i: f64, cos_o: f64, cos_dphi: f64, out: &mut Vec<f64>) {
-    let mut pi = [0.0; MAX_DEGREE + 1];
-    let mut po = [0.0; MAX_DEGREE + 1];
-    let mut py = [0.0; MAX_DEGREE + 1];
     let d = degree.min(MAX_DEGREE);
-    legendre(2.0 * cos_i - 1.0, &mut pi[..=d]);
-    legendre(2.0 * cos_o - 1.0, &mut po[..=d]);
-    legendre(cos_dphi, &mut py[..=d]);
+    let t = tables(d, cos_i, cos_o, cos_dphi);
     out.clear();
-    for (a, b, c) in terms(d) {
-        let sym = match a == b {
-            true => pi[a] * po[b],
-            false => pi[a] * po[b] + pi[b] * po[a],
-        };
-        out.push(sym * py[c]);
-    }
+    for_each_term(d, |a, b, c| out.push(term(&t, a, b, c)));
 }
 
 impl Correction {
@@ -142,14 +155,17 @@ impl Correction {
 
     /// The log factor per channel at (cos theta_i, cos theta_o, cos dphi), without the clamps.
     fn raw_log_factor(&self, cos_i: f64, cos_o: f64, cos_dphi: f64) -> [f64; 3] {
-        let mut f = Vec::with_capacity(self.coefficients.len());
-        features(self.degree, cos_i, cos_o, cos_dphi, &mut f);
+        let t = tables(self.degree, cos_i, cos_o, cos_dphi);
         let mut s = [0.0; 3];
-        for (x, k) in f.iter().zip(&self.coefficients) {
-            for c in 0..3 {
-                s[c] += x * k[c];
+        let mut k = 0;
+        for_each_term(self.degree, |a, b, c| {
+            let x = term(&t, a, b, c);
+            let w = &self.coefficients[k];
+            for ch in 0..3 {
+                s[ch] += x * w[ch];
             }
-        }
+            k += 1;
+        });
         s
     }
 
@@ -182,55 +198,88 @@ impl Correction {
         weights: &[f64],
         channels: usize,
     ) -> Option<Correction> {
-        let d = degree.min(MAX_DEGREE);
-        let k = terms(d).len();
-        let mut ata = nalgebra::DMatrix::<f64>::zeros(k, k);
-        let mut atb = nalgebra::DMatrix::<f64>::zeros(k, 3);
+        Self::fit_degrees(&[degree], points, targets, weights, channels)
+            .pop()
+            .flatten()
+    }
+
+    /// [`Correction::fit`] at each of `degrees` from one pass over the points: the terms are
+    /// ordered by total degree, so a lower degree's normal equations are the leading block of
+    /// the highest's.
+    pub fn fit_degrees(
+        degrees: &[usize],
+        points: &[(f64, f64, f64)],
+        targets: &[[f64; 3]],
+        weights: &[f64],
+        channels: usize,
+    ) -> Vec<Option<Correction>> {
+        let top = degrees.iter().copied().max().unwrap_or(0).min(MAX_DEGREE);
+        let k = terms(top).len();
+        // the features of every point (row-major), and the normal equations' upper triangle
+        let mut features_all = Vec::with_capacity(points.len() * k);
         let mut f = Vec::with_capacity(k);
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for ((&(ci, co, cd), t), &w) in points.iter().zip(targets).zip(weights) {
-            features(d, ci, co, cd, &mut f);
-            for r in 0..k {
-                let wr = w * f[r];
-                for c in r..k {
-                    ata[(r, c)] += wr * f[c];
-                }
-                for ch in 0..3 {
-                    atb[(r, ch)] += wr * t[ch.min(channels - 1)];
-                }
-            }
-            lo = lo.min(ci.min(co));
-            hi = hi.max(ci.max(co));
-        }
-        for r in 0..k {
-            for c in 0..r {
-                ata[(r, c)] = ata[(c, r)];
-            }
-        }
-        // A whisper of ridge keeps a term the points barely constrain from running away.
-        let ridge = 1e-9 * (0..k).map(|i| ata[(i, i)]).sum::<f64>() / k as f64;
-        for i in 0..k {
-            ata[(i, i)] += ridge;
-        }
-        let x = ata.cholesky()?.solve(&atb);
-        let coefficients: Vec<[f64; 3]> = (0..k).map(|r| [x[(r, 0)], x[(r, 1)], x[(r, 2)]]).collect();
-        if coefficients.iter().flatten().any(|v| !v.is_finite()) || !lo.is_finite() {
-            return None;
-        }
-        let mut out = Correction {
-            degree: d,
-            coefficients,
-            cos_range: [lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0)],
-            log_range: [[f64::INFINITY, f64::NEG_INFINITY]; 3],
-        };
         for &(ci, co, cd) in points {
-            let s = out.raw_log_factor(ci, co, cd);
-            for c in 0..3 {
-                out.log_range[c][0] = out.log_range[c][0].min(s[c]);
-                out.log_range[c][1] = out.log_range[c][1].max(s[c]);
+            features(top, ci, co, cd, &mut f);
+            features_all.extend_from_slice(&f);
+        }
+        let mut ata = vec![0.0; k * k];
+        let mut atb = vec![[0.0; 3]; k];
+        for ((row, t), &w) in features_all.chunks_exact(k).zip(targets).zip(weights) {
+            let y = [0, 1, 2].map(|ch| t[ch.min(channels - 1)]);
+            for (r, (&fr, b)) in row.iter().zip(atb.iter_mut()).enumerate() {
+                let wr = w * fr;
+                for (x, &fc) in ata[r * k + r..(r + 1) * k].iter_mut().zip(&row[r..]) {
+                    *x += wr * fc;
+                }
+                for (bc, yc) in b.iter_mut().zip(y) {
+                    *bc += wr * yc;
+                }
             }
         }
-        Some(out)
+        let (lo, hi) = points.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+            (lo.min(p.0.min(p.1)), hi.max(p.0.max(p.1)))
+        });
+        degrees
+            .iter()
+            .map(|&degree| {
+                let d = degree.min(MAX_DEGREE);
+                let n = terms(d).len();
+                let mut a = nalgebra::DMatrix::<f64>::from_fn(n, n, |r, c| {
+                    ata[r.min(c) * k + r.max(c)]
+                });
+                // a whisper of ridge keeps a term the points barely constrain from running away
+                let ridge = 1e-9 * a.diagonal().sum() / n as f64;
+                for i in 0..n {
+                    a[(i, i)] += ridge;
+                }
+                let b = nalgebra::DMatrix::<f64>::from_fn(n, 3, |r, ch| atb[r][ch]);
+                let x = a.cholesky()?.solve(&b);
+                let coefficients: Vec<[f64; 3]> =
+                    (0..n).map(|r| [x[(r, 0)], x[(r, 1)], x[(r, 2)]]).collect();
+                if coefficients.iter().flatten().any(|v| !v.is_finite()) || !lo.is_finite() {
+                    return None;
+                }
+                let mut log_range = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
+                for row in features_all.chunks_exact(k) {
+                    let mut s = [0.0; 3];
+                    for (fr, w) in row[..n].iter().zip(&coefficients) {
+                        for ch in 0..3 {
+                            s[ch] += fr * w[ch];
+                        }
+                    }
+                    for ch in 0..3 {
+                        log_range[ch][0] = log_range[ch][0].min(s[ch]);
+                        log_range[ch][1] = log_range[ch][1].max(s[ch]);
+                    }
+                }
+                Some(Correction {
+                    degree: d,
+                    coefficients,
+                    cos_range: [lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0)],
+                    log_range,
+                })
+            })
+            .collect()
     }
 }
 

@@ -240,15 +240,33 @@ pub fn compare(
     outputs: &[Output],
     bound: &Bound,
 ) -> Agreement {
+    compare_corrected(model, albedos, channels, None, cases, outputs, bound)
+}
+
+/// [`compare`] with the result's smooth correction `correction` on the Rust model's BRDF (the
+/// basis compared as it is).
+pub fn compare_corrected(
+    model: &dyn ShadingModel,
+    albedos: &Albedos,
+    channels: usize,
+    correction: Option<&crate::model::correction::Correction>,
+    cases: &[Case],
+    outputs: &[Output],
+    bound: &Bound,
+) -> Agreement {
     const FLOOR: f64 = 1e-4;
     // per case: 3 BRDF channels and 4 basis components (Rust, shader)
     let mut values: Vec<[(f64, f64); 7]> = Vec::with_capacity(cases.len());
     for (c, o) in cases.iter().zip(outputs) {
         let b = rust_basis(model, c);
         let rb = [b.diffuse, b.specular, b.substrate, b.fuzz];
+        let factor = match correction {
+            Some(k) => k.factor(&local_pair(c)),
+            None => [1.0; 3],
+        };
         let mut row = [(0.0, 0.0); 7];
         for (ch, (slot, g)) in row[..3].iter_mut().zip(o.brdf).enumerate() {
-            *slot = (b.brdf(albedos, ch.min(channels - 1)), g as f64);
+            *slot = (b.brdf(albedos, ch.min(channels - 1)) * factor[ch.min(channels - 1)], g as f64);
         }
         for ((slot, want), got) in row[3..].iter_mut().zip(rb).zip(o.basis) {
             *slot = (want, got as f64);
@@ -329,10 +347,11 @@ pub fn on_gpu(
     let model = crate::model::build(id, p)?;
     let outputs = gpu.evaluate(wgsl, cases)?;
     let bound = Bound::for_exponent(p.exponent);
-    let a = compare(
+    let a = compare_corrected(
         model.as_ref(),
         &p.albedos,
         p.albedos.channels(),
+        p.correction.as_ref(),
         cases,
         &outputs,
         &bound,
@@ -340,12 +359,18 @@ pub fn on_gpu(
     Ok((a, bound))
 }
 
-/// The check values a fitted result states (`check_values`: directions in degrees in the swatch
+/// The check values a fitted result states (`check_values`, or with a smooth correction
+/// `correction.check_values`: directions in degrees in the swatch
 /// frame, the BRDF per channel, one number for grey), as cases in that frame (n = +z, t at the
 /// fibre azimuth `psi`, radians) with the stated values. Empty when the file has none.
 pub fn stated_check_values(result: &serde_json::Value, psi: f64) -> Vec<(Case, Vec<f64>)> {
     use crate::model::frame::direction_from_angles;
-    let Some(list) = result.get("check_values").and_then(|c| c.as_array()) else {
+    // with a smooth correction, the corrected BRDF's (what the shader evaluates)
+    let list = match result.get("correction") {
+        Some(c) => c.get("check_values"),
+        None => result.get("check_values"),
+    };
+    let Some(list) = list.and_then(|c| c.as_array()) else {
         return vec![];
     };
     let f32s3 = |v: Vec3| [v.x as f32, v.y as f32, v.z as f32];

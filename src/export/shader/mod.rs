@@ -82,6 +82,9 @@ const HEADER: &str = "\
 //       The BRDF per unit albedo of each linear component, (diffuse, specular, substrate, fuzz):
 //       brdf = b.x kd + b.y ks + b.z substrate_albedo + b.w fuzz (Ward: b.x rho_d + b.y rho_s),
 //       for renderers that feed albedo maps.
+//   fn fibrefit_correction(l, v, n) -> vec3<f32>
+//       The result's smooth correction of the rung per channel (1 without one): fibrefit_brdf
+//       and fibrefit_brdf_at include it; a renderer combining the basis itself multiplies by it.
 //
 // Parameters: baked in as the constants returned by fibrefit_params(). Every entry point has a
 // `_with` form taking them first, e.g. fibrefit_brdf_with(p: FibrefitParams, l, v, n, t), so a
@@ -351,6 +354,7 @@ fn fibrefit_params() -> FibrefitParams {{
         spread.len(),
         fmt(spread).join(",\n            "),
     )?;
+    s.push_str(&correction_wgsl(p.correction.as_ref()));
     s.push_str(section("common"));
     let (names, body, _) = sections(id)?;
     for name in names {
@@ -370,6 +374,100 @@ fn fibrefit_rung(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, height: f32, at_
     s.push_str(PUBLIC);
     validate(&s)?;
     Ok(s)
+}
+
+/// `fibrefit_correction(l, v, n)`: the factor of the result's smooth correction `k` per
+/// channel (`model::correction`, in f32), or 1 without one.
+fn correction_wgsl(k: Option<&crate::model::correction::Correction>) -> String {
+    let Some(k) = k else {
+        return "
+// No correction: the rung as fitted (a result's `correction` would multiply it here).
+fn fibrefit_correction(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>) -> vec3<f32> {
+    return vec3<f32>(1.0);
+}
+"
+        .into();
+    };
+    let v3 = |x: [f64; 3]| format!("vec3<f32>({}, {}, {})", lit(x[0]), lit(x[1]), lit(x[2]));
+    let terms = crate::model::correction::terms(k.degree);
+    let term_list: Vec<String> = terms
+        .iter()
+        .map(|(a, b, c)| format!("vec3<u32>({a}u, {b}u, {c}u)"))
+        .collect();
+    let coeffs: Vec<String> = k.coefficients.iter().map(|c| v3(*c)).collect();
+    format!(
+        "
+// The result's smooth correction of the rung (`correction.series`; not a physical parameter):
+// the BRDF per channel times exp(s), s = sum over the terms (a, b, c) of c_k (P_a(x_i) P_b(x_o)
+// + P_b(x_i) P_a(x_o)) P_c(y) (one product when a = b), P_n Legendre polynomials,
+// x = 2 cos theta - 1 with the cosine clamped to the range the data covered, y = cos(phi_i -
+// phi_o); s clamped per channel to the range it took on the data. Reciprocal in l and v.
+const FIBREFIT_CORRECTION_DEGREE: u32 = {degree}u;
+const FIBREFIT_CORRECTION_TERMS: u32 = {n}u;
+const FIBREFIT_CORRECTION_COS: vec2<f32> = vec2<f32>({lo}, {hi});
+const FIBREFIT_CORRECTION_LOG_LO: vec3<f32> = {log_lo};
+const FIBREFIT_CORRECTION_LOG_HI: vec3<f32> = {log_hi};
+const FIBREFIT_CORRECTION_TERM = array<vec3<u32>, {n}>(
+    {term_list}
+);
+const FIBREFIT_CORRECTION_COEFF = array<vec3<f32>, {n}>(
+    {coeffs}
+);
+
+// P_0(x) .. P_8(x) (those above the correction's degree unused).
+fn fibrefit_legendre(x: f32) -> array<f32, 9> {{
+    var p: array<f32, 9>;
+    p[0] = 1.0;
+    p[1] = x;
+    for (var k = 2u; k <= FIBREFIT_CORRECTION_DEGREE; k++) {{
+        let kf = f32(k);
+        p[k] = ((2.0 * kf - 1.0) * x * p[k - 1u] - (kf - 1.0) * p[k - 2u]) / kf;
+    }}
+    return p;
+}}
+
+// The factor per channel at unit l, v (towards the light and the viewer) and the macro normal
+// n; 1 at and below either horizon (where the BRDF is 0).
+fn fibrefit_correction(l: vec3<f32>, v: vec3<f32>, n: vec3<f32>) -> vec3<f32> {{
+    let ci = dot(l, n);
+    let co = dot(v, n);
+    if (!(ci > 0.0 && co > 0.0)) {{
+        return vec3<f32>(1.0);
+    }}
+    let lp = l - ci * n;
+    let vp = v - co * n;
+    let q = sqrt(dot(lp, lp) * dot(vp, vp));
+    var y = 1.0;
+    if (q > 1e-12) {{
+        y = clamp(dot(lp, vp) / q, -1.0, 1.0);
+    }}
+    let range = FIBREFIT_CORRECTION_COS;
+    let pl = fibrefit_legendre(2.0 * clamp(ci, range.x, range.y) - 1.0);
+    let pv = fibrefit_legendre(2.0 * clamp(co, range.x, range.y) - 1.0);
+    let py = fibrefit_legendre(y);
+    var term = FIBREFIT_CORRECTION_TERM;
+    var coeff = FIBREFIT_CORRECTION_COEFF;
+    var s = vec3<f32>(0.0);
+    for (var k = 0u; k < FIBREFIT_CORRECTION_TERMS; k++) {{
+        let t = term[k];
+        var b = pl[t.x] * pv[t.y];
+        if (t.x != t.y) {{
+            b += pl[t.y] * pv[t.x];
+        }}
+        s += (b * py[t.z]) * coeff[k];
+    }}
+    return exp(clamp(s, FIBREFIT_CORRECTION_LOG_LO, FIBREFIT_CORRECTION_LOG_HI));
+}}
+",
+        degree = k.degree,
+        n = terms.len(),
+        lo = lit(k.cos_range[0]),
+        hi = lit(k.cos_range[1]),
+        log_lo = v3(k.log_range.map(|r| r[0])),
+        log_hi = v3(k.log_range.map(|r| r[1])),
+        term_list = term_list.join(",\n    "),
+        coeffs = coeffs.join(",\n    "),
+    )
 }
 
 /// The entry points, the same for every rung.
@@ -412,11 +510,12 @@ fn fibrefit_basis_at_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3
 }
 
 fn fibrefit_brdf_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>) -> vec3<f32> {
-    return fibrefit_combine(p, fibrefit_basis_with(p, l, v, n, t));
+    return fibrefit_combine(p, fibrefit_basis_with(p, l, v, n, t)) * fibrefit_correction(l, v, n);
 }
 
 fn fibrefit_brdf_at_with(p: FibrefitParams, l: vec3<f32>, v: vec3<f32>, n: vec3<f32>, t: vec3<f32>, height: f32, azimuth_offset: f32) -> vec3<f32> {
-    return fibrefit_combine(p, fibrefit_basis_at_with(p, l, v, n, t, height, azimuth_offset));
+    return fibrefit_combine(p, fibrefit_basis_at_with(p, l, v, n, t, height, azimuth_offset))
+        * fibrefit_correction(l, v, n);
 }
 
 fn fibrefit_height_from_map(m: f32) -> f32 {

@@ -2,7 +2,7 @@
 //! measured on the same kind of folds) against the floor, and the verdict it gives data
 //! without sigmas.
 
-use super::{check, FloorCheck};
+use super::FloorCheck;
 use crate::fit::config::FitConfig;
 use crate::fit::quality::Quality;
 use crate::fit::selection::{self, SelectionOutcome};
@@ -24,11 +24,12 @@ pub fn fit_stage(
         Some(h) => Ok(h),
         None => selection::of_fit(samples, cfg, &outcome.set),
     };
-    let checked = heldout.and_then(|h| Ok((check(samples, cfg.metric, &h, cfg.seed)?, h)));
-    match checked {
-        Ok((c, h)) => {
+    let measured = heldout.and_then(|h| Ok((super::Measured::run(samples, cfg.metric, &h, cfg.seed)?, h)));
+    match measured {
+        Ok((m, h)) => {
             let sigmas = outcome.statistics.sigmas_given;
-            let c = match correct(samples, cfg, outcome, &c, &h, progress) {
+            let c = m.check(samples, &h);
+            let c = match correct(samples, cfg, outcome, &c, &h, &m, progress) {
                 Some(corrected) => corrected,
                 None => c,
             };
@@ -49,6 +50,7 @@ fn correct(
     outcome: &mut FitOutcome,
     c: &FloorCheck,
     h: &crate::fit::selection::HeldOut,
+    measured: &super::Measured,
     progress: &crate::progress::Progress,
 ) -> Option<FloorCheck> {
     let wanted = cfg.components.correction
@@ -69,11 +71,60 @@ fn correct(
     match crate::fit::correction::choose(samples, h, &full, outcome.channels) {
         crate::fit::correction::Decision::NotKept(_) => None,
         crate::fit::correction::Decision::Kept(fit, corrected) => {
-            let checked = check(samples, cfg.metric, &corrected, cfg.seed).ok()?;
+            let checked = measured.check(samples, &corrected);
+            rebin(samples, outcome, &full, &fit.correction);
             outcome.correction = Some(fit);
             Some(checked)
         }
     }
+}
+
+/// The residual-structure bins of `outcome` (and their "systematic residuals" warning) again,
+/// of the rung's values `full` times the kept correction `k`: the model delivered.
+fn rebin(
+    samples: &Samples,
+    outcome: &mut FitOutcome,
+    full: &[[f64; 3]],
+    k: &crate::model::correction::Correction,
+) {
+    use crate::fit::config::Metric;
+    let ch = outcome.channels;
+    let raw: Vec<[f64; 3]> = samples.samples.iter().map(|s| s.value).collect();
+    let eps = [0, 1, 2].map(|c| crate::fit::problem::log_floor(&raw, c));
+    let mut residuals = Vec::with_capacity(samples.samples.len() * ch);
+    for (s, m) in samples.samples.iter().zip(full) {
+        let (ci, co, cd) = crate::fit::correction::sample_point(s);
+        let f = k.factor_at(ci, co, cd);
+        let scale = crate::fit::problem::residual_scale(Metric::Log, s);
+        for c in 0..ch {
+            residuals.push(crate::fit::problem::metric_residual(
+                Metric::Log,
+                scale[c],
+                eps[c],
+                s,
+                c,
+                m[c] * f[c],
+            ));
+        }
+    }
+    let refs: Vec<&crate::load::samples::Sample> = samples.samples.iter().collect();
+    let psi = outcome
+        .set
+        .shape_value(crate::fit::parameters::Param::Azimuth)
+        .to_radians();
+    let mut sums = crate::fit::quality::Sums::new(false);
+    sums.add(&refs, &residuals, ch, psi);
+    let free = outcome.statistics.free_parameters;
+    let q = crate::fit::quality::assess_sums(&sums, free, false, || None, &[]);
+    let systematic = |w: &String| w.starts_with("systematic residuals");
+    outcome.quality.warnings.retain(|w| !systematic(w));
+    outcome.warnings.retain(|w| !systematic(w));
+    for w in q.warnings.iter().filter(|w| systematic(w)) {
+        let w = format!("{w} (with the smooth correction)");
+        outcome.quality.warnings.push(w.clone());
+        outcome.warnings.push(w);
+    }
+    outcome.quality.residual_bins = q.residual_bins;
 }
 
 /// Does the verdict of data with these noise sources follow the floor? Without sigmas, unless

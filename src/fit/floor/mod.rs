@@ -485,35 +485,88 @@ fn reciprocal_floor(samples: &Samples, req: &FloorRequest, floor: &Floor, error:
 /// The model's held-out errors `model` against the floor on the same splits (each training
 /// part's log floors, as the model's fold fits were judged).
 pub fn check(samples: &Samples, metric: Metric, model: &HeldOut, seed: u64) -> Result<FloorCheck> {
-    let req = FloorRequest {
-        splits: &model.splits,
-        metric,
-        eps: None,
-        seed,
-        validation: model.validation.clone(),
-        choice: Choice::default(),
-    };
-    let run = floor_on(samples, &req)?;
-    let mut per_sample = vec![None; samples.samples.len()];
-    let tests = model.splits.iter().flat_map(|s| s.test.iter());
-    for ((&i, e), m) in tests.zip(&model.errors).zip(&model.values) {
-        per_sample[i] = Some((*e, *m));
-    }
-    let rows: Vec<regions::Row> = run
-        .tested
-        .iter()
-        .filter_map(|&(i, floor)| {
-            per_sample[i].map(|(model, value)| regions::Row {
-                sample: &samples.samples[i],
-                model,
-                floor,
-                value,
-            })
+    Ok(Measured::run(samples, metric, model, seed)?.check(samples, model))
+}
+
+/// The floor measured on a model's splits, to judge that model and another on the same splits
+/// (a corrected one) without measuring it again.
+pub struct Measured {
+    run: FloorRun,
+    req_metric: Metric,
+    seed: u64,
+    validation: String,
+    /// The reciprocal floor once measured (`None` inside: measured, none to give).
+    reciprocal: std::cell::OnceCell<Option<Floor>>,
+}
+
+impl Measured {
+    /// Measure the floor on `model`'s splits.
+    pub fn run(samples: &Samples, metric: Metric, model: &HeldOut, seed: u64) -> Result<Self> {
+        let req = FloorRequest {
+            splits: &model.splits,
+            metric,
+            eps: None,
+            seed,
+            validation: model.validation.clone(),
+            choice: Choice::default(),
+        };
+        Ok(Self {
+            run: floor_on(samples, &req)?,
+            req_metric: metric,
+            seed,
+            validation: model.validation.clone(),
+            reciprocal: std::cell::OnceCell::new(),
         })
-        .collect();
-    let (regs, bins) = regions::regions(&rows, samples.channels);
-    let reciprocal = reciprocal_floor(samples, &req, &run.floor, model.error);
-    Ok(compare(model.error, model.standard_error, run.floor, reciprocal, regs, bins))
+    }
+
+    /// The check of `model` (on the splits the floor was measured on): where its excess lies,
+    /// and the reciprocal floor where it is beyond [`WITHIN`] the floor (measured once).
+    pub fn check(&self, samples: &Samples, model: &HeldOut) -> FloorCheck {
+        let run = &self.run;
+        let mut per_sample = vec![None; samples.samples.len()];
+        let tests = model.splits.iter().flat_map(|s| s.test.iter());
+        for ((&i, e), m) in tests.zip(&model.errors).zip(&model.values) {
+            per_sample[i] = Some((*e, *m));
+        }
+        let rows: Vec<regions::Row> = run
+            .tested
+            .iter()
+            .filter_map(|&(i, floor)| {
+                per_sample[i].map(|(model, value)| regions::Row {
+                    sample: &samples.samples[i],
+                    model,
+                    floor,
+                    value,
+                })
+            })
+            .collect();
+        let (regs, bins) = regions::regions(&rows, samples.channels);
+        let beyond = model.error > WITHIN * run.floor.error;
+        let reciprocal = match (beyond, self.reciprocal.get()) {
+            (false, _) => None,
+            (true, Some(r)) => r.clone(),
+            (true, None) => {
+                let req = FloorRequest {
+                    splits: &model.splits,
+                    metric: self.req_metric,
+                    eps: None,
+                    seed: self.seed,
+                    validation: self.validation.clone(),
+                    choice: Choice::default(),
+                };
+                let r = reciprocal_floor(samples, &req, &run.floor, model.error);
+                self.reciprocal.get_or_init(|| r).clone()
+            }
+        };
+        compare(
+            model.error,
+            model.standard_error,
+            run.floor.clone(),
+            reciprocal,
+            regs,
+            bins,
+        )
+    }
 }
 
 /// The check of a model error `error` (standard error `se`) against `floor` (and `reciprocal`,
