@@ -198,6 +198,17 @@ def run_child(kind, fit, size, spp, runs):
     return json.loads(line[0][7:])
 
 
+def correction_text(r):
+    """The fit's smooth correction in words (empty without one)."""
+    c = r.correction
+    if c is None:
+        return ""
+    return (
+        f", and the smooth correction kept on it: degree {c['degree']}, held-out log error "
+        f"{c['heldout_error']:.4f} against the rung's {c['rung_heldout_error']:.4f}; the fast path evaluates it"
+    )
+
+
 def write(out, rows, r, fit_s, synthetic, models):
     import numpy as np
 
@@ -231,7 +242,7 @@ def write(out, rows, r, fit_s, synthetic, models):
         f"Written by `python3 python/examples/mitsuba_speed.py` (issue 41 item 3; CSV: `mitsuba_speed.csv`), on this machine "
         f"({os.cpu_count()} cores; the machine is shared: read the ratios, not the digits). "
         f"The felt `tests/data/rgl/acrylic_felt_green_rgb.bsdf` fitted with `--model auto` ({fit_s:.0f} s): {r.model} "
-        f"(the choice's fuzz layer included). One scene: a sphere under a constant environment (0.5) and a directional light, "
+        f"(the choice's fuzz layer included{correction_text(r)}). One scene: a sphere under a constant environment (0.5) and a directional light, "
         "perspective camera, `path` with max depth 3, `independent` sampler, variant `llvm_ad_rgb`; each BSDF and size in its own "
         "process; the median of the timed renders after one that compiles the kernels. Mitsuba's defaults (symbolic loops and "
         "calls on, which `register()` keeps) but in the rows marked symbolic off (`register(exact_flags=True)`: what the exact "

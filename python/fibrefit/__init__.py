@@ -199,19 +199,6 @@ class Material:
         return list(self._m.warnings)
 
     @property
-    def correction(self) -> Optional[Dict[str, float]]:
-        """The smooth reciprocal correction kept on the rung where the rung missed what the data
-        hold and the correction paid held out: ``{"degree", "heldout_error", "rung_heldout_error"}``
-        (log metric); ``None`` when none was kept. Not a physical parameter: the rung's BRDF per
-        channel times exp(a Legendre series in cos theta_i, cos theta_o, cos dphi), symmetric in
-        light and view. ``Material`` of the result applies it (eval, sample); the coefficients
-        are ``result["correction"]["series"]``."""
-        c = self._r.correction
-        if c is None:
-            return None
-        return {"degree": c[0], "heldout_error": c[1], "rung_heldout_error": c[2]}
-
-    @property
     def undetermined(self) -> Dict[str, str]:
         """The result's values its data did not determine, label -> why (at a bound, held by a
         degeneracy, a flat cost): the material uses them as given, but they are not
@@ -405,6 +392,19 @@ class Result:
         the floor is reciprocal already, the model within 1.2x of it, or no floor was measured;
         details in ``result["quality"]["floor"]["reciprocal"]``."""
         return self._r.reciprocal_floor
+
+    @property
+    def correction(self) -> Optional[Dict[str, float]]:
+        """The smooth reciprocal correction kept on the rung where the rung missed what the data
+        hold and the correction paid held out: ``{"degree", "heldout_error", "rung_heldout_error"}``
+        (log metric); ``None`` when none was kept. Not a physical parameter: the rung's BRDF per
+        channel times exp(a Legendre series in cos theta_i, cos theta_o, cos dphi), symmetric in
+        light and view. ``Material`` of the result applies it (eval, sample); the coefficients
+        are ``result["correction"]["series"]``."""
+        c = self._r.correction
+        if c is None:
+            return None
+        return {"degree": c[0], "heldout_error": c[1], "rung_heldout_error": c[2]}
 
     @property
     def undetermined(self) -> Dict[str, str]:
