@@ -281,6 +281,19 @@ fn a_rung_within_the_floor_gets_no_correction() {
     assert!(!run.report_text.contains("correction    "));
 }
 
+/// A renderer's own material without the fuzz layer (`gltf`, `principled`, `openpbr`) goes to
+/// that renderer as it is, which could not show a correction: none is tried, the verdict is the
+/// material's own.
+#[test]
+fn a_renderers_own_material_is_judged_as_the_renderer_will_show_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let data = common::synth_without_sigmas(dir.path(), 2500);
+    let run = fit(&data, "gltf", None);
+    let f = run.outcome.quality.floor.as_ref().unwrap();
+    assert!(!f.within, "{}", f.ratio);
+    assert!(run.outcome.correction.is_none());
+}
+
 /// A result's series is checked on reading: too many terms for its degree, or a degree above
 /// the largest, is an error naming the file and the problem (exit 2), nothing written.
 #[test]

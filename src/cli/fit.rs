@@ -71,7 +71,8 @@ pub struct FitArgs {
     /// Never a smooth correction on the rung. By default, where data without sigmas hold
     /// structure the fitted rung misses (its held-out error beyond 1.2x the floor), a smooth
     /// reciprocal factor exp(Legendre series in cos theta_i, cos theta_o, cos dphi) is fitted
-    /// on it, its degree chosen held out, and kept only where it pays: `eval`, `render`,
+    /// on it (not on a renderer's own material without the fuzz layer: that renderer could not
+    /// show it), its degree chosen held out, and kept only where it pays: `eval`, `render`,
     /// `score`, `Material` and the shader export apply it; the glTF, Blender and MaterialX/USD
     /// materials carry the rung alone and say so (as
     /// `[components] correction = false`)

@@ -42,8 +42,9 @@ pub fn fit_stage(
 }
 
 /// The correction stage ([`crate::fit::correction`]) where the rung misses what data judged
-/// by the floor hold (`log` metric, the correction not switched off): a kept correction goes
-/// into `outcome`, and the floor check of the corrected model is returned.
+/// by the floor hold (`log` metric, the correction not switched off, the rung not a renderer's
+/// own material without the fuzz layer): a kept correction goes into `outcome`, and the floor
+/// check of the corrected model is returned.
 fn correct(
     samples: &Samples,
     cfg: &FitConfig,
@@ -53,7 +54,16 @@ fn correct(
     measured: &super::Measured,
     progress: &crate::progress::Progress,
 ) -> Option<FloorCheck> {
+    // a renderer's own material without the fuzz layer is fitted to go to that renderer as it
+    // is, and the renderer could not show a correction: judged as it will be seen
+    let fuzz = outcome
+        .set
+        .albedos
+        .iter()
+        .any(|a| a.component == crate::model::parameter::Component::Fuzz);
+    let renderers_own = outcome.set.rung.rung().renderer.is_some() && !fuzz;
     let wanted = cfg.components.correction
+        && !renderers_own
         && cfg.metric == crate::fit::config::Metric::Log
         && !c.within
         && judged_by_floor(&outcome.quality, outcome.statistics.sigmas_given);
