@@ -72,14 +72,12 @@ fn log_floors(samples: &[&Sample]) -> [f64; 3] {
     [0, 1, 2].map(|c| crate::fit::problem::log_floor(&raw, c))
 }
 
-/// Mean over channels of the weighted squared log error of `value` against `s` (the `log`
-/// metric's residual without sigmas).
+/// Mean over channels of the squared `log` metric residual of `value` against `s`.
 fn log_term(s: &Sample, value: &[f64; 3], eps: &[f64; 3], channels: usize) -> f64 {
+    use crate::fit::config::Metric;
+    let scale = crate::fit::problem::residual_scale(Metric::Log, s);
     (0..channels)
-        .map(|c| {
-            let r = (value[c].max(0.0) + eps[c]).ln() - (s.value[c].max(0.0) + eps[c]).ln();
-            s.weight * r * r
-        })
+        .map(|c| crate::fit::problem::metric_residual(Metric::Log, scale[c], eps[c], s, c, value[c]).powi(2))
         .sum::<f64>()
         / channels as f64
 }
@@ -97,19 +95,19 @@ fn targets(samples: &Samples, idx: &[usize], full: &[[f64; 3]], eps: &[f64; 3]) 
 }
 
 /// The series of each of `degrees` fitted to the log residuals of the samples `idx` at the
-/// full fit's values `full` (their own log floors).
+/// full fit's values `full` (`eps`: their own log floors).
 fn fit_on(
     samples: &Samples,
     idx: &[usize],
     full: &[[f64; 3]],
+    eps: &[f64; 3],
     degrees: &[usize],
     channels: usize,
 ) -> Vec<Option<Correction>> {
     let refs: Vec<&Sample> = idx.iter().map(|&i| &samples.samples[i]).collect();
-    let eps = log_floors(&refs);
     let pts: Vec<_> = refs.iter().map(|s| sample_point(s)).collect();
     let w: Vec<f64> = refs.iter().map(|s| s.weight).collect();
-    Correction::fit_degrees(degrees, &pts, &targets(samples, idx, full, &eps), &w, channels)
+    Correction::fit_degrees(degrees, &pts, &targets(samples, idx, full, eps), &w, channels)
 }
 
 /// Choose a correction of the fit whose values on every sample are `full` and whose held-out
@@ -133,7 +131,7 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
             errors[0].push(log_term(&samples.samples[i], v, &eps, channels));
             values[0].push(*v);
         }
-        let fitted = fit_on(samples, &split.train, full, &degrees, channels);
+        let fitted = fit_on(samples, &split.train, full, &eps, &degrees, channels);
         for (k, corr) in fitted.into_iter().enumerate() {
             failed[k] |= corr.is_none();
             let corr = corr.unwrap_or_else(Correction::identity);
@@ -176,7 +174,9 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
         return Decision::NotKept(tried);
     };
     let all: Vec<usize> = (0..samples.samples.len()).collect();
-    let Some(correction) = fit_on(samples, &all, full, &[degree], channels).pop().flatten() else {
+    let eps = log_floors(&samples.samples.iter().collect::<Vec<_>>());
+    let fitted = fit_on(samples, &all, full, &eps, &[degree], channels);
+    let Some(correction) = fitted.into_iter().next().flatten() else {
         return Decision::NotKept(tried);
     };
     let (error, standard_error) = (tried[chosen].error, tried[chosen].standard_error);
