@@ -778,7 +778,11 @@ pub fn correction_block(
                  + P_b(2 cos theta_i - 1) P_a(2 cos theta_o - 1) P_c(cos(phi_i - phi_o)) for the \
                  term (a, b, c) (one product when a = b), P_n Legendre polynomials; cosines \
                  clamped to cos_range, the exponent to log_range per channel. Structure the \
-                 rung misses and the data hold; the rung's parameters keep their meaning",
+                 rung misses and the data hold; the rung's parameters keep their meaning. \
+                 series.instrument (k = 1..degree, if present): the coefficients of \
+                 P_k(2 cos theta_i - 1) - P_k(2 cos theta_o - 1), the measuring instrument's \
+                 light/view imbalance fitted beside the series (what of the data is not \
+                 reciprocal), not part of the material: eval, renderers and exports leave it out",
         "series": k,
         "terms": crate::model::correction::terms(k.degree),
         "heldout": {
@@ -786,6 +790,8 @@ pub fn correction_block(
             "standard_error": c.standard_error,
             "rung_error": c.rung_error,
             "rung_standard_error": c.rung_standard_error,
+            "material_error": c.material_error,
+            "reciprocal_floor": c.reciprocal_floor,
             "validation": c.validation,
             "metric": "log",
         },

@@ -1,8 +1,18 @@
 //! The correction stage: where a fit of data without sigmas misses structure the data hold
 //! (beyond [`crate::fit::floor::WITHIN`] the floor), a smooth reciprocal factor
-//! ([`crate::model::correction`]) on the fitted rung, its degree chosen held out as `--model
-//! auto` chooses a rung: on the same folds (or split), the fewest terms within one standard
-//! error of the best, no correction among the candidates. Kept only where it pays.
+//! ([`crate::model::correction`]) on the fitted rung, its degree chosen held out on `--model
+//! auto`'s folds (or split): the fewest terms whose held-out error is within one standard error
+//! of the best's, the standard error that of their paired difference (every candidate is judged
+//! on the same held-out samples, so their errors move together; auto's rule for rungs takes the
+//! best's own standard error), no correction among the candidates. Kept only where it pays.
+//!
+//! Beside the material's reciprocal series, each degree d fits the instrument's light/view
+//! imbalance, exp(sum_{k=1..d} b_k (P_k(x_i) - P_k(x_o))) ([`Correction::instrument`]): a
+//! material is reciprocal, so what of the data is not is the instrument's, and a model of the
+//! measurement has to carry it to be judged against the floor (a predictor of the data). The
+//! held-out errors, the verdict and the residual bins are the measurement model's; the material
+//! delivered (eval, render, exports) is the rung times the reciprocal series alone, and its
+//! held-out error is reported beside (`material_error`).
 //!
 //! Each fold's series is fitted to the training part's log residuals of the fit to all samples
 //! (the rung's parameters hardly move between folds) and judged on the fold's held-out values
@@ -23,10 +33,15 @@ pub const SAMPLES_PER_TERM: usize = 5;
 pub struct Tried {
     /// Total degree; `None`: no correction (the rung alone).
     pub degree: Option<usize>,
-    /// Coefficients per channel (0 for none).
+    /// Coefficients per channel (0 for none), the material's series and the instrument's.
     pub terms: usize,
     pub error: f64,
     pub standard_error: f64,
+    /// The standard error of its held-out error's difference from the best's, the two paired
+    /// on the same samples (RMS units; 0 for the best): the rule's yardstick.
+    pub paired_standard_error: f64,
+    /// Its held-out error without the instrument's terms: the material's.
+    pub material_error: f64,
 }
 
 /// A kept correction and how it was chosen.
@@ -40,6 +55,11 @@ pub struct CorrectionFit {
     /// The held-out error with the correction, and its standard error.
     pub error: f64,
     pub standard_error: f64,
+    /// The held-out error of the corrected material alone, without the instrument's terms.
+    pub material_error: f64,
+    /// The reciprocal floor (what a material can reach on data that are not reciprocal), where
+    /// the floor check measured one: the yardstick of `material_error`.
+    pub reciprocal_floor: Option<f64>,
     /// Every degree tried, none first.
     pub tried: Vec<Tried>,
     /// How samples were held out (auto's words).
@@ -107,7 +127,29 @@ fn fit_on(
     let refs: Vec<&Sample> = idx.iter().map(|&i| &samples.samples[i]).collect();
     let pts: Vec<_> = refs.iter().map(|s| sample_point(s)).collect();
     let w: Vec<f64> = refs.iter().map(|s| s.weight).collect();
-    Correction::fit_degrees(degrees, &pts, &targets(samples, idx, full, eps), &w, channels)
+    Correction::fit_degrees(degrees, &pts, &targets(samples, idx, full, eps), &w, channels, true)
+}
+
+/// Coefficients per channel of a correction of total degree `d`: the material's series and the
+/// instrument's terms.
+pub fn columns(d: usize) -> usize {
+    terms(d).len() + d
+}
+
+/// The paired standard error, in RMS units, of the difference between the held-out errors
+/// whose per-sample squared terms are `a` and `b` (the same samples, in the same order).
+fn paired_se(a: &[f64], b: &[f64]) -> f64 {
+    let n = a.len().min(b.len());
+    if n < 2 {
+        return 0.0;
+    }
+    let d: Vec<f64> = a.iter().zip(b).map(|(x, y)| x - y).collect();
+    let mean = d.iter().sum::<f64>() / n as f64;
+    let var = d.iter().map(|x| (x - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let ra = (a.iter().sum::<f64>() / n as f64).sqrt();
+    let rb = (b.iter().sum::<f64>() / n as f64).sqrt();
+    // rms_a - rms_b = (mean a - mean b) / (rms_a + rms_b)
+    (var / n as f64).sqrt() / (ra + rb).max(f64::MIN_POSITIVE)
 }
 
 /// Choose a correction of the fit whose values on every sample are `full` and whose held-out
@@ -115,10 +157,12 @@ fn fit_on(
 pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels: usize) -> Decision {
     let n_train = heldout.splits.iter().map(|s| s.train.len()).min().unwrap_or(0);
     let degrees: Vec<usize> = (0..=MAX_DEGREE)
-        .filter(|&d| terms(d).len() * SAMPLES_PER_TERM <= n_train)
+        .filter(|&d| columns(d) * SAMPLES_PER_TERM <= n_train)
         .collect();
-    // Per candidate (none, then each degree), the held-out terms and values in the splits' order.
+    // Per candidate (none, then each degree), the held-out terms and values in the splits'
+    // order (the measurement model's), and the terms of the material alone.
     let mut errors: Vec<Vec<f64>> = vec![Vec::new(); degrees.len() + 1];
+    let mut material: Vec<Vec<f64>> = vec![Vec::new(); degrees.len() + 1];
     let mut values: Vec<Vec<[f64; 3]>> = vec![Vec::new(); degrees.len() + 1];
     let mut offset = 0;
     let mut failed = vec![false; degrees.len()];
@@ -128,7 +172,9 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
         let fold_values = &heldout.values[offset..offset + split.test.len()];
         offset += split.test.len();
         for (&i, v) in split.test.iter().zip(fold_values) {
-            errors[0].push(log_term(&samples.samples[i], v, &eps, channels));
+            let e = log_term(&samples.samples[i], v, &eps, channels);
+            errors[0].push(e);
+            material[0].push(e);
             values[0].push(*v);
         }
         let fitted = fit_on(samples, &split.train, full, &eps, &degrees, channels);
@@ -139,24 +185,27 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
                 let s = &samples.samples[i];
                 let (ci, co, cd) = sample_point(s);
                 let f = corr.factor_at(ci, co, cd);
-                let m = [0, 1, 2].map(|c| v[c] * f[c]);
+                let inst = corr.instrument_at(ci, co);
+                let mat = [0, 1, 2].map(|c| v[c] * f[c]);
+                let m = [0, 1, 2].map(|c| mat[c] * inst[c]);
                 errors[k + 1].push(log_term(s, &m, &eps, channels));
+                material[k + 1].push(log_term(s, &mat, &eps, channels));
                 values[k + 1].push(m);
             }
         }
     }
-    let tried: Vec<Tried> = (0..=degrees.len())
+    let mut tried: Vec<Tried> = (0..=degrees.len())
         .map(|k| {
             let (error, standard_error) = rms_and_se(&errors[k]);
             let degree = k.checked_sub(1).map(|j| degrees[j]);
+            let failed = k > 0 && failed[k - 1];
             Tried {
                 degree,
-                terms: degree.map_or(0, |d| terms(d).len()),
-                error: match k > 0 && failed[k - 1] {
-                    true => f64::INFINITY,
-                    false => error,
-                },
+                terms: degree.map_or(0, columns),
+                error: if failed { f64::INFINITY } else { error },
                 standard_error,
+                paired_standard_error: 0.0,
+                material_error: if failed { f64::INFINITY } else { rms_and_se(&material[k]).0 },
             }
         })
         .collect();
@@ -166,9 +215,11 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
     else {
         return Decision::NotKept(tried);
     };
-    let threshold = tried[best].error + tried[best].standard_error;
+    for k in 0..tried.len() {
+        tried[k].paired_standard_error = paired_se(&errors[k], &errors[best]);
+    }
     let chosen = (0..tried.len())
-        .find(|&k| tried[k].error <= threshold)
+        .find(|&k| tried[k].error <= tried[best].error + tried[k].paired_standard_error)
         .unwrap_or(best);
     let Some(degree) = tried[chosen].degree else {
         return Decision::NotKept(tried);
@@ -180,6 +231,7 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
         return Decision::NotKept(tried);
     };
     let (error, standard_error) = (tried[chosen].error, tried[chosen].standard_error);
+    let material_error = tried[chosen].material_error;
     let (rung_error, rung_standard_error) = (tried[0].error, tried[0].standard_error);
     let corrected = HeldOut {
         splits: heldout.splits.clone(),
@@ -196,6 +248,8 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
             rung_standard_error,
             error,
             standard_error,
+            material_error,
+            reciprocal_floor: None,
             tried,
             validation: heldout.validation.clone(),
         },
@@ -208,14 +262,24 @@ pub fn choose(samples: &Samples, heldout: &HeldOut, full: &[[f64; 3]], channels:
 pub fn text(c: &CorrectionFit) -> String {
     use std::fmt::Write;
     let mut t = String::new();
+    let k = &c.correction;
     let _ = writeln!(
         t,
         "correction    a reciprocal smooth factor on the rung, exp(series of degree {} in \
          cos theta_i, cos theta_o, cos dphi; {} terms per channel): structure the rung misses, \
          not a physical parameter",
-        c.correction.degree,
-        c.correction.terms()
+        k.degree,
+        k.terms()
     );
+    if !k.instrument.is_empty() {
+        let _ = writeln!(
+            t,
+            "              with the instrument's light/view imbalance beside it ({} terms per \
+             channel in cos theta_i against cos theta_o; what of the data is not reciprocal): \
+             part of the model of the measurement, not of the material",
+            k.instrument.len()
+        );
+    }
     let _ = writeln!(
         t,
         "              held-out log error {:.4} +- {:.4} with it, {:.4} +- {:.4} the rung alone ({:.2}x; {}); \
@@ -228,6 +292,23 @@ pub fn text(c: &CorrectionFit) -> String {
         c.error / c.rung_error.max(f64::MIN_POSITIVE),
         c.validation
     );
+    if !k.instrument.is_empty() {
+        let against = c
+            .reciprocal_floor
+            .map(|r| {
+                format!(
+                    " ({:.2}x what a material can reach, the reciprocal floor {r:.4})",
+                    c.material_error / r.max(f64::MIN_POSITIVE)
+                )
+            })
+            .unwrap_or_default();
+        let _ = writeln!(
+            t,
+            "              the material delivered (the rung times the series, the instrument's \
+             terms aside): held-out log error {:.4}{against}",
+            c.material_error
+        );
+    }
     let tried: Vec<String> = c
         .tried
         .iter()
@@ -238,7 +319,7 @@ pub fn text(c: &CorrectionFit) -> String {
         .collect();
     let _ = writeln!(
         t,
-        "              degrees tried (held-out error; the fewest terms within one standard \
+        "              degrees tried (held-out error; the fewest terms within one paired standard \
          error of the best kept): {}",
         tried.join(", ")
     );

@@ -31,7 +31,8 @@ pub struct FittedResult {
     pub knobs: Knobs,
     pub free_parameters: usize,
     /// The smooth correction the result keeps on its rung (`correction.series`), if any: the
-    /// model scored is the rung times its factor.
+    /// model scored is the rung times its factor, the material (the instrument's terms of the
+    /// fit's data, if any, are not applied: other data come from other instruments).
     pub correction: Option<crate::model::correction::Correction>,
 }
 

@@ -17,6 +17,32 @@ use serde::{Deserialize, Serialize};
 /// The highest total degree a correction may have.
 pub const MAX_DEGREE: usize = 8;
 
+/// One column of a fit's design: a term of the material's series, or the instrument's term
+/// P_k(x_i) - P_k(x_o) of degree k.
+#[derive(Clone, Copy)]
+enum Column {
+    Term(usize, usize, usize),
+    Instrument(usize),
+}
+
+/// The columns of a fit at total degree `degree`, by total degree: each degree's terms (in
+/// [`terms`]' order), then, with `instrument`, that degree's instrument term (k >= 1). A lower
+/// degree's columns are the leading ones of a higher's.
+fn columns(degree: usize, instrument: bool) -> Vec<Column> {
+    let mut out = Vec::new();
+    for total in 0..=degree {
+        for a in 0..=total {
+            for b in a..=total - a {
+                out.push(Column::Term(a, b, total - a - b));
+            }
+        }
+        if instrument && total >= 1 {
+            out.push(Column::Instrument(total));
+        }
+    }
+    out
+}
+
 /// A fitted correction (see the module docs).
 #[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -30,6 +56,14 @@ pub struct Correction {
     pub cos_range: [f64; 2],
     /// The least and largest log factor on the data, per channel; the factor is clamped to it.
     pub log_range: [[f64; 2]; 3],
+    /// The measuring instrument's light/view imbalance, fitted beside the series and **not part
+    /// of the material**: per k = 1, ..., degree, the coefficient per channel of P_k(x_i) -
+    /// P_k(x_o), the data being the material times exp(that sum) (a light and a detector whose
+    /// responses differ with their own polar angles; a material is reciprocal, so what of the
+    /// data is not is the instrument's). Empty: none fitted. Only the fit's held-out judgement
+    /// of the data uses it; a renderer, `eval` and every export get the material.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub instrument: Vec<[f64; 3]>,
 }
 
 /// The series' terms at total degree `degree`: (a, b, c) with a <= b and a + b + c <= degree,
@@ -115,6 +149,7 @@ impl Correction {
             coefficients: vec![[0.0; 3]],
             cos_range: [0.0, 1.0],
             log_range: [[0.0, 0.0]; 3],
+            instrument: Vec::new(),
         }
     }
 
@@ -135,6 +170,17 @@ impl Correction {
         }
         if let Some(k) = self.coefficients.iter().position(|c| !c.iter().all(|x| x.is_finite())) {
             return Err(format!("coefficient {k} is not finite"));
+        }
+        if !self.instrument.is_empty() && self.instrument.len() != self.degree {
+            return Err(format!(
+                "instrument: degree {} has {} instrument terms (or none), but {} triples are given",
+                self.degree,
+                self.degree,
+                self.instrument.len()
+            ));
+        }
+        if let Some(k) = self.instrument.iter().position(|c| !c.iter().all(|x| x.is_finite())) {
+            return Err(format!("instrument coefficient {} is not finite", k + 1));
         }
         let [lo, hi] = self.cos_range;
         if !(0.0..=1.0).contains(&lo) || !(0.0..=1.0).contains(&hi) || lo > hi {
@@ -177,6 +223,36 @@ impl Correction {
         [0, 1, 2].map(|c| s[c].clamp(self.log_range[c][0], self.log_range[c][1]).exp())
     }
 
+    /// The instrument's factor per channel at (cos theta_i, cos theta_o), the cosines held at
+    /// the covered range's edge: what the data are beside the material (1 where none was fitted).
+    pub fn instrument_at(&self, cos_i: f64, cos_o: f64) -> [f64; 3] {
+        if self.instrument.is_empty() {
+            return [1.0; 3];
+        }
+        let [lo, hi] = self.cos_range;
+        let mut pi = [0.0; MAX_DEGREE + 1];
+        let mut po = [0.0; MAX_DEGREE + 1];
+        let d = self.instrument.len().min(MAX_DEGREE);
+        legendre(2.0 * cos_i.clamp(lo, hi) - 1.0, &mut pi[..=d]);
+        legendre(2.0 * cos_o.clamp(lo, hi) - 1.0, &mut po[..=d]);
+        let mut s = [0.0; 3];
+        for (k, w) in self.instrument.iter().enumerate().take(d) {
+            let x = pi[k + 1] - po[k + 1];
+            for ch in 0..3 {
+                s[ch] += x * w[ch];
+            }
+        }
+        s.map(f64::exp)
+    }
+
+    /// What the fit predicts the data to be, per channel, relative to the rung: the material's
+    /// factor times the instrument's.
+    pub fn measured_factor_at(&self, cos_i: f64, cos_o: f64, cos_dphi: f64) -> [f64; 3] {
+        let m = self.factor_at(cos_i, cos_o, cos_dphi);
+        let i = self.instrument_at(cos_i, cos_o);
+        [0, 1, 2].map(|c| m[c] * i[c])
+    }
+
     /// The factor per channel of a pair (1 where either direction is at or below the horizon:
     /// the rung is zero there).
     pub fn factor(&self, pair: &DirectionPair) -> [f64; 3] {
@@ -189,21 +265,23 @@ impl Correction {
 
     /// Fit a series of total degree `degree` to log residuals: `points` (cos theta_i, cos
     /// theta_o, cos dphi), `targets` ln(data) - ln(model) per channel, `weights` per point;
-    /// weighted least squares per channel of `channels` (grey data: channel 0, repeated).
-    /// `None` when the normal equations are singular.
+    /// weighted least squares per channel of `channels` (grey data: channel 0, repeated). With
+    /// `instrument`, the instrument's terms of degree 1, ..., `degree` beside the series (see
+    /// [`Correction::instrument`]). `None` when the normal equations are singular.
     pub fn fit(
         degree: usize,
         points: &[(f64, f64, f64)],
         targets: &[[f64; 3]],
         weights: &[f64],
         channels: usize,
+        instrument: bool,
     ) -> Option<Correction> {
-        Self::fit_degrees(&[degree], points, targets, weights, channels)
+        Self::fit_degrees(&[degree], points, targets, weights, channels, instrument)
             .pop()
             .flatten()
     }
 
-    /// [`Correction::fit`] at each of `degrees` from one pass over the points: the terms are
+    /// [`Correction::fit`] at each of `degrees` from one pass over the points: the columns are
     /// ordered by total degree, so a lower degree's normal equations are the leading block of
     /// the highest's.
     pub fn fit_degrees(
@@ -212,15 +290,19 @@ impl Correction {
         targets: &[[f64; 3]],
         weights: &[f64],
         channels: usize,
+        instrument: bool,
     ) -> Vec<Option<Correction>> {
         let top = degrees.iter().copied().max().unwrap_or(0).min(MAX_DEGREE);
-        let k = terms(top).len();
-        // the features of every point (row-major), and the normal equations' upper triangle
+        let cols = columns(top, instrument);
+        let k = cols.len();
+        // the columns of every point (row-major), and the normal equations' upper triangle
         let mut features_all = Vec::with_capacity(points.len() * k);
-        let mut f = Vec::with_capacity(k);
         for &(ci, co, cd) in points {
-            features(top, ci, co, cd, &mut f);
-            features_all.extend_from_slice(&f);
+            let t = tables(top, ci, co, cd);
+            features_all.extend(cols.iter().map(|col| match *col {
+                Column::Term(a, b, c) => term(&t, a, b, c),
+                Column::Instrument(d) => t[0][d] - t[1][d],
+            }));
         }
         let mut ata = vec![0.0; k * k];
         let mut atb = vec![[0.0; 3]; k];
@@ -243,7 +325,7 @@ impl Correction {
             .iter()
             .map(|&degree| {
                 let d = degree.min(MAX_DEGREE);
-                let n = terms(d).len();
+                let n = columns(d, instrument).len();
                 let mut a = nalgebra::DMatrix::<f64>::from_fn(n, n, |r, c| {
                     ata[r.min(c) * k + r.max(c)]
                 });
@@ -254,17 +336,28 @@ impl Correction {
                 }
                 let b = nalgebra::DMatrix::<f64>::from_fn(n, 3, |r, ch| atb[r][ch]);
                 let x = a.cholesky()?.solve(&b);
-                let coefficients: Vec<[f64; 3]> =
+                let solved: Vec<[f64; 3]> =
                     (0..n).map(|r| [x[(r, 0)], x[(r, 1)], x[(r, 2)]]).collect();
-                if coefficients.iter().flatten().any(|v| !v.is_finite()) || !lo.is_finite() {
+                if solved.iter().flatten().any(|v| !v.is_finite()) || !lo.is_finite() {
                     return None;
                 }
+                let is_term = |c: &Column| matches!(c, Column::Term(..));
+                let (mut coefficients, mut instrument_terms) = (Vec::new(), Vec::new());
+                for (col, w) in cols[..n].iter().zip(&solved) {
+                    match is_term(col) {
+                        true => coefficients.push(*w),
+                        false => instrument_terms.push(*w),
+                    }
+                }
+                // the material's log factor's range on the data (the instrument's terms aside)
                 let mut log_range = [[f64::INFINITY, f64::NEG_INFINITY]; 3];
                 for row in features_all.chunks_exact(k) {
                     let mut s = [0.0; 3];
-                    for (fr, w) in row[..n].iter().zip(&coefficients) {
-                        for ch in 0..3 {
-                            s[ch] += fr * w[ch];
+                    for ((fr, w), col) in row[..n].iter().zip(&solved).zip(&cols) {
+                        if is_term(col) {
+                            for ch in 0..3 {
+                                s[ch] += fr * w[ch];
+                            }
                         }
                     }
                     for ch in 0..3 {
@@ -277,6 +370,7 @@ impl Correction {
                     coefficients,
                     cos_range: [lo.clamp(0.0, 1.0), hi.clamp(0.0, 1.0)],
                     log_range,
+                    instrument: instrument_terms,
                 })
             })
             .collect()
@@ -339,7 +433,7 @@ mod tests {
             tg.push(truth(ci, co, cd));
         }
         let w = vec![1.0; pts.len()];
-        let corr = Correction::fit(4, &pts, &tg, &w, 3).unwrap();
+        let corr = Correction::fit(4, &pts, &tg, &w, 3, false).unwrap();
         for _ in 0..200 {
             let (l, v) = (random_local(&mut rng), random_local(&mut rng));
             let p = DirectionPair { l, v };
@@ -356,5 +450,49 @@ mod tests {
         let grazing = DirectionPair::from_local([1.0, 0.0, 1e-6], [0.0, 1.0, 1e-6]);
         assert!(corr.factor(&grazing).iter().all(|f| f.is_finite() && *f > 0.0));
         assert_eq!(Correction::identity().factor(&grazing), [1.0; 3]);
+    }
+
+    /// Data that are a reciprocal material times an instrument's imbalance exp(a(theta_i) -
+    /// a(theta_o)): the fit splits them, the material's factor reciprocal and the instrument's
+    /// the antisymmetric part, 1 where the two polar angles are equal.
+    #[test]
+    fn an_instruments_imbalance_is_split_from_the_material() {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+        let material = |ci: f64, co: f64, cd: f64| 0.3 * (ci + co) - 0.2 * ci * co + 0.1 * cd;
+        let a = |c: f64| 0.4 * c - 0.3 * c * c;
+        let mut pts = Vec::new();
+        let mut tg = Vec::new();
+        for _ in 0..2000 {
+            let (l, v) = (random_local(&mut rng), random_local(&mut rng));
+            let (ci, co, cd) = coordinates(&l, &v);
+            pts.push((ci, co, cd));
+            let y = material(ci, co, cd) + a(ci) - a(co);
+            tg.push([y, 0.5 * y, -y]);
+        }
+        let w = vec![1.0; pts.len()];
+        let corr = Correction::fit(3, &pts, &tg, &w, 3, true).unwrap();
+        assert_eq!(corr.instrument.len(), 3);
+        assert_eq!(corr.checked().unwrap(), corr);
+        for &(ci, co, cd) in pts.iter().take(200) {
+            let m = corr.factor_at(ci, co, cd);
+            let mirrored = corr.factor_at(co, ci, cd);
+            let full = corr.measured_factor_at(ci, co, cd);
+            for (c, scale) in [1.0, 0.5, -1.0].into_iter().enumerate() {
+                assert!((m[c] - mirrored[c]).abs() <= 1e-12 * m[c], "not reciprocal");
+                assert!((m[c].ln() - scale * material(ci, co, cd)).abs() < 1e-6);
+                let y = scale * (material(ci, co, cd) + a(ci) - a(co));
+                assert!((full[c].ln() - y).abs() < 1e-6, "{} vs {y}", full[c].ln());
+            }
+            assert!(corr.instrument_at(ci, ci).iter().all(|f| (f - 1.0).abs() < 1e-12));
+        }
+        // without the instrument's terms the reciprocal series cannot follow the imbalance
+        let plain = Correction::fit(3, &pts, &tg, &w, 3, false).unwrap();
+        assert!(plain.instrument.is_empty());
+        let (ci, co, cd) = pts[0];
+        assert!((plain.measured_factor_at(ci, co, cd)[0] - plain.factor_at(ci, co, cd)[0]).abs() < 1e-15);
+        // a file's instrument of the wrong length is refused
+        let mut bad = corr.clone();
+        bad.instrument.pop();
+        assert!(bad.checked().unwrap_err().contains("instrument"));
     }
 }

@@ -80,8 +80,10 @@ fn correct(
     };
     match crate::fit::correction::choose(samples, h, &full, outcome.channels) {
         crate::fit::correction::Decision::NotKept(_) => None,
-        crate::fit::correction::Decision::Kept(fit, corrected) => {
-            let checked = measured.check(samples, &corrected);
+        crate::fit::correction::Decision::Kept(mut fit, corrected) => {
+            fit.reciprocal_floor = measured.reciprocal().map(|f| f.error);
+            let instrument = !fit.correction.instrument.is_empty();
+            let checked = measured.check_with(samples, &corrected, instrument.then_some(fit.material_error));
             rebin(samples, outcome, &full, &fit.correction);
             outcome.correction = Some(fit);
             Some(checked)
@@ -90,7 +92,8 @@ fn correct(
 }
 
 /// The residual-structure bins of `outcome` (and their "systematic residuals" warning) again,
-/// of the rung's values `full` times the kept correction `k`: the model delivered.
+/// of the rung's values `full` times the kept correction `k` (with the instrument's terms: the
+/// model of the measurement the floor judges).
 fn rebin(
     samples: &Samples,
     outcome: &mut FitOutcome,
@@ -104,7 +107,8 @@ fn rebin(
     let mut residuals = Vec::with_capacity(samples.samples.len() * ch);
     for (s, m) in samples.samples.iter().zip(full) {
         let (ci, co, cd) = crate::fit::correction::sample_point(s);
-        let f = k.factor_at(ci, co, cd);
+        // the measurement model's: the material's factor and the instrument's
+        let f = k.measured_factor_at(ci, co, cd);
         let scale = crate::fit::problem::residual_scale(Metric::Log, s);
         for c in 0..ch {
             residuals.push(crate::fit::problem::metric_residual(
@@ -174,6 +178,22 @@ pub fn apply(q: &mut Quality, warnings: &mut Vec<String>, c: FloorCheck, sigmas_
 pub fn misses_warning(c: &FloorCheck) -> String {
     let not_reciprocal = c.reciprocal.as_ref().filter(|r| r.data_not_reciprocal());
     match not_reciprocal {
+        Some(r) if r.within && r.material_error.is_some() => format!(
+            "the data are not reciprocal: the model of the measurement (the material and the \
+             instrument's light/view imbalance) has held-out error {:.4}, {:.2}x the floor {:.4} \
+             ({} on the same {}); the material delivered, {:.4}, is {:.2}x the floor of the same \
+             predictor made reciprocal ({:.4}), what any material (a reciprocal BRDF) can reach: \
+             within {}x of that",
+            c.heldout_error,
+            c.ratio,
+            c.floor,
+            c.estimate.predictor,
+            c.estimate.validation,
+            r.material_error.unwrap_or(c.heldout_error),
+            r.ratio,
+            r.floor,
+            c.limit
+        ),
         Some(r) if r.within => format!(
             "the data are not reciprocal: the model's held-out error {:.4} is {:.2}x the floor \
              {:.4} ({} on the same {}), but {:.2}x the floor of the same predictor made \

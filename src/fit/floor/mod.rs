@@ -445,8 +445,13 @@ pub struct ReciprocalFloor {
     /// This floor over the data's own: how far the data are from reciprocal (near 1: they
     /// are).
     pub over_floor: f64,
-    /// The model's held-out error over this floor.
+    /// The model's held-out error over this floor (the material's, where given).
     pub ratio: f64,
+    /// The material's held-out error where the model of the measurement carries an
+    /// instrument's light/view imbalance the material leaves out (`fit::correction`): what is
+    /// judged against this floor.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub material_error: Option<f64>,
     /// ratio <= [`WITHIN`]: as close as a material can come.
     pub within: bool,
 }
@@ -519,9 +524,21 @@ impl Measured {
         })
     }
 
+    /// The reciprocal floor's estimate, where a check measured one (a model beyond [`WITHIN`]
+    /// the floor on data whose floor chart is not reciprocal).
+    pub fn reciprocal(&self) -> Option<&Floor> {
+        self.reciprocal.get().and_then(Option::as_ref)
+    }
+
     /// The check of `model` (on the splits the floor was measured on): where its excess lies,
     /// and the reciprocal floor where it is beyond [`WITHIN`] the floor (measured once).
     pub fn check(&self, samples: &Samples, model: &HeldOut) -> FloorCheck {
+        self.check_with(samples, model, None)
+    }
+
+    /// [`Measured::check`] of a model of the measurement whose material alone (an instrument's
+    /// terms aside) has the held-out error `material`: that is what the reciprocal floor judges.
+    pub fn check_with(&self, samples: &Samples, model: &HeldOut, material: Option<f64>) -> FloorCheck {
         let run = &self.run;
         let mut per_sample = vec![None; samples.samples.len()];
         let tests = model.splits.iter().flat_map(|s| s.test.iter());
@@ -565,12 +582,14 @@ impl Measured {
             reciprocal,
             regs,
             bins,
+            material,
         )
     }
 }
 
 /// The check of a model error `error` (standard error `se`) against `floor` (and `reciprocal`,
-/// a reciprocal predictor's floor where `floor`'s is not one).
+/// a reciprocal predictor's floor where `floor`'s is not one, against which the material's
+/// error `material` is judged where given, else `error`).
 pub fn compare(
     error: f64,
     se: f64,
@@ -578,17 +597,19 @@ pub fn compare(
     reciprocal: Option<Floor>,
     regions: Vec<regions::Region>,
     half_vector_bins: Vec<regions::Region>,
+    material: Option<f64>,
 ) -> FloorCheck {
     let ratio = error / floor.error.max(f64::MIN_POSITIVE);
     let within = ratio <= WITHIN;
     let reciprocal = reciprocal.map(|r| {
-        let ratio = error / r.error.max(f64::MIN_POSITIVE);
+        let ratio = material.unwrap_or(error) / r.error.max(f64::MIN_POSITIVE);
         ReciprocalFloor {
             floor: r.error,
             standard_error: r.standard_error,
             coordinates: r.coordinates,
             over_floor: r.error / floor.error.max(f64::MIN_POSITIVE),
             ratio,
+            material_error: material,
             within: ratio <= WITHIN,
         }
     });
@@ -640,7 +661,7 @@ pub fn of_scored(samples: &Samples, metric: Metric, eps: [f64; 3], error: f64) -
     };
     let run = floor_on(samples, &req)?;
     let reciprocal = reciprocal_floor(samples, &req, &run.floor, error);
-    Ok(compare(error, f64::NAN, run.floor, reciprocal, vec![], vec![]))
+    Ok(compare(error, f64::NAN, run.floor, reciprocal, vec![], vec![], None))
 }
 
 /// The floor lines of the report's [[Quality]] (and of `fibrefit score`): the model's held-out error, the floor, their ratio, where the
