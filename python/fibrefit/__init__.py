@@ -396,15 +396,25 @@ class Result:
     @property
     def correction(self) -> Optional[Dict[str, float]]:
         """The smooth reciprocal correction kept on the rung where the rung missed what the data
-        hold and the correction paid held out: ``{"degree", "heldout_error", "rung_heldout_error"}``
-        (log metric); ``None`` when none was kept. Not a physical parameter: the rung's BRDF per
-        channel times exp(a Legendre series in cos theta_i, cos theta_o, cos dphi), symmetric in
-        light and view. ``Material`` of the result applies it (eval, sample); the coefficients
-        are ``result["correction"]["series"]``."""
+        hold and the correction paid held out: ``{"degree", "heldout_error", "rung_heldout_error",
+        "material_heldout_error", "instrument_terms"}`` (log metric); ``None`` when none was kept.
+        Not a physical parameter: the rung's BRDF per channel times exp(a Legendre series in cos
+        theta_i, cos theta_o, cos dphi), symmetric in light and view. Beside it the fit models
+        the instrument's light/view imbalance (``instrument_terms`` per channel; what of the data
+        is not reciprocal): ``heldout_error`` is the model of the measurement's,
+        ``material_heldout_error`` the material's alone. ``Material`` of the result applies the
+        series, never the instrument's terms (eval, sample); the coefficients are
+        ``result["correction"]["series"]``."""
         c = self._r.correction
         if c is None:
             return None
-        return {"degree": c[0], "heldout_error": c[1], "rung_heldout_error": c[2]}
+        return {
+            "degree": c[0],
+            "heldout_error": c[1],
+            "rung_heldout_error": c[2],
+            "material_heldout_error": c[3],
+            "instrument_terms": c[4],
+        }
 
     @property
     def undetermined(self) -> Dict[str, str]:

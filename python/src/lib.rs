@@ -530,11 +530,18 @@ impl FitResult {
     }
 
     /// The smooth correction kept on the rung: (degree, held-out error with it, the rung's
-    /// own); None when none paid or none was tried.
+    /// own, the material's: the instrument's terms aside, instrument terms per channel); None
+    /// when none paid or none was tried.
     #[getter]
-    fn correction(&self) -> Option<(usize, f64, f64)> {
+    fn correction(&self) -> Option<(usize, f64, f64, f64, usize)> {
         let c = self.run.outcome.correction.as_ref()?;
-        Some((c.correction.degree, c.error, c.rung_error))
+        Some((
+            c.correction.degree,
+            c.error,
+            c.rung_error,
+            c.material_error,
+            c.correction.instrument.len(),
+        ))
     }
 
     /// Whether per-texel maps were recovered (written by `to_json`).

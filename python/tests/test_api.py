@@ -210,6 +210,11 @@ def test_the_felt_fit_keeps_a_smooth_correction_that_material_applies(tmp_path):
     assert c is not None and c["degree"] >= 1
     assert c["heldout_error"] < 0.8 * c["rung_heldout_error"]
     assert r.result["correction"]["heldout"]["error"] == pytest.approx(c["heldout_error"])
+    # the felt is not reciprocal: the instrument's imbalance is fitted beside the series, and
+    # the material alone (what Material evaluates) is judged without it
+    assert c["instrument_terms"] == c["degree"]
+    assert c["heldout_error"] <= c["material_heldout_error"] < c["rung_heldout_error"]
+    assert r.result["correction"]["heldout"]["material_error"] == pytest.approx(c["material_heldout_error"])
     assert r.result["quality"]["floor"]["heldout_error"] == pytest.approx(c["heldout_error"])
     r.to_json(tmp_path / "fit.json")
     m = fibrefit.load(tmp_path / "fit.json")
