@@ -393,6 +393,18 @@ mod tests {
         }
     }
 
+    /// 2000 random pairs' coordinates and `target` at each.
+    type Points = (Vec<(f64, f64, f64)>, Vec<[f64; 3]>);
+    fn random_points(rng: &mut rand::rngs::StdRng, target: impl Fn(f64, f64, f64) -> [f64; 3]) -> Points {
+        (0..2000)
+            .map(|_| {
+                let (l, v) = (random_local(rng), random_local(rng));
+                let (ci, co, cd) = coordinates(&l, &v);
+                ((ci, co, cd), target(ci, co, cd))
+            })
+            .unzip()
+    }
+
     #[test]
     fn terms_count_the_symmetric_products() {
         // (a <= b, c) with a + b + c <= d: 1, 3, 7, 13, 22, 34, 50 terms.
@@ -424,14 +436,7 @@ mod tests {
                 0.2 * (ci * ci + co * co),
             ]
         };
-        let mut pts = Vec::new();
-        let mut tg = Vec::new();
-        for _ in 0..2000 {
-            let (l, v) = (random_local(&mut rng), random_local(&mut rng));
-            let (ci, co, cd) = coordinates(&l, &v);
-            pts.push((ci, co, cd));
-            tg.push(truth(ci, co, cd));
-        }
+        let (pts, tg) = random_points(&mut rng, |ci, co, cd| truth(ci, co, cd));
         let w = vec![1.0; pts.len()];
         let corr = Correction::fit(4, &pts, &tg, &w, 3, false).unwrap();
         for _ in 0..200 {
@@ -460,15 +465,10 @@ mod tests {
         let mut rng = rand::rngs::StdRng::seed_from_u64(5);
         let material = |ci: f64, co: f64, cd: f64| 0.3 * (ci + co) - 0.2 * ci * co + 0.1 * cd;
         let a = |c: f64| 0.4 * c - 0.3 * c * c;
-        let mut pts = Vec::new();
-        let mut tg = Vec::new();
-        for _ in 0..2000 {
-            let (l, v) = (random_local(&mut rng), random_local(&mut rng));
-            let (ci, co, cd) = coordinates(&l, &v);
-            pts.push((ci, co, cd));
+        let (pts, tg) = random_points(&mut rng, |ci, co, cd| {
             let y = material(ci, co, cd) + a(ci) - a(co);
-            tg.push([y, 0.5 * y, -y]);
-        }
+            [y, 0.5 * y, -y]
+        });
         let w = vec![1.0; pts.len()];
         let corr = Correction::fit(3, &pts, &tg, &w, 3, true).unwrap();
         assert_eq!(corr.instrument.len(), 3);
