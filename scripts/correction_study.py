@@ -86,8 +86,10 @@ def study(fibrefit, path, floor, degrees, work):
         tr_csv, fit_json, ev_csv = (os.path.join(work, n) for n in ("train.csv", "fit.json", "eval.csv"))
         np.savetxt(tr_csv, np.hstack([np.degrees(np.stack([ti, pi, to, po], 1)), Y])[train], delimiter=",",
                    header="theta_i,phi_i,theta_o,phi_o,brdf_r,brdf_g,brdf_b", comments="", fmt="%.9g")
-        subprocess.run([fibrefit, "fit", tr_csv, "--model", "auto", "--metric", "log", "--out", fit_json, "-q"],
-                       check=True, capture_output=True)
+        # the rung auto chooses, alone: the study is of a correction on it (fit's own correction
+        # stage, which came of this study, is switched off)
+        subprocess.run([fibrefit, "fit", tr_csv, "--model", "auto", "--metric", "log", "--no-correction",
+                        "--out", fit_json, "-q"], check=True, capture_output=True)
         subprocess.run([fibrefit, "eval", "--params", fit_json, "--queries", dirs, "--out", ev_csv, "-q"],
                        check=True, capture_output=True)
         ev = np.genfromtxt(ev_csv, delimiter=",", names=True)
