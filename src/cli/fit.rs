@@ -72,10 +72,11 @@ pub struct FitArgs {
     /// structure the fitted rung misses (its held-out error beyond 1.2x the floor), a smooth
     /// reciprocal factor exp(Legendre series in cos theta_i, cos theta_o, cos dphi) is fitted
     /// on it (not on a renderer's own material without the fuzz layer: that renderer could not
-    /// show it), its degree chosen held out, and kept only where it pays: `eval`, `render`,
-    /// `score`, `Material` and the shader export apply it; the glTF, Blender and MaterialX/USD
-    /// materials carry the rung alone and say so (as
-    /// `[components] correction = false`)
+    /// show it), with the instrument's light/view imbalance beside it (what of the data is not
+    /// reciprocal: judged with the fit, left out of the material), its degree chosen held out,
+    /// and kept only where it pays: `eval`, `render`, `score`, `Material` and the shader export
+    /// apply the series; the glTF, Blender and MaterialX/USD materials carry the rung alone and
+    /// say so (as `[components] correction = false`)
     #[arg(long)]
     pub no_correction: bool,
     /// Result JSON for renderers (and `fibrefit eval --params`) [default: none: the report is
