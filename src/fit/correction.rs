@@ -21,7 +21,7 @@
 
 use crate::fit::selection::{rms_and_se, HeldOut};
 use crate::load::samples::{Sample, Samples};
-use crate::model::correction::{coordinates, terms, Correction, MAX_DEGREE};
+use crate::model::correction::{coordinates, Correction, MAX_DEGREE};
 use crate::model::frame::Local;
 use serde::Serialize;
 
@@ -130,10 +130,10 @@ fn fit_on(
     Correction::fit_degrees(degrees, &pts, &targets(samples, idx, full, eps), &w, channels, true)
 }
 
-/// Coefficients per channel of a correction of total degree `d`: the material's series and the
-/// instrument's terms.
+/// Coefficients per channel of a correction of total degree `d` as this stage fits it: the
+/// material's series and the instrument's terms.
 pub fn columns(d: usize) -> usize {
-    terms(d).len() + d
+    crate::model::correction::coefficient_count(d, true)
 }
 
 /// The paired standard error, in RMS units, of the difference between the held-out errors

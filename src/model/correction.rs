@@ -28,6 +28,12 @@ enum Column {
 /// The columns of a fit at total degree `degree`, by total degree: each degree's terms (in
 /// [`terms`]' order), then, with `instrument`, that degree's instrument term (k >= 1). A lower
 /// degree's columns are the leading ones of a higher's.
+/// Coefficients per channel a fit of total degree `degree` solves for: the series' terms and,
+/// with `instrument`, the instrument's.
+pub fn coefficient_count(degree: usize, instrument: bool) -> usize {
+    columns(degree, instrument).len()
+}
+
 fn columns(degree: usize, instrument: bool) -> Vec<Column> {
     let mut out = Vec::new();
     for total in 0..=degree {
@@ -131,14 +137,6 @@ pub fn coordinates(l: &Local, v: &Local) -> (f64, f64, f64) {
         false => 1.0,
     };
     (l.n, v.n, cos_dphi)
-}
-
-/// The values of [`terms`]`(degree)` at (cos theta_i, cos theta_o, cos dphi), into `out`.
-pub fn features(degree: usize, cos_i: f64, cos_o: f64, cos_dphi: f64, out: &mut Vec<f64>) {
-    let d = degree.min(MAX_DEGREE);
-    let t = tables(d, cos_i, cos_o, cos_dphi);
-    out.clear();
-    for_each_term(d, |a, b, c| out.push(term(&t, a, b, c)));
 }
 
 impl Correction {

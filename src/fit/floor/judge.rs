@@ -2,7 +2,7 @@
 //! measured on the same kind of folds) against the floor, and the verdict it gives data
 //! without sigmas.
 
-use super::FloorCheck;
+use super::{FloorCheck, ReciprocalFloor};
 use crate::fit::config::FitConfig;
 use crate::fit::quality::Quality;
 use crate::fit::selection::{self, SelectionOutcome};
@@ -178,7 +178,7 @@ pub fn apply(q: &mut Quality, warnings: &mut Vec<String>, c: FloorCheck, sigmas_
 pub fn misses_warning(c: &FloorCheck) -> String {
     let not_reciprocal = c.reciprocal.as_ref().filter(|r| r.data_not_reciprocal());
     match not_reciprocal {
-        Some(r) if r.within && r.material_error.is_some() => format!(
+        Some(r @ ReciprocalFloor { within: true, material_error: Some(material), .. }) => format!(
             "the data are not reciprocal: the model of the measurement (the material and the \
              instrument's light/view imbalance) has held-out error {:.4}, {:.2}x the floor {:.4} \
              ({} on the same {}); the material delivered, {:.4}, is {:.2}x the floor of the same \
@@ -189,7 +189,7 @@ pub fn misses_warning(c: &FloorCheck) -> String {
             c.floor,
             c.estimate.predictor,
             c.estimate.validation,
-            r.material_error.unwrap_or(c.heldout_error),
+            material,
             r.ratio,
             r.floor,
             c.limit
