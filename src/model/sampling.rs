@@ -56,34 +56,43 @@
 //! l = sin(th) T + cos(th) (cos(phi) B + sin(phi) N),   th in [-pi/2, pi/2], phi in (0, pi),
 //! ```
 //!
-//! spherical coordinates about T (th the latitude from the cross-section plane), so d omega =
-//! cos(th) dth dphi. T lies in the swatch plane, so N.l = cos(th) sin(phi) > 0 exactly when phi is
-//! in (0, pi): drawing phi there never leaves the hemisphere. th and phi are drawn independently:
-//! th = th_r + delta with the
-//! mirror latitude th_r = -asin(v.t) and delta from a Cauchy law of width gamma = c / sqrt(e)
-//! truncated to th in [-pi/2, pi/2]: with A = atan((-pi/2 - th_r)/gamma), B = atan((pi/2 -
-//! th_r)/gamma), delta = gamma tan(A + u (B - A)) and its density is
+//! spherical coordinates about T (th the latitude from the cross-section plane). T lies in the
+//! swatch plane, so N.l = cos(th) sin(phi) > 0 exactly when phi is in (0, pi): drawing phi there
+//! never leaves the hemisphere. The latitude is drawn through its sine s = sin th = l.t, in
+//! which d omega = ds dphi (no Jacobian), and s and phi are drawn independently: s from a Cauchy
+//! law about the mirror's s_r = -v.t, of width gamma_s = gamma sqrt(1 - s_r^2 + gamma^2) (the
+//! lobe's width gamma = c / sqrt(e) in latitude times ds/dth = cos th_r at the mirror, kept above
+//! gamma^2 where v runs along the fibre), truncated to [-1, 1]: with x_A,B = (-+1 - s_r) /
+//! gamma_s, A = atan(x_A) and the truncated mass W = atan(x_B) - A = atan2(2 / gamma_s, 1 + x_A
+//! x_B), s = s_r + gamma_s tan(A + u W), and
 //!
 //! ```text
-//! g(delta) = 1 / ((B - A) gamma (1 + (delta/gamma)^2)),
-//! p_lobe(l | v) = g(th - th_r) q(alpha_l | v) / cos th,   th = atan2(l.t, |l_p|), cos th = |l_p|,
+//! g(s) = 1 / (W gamma_s (1 + ((s - s_r)/gamma_s)^2)),
+//! p_lobe(l | v) = g(l.t) q(alpha_l | v),
 //! ```
 //!
-//! with q the density of the longitude, written by alpha_l = pi/2 - phi = atan2(l.b, l.n), the
-//! angle of l's projection in the cross-section plane (MODEL.md §1).
+//! with q the density (per radian) of the longitude, written by alpha_l = pi/2 - phi, the angle
+//! of l's projection in the cross-section plane (MODEL.md §1). The density needs no arc tangent
+//! but W's (in lane form: `Sampler`'s density sums the nodes of a spread eight at a time in
+//! vector lanes); a draw whose s rounds outside [-1, 1] is returned as `None` (a few ulp of
+//! mass).
 //!
 //! - max-normal: q = 1/pi, uniform: its lobe does not depend on the longitude at all.
 //! - cross-section rungs: along the cone the lobe is shaped by hiding and shadowing, strongly
 //!   so at grazing views (at 80 deg across the fibres it is zero over 40 % of the cone and peaks
 //!   at the edge where the reflecting normals stop being visible). Its shape depends on v
 //!   through alpha_v, the view's angle in the cross-section plane (the latitude only scales it:
-//!   the cross-section sees projections), so `Sampler::new` tabulates it from the rung itself:
-//!   [`CONE_ROWS`] / 2 views at latitude 0 with alpha_v >= 0, and for each the lobe's intensity
-//!   f_s (N.l) at l in the plane at [`CONE_BINS`] + 1 equally spaced alpha_l. q is that profile
-//!   interpolated linearly between the nodes, normalised, mixed with the uniform law
-//!   ([`CONE_UNIFORM`] of it: other heights and latitudes, the Fresnel factor, the spread), and
-//!   blended linearly between the two rows whose alpha_v bracket the view's (the lobe's edge moves
-//!   fast with alpha_v at grazing views). Rows for alpha_v < 0 are the mirror images, so q and
+//!   the cross-section sees projections), so `Sampler::new` tabulates it from the rung itself,
+//!   in the half tangents x = tan(alpha / 2) = w.b / (|w_p| + w.n) (rational in the direction:
+//!   no arc tangent to evaluate, and sin alpha = 2x / (1 + x^2), cos alpha = (1 - x^2) / (1 +
+//!   x^2) to draw): [`CONE_ROWS`] / 2 views at latitude 0 with x_v >= 0 (row centres equally
+//!   spaced in x_v, so finer in alpha_v towards grazing), and for each the lobe's intensity
+//!   f_s (N.l) dalpha/dx at l in the plane at [`CONE_BINS`] + 1 equally spaced x_l in [-1, 1].
+//!   The law of x_l is that profile interpolated linearly between the nodes, normalised, mixed
+//!   with the uniform law of alpha_l ([`CONE_UNIFORM`] of it: other heights and latitudes, the
+//!   Fresnel factor, the spread), and blended linearly between the two rows whose x_v bracket
+//!   the view's (the lobe's edge moves fast with alpha_v at grazing views); q = its density
+//!   times dx/dalpha = (1 + x_l^2) / 2. Rows for x_v < 0 are the mirror images, so q and
 //!   the pdf are exactly invariant under T -> -T. Drawn by picking the row with the rescaled
 //!   uniform, the bin by its cumulative mass, and the position in the bin by inverting the
 //!   linear density's quadratic CDF in closed form. The reference is tabulated through
@@ -137,7 +146,9 @@
 //!
 //! Every component is drawn by inverting its own closed-form CDF (the tube's by Newton to full
 //! precision; the cone table's row by its exact cumulative masses and the quadratic within a
-//! bin), and `pdf` evaluates the same closed forms at l, for every component and node, not
+//! bin; the fibre lobe's Cauchy law with the same truncated mass W in the draw and the
+//! density, so the rounding of its arc tangent moves the law's ends by ulps, never the density
+//! of what is drawn), and `pdf` evaluates the same closed forms at l, for every component and node, not
 //! only the one that drew l: the density of the mixture is the weighted sum of the densities of
 //! its components whichever produced the sample. The component and node are chosen by rescaling
 //! `u[0]` (the rescaled uniform is again uniform and independent of the choice), the cone
@@ -165,7 +176,7 @@ use directions::{
     cosine_direction, ggx_direction, ggx_pdf, rescale, tube_direction, tube_pdf, turn, unturn,
     wallis, ward_direction, ward_pdf, ONE_BELOW,
 };
-use lobe::{fibre_lobe_direction, fibre_lobe_pdf, ConeTable};
+use lobe::{fibre_lobe_density, fibre_lobe_direction, fibre_lobe_law, half_tangent, ConeTable};
 
 /// Width c of the fibre lobe's Cauchy law in units of 1/sqrt(exponent).
 pub const LOBE_WIDTH: f64 = std::f64::consts::FRAC_1_SQRT_2;
@@ -223,11 +234,27 @@ pub struct Sampler {
     nodes: Vec<(f64, f64, f64)>,
     /// Cumulative node weights (the last is 1).
     cumulative: Vec<f64>,
+    /// The nodes again in blocks of [`NODE_LANES`] for the density's lane loop (padding:
+    /// weight 0 at delta 0).
+    node_blocks: Vec<NodeBlock>,
     /// Directional albedo per unit kd going to the tube and to the cosine technique.
     kd_tube: f64,
     kd_cos: f64,
     /// Directional albedo per unit kd going to the lobe technique (glTF's metal).
     kd_lobe: f64,
+}
+
+/// Lanes of the mixture density's node loop.
+const NODE_LANES: usize = 8;
+
+/// [`NODE_LANES`] spread nodes: cos delta, sin delta and weight of each.
+#[derive(Clone, Debug)]
+struct NodeBlock {
+    cos: [f64; NODE_LANES],
+    sin: [f64; NODE_LANES],
+    weight: [f64; NODE_LANES],
+    /// The nodes that are not padding.
+    count: usize,
 }
 
 /// One sampled direction.
@@ -317,6 +344,21 @@ impl Sampler {
         if let Some(last) = cumulative.last_mut() {
             *last = 1.0;
         }
+        let node_blocks = nodes
+            .chunks(NODE_LANES)
+            .map(|chunk| {
+                let mut b = NodeBlock {
+                    cos: [1.0; NODE_LANES],
+                    sin: [0.0; NODE_LANES],
+                    weight: [0.0; NODE_LANES],
+                    count: chunk.len(),
+                };
+                for (j, &(c, s, nu)) in chunk.iter().enumerate() {
+                    (b.cos[j], b.sin[j], b.weight[j]) = (c, s, nu);
+                }
+                b
+            })
+            .collect();
         // directional albedo per unit kd of the diffuse term, by technique; glTF's base colour
         // is Lambertian for the dielectric, the metal's Fresnel on its GGX lobe for the metal
         let (kd_tube, mut kd_cos) = (rung.diffuse_tube, rung.diffuse_cosine);
@@ -335,6 +377,7 @@ impl Sampler {
             fuzz_depth: p.fuzz_depth,
             nodes,
             cumulative,
+            node_blocks,
             kd_tube,
             kd_cos,
             kd_lobe,
@@ -419,7 +462,7 @@ impl Sampler {
                 match self.lobe {
                     Lobe::Fibre { gamma } => {
                         let vj = turn(v, c, s);
-                        fibre_lobe_direction(gamma, self.cone.as_ref(), &vj, [r, u1])
+                        fibre_lobe_direction(gamma, self.cone.as_ref(), &vj, [r, u1])?
                     }
                     Lobe::Ward { ax, ay } => ward_direction(ax, ay, &turn(v, c, s), [r, u1]),
                     Lobe::Ggx { at, ab, .. } => {
@@ -441,6 +484,9 @@ impl Sampler {
     fn mixture_pdf(&self, w: &Weights, v: &Local, l: &Local) -> f64 {
         let mut p = w.cos * l.n * FRAC_1_PI;
         if w.tube > 0.0 || w.lobe > 0.0 {
+            if let Lobe::Fibre { gamma } = self.lobe {
+                return p + self.fibre_nodes_pdf(gamma, w, v, l);
+            }
             let mut nodes = 0.0;
             for &(c, s, nu) in &self.nodes {
                 let lj = turn(l, c, s);
@@ -449,12 +495,9 @@ impl Sampler {
                     let vj = turn(v, c, s);
                     q += w.lobe
                         * match self.lobe {
-                            Lobe::Fibre { gamma } => {
-                                fibre_lobe_pdf(gamma, self.cone.as_ref(), &vj, &lj)
-                            }
                             Lobe::Ward { ax, ay } => ward_pdf(ax, ay, &vj, &lj),
                             Lobe::Ggx { at, ab, .. } => ggx_pdf(at, ab, &vj, &lj),
-                            Lobe::None => 0.0,
+                            Lobe::Fibre { .. } | Lobe::None => 0.0,
                         };
                 }
                 nodes += nu * q;
@@ -462,6 +505,62 @@ impl Sampler {
             p += nodes;
         }
         p
+    }
+
+    /// The fibre rungs' node sum of the mixture's density (tube and lobe at every spread node),
+    /// [`NODE_LANES`] nodes at a time in lanes on the widest vector instructions: no libm call
+    /// per node (the lobe's law has one lane arc tangent, the cone table's coordinates are half
+    /// tangents), so with a spread's 16 nodes the density costs about what one node's did.
+    fn fibre_nodes_pdf(&self, gamma: f64, w: &Weights, v: &Local, l: &Local) -> f64 {
+        if let [(c, s, nu)] = self.nodes[..] {
+            // one node (no spread): the same terms without the lanes
+            let lj = turn(l, c, s);
+            let vj = turn(v, c, s);
+            let lobe = w.lobe * fibre_lobe_density(fibre_lobe_law(gamma, vj.t), lj.t);
+            let longitude = match &self.cone {
+                None => FRAC_1_PI,
+                Some(t) => t.density_per_radian(half_tangent(vj.b, vj.n), half_tangent(lj.b, lj.n)),
+            };
+            return nu * (w.tube * tube_pdf(&lj) + lobe * longitude);
+        }
+        crate::model::numerics::lanes::on_widest_lanes(
+            #[inline(always)]
+            |_| match &self.cone {
+                None => self.node_sum::<false>(gamma, w, v, l),
+                Some(_) => self.node_sum::<true>(gamma, w, v, l),
+            },
+        )
+    }
+
+    /// The lane loop of [`Sampler::fibre_nodes_pdf`]; with `CONE`, the cone table's
+    /// coordinates in the lanes, then its lookups one node at a time (padding skipped).
+    #[inline(always)]
+    fn node_sum<const CONE: bool>(&self, gamma: f64, w: &Weights, v: &Local, l: &Local) -> f64 {
+        let mut total = 0.0;
+        for block in &self.node_blocks {
+            let (mut q, mut lobe) = ([0.0; NODE_LANES], [0.0; NODE_LANES]);
+            let (mut x_l, mut x_v) = ([0.0; NODE_LANES], [0.0; NODE_LANES]);
+            for j in 0..NODE_LANES {
+                let (c, s) = (block.cos[j], block.sin[j]);
+                let lj = turn(l, c, s);
+                let vj = turn(v, c, s);
+                q[j] = w.tube * tube_pdf(&lj);
+                lobe[j] = w.lobe * fibre_lobe_density(fibre_lobe_law(gamma, vj.t), lj.t);
+                if CONE {
+                    x_l[j] = half_tangent(lj.b, lj.n);
+                    x_v[j] = half_tangent(vj.b, vj.n);
+                }
+            }
+            match &self.cone {
+                Some(t) if CONE => (0..block.count)
+                    .for_each(|j| q[j] += lobe[j] * t.density_per_radian(x_v[j], x_l[j])),
+                _ => (0..NODE_LANES).for_each(|j| q[j] += lobe[j] * FRAC_1_PI),
+            }
+            for j in 0..NODE_LANES {
+                total += block.weight[j] * q[j];
+            }
+        }
+        total
     }
 
     /// The mixture weights for the view v (above the horizon) from the albedos.

@@ -23,6 +23,7 @@ pub(super) fn rescale(u: f64, lo: f64, hi: f64) -> f64 {
 }
 
 /// w in the frame of fibres turned by delta (cos c, sin s) about N (as the spread turns them).
+#[inline(always)]
 pub(super) fn turn(w: &Local, c: f64, s: f64) -> Local {
     Local {
         t: w.t * c + w.b * s,
@@ -106,6 +107,7 @@ pub(super) fn tube_direction(u: [f64; 2]) -> Local {
 }
 
 /// Density of [`tube_direction`] at l (above the horizon, in the fibres' frame).
+#[inline(always)]
 pub(super) fn tube_pdf(l: &Local) -> f64 {
     2.0 * l.projected_len() * FRAC_1_PI * FRAC_1_PI
 }
