@@ -22,7 +22,7 @@
 //! substrate fraction, in `diffuse.rs` the diffuse kernel.
 
 use super::frame::Local;
-use super::numerics::elementary;
+use super::numerics::elementary::{self, floor};
 
 mod arcs;
 mod diffuse;
@@ -37,22 +37,6 @@ pub use diffuse::{diffuse_kernel, DiffuseArc, DiffuseArcs};
 #[cfg_attr(not(feature = "internals"), allow(unused_imports))] // for the tests and benchmarks
 pub use gaps::{compact_gaps, FibreOcclusion, FibreOcclusions, GapSlots};
 pub use substrate::{substrate_fractions, SubstrateProblem};
-
-/// floor(x) without a libm call or a branch (baseline x86-64 has no rounding instruction, and
-/// `x as i64` would add Rust's saturation checks), exact for every f64: adding 2^52 to |x| < 2^52
-/// rounds it to an integer, then one step down where that rounded up; larger |x| are integers.
-/// Branch-free, so lane loops vectorise it.
-#[inline(always)]
-fn floor(x: f64) -> f64 {
-    const TWO_52: f64 = 4_503_599_627_370_496.0;
-    let r = ((x.abs() + TWO_52) - TWO_52).copysign(x);
-    let r = r - (r > x) as u8 as f64;
-    if x.abs() < TWO_52 {
-        r
-    } else {
-        x
-    }
-}
 
 #[inline(always)]
 fn ceil(x: f64) -> f64 {

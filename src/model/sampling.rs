@@ -176,7 +176,10 @@ use directions::{
     cosine_direction, ggx_direction, ggx_pdf, rescale, tube_direction, tube_pdf, turn, unturn,
     wallis, ward_direction, ward_pdf, ONE_BELOW,
 };
-use lobe::{fibre_lobe_density, fibre_lobe_direction, fibre_lobe_law, half_tangent, ConeTable};
+use lobe::{
+    fibre_lobe_density, fibre_lobe_direction, fibre_lobe_law, fibre_lobe_pdf, half_tangent,
+    ConeTable,
+};
 
 /// Width c of the fibre lobe's Cauchy law in units of 1/sqrt(exponent).
 pub const LOBE_WIDTH: f64 = std::f64::consts::FRAC_1_SQRT_2;
@@ -514,14 +517,10 @@ impl Sampler {
     fn fibre_nodes_pdf(&self, gamma: f64, w: &Weights, v: &Local, l: &Local) -> f64 {
         if let [(c, s, nu)] = self.nodes[..] {
             // one node (no spread): the same terms without the lanes
-            let lj = turn(l, c, s);
-            let vj = turn(v, c, s);
-            let lobe = w.lobe * fibre_lobe_density(fibre_lobe_law(gamma, vj.t), lj.t);
-            let longitude = match &self.cone {
-                None => FRAC_1_PI,
-                Some(t) => t.density_per_radian(half_tangent(vj.b, vj.n), half_tangent(lj.b, lj.n)),
-            };
-            return nu * (w.tube * tube_pdf(&lj) + lobe * longitude);
+            let (lj, vj) = (turn(l, c, s), turn(v, c, s));
+            return nu
+                * (w.tube * tube_pdf(&lj)
+                    + w.lobe * fibre_lobe_pdf(gamma, self.cone.as_ref(), &vj, &lj));
         }
         crate::model::numerics::lanes::on_widest_lanes(
             #[inline(always)]

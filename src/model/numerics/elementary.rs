@@ -100,6 +100,22 @@ const AT: [f64; 11] = [
     1.628_582_011_536_578_2e-2,
 ];
 
+/// floor(x) without a libm call or a branch (baseline x86-64 has no rounding instruction, and
+/// `x as i64` would add Rust's saturation checks), exact for every f64: adding 2^52 to |x| < 2^52
+/// rounds it to an integer, then one step down where that rounded up; larger |x| are integers.
+/// Branch-free, so lane loops vectorise it.
+#[inline(always)]
+pub fn floor(x: f64) -> f64 {
+    const TWO_52: f64 = 4_503_599_627_370_496.0;
+    let r = ((x.abs() + TWO_52) - TWO_52).copysign(x);
+    let r = r - (r > x) as u8 as f64;
+    if x.abs() < TWO_52 {
+        r
+    } else {
+        x
+    }
+}
+
 /// atan2(y, x) for x >= 0 (not both zero): in [-pi/2, pi/2], within ~2 ulp.
 ///
 /// fdlibm's s_atan.c applied to y/x, with each of its reductions t = (a ax + b)/(c ax + d)

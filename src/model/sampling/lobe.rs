@@ -11,7 +11,7 @@ use crate::model::numerics::elementary;
 use crate::model::params::ModelParams;
 use crate::model::rung::Rung;
 use crate::model::{Basis, DirectionPair, ModelId};
-use std::f64::consts::{FRAC_PI_2, PI};
+use std::f64::consts::{FRAC_1_PI, FRAC_PI_2, PI};
 
 /// The Cauchy law of s = l.t about the mirror s_r = -v_t (v_t = v.t), truncated to s in
 /// [-1, 1]: (s_r, 1 / gamma_s, W) with the width gamma_s = gamma sqrt(1 - s_r^2 + gamma^2) (the
@@ -82,12 +82,11 @@ pub(super) fn fibre_lobe_direction(
 
 /// Density of [`fibre_lobe_direction`] at l (above the horizon): d omega = ds dalpha (s = l.t,
 /// alpha the longitude about T), so it is the two laws' product, with no Jacobian. One node at
-/// a time: the tests' reference for `Sampler`'s lane loop, which writes the same terms.
-#[cfg(test)]
+/// a time (`Sampler`'s lane loop writes the same terms for many).
 pub(super) fn fibre_lobe_pdf(gamma: f64, cone: Option<&ConeTable>, v: &Local, l: &Local) -> f64 {
     let g = fibre_lobe_density(fibre_lobe_law(gamma, v.t), l.t);
     g * match cone {
-        None => std::f64::consts::FRAC_1_PI,
+        None => FRAC_1_PI,
         Some(table) => table.density_per_radian(half_tangent(v.b, v.n), half_tangent(l.b, l.n)),
     }
 }
@@ -268,7 +267,7 @@ impl ConeTable {
         // position among the row centres (i + 1/2) of the rows with x_v >= 0, in row units;
         // -1 is the mirror of row 0
         let q = x_v.abs().min(1.0) * half as f64 - 0.5;
-        let lo = floor_small(q).clamp(-1.0, half as f64 - 1.0);
+        let lo = elementary::floor(q).clamp(-1.0, half as f64 - 1.0);
         let w = (q - lo).clamp(0.0, 1.0);
         let lo = lo as isize;
         let hi = (lo + 1).min(half as isize - 1);
@@ -295,7 +294,7 @@ impl ConeTable {
         // the nodes either side of x_l, from |x_l| and its sign (exact mirror images)
         let half = CONE_BINS / 2;
         let y = x_l.abs().min(1.0) * half as f64;
-        let k = (floor_small(y) as usize).min(half - 1);
+        let k = (elementary::floor(y) as usize).min(half - 1);
         let f = (y - k as f64).clamp(0.0, 1.0);
         let (n0, n1) = if x_l.is_sign_negative() {
             (half - k, half - k - 1)
@@ -338,13 +337,6 @@ impl ConeTable {
     }
 }
 
-/// floor(y) for 0 <= |y| < 2^31 without a libm call (baseline x86-64 has no rounding
-/// instruction): truncation, one step down for negative non-integers.
-#[inline(always)]
-fn floor_small(y: f64) -> f64 {
-    let t = y as i64 as f64;
-    t - (t > y) as u8 as f64
-}
 
 #[cfg(test)]
 mod tests {
