@@ -385,6 +385,33 @@ fn run_jobs(jobs: &[Job], quick: bool, bar: &ProgressBar) -> Result<Vec<Variance
         .collect::<Result<Vec<_>>>()
 }
 
+/// The speed table's variants with optional components: (rung, variant, parameter lines added
+/// to the rung's example). `cargo bench --bench sampling` times the same ones.
+pub const SPEED_VARIANTS: [(ModelId, &str, &str); 7] = [
+    (ModelId::MaxNormal, "spread 180", "azimuth_spread_deg = 180\n"),
+    (ModelId::PoulinFournier, "spread 180", "azimuth_spread_deg = 180\n"),
+    (ModelId::PoulinFournier, "spread 20", "azimuth_spread_deg = 20\n"),
+    (
+        ModelId::PoulinFournier,
+        "fuzz + fresnel",
+        "fuzz = 0.5\nfuzz_depth = 0.3\nfresnel_ior = 1.5\n",
+    ),
+    (
+        ModelId::PoulinFournier,
+        "spread 180 + fuzz (felt)",
+        "azimuth_spread_deg = 180\nfuzz = 0.5\nfuzz_depth = 0.3\n",
+    ),
+    (ModelId::VaryingTopology, HEIGHT_PER_DRAW, ""),
+    (
+        ModelId::VaryingTopology,
+        "spread 30 + fuzz",
+        "azimuth_spread_deg = 30\nfuzz = 0.5\nfuzz_depth = 0.3\n",
+    ),
+];
+
+/// The variant drawn at a height per sample, as a per-texel height map does.
+pub const HEIGHT_PER_DRAW: &str = "a height per draw (maps)";
+
 /// Samples per second of every rung at exponent `e`, then of variants with the optional
 /// components: one thread, one rung after another.
 fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
@@ -405,49 +432,12 @@ fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
         )?);
         bar.inc(1);
     }
-    for (id, variant, extra) in [
-        (
-            ModelId::MaxNormal,
-            "spread 180",
-            "azimuth_spread_deg = 180\n",
-        ),
-        (
-            ModelId::PoulinFournier,
-            "spread 180",
-            "azimuth_spread_deg = 180\n",
-        ),
-        (
-            ModelId::PoulinFournier,
-            "spread 20",
-            "azimuth_spread_deg = 20\n",
-        ),
-        (
-            ModelId::PoulinFournier,
-            "fuzz + fresnel",
-            "fuzz = 0.5\nfuzz_depth = 0.3\nfresnel_ior = 1.5\n",
-        ),
-        (
-            ModelId::PoulinFournier,
-            "spread 180 + fuzz (felt)",
-            "azimuth_spread_deg = 180\nfuzz = 0.5\nfuzz_depth = 0.3\n",
-        ),
-        (
-            ModelId::VaryingTopology,
-            "a height per draw (maps)",
-            "",
-        ),
-        (
-            ModelId::VaryingTopology,
-            "spread 30 + fuzz",
-            "azimuth_spread_deg = 30\nfuzz = 0.5\nfuzz_depth = 0.3\n",
-        ),
-    ] {
+    for &(id, variant, extra) in &SPEED_VARIANTS {
         let text = params_text(id, e) + extra;
         let p = params(id, &text)?;
         // a per-texel height map: every draw at its own height over the whole range
-        let heights = variant
-            .contains("height per draw")
-            .then(|| (0.0, crate::model::topology::max_height(p.spacing)));
+        let top = crate::model::topology::max_height(p.spacing);
+        let heights = (variant == HEIGHT_PER_DRAW).then_some((0.0, top));
         speed.push(speed_row(id, variant, &p, heights, budget)?);
         bar.inc(1);
     }
