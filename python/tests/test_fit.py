@@ -206,3 +206,25 @@ def test_fit_gltf_variant_threejs_reaches_the_result(tmp_path):
         fibrefit.fit(data, model="gltf", gltf_variant="three")
     with pytest.raises(fibrefit.FibrefitError, match="knob of the gltf rung"):
         fibrefit.fit(data, model="ward", gltf_variant="threejs")
+
+
+def test_a_material_that_gains_energy_is_said_to(tmp_path):
+    # a Lambertian of 0.5 / sr (a directional albedo of pi / 2: data in the wrong units): the
+    # rung's albedo stops at 1, the correction makes up the rest, and the fit says the material
+    # reflects more than it receives, as the CLI does
+    rows = ["theta_i,phi_i,theta_o,phi_o,brdf"]
+    k = 0
+    for ti in (0, 15, 30, 45, 60, 75):
+        for to in (0, 20, 40, 60, 80):
+            for po in (0, 60, 120, 180):
+                k += 1
+                rows.append(f"{ti},0,{to},{po},{0.5 * (1 + 0.01 * ((k * 7919 % 101) / 50 - 1))}")
+    data = tmp_path / "bright.csv"
+    data.write_text("\n".join(rows) + "\n")
+    r = fibrefit.fit(data, model="lambert", metric="log")
+    GAIN = "the material reflects more light than it receives"
+    energy = [w for w in r.warnings if w.startswith(GAIN)]
+    assert len(energy) == 1 and "normal incidence" in energy[0], r.warnings
+    # the shipped brushed fit keeps its energy
+    ok = fibrefit.fit(DATA / "brushed" / "gonio.csv", config=CONFIGS / "fit_brushed.toml")
+    assert not any(w.startswith(GAIN) for w in ok.warnings)

@@ -808,19 +808,30 @@ pub fn fit_reporting(req: &FitRequest, sink: Option<&AutoSink>) -> Result<FitRun
         None => renderer_stage(req, &cfg, &data, selection.as_ref(), &mut warnings)?,
         Some(_) => Vec::new(),
     };
-    let mut result = rj::assemble(rj::ResultParts {
-        config: &cfg,
-        outcome: &outcome,
-        model: model.as_ref(),
-        samples: &data.samples,
-        data: &req.data,
-        data_sha256: req.held.as_ref().map(|h| h.sha256.clone()),
-        stride: req.load.subsample.stride,
-        fraction: req.load.subsample.fraction,
-        all_pixels: all_pixels.as_ref(),
-        selection: selection.as_ref(),
-        warnings: warnings.clone(),
-    })?;
+    let assemble = |outcome: &FitOutcome, warnings: &[String]| {
+        rj::assemble(rj::ResultParts {
+            config: &cfg,
+            outcome,
+            model: model.as_ref(),
+            samples: &data.samples,
+            data: &req.data,
+            data_sha256: req.held.as_ref().map(|h| h.sha256.clone()),
+            stride: req.load.subsample.stride,
+            fraction: req.load.subsample.fraction,
+            all_pixels: all_pixels.as_ref(),
+            selection: selection.as_ref(),
+            warnings: warnings.to_vec(),
+        })
+    };
+    let mut result = assemble(&outcome, &warnings)?;
+    // the white furnace of the material delivered (rung, fuzz layer, correction; the globals):
+    // a gain is a quality warning (the banner shows it), so the result is assembled again
+    if let Some(w) = crate::api::energy::check_result(&serde_json::to_value(&result)?, &req.data) {
+        outcome.quality.warnings.push(w.clone());
+        outcome.warnings.push(w.clone());
+        warnings.push(w);
+        result = assemble(&outcome, &warnings)?;
+    }
     let mut report_text = report::text(
         &outcome,
         id.as_str(),

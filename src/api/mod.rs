@@ -7,6 +7,7 @@ pub mod board;
 pub mod calibrate;
 pub mod capture;
 pub mod data;
+pub mod energy;
 pub mod eval;
 pub mod export;
 pub mod fit;
