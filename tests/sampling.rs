@@ -771,3 +771,137 @@ fn the_lobe_lowers_the_variance_tenfold_at_exponent_1000() {
         }
     }
 }
+
+/// `sample_many` (the rung evaluated at a batch of draws at once, in lanes) gives every draw
+/// what `sample` gives it alone, bit for bit: every rung but the reference, the speed table's
+/// variants, draws at random views with and without a height each (varying-topology draws at
+/// its texels' heights, the others ignore them), albedos varying per draw.
+#[test]
+fn a_batch_of_draws_is_each_draw_alone_bit_for_bit() {
+    use fibrefit::bench::sampling::SPEED_VARIANTS;
+    use fibrefit::model::sampling::Draw;
+    let mut configs: Vec<(ModelId, String)> = ModelId::ALL
+        .iter()
+        .filter(|&&id| id != ModelId::Reference)
+        .map(|&id| (id, base_text(id)))
+        .collect();
+    for &(id, _, extra) in &SPEED_VARIANTS {
+        configs.push((id, base_text(id) + extra));
+    }
+    let mut rng = Rng::new(5);
+    for (id, text) in configs {
+        let p = params(&text, id);
+        let m = model::build(id, &p).unwrap();
+        let sampler = Sampler::new(id, &p);
+        let top = fibrefit::model::topology::max_height(p.spacing);
+        let draws: Vec<Draw> = (0..203)
+            .map(|k| {
+                let mut albedos = p.albedos;
+                albedos.diffuse[0] *= 0.5 + rng.uniform();
+                albedos.specular[0] *= 0.5 + rng.uniform();
+                let h = rng.uniform();
+                Draw {
+                    albedos,
+                    height: (k % 3 != 0).then_some(top * h),
+                    // a few views at and below the horizon too
+                    v: view(95.0 * rng.uniform(), 360.0 * rng.uniform()),
+                    u: [rng.uniform(), rng.uniform()],
+                }
+            })
+            .collect();
+        let mut batch = vec![None; draws.len()];
+        sampler.sample_many(m.as_ref(), &draws, &mut batch);
+        let mut drawn = 0;
+        for (d, b) in draws.iter().zip(&batch) {
+            let alone = sampler.sample(m.as_ref(), &d.albedos, d.height, &d.v, d.u);
+            match (alone, b) {
+                (None, None) => {}
+                (Some(a), Some(b)) => {
+                    drawn += 1;
+                    let bits = |s: &fibrefit::model::sampling::Sample| {
+                        [
+                            s.l.t,
+                            s.l.b,
+                            s.l.n,
+                            s.pdf,
+                            s.weight[0],
+                            s.weight[1],
+                            s.weight[2],
+                        ]
+                        .map(f64::to_bits)
+                    };
+                    assert_eq!(bits(&a), bits(b), "{id} {text:?}: {d:?}");
+                }
+                (a, b) => panic!("{id} {text:?}: {d:?}: alone {a:?}, in the batch {b:?}"),
+            }
+        }
+        assert!(drawn > 150, "{id}: {drawn} of 203 drawn");
+    }
+}
+
+/// `Material::sample_many` (blocks of rows, each block's rung evaluated at once) gives every
+/// row what `Material::sample` gives it alone, bit for bit: the silk's truth (its topology map:
+/// a height per texel), the loose capture's truth with its tangent map (a fibre azimuth per
+/// texel), a corrected poulin-fournier with a spread (the correction's factor in the weight).
+#[test]
+fn a_materials_rows_sampled_at_once_are_each_row_alone_bit_for_bit() {
+    use fibrefit::api::material::Material;
+    use fibrefit::model::Vec3;
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let dir = tempfile::tempdir().unwrap();
+    let silk = Material::load(&root.join("data_synthetic/silk/truth.json"), None)
+        .unwrap()
+        .0;
+    let loose = Material::load(&root.join("data_synthetic/loose/truth.json"), None)
+        .unwrap()
+        .0
+        .with_capture(&root.join("data_synthetic/loose/capture.toml"))
+        .unwrap();
+    let c = 1.2f64.ln();
+    let corrected = dir.path().join("pf.toml");
+    std::fs::write(
+        &corrected,
+        format!(
+            "model = \"poulin-fournier\"\n{}azimuth_spread_deg = 40\n[correction]\ndegree = 1\n\
+             coefficients = [[{c}, {c}, {c}], [0.1, -0.1, 0.05], [0.2, 0.1, 0.0]]\n\
+             cos_range = [0.0, 1.0]\nlog_range = [[-1.0, 1.0], [-1.0, 1.0], [-1.0, 1.0]]\n",
+            base_text(ModelId::PoulinFournier)
+        ),
+    )
+    .unwrap();
+    let corrected = Material::load(&corrected, None).unwrap().0;
+    let mut rng = Rng::new(11);
+    for (name, m, with_uv) in [
+        ("silk", &silk, true),
+        ("loose", &loose, true),
+        ("corrected", &corrected, false),
+    ] {
+        let n = 700; // more than two blocks
+        let v: Vec<[f64; 3]> = (0..n)
+            .map(|_| {
+                let d = view(88.0 * rng.uniform(), 360.0 * rng.uniform());
+                [d.t, d.b, d.n]
+            })
+            .collect();
+        let u: Vec<[f64; 2]> = (0..n).map(|_| [rng.uniform(), rng.uniform()]).collect();
+        let uv: Vec<[f64; 2]> = (0..n).map(|_| [rng.uniform(), rng.uniform()]).collect();
+        let uv = with_uv.then_some(&uv[..]);
+        let many = m.sample_many(&v, &u, uv).unwrap();
+        let mut drawn = 0;
+        for i in 0..n {
+            // as `sample_many` takes a row: divided by its length
+            let d = Vec3::new(v[i][0], v[i][1], v[i][2]);
+            let alone = m.sample(&(d / d.norm()), u[i], uv.map(|c| c[i]));
+            drawn += (alone.pdf > 0.0) as usize;
+            let bits = |s: &fibrefit::api::material::Sampled| {
+                [s.l, s.weight, [s.pdf; 3]]
+                    .concat()
+                    .iter()
+                    .map(|x| x.to_bits())
+                    .collect::<Vec<_>>()
+            };
+            assert_eq!(bits(&alone), bits(&many[i]), "{name}, row {i}");
+        }
+        assert!(drawn > n / 2, "{name}: {drawn} drawn");
+    }
+}

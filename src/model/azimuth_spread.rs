@@ -230,6 +230,29 @@ impl ShadingModel for AzimuthSpread {
         true
     }
 
+    fn basis_many_at_each_height(
+        &self,
+        pairs: &[DirectionPair],
+        heights: &[f64],
+        out: &mut [Basis],
+    ) -> bool {
+        if !self.inner.rung().has(crate::model::Ability::Topology) {
+            return false;
+        }
+        if self.adaptive {
+            for ((p, &h), o) in pairs.iter().zip(heights).zip(out.iter_mut()) {
+                *o = self.basis_at_height(p, h).unwrap_or_default();
+            }
+            return true;
+        }
+        // the turned pairs are node by node, each node's in the order of `pairs`
+        let each: Vec<f64> = heights.repeat(self.nodes.len());
+        self.sum_over_nodes(pairs, out, |rotated, part| {
+            self.inner.basis_many_at_each_height(rotated, &each, part);
+        });
+        true
+    }
+
     fn basis_many(&self, pairs: &[DirectionPair], out: &mut [Basis]) {
         if self.adaptive {
             for (p, o) in pairs.iter().zip(out.iter_mut()) {

@@ -187,6 +187,27 @@ pub trait ShadingModel: Send + Sync {
         }
         true
     }
+
+    /// [`ShadingModel::basis_at_height`] of each pair at its own height (`heights`, same
+    /// length), into `out`; `false`, `out` untouched, for models without a topology. Equal to
+    /// calling it pair by pair, bit for bit; the cross-section rungs batch the pairs (a
+    /// sampler's draws, each at its texel's height).
+    fn basis_many_at_each_height(
+        &self,
+        pairs: &[DirectionPair],
+        heights: &[f64],
+        out: &mut [Basis],
+    ) -> bool {
+        assert_eq!(pairs.len(), out.len());
+        assert_eq!(pairs.len(), heights.len());
+        if !self.rung().has(crate::model::Ability::Topology) {
+            return false;
+        }
+        for ((p, &h), o) in pairs.iter().zip(heights).zip(out.iter_mut()) {
+            *o = self.basis_at_height(p, h).unwrap_or_default();
+        }
+        true
+    }
 }
 
 /// A lobe's per-texel shape ([`ShadingModel::with_lobe`]): GGX roughness and anisotropy, in
@@ -280,6 +301,19 @@ impl<T: BasisTransform + Clone + 'static> ShadingModel for Transformed<T> {
         out: &mut [Basis],
     ) -> bool {
         if !self.inner.basis_many_at_height(pairs, height, out) {
+            return false;
+        }
+        self.apply_many(pairs, out);
+        true
+    }
+
+    fn basis_many_at_each_height(
+        &self,
+        pairs: &[DirectionPair],
+        heights: &[f64],
+        out: &mut [Basis],
+    ) -> bool {
+        if !self.inner.basis_many_at_each_height(pairs, heights, out) {
             return false;
         }
         self.apply_many(pairs, out);

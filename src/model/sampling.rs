@@ -166,7 +166,7 @@ use super::frame::Local;
 use super::fresnel::schlick;
 use super::params::ModelParams;
 use super::rung::{LobeAlbedo, LobeSampling};
-use super::{Ability, Albedos, DirectionPair, ModelId, ShadingModel};
+use super::{Ability, Albedos, Basis, DirectionPair, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
 
 mod directions;
@@ -266,6 +266,23 @@ pub struct Sample {
     pub l: Local,
     pub pdf: f64,
     pub weight: [f64; 3],
+}
+
+/// Pairs per call of the rung's batch evaluation in [`Sampler::sample_many`], counting a
+/// spread's turned pairs.
+const EVAL_PAIRS: usize = 64;
+
+/// One draw of a batch ([`Sampler::sample_many`]): what [`Sampler::sample`] takes.
+#[derive(Clone, Copy, Debug)]
+pub struct Draw {
+    /// The albedos at the draw's point (the mixture's weights follow them).
+    pub albedos: Albedos,
+    /// The fibres' height where a texel fixes one (rungs with a topology).
+    pub height: Option<f64>,
+    /// The view, in the fibre frame.
+    pub v: Local,
+    /// Two uniforms in [0, 1).
+    pub u: [f64; 2],
 }
 
 /// The mixture weights for one view.
@@ -423,6 +440,68 @@ impl Sampler {
             *w = basis.brdf(albedos, c) * l.n / pdf;
         }
         Some(Sample { l, pdf, weight })
+    }
+
+    /// [`Sampler::sample`] of every draw, into `out` (same length), bit for bit: the directions
+    /// one by one, then the rung evaluated at all of them at once (`basis_many`, or
+    /// `basis_many_at_each_height` for draws at a height), which the cross-section rungs run in
+    /// lanes: one pair at a time their evaluation is latency-bound, about twice the time per
+    /// pair. What a wavefront renderer (Mitsuba's variants, `Material.sample` on arrays) asks for.
+    pub fn sample_many(&self, model: &dyn ShadingModel, draws: &[Draw], out: &mut [Option<Sample>]) {
+        assert_eq!(draws.len(), out.len());
+        let topology = model.rung().has(Ability::Topology);
+        // the drawn directions: (draw, pair, pdf), at a height (with it) or not
+        let (mut plain, mut high) = (Vec::new(), Vec::new());
+        let (mut plain_pairs, mut high_pairs, mut heights) = (Vec::new(), Vec::new(), Vec::new());
+        for (i, (d, o)) in draws.iter().zip(out.iter_mut()).enumerate() {
+            *o = None;
+            let Some((l, pdf)) = self.sample_direction(&d.albedos, &d.v, d.u) else {
+                continue;
+            };
+            let pair = DirectionPair { l, v: d.v };
+            match d.height {
+                Some(h) if topology => {
+                    high.push((i, pdf));
+                    high_pairs.push(pair);
+                    heights.push(h);
+                }
+                _ => {
+                    plain.push((i, pdf));
+                    plain_pairs.push(pair);
+                }
+            }
+        }
+        // in groups of about EVAL_PAIRS pairs as the rung sees them (a spread turns each pair
+        // into one per node): larger groups only spill the rung's buffers out of the caches
+        let group = (EVAL_PAIRS / self.nodes.len().max(1)).max(1);
+        let mut bases = vec![Basis::default(); plain_pairs.len()];
+        for (p, b) in plain_pairs.chunks(group).zip(bases.chunks_mut(group)) {
+            model.basis_many(p, b);
+        }
+        let mut high_bases = vec![Basis::default(); high_pairs.len()];
+        for ((p, h), b) in high_pairs
+            .chunks(group)
+            .zip(heights.chunks(group))
+            .zip(high_bases.chunks_mut(group))
+        {
+            model.basis_many_at_each_height(p, h, b);
+        }
+        let done = plain
+            .iter()
+            .zip(plain_pairs.iter().zip(&bases))
+            .chain(high.iter().zip(high_pairs.iter().zip(&high_bases)));
+        for (&(i, pdf), (pair, basis)) in done {
+            let albedos = &draws[i].albedos;
+            let mut weight = [0.0; 3];
+            for (c, w) in weight.iter_mut().enumerate() {
+                *w = basis.brdf(albedos, c) * pair.l.n / pdf;
+            }
+            out[i] = Some(Sample {
+                l: pair.l,
+                pdf,
+                weight,
+            });
+        }
     }
 
     /// The exact density (1/sr, solid angle) of `sample` producing l given v (0 below the

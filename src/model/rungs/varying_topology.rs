@@ -141,6 +141,25 @@ impl GaussSection {
     ///
     /// Each pair's result does not depend on the other pairs in the batch, bit for bit (tested).
     pub fn bases(&self, pairs: &[DirectionPair], patterns: &[(Pattern, f64)], out: &mut [Basis]) {
+        self.bases_with(pairs, |_| patterns, out)
+    }
+
+    /// [`GaussSection::bases`] with each pair at its own pattern (weight 1): a sampler's batch
+    /// of draws at their texels' heights. Each pair's result is its `bases` with that one
+    /// pattern, bit for bit.
+    pub fn bases_each(&self, pairs: &[DirectionPair], patterns: &[Pattern], out: &mut [Basis]) {
+        assert_eq!(pairs.len(), patterns.len());
+        let weighted: Vec<[(Pattern, f64); 1]> = patterns.iter().map(|&p| [(p, 1.0)]).collect();
+        self.bases_with(pairs, |i| &weighted[i], out)
+    }
+
+    /// [`GaussSection::bases`] with pair i averaged over `patterns(i)`.
+    fn bases_with<'p>(
+        &self,
+        pairs: &[DirectionPair],
+        patterns: impl Fn(usize) -> &'p [(Pattern, f64)],
+        out: &mut [Basis],
+    ) {
         assert_eq!(pairs.len(), out.len());
         SCRATCH.with(|scratch| {
             let mut scratch = scratch.borrow_mut();
@@ -166,7 +185,7 @@ impl GaussSection {
                 if !pair.above_horizon() {
                     continue;
                 }
-                for (k, (pattern, _)) in patterns.iter().enumerate() {
+                for &(pattern, weight) in patterns(i) {
                     if !(pattern.period * sp.cos_alpha_product() > 0.0) {
                         continue;
                     }
@@ -174,11 +193,12 @@ impl GaussSection {
                     // per fibre in the order of `fibres`: seen along v, lit along l
                     let (even, odd) = (Fibre::Even, Fibre::Odd);
                     let four = [view.of(even), light.of(even), view.of(odd), light.of(odd)];
-                    problems.extend(&four[..2 * fibres(pattern).len()]);
-                    substrates.push(SubstrateProblem::new(pattern, &sp.l, &sp.v));
+                    problems.extend(&four[..2 * fibres(&pattern).len()]);
+                    substrates.push(SubstrateProblem::new(&pattern, &sp.l, &sp.v));
                     visits.push(Visit {
                         pair: i,
-                        pattern: k,
+                        pattern,
+                        weight,
                         diffuse: 0.0,
                         substrate: 0.0,
                     });
@@ -203,7 +223,7 @@ impl GaussSection {
             let (mut at, mut problem) = (0, 0);
             for (v, visit) in visits.iter_mut().enumerate() {
                 let (sp, lobe) = &prepared[visit.pair];
-                let (pattern, weight) = &patterns[visit.pattern];
+                let (pattern, weight) = (&visit.pattern, &visit.weight);
                 let counts = &gap_counts[problem..problem + 2 * fibres(pattern).len()];
                 problem += counts.len();
                 let one = OneVisit {
@@ -239,7 +259,7 @@ impl GaussSection {
             out.fill(Basis::default());
             for visit in visits.iter() {
                 let (sp, _) = &prepared[visit.pair];
-                let (pattern, weight) = &patterns[visit.pattern];
+                let (pattern, weight) = (&visit.pattern, &visit.weight);
                 let denom = pattern.period * sp.cos_alpha_product();
                 let b = Basis {
                     diffuse: weight * FRAC_1_PI * visit.diffuse / denom,
@@ -452,7 +472,8 @@ struct OneVisit<'a> {
 /// denominator).
 struct Visit {
     pair: usize,
-    pattern: usize,
+    pattern: Pattern,
+    weight: f64,
     /// Sum over its seen-and-lit arcs of count * diffuse kernel (step 5).
     diffuse: f64,
     /// Seen-and-lit fraction of the substrate (step 5).
@@ -561,6 +582,21 @@ impl ShadingModel for VaryingTopology {
     ) -> bool {
         let pattern = Pattern::new(self.spacing, elevation_from_height(height, self.spacing));
         self.section.bases(pairs, &[(pattern, 1.0)], out);
+        true
+    }
+
+    fn basis_many_at_each_height(
+        &self,
+        pairs: &[DirectionPair],
+        heights: &[f64],
+        out: &mut [Basis],
+    ) -> bool {
+        assert_eq!(pairs.len(), heights.len());
+        let patterns: Vec<Pattern> = heights
+            .iter()
+            .map(|&h| Pattern::new(self.spacing, elevation_from_height(h, self.spacing)))
+            .collect();
+        self.section.bases_each(pairs, &patterns, out);
         true
     }
 }
