@@ -15,13 +15,17 @@ use crate::load::image_io::LinearImage;
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{Local, Vec3};
 use crate::model::params::ModelParams;
-use crate::model::sampling::Sampler;
+use crate::model::sampling::{Draw, Sampler};
 use crate::model::{self, ModelId, ShadingModel};
 use crate::render::objects::Hit;
 use crate::render::{Material as Shading, ShadingPoint};
 use anyhow::{anyhow, bail, Result};
 use rayon::prelude::*;
 use std::path::{Path, PathBuf};
+
+/// Rows per block of [`Material::sample_many`]: enough for the rung's lanes, few enough that
+/// two threads share a million rows evenly.
+const SAMPLE_BLOCK: usize = 256;
 
 /// How far from unit length a given direction may be (it is normalised).
 pub const UNIT_TOLERANCE: f64 = 1e-3;
@@ -355,28 +359,62 @@ impl Material {
     pub fn sample(&self, v: &Vec3, u: [f64; 2], uv: Option<[f64; 2]>) -> Sampled {
         let shading = self.shading();
         let sp = self.point(&shading, uv);
-        let failed = Sampled {
-            l: [0.0; 3],
-            weight: [0.0; 3],
-            pdf: 0.0,
-        };
-        let Some(s) = self.sampler.sample(
-            self.shading.as_ref(),
-            &sp.albedos,
-            sp.height,
-            &local(&sp, v),
-            u,
-        ) else {
-            return failed;
+        let v = local(&sp, v);
+        let s = self
+            .sampler
+            .sample(self.shading.as_ref(), &sp.albedos, sp.height, &v, u);
+        self.sampled(&shading, &sp, &v, s)
+    }
+
+    /// [`Material::sample`] of a block of rows, the rung evaluated at all of them at once
+    /// ([`Sampler::sample_many`]): the same values, bit for bit.
+    fn sample_block(&self, v: &[Vec3], u: &[[f64; 2]], uv: Option<&[[f64; 2]]>) -> Vec<Sampled> {
+        let shading = self.shading();
+        let points: Vec<ShadingPoint> = (0..v.len())
+            .map(|i| self.point(&shading, uv.map(|c| c[i])))
+            .collect();
+        let draws: Vec<Draw> = points
+            .iter()
+            .zip(v.iter().zip(u))
+            .map(|(sp, (v, u))| Draw {
+                albedos: sp.albedos,
+                height: sp.height,
+                v: local(sp, v),
+                u: *u,
+            })
+            .collect();
+        let mut drawn = vec![None; draws.len()];
+        self.sampler
+            .sample_many(self.shading.as_ref(), &draws, &mut drawn);
+        points
+            .iter()
+            .zip(draws.iter().zip(drawn))
+            .map(|(sp, (d, s))| self.sampled(&shading, sp, &d.v, s))
+            .collect()
+    }
+
+    /// A sampler's draw at the point `sp` for the view `v` (fibre frame) as the caller sees it:
+    /// in the swatch frame, the correction's factor in the weight, a grey result's channel
+    /// repeated; a failed draw as zeros.
+    fn sampled(
+        &self,
+        shading: &Shading,
+        sp: &ShadingPoint,
+        v: &Local,
+        s: Option<crate::model::sampling::Sample>,
+    ) -> Sampled {
+        let Some(s) = s else {
+            return Sampled {
+                l: [0.0; 3],
+                weight: [0.0; 3],
+                pdf: 0.0,
+            };
         };
         let l = sp.world(&Vec3::new(s.l.t, s.l.b, s.l.n));
         let mut weight = s.weight;
         if self.params.correction.is_some() {
             // the proposal is the rung's; its pdf stays exact, the weight carries the factor
-            let pair = model::DirectionPair {
-                l: s.l,
-                v: local(&sp, v),
-            };
+            let pair = model::DirectionPair { l: s.l, v: *v };
             let f = shading.factor(&pair);
             for c in 0..3 {
                 weight[c] *= f[c];
@@ -445,9 +483,14 @@ impl Material {
             );
         }
         let uv = coordinates(uv, v.len())?;
-        Ok((0..v.len())
-            .into_par_iter()
-            .map(|i| self.sample(&v[i], u[i], uv.map(|c| c[i])))
+        // blocks of rows in parallel, each block's rung evaluated at once (in lanes)
+        Ok(v.par_chunks(SAMPLE_BLOCK)
+            .zip(u.par_chunks(SAMPLE_BLOCK))
+            .enumerate()
+            .flat_map_iter(|(k, (v, u))| {
+                let at = k * SAMPLE_BLOCK;
+                self.sample_block(v, u, uv.map(|c| &c[at..at + v.len()]))
+            })
             .collect())
     }
 }
