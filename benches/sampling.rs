@@ -1,7 +1,8 @@
 //! Importance sampling per rung: `cargo bench --bench sampling`. One `Sampler::sample` (the
 //! direction, its exact pdf over the whole mixture and the rung's evaluation at it) per
-//! iteration over a fixed set of views and uniforms (`sample`), and the sampler alone with a
-//! constant model (`sampler_only`). The variance the sampler buys is `fibrefit bench
+//! iteration over a fixed set of views and uniforms (`sample`), the same draws as one block
+//! (`with_eval_batch`: `Sampler::sample_many`, the evaluations at once), and the sampler alone
+//! with a constant model (`sampler_only`). The variance the sampler buys is `fibrefit bench
 //! --sampling` (reports/sampling.md).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
@@ -9,7 +10,7 @@ use fibrefit::bench::sampling::{HEIGHT_PER_DRAW, SPEED_VARIANTS};
 use fibrefit::model::frame::Local;
 use fibrefit::model::lambert::Lambert;
 use fibrefit::model::params::{ModelParams, RawParams};
-use fibrefit::model::sampling::Sampler;
+use fibrefit::model::sampling::{Draw, Sampler};
 use fibrefit::model::{self, ModelId};
 use std::hint::black_box;
 
@@ -80,6 +81,27 @@ fn sampling(c: &mut Criterion) {
                     .sum::<f64>()
             })
         });
+        // the same draws as one block (`sample_many`: the evaluations at once, in lanes)
+        let block: Vec<Draw> = d
+            .iter()
+            .map(|(v, u, r)| Draw {
+                albedos: p.albedos,
+                height: height(*r),
+                v: *v,
+                u: *u,
+            })
+            .collect();
+        g.bench_with_input(
+            BenchmarkId::new("with_eval_batch", name),
+            &block,
+            |b, block| {
+                let mut out = vec![None; block.len()];
+                b.iter(|| {
+                    sampler.sample_many(m.as_ref(), black_box(block), &mut out);
+                    out.iter().flatten().map(|s| s.weight[0]).sum::<f64>()
+                })
+            },
+        );
         g.bench_with_input(BenchmarkId::new("sampler_only", name), &d, |b, d| {
             b.iter(|| {
                 d.iter()

@@ -12,7 +12,7 @@
 use crate::model::frame::Local;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::rungs::Cost;
-use crate::model::sampling::{Sampler, LOBE_WIDTH};
+use crate::model::sampling::{Draw, Sampler, LOBE_WIDTH};
 use crate::model::{self, lambert::Lambert, DirectionPair, ModelId};
 use anyhow::{anyhow, Result};
 use indicatif::ProgressBar;
@@ -56,7 +56,13 @@ pub struct SpeedRow {
     /// samples summed over the same wall time): what 2 cores draw. Goal (issue 41): at least
     /// [`SAMPLES_GOAL`] for every rung.
     pub parallel_samples_per_second: f64,
+    /// `Sampler::sample_many` in blocks of [`BATCH`] draws on [`SPEED_THREADS`] threads: what
+    /// a renderer drawing a wavefront of samples (Mitsuba, `Material.sample` on arrays) gets.
+    pub batched_samples_per_second: f64,
 }
+
+/// Draws per block of the batched speed measure (as `Material.sample`'s blocks).
+pub const BATCH: usize = 256;
 
 /// Threads of the parallel speed measure (the 2 cores the goal is set on).
 pub const SPEED_THREADS: usize = 2;
@@ -251,6 +257,44 @@ fn speed_row(
         let count: usize = done.iter().map(|d| d.0).sum();
         count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
     });
+    // the same draws in blocks (`sample_many`: the rung evaluated at a block at once), as a
+    // wavefront renderer or `Material.sample` on arrays asks for them, on SPEED_THREADS threads
+    let batched = |seed: u64| {
+        let mut u = Uniforms::new(seed);
+        let mut draws = Vec::with_capacity(BATCH);
+        let mut out = vec![None; BATCH];
+        let (mut count, mut sink) = (0usize, 0.0);
+        let t = Instant::now();
+        while t.elapsed().as_secs_f64() < budget || count == 0 {
+            draws.clear();
+            for k in 0..BATCH {
+                let u2 = [u.next(), u.next()];
+                draws.push(Draw {
+                    albedos: a,
+                    height: height(u.next()),
+                    v: views[k % views.len()],
+                    u: u2,
+                });
+            }
+            sampler.sample_many(m.as_ref(), &draws, &mut out);
+            sink += out.iter().flatten().map(|s| s.weight[0]).sum::<f64>();
+            count += BATCH;
+        }
+        std::hint::black_box(sink);
+        (count, t.elapsed().as_secs_f64())
+    };
+    let batched_ref = &batched;
+    let batched_samples_per_second = std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..SPEED_THREADS)
+            .map(|k| scope.spawn(move || batched_ref(17 + k as u64)))
+            .collect();
+        let done: Vec<(usize, f64)> = handles
+            .into_iter()
+            .map(|h| h.join().expect("a speed thread"))
+            .collect();
+        let count: usize = done.iter().map(|d| d.0).sum();
+        count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
+    });
     let samples_per_second = time(&with_eval);
     let sampler_only_per_second = time(&|v, u, _| {
         sampler
@@ -275,6 +319,7 @@ fn speed_row(
         evals_per_second,
         construct_ms,
         parallel_samples_per_second,
+        batched_samples_per_second,
     })
 }
 
