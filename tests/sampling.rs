@@ -905,3 +905,64 @@ fn a_materials_rows_sampled_at_once_are_each_row_alone_bit_for_bit() {
         assert!(drawn > n / 2, "{name}: {drawn} drawn");
     }
 }
+
+/// A material with lobe maps (a renderer's own material fitted per texel: its roughness and
+/// anisotropy at each texel): `Material.sample`'s weight is `eval` cos / pdf at every texel,
+/// the texel's own lobe in both, one row at a time and in blocks.
+#[test]
+fn a_texels_own_lobe_is_in_the_sampled_weight() {
+    use fibrefit::api::material::Material;
+    use fibrefit::model::Vec3;
+    let dir = tempfile::tempdir().unwrap();
+    let maps = dir.path().join("maps");
+    std::fs::create_dir(&maps).unwrap();
+    let n = 8;
+    let map = |name: &str, f: &dyn Fn(usize, usize) -> f64| {
+        let data: Vec<f32> = (0..n * n).map(|i| f(i % n, i / n) as f32).collect();
+        fibrefit::export::images::write_exr(&maps.join(name), n, n, 1, &data).unwrap();
+    };
+    map("roughness.exr", &|x, _| {
+        0.08 + 0.8 * x as f64 / (n - 1) as f64
+    });
+    map("anisotropic.exr", &|_, y| 0.9 * y as f64 / (n - 1) as f64);
+    let params = dir.path().join("principled.toml");
+    std::fs::write(
+        &params,
+        "model = \"principled\"\nkd = 0.4\nroughness = 0.4\nanisotropic = 0.3\n",
+    )
+    .unwrap();
+    let m = Material::load(&params, Some(&maps)).unwrap().0;
+    let mut rng = Rng::new(3);
+    let rows = 300;
+    let v: Vec<[f64; 3]> = (0..rows)
+        .map(|_| {
+            let d = view(85.0 * rng.uniform(), 360.0 * rng.uniform());
+            [d.t, d.b, d.n]
+        })
+        .collect();
+    let u: Vec<[f64; 2]> = (0..rows).map(|_| [rng.uniform(), rng.uniform()]).collect();
+    let uv: Vec<[f64; 2]> = (0..rows).map(|_| [rng.uniform(), rng.uniform()]).collect();
+    let many = m.sample_many(&v, &u, Some(&uv)).unwrap();
+    let mut checked = 0;
+    for i in 0..rows {
+        let d = Vec3::new(v[i][0], v[i][1], v[i][2]);
+        let d = d / d.norm();
+        let alone = m.sample(&d, u[i], Some(uv[i]));
+        assert_eq!(alone.weight, many[i].weight, "row {i}");
+        if alone.pdf > 0.0 {
+            let l = Vec3::new(alone.l[0], alone.l[1], alone.l[2]);
+            let f = m.eval(&l, &d, Some(uv[i]));
+            for c in 0..3 {
+                let want = f[c] * l.z / alone.pdf;
+                assert!(
+                    (alone.weight[c] - want).abs() <= 1e-9 * want.abs().max(1e-12),
+                    "row {i} at uv {:?}: weight {} against eval cos / pdf {want}",
+                    uv[i],
+                    alone.weight[c]
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > rows / 2, "{checked}");
+}

@@ -360,10 +360,18 @@ impl Material {
         let shading = self.shading();
         let sp = self.point(&shading, uv);
         let v = local(&sp, v);
-        let s = self
-            .sampler
-            .sample(self.shading.as_ref(), &sp.albedos, sp.height, &v, u);
+        let own = self.texel_model(&sp);
+        let model = own.as_deref().unwrap_or(self.shading.as_ref());
+        let s = self.sampler.sample(model, &sp.albedos, sp.height, &v, u);
         self.sampled(&shading, &sp, &v, s)
+    }
+
+    /// The model at a shading point whose texel has its own lobe (a lobe map's roughness and
+    /// anisotropy): what `eval` shades that texel with, so a sample's weight is the texel's
+    /// f cos / pdf. `None`: the result's model. The proposal stays the result's (its pdf is
+    /// exact for what it draws).
+    fn texel_model(&self, sp: &ShadingPoint) -> Option<Box<dyn ShadingModel>> {
+        sp.lobe.and_then(|l| self.shading.with_lobe(l))
     }
 
     /// [`Material::sample`] of a block of rows, the rung evaluated at all of them at once
@@ -383,9 +391,26 @@ impl Material {
                 u: *u,
             })
             .collect();
-        let mut drawn = vec![None; draws.len()];
+        // rows at texels with their own lobe one by one, the others at once
+        let own: Vec<Option<Box<dyn ShadingModel>>> =
+            points.iter().map(|sp| self.texel_model(sp)).collect();
+        let shared: Vec<usize> = (0..draws.len()).filter(|&i| own[i].is_none()).collect();
+        let shared_draws: Vec<Draw> = shared.iter().map(|&i| draws[i]).collect();
+        let mut shared_drawn = vec![None; shared.len()];
         self.sampler
-            .sample_many(self.shading.as_ref(), &draws, &mut drawn);
+            .sample_many(self.shading.as_ref(), &shared_draws, &mut shared_drawn);
+        let mut drawn = vec![None; draws.len()];
+        for (&i, s) in shared.iter().zip(shared_drawn) {
+            drawn[i] = s;
+        }
+        for (i, m) in own.iter().enumerate() {
+            if let Some(m) = m {
+                let d = &draws[i];
+                drawn[i] = self
+                    .sampler
+                    .sample(m.as_ref(), &d.albedos, d.height, &d.v, d.u);
+            }
+        }
         points
             .iter()
             .zip(draws.iter().zip(drawn))
