@@ -53,7 +53,7 @@ pub fn furnace(m: &Material, strata: usize) -> Vec<ViewAlbedo> {
                     rows_v.push(v);
                     // the cell's centre, jittered by a fixed low-discrepancy offset
                     let jitter =
-                        |k: usize, a: f64| (k as f64 + frac(a * (k + 1) as f64)) / n as f64;
+                        |k: usize, a: f64| (k as f64 + (a * (k + 1) as f64).fract()) / n as f64;
                     rows_u.push([
                         jitter(i, 0.618_033_988_749_895),
                         jitter(j, 0.754_877_666_246_693),
@@ -86,10 +86,6 @@ pub fn furnace(m: &Material, strata: usize) -> Vec<ViewAlbedo> {
             }
         })
         .collect()
-}
-
-fn frac(x: f64) -> f64 {
-    x - x.floor()
 }
 
 /// The warning for views whose albedo exceeds 1 by more than three standard errors (and by

@@ -391,24 +391,18 @@ impl Material {
                 u: *u,
             })
             .collect();
-        // rows at texels with their own lobe one by one, the others at once
         let own: Vec<Option<Box<dyn ShadingModel>>> =
             points.iter().map(|sp| self.texel_model(sp)).collect();
-        let shared: Vec<usize> = (0..draws.len()).filter(|&i| own[i].is_none()).collect();
-        let shared_draws: Vec<Draw> = shared.iter().map(|&i| draws[i]).collect();
-        let mut shared_drawn = vec![None; shared.len()];
-        self.sampler
-            .sample_many(self.shading.as_ref(), &shared_draws, &mut shared_drawn);
         let mut drawn = vec![None; draws.len()];
-        for (&i, s) in shared.iter().zip(shared_drawn) {
-            drawn[i] = s;
-        }
-        for (i, m) in own.iter().enumerate() {
-            if let Some(m) = m {
-                let d = &draws[i];
-                drawn[i] = self
-                    .sampler
-                    .sample(m.as_ref(), &d.albedos, d.height, &d.v, d.u);
+        if own.iter().all(Option::is_none) {
+            self.sampler
+                .sample_many(self.shading.as_ref(), &draws, &mut drawn);
+        } else {
+            // texels with their own lobe (lobe maps: a renderer's material, whose evaluation
+            // gains nothing from a batch): row by row, each with its texel's model
+            for ((d, m), o) in draws.iter().zip(&own).zip(drawn.iter_mut()) {
+                let m = m.as_deref().unwrap_or(self.shading.as_ref());
+                *o = self.sampler.sample(m, &d.albedos, d.height, &d.v, d.u);
             }
         }
         points

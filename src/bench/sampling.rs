@@ -204,6 +204,23 @@ fn samples_for(id: ModelId, quick: bool) -> usize {
     }
 }
 
+/// `run(seed)` on [`SPEED_THREADS`] threads at once (seeds 17, 18, ...), each returning its
+/// (count, seconds): their counts summed over the longest wall time.
+fn on_speed_threads(run: impl Fn(u64) -> (usize, f64) + Sync) -> f64 {
+    let run = &run;
+    std::thread::scope(|scope| {
+        let handles: Vec<_> = (0..SPEED_THREADS)
+            .map(|k| scope.spawn(move || run(17 + k as u64)))
+            .collect();
+        let done: Vec<(usize, f64)> = handles
+            .into_iter()
+            .map(|h| h.join().expect("a speed thread"))
+            .collect();
+        let count: usize = done.iter().map(|d| d.0).sum();
+        count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
+    })
+}
+
 /// Samples per second of `sampler` (with `m`'s evaluation on this thread and on
 /// [`SPEED_THREADS`] threads, and with a constant model) and `m`'s evaluations per second, over
 /// the study's views.
@@ -245,18 +262,7 @@ fn speed_row(
             .sample(m.as_ref(), &a, height(r), v, u)
             .map_or(0.0, |s| s.weight[0])
     };
-    let (run_ref, with_eval_ref) = (&run, &with_eval);
-    let parallel_samples_per_second = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..SPEED_THREADS)
-            .map(|k| scope.spawn(move || run_ref(17 + k as u64, with_eval_ref)))
-            .collect();
-        let done: Vec<(usize, f64)> = handles
-            .into_iter()
-            .map(|h| h.join().expect("a speed thread"))
-            .collect();
-        let count: usize = done.iter().map(|d| d.0).sum();
-        count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
-    });
+    let parallel_samples_per_second = on_speed_threads(|seed| run(seed, &with_eval));
     // the same draws in blocks (`sample_many`: the rung evaluated at a block at once), as a
     // wavefront renderer or `Material.sample` on arrays asks for them, on SPEED_THREADS threads
     let batched = |seed: u64| {
@@ -283,18 +289,7 @@ fn speed_row(
         std::hint::black_box(sink);
         (count, t.elapsed().as_secs_f64())
     };
-    let batched_ref = &batched;
-    let batched_samples_per_second = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..SPEED_THREADS)
-            .map(|k| scope.spawn(move || batched_ref(17 + k as u64)))
-            .collect();
-        let done: Vec<(usize, f64)> = handles
-            .into_iter()
-            .map(|h| h.join().expect("a speed thread"))
-            .collect();
-        let count: usize = done.iter().map(|d| d.0).sum();
-        count as f64 / done.iter().map(|d| d.1).fold(0.0, f64::max)
-    });
+    let batched_samples_per_second = on_speed_threads(batched);
     let samples_per_second = time(&with_eval);
     let sampler_only_per_second = time(&|v, u, _| {
         sampler

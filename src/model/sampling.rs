@@ -268,6 +268,14 @@ pub struct Sample {
     pub weight: [f64; 3],
 }
 
+impl Sample {
+    /// The draw l with its density and weight[c] = f_c(l, v) l.n / pdf, f from `basis`.
+    fn weighed(l: Local, pdf: f64, basis: &Basis, albedos: &Albedos) -> Self {
+        let weight = std::array::from_fn(|c| basis.brdf(albedos, c) * l.n / pdf);
+        Sample { l, pdf, weight }
+    }
+}
+
 /// Pairs per call of the rung's batch evaluation in [`Sampler::sample_many`], counting a
 /// spread's turned pairs.
 const EVAL_PAIRS: usize = 64;
@@ -435,11 +443,7 @@ impl Sampler {
                 .unwrap_or_else(|| model.basis(&pair)),
             None => model.basis(&pair),
         };
-        let mut weight = [0.0; 3];
-        for (c, w) in weight.iter_mut().enumerate() {
-            *w = basis.brdf(albedos, c) * l.n / pdf;
-        }
-        Some(Sample { l, pdf, weight })
+        Some(Sample::weighed(l, pdf, &basis, albedos))
     }
 
     /// [`Sampler::sample`] of every draw, into `out` (same length), bit for bit: the directions
@@ -491,16 +495,7 @@ impl Sampler {
             .zip(plain_pairs.iter().zip(&bases))
             .chain(high.iter().zip(high_pairs.iter().zip(&high_bases)));
         for (&(i, pdf), (pair, basis)) in done {
-            let albedos = &draws[i].albedos;
-            let mut weight = [0.0; 3];
-            for (c, w) in weight.iter_mut().enumerate() {
-                *w = basis.brdf(albedos, c) * pair.l.n / pdf;
-            }
-            out[i] = Some(Sample {
-                l: pair.l,
-                pdf,
-                weight,
-            });
+            out[i] = Some(Sample::weighed(pair.l, pdf, basis, &draws[i].albedos));
         }
     }
 

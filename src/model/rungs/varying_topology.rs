@@ -144,16 +144,9 @@ impl GaussSection {
         self.bases_with(pairs, |_| patterns, out)
     }
 
-    /// [`GaussSection::bases`] with each pair at its own pattern (weight 1): a sampler's batch
-    /// of draws at their texels' heights. Each pair's result is its `bases` with that one
-    /// pattern, bit for bit.
-    pub fn bases_each(&self, pairs: &[DirectionPair], patterns: &[Pattern], out: &mut [Basis]) {
-        assert_eq!(pairs.len(), patterns.len());
-        let weighted: Vec<[(Pattern, f64); 1]> = patterns.iter().map(|&p| [(p, 1.0)]).collect();
-        self.bases_with(pairs, |i| &weighted[i], out)
-    }
-
-    /// [`GaussSection::bases`] with pair i averaged over `patterns(i)`.
+    /// [`GaussSection::bases`] with pair i averaged over `patterns(i)` (one pattern each: a
+    /// sampler's draws at their texels' heights); each pair's result is its `bases` with its
+    /// own patterns, bit for bit.
     fn bases_with<'p>(
         &self,
         pairs: &[DirectionPair],
@@ -592,11 +585,11 @@ impl ShadingModel for VaryingTopology {
         out: &mut [Basis],
     ) -> bool {
         assert_eq!(pairs.len(), heights.len());
-        let patterns: Vec<Pattern> = heights
+        let patterns: Vec<[(Pattern, f64); 1]> = heights
             .iter()
-            .map(|&h| Pattern::new(self.spacing, elevation_from_height(h, self.spacing)))
+            .map(|&h| [(Pattern::new(self.spacing, elevation_from_height(h, self.spacing)), 1.0)])
             .collect();
-        self.section.bases_each(pairs, &patterns, out);
+        self.section.bases_with(pairs, |i| &patterns[i], out);
         true
     }
 }
