@@ -46,6 +46,13 @@ impl Batch {
     /// name (their folders would collide), the options valid, the output folder usable and
     /// any summary there one this version writes. Returns the inputs' folder names.
     pub fn plan(&self) -> Result<Vec<String>> {
+        // a plan alone leaves no folder behind: the check's folder is removed again
+        self.checked().map(|(names, _)| names)
+    }
+
+    /// [`Batch::plan`]'s checks; the output folder, made if missing, is held by the returned
+    /// outputs (removed when they are dropped uncommitted, kept once committed).
+    fn checked(&self) -> Result<(Vec<String>, Outputs)> {
         if self.options.maps != Maps::None {
             bail!("--out-dir fits global parameters only: per-texel maps of many captures are fitted one `fit --maps` at a time (or in tiles: docs/guide/fit.md)");
         }
@@ -73,16 +80,17 @@ impl Batch {
         let mut outs = Outputs::new(&self.inputs);
         outs.dir(&self.out_dir, "--out-dir")?;
         summary_csv::read(&self.out_dir)?;
-        Ok(names.into_iter().map(|(n, _)| n).collect())
+        Ok((names.into_iter().map(|(n, _)| n).collect(), outs))
     }
 
     /// Fit every input in turn (after [`Batch::plan`]), updating the summary after each;
     /// `done` hears of each input as it finishes. Returns the rows of this batch.
     pub fn run(&self, done: &mut dyn FnMut(Done)) -> Result<Vec<Row>> {
-        let names = self.plan()?;
-        std::fs::create_dir_all(&self.out_dir).map_err(|e| {
-            anyhow::anyhow!("--out-dir {}: cannot create: {e}", self.out_dir.display())
-        })?;
+        let (names, folder) = self.checked()?;
+        // the folder is kept from here on, never made and removed again: runs sharing it
+        // (`parallel fibrefit fit {} --out-dir F`) would otherwise race, one removing the empty
+        // folder another has just found there
+        folder.commit()?;
         let earlier = summary_csv::read(&self.out_dir)?;
         let mut rows = Vec::with_capacity(names.len());
         for (index, (input, name)) in self.inputs.iter().zip(&names).enumerate() {
