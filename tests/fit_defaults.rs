@@ -26,10 +26,17 @@ fn text(b: &[u8]) -> String {
 
 /// A gonio set of flat touching fibres at 37 degrees (poulin-fournier), 1 % noise, in `dir`.
 fn fibres_at_37(dir: &Path) -> PathBuf {
-    let synth = "model = \"poulin-fournier\"\n[params]\nkd = 0.3\nks = 0.4\nexponent = 80\n\
-                 spacing = 2.0\nfibre_azimuth_deg = 37\n[gonio]\n\
-                 random = { count = 800, seed = 2, max_theta_deg = 75 }\n\
-                 [noise]\nrelative = 0.01\nseed = 3\n";
+    fibres_at_37_spread(dir, 0.0)
+}
+
+/// [`fibres_at_37`] with the fibre directions spread by `spread` degrees.
+fn fibres_at_37_spread(dir: &Path, spread: f64) -> PathBuf {
+    let synth = format!(
+        "model = \"poulin-fournier\"\n[params]\nkd = 0.3\nks = 0.4\nexponent = 80\n\
+         spacing = 2.0\nfibre_azimuth_deg = 37\nazimuth_spread_deg = {spread}\n[gonio]\n\
+         random = {{ count = 800, seed = 2, max_theta_deg = 75 }}\n\
+         [noise]\nrelative = 0.01\nseed = 3\n"
+    );
     fs::write(dir.join("synth.toml"), synth).unwrap();
     fibrefit()
         .arg("synth")
@@ -61,10 +68,20 @@ fn a_named_rung_without_a_config_fits_the_fibre_direction() {
     let psi = p["fibre_azimuth_deg"]["value"].as_f64().unwrap();
     assert!((psi - 37.0).abs() < 0.5, "fibre direction {psi}");
     assert_eq!(p["fibre_azimuth_deg"]["fixed"], false);
-    // the shapes are free, from their documented starts
-    for name in ["exponent", "spacing", "azimuth_spread_deg"] {
+    // the shapes are free, from their documented starts; the spread too, then held at 0 as
+    // the data cannot tell it from 0 (the fibres are aligned)
+    for name in ["exponent", "spacing"] {
         assert_eq!(p[name]["fixed"], false, "{name}");
     }
+    let spread = &p["azimuth_spread_deg"];
+    assert_eq!(
+        (spread["fixed"].clone(), spread["value"].as_f64()),
+        (true.into(), Some(0.0))
+    );
+    assert!(spread["fixed_reason"]
+        .as_str()
+        .unwrap()
+        .starts_with("held at 0: the data cannot tell it from 0"));
     let e = p["exponent"]["value"].as_f64().unwrap();
     assert!((e - 80.0).abs() < 2.0, "exponent {e}");
     let chi2 = r["statistics"]["reduced_chi_square"].as_f64().unwrap();
@@ -81,6 +98,55 @@ fn a_named_rung_without_a_config_fits_the_fibre_direction() {
         "{report}"
     );
     assert!(!report.contains("(fixed)\n"), "{report}");
+}
+
+#[test]
+fn a_spread_the_data_cannot_tell_from_0_is_held_there_and_one_they_can_is_kept() {
+    // the shipped silk's fibres are aligned: its fit ended a hair above 0 (0.12 +/- 0.15 deg),
+    // evaluated with 16 turned fibre directions for nothing the data can see
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("silk.json");
+    let o = fibrefit()
+        .arg("fit")
+        .arg(root().join("data_synthetic/silk/gonio.csv"))
+        .args(["--model", "varying-topology", "--out"])
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", text(&o.stderr));
+    let r = json(&out);
+    let spread = &r["parameters"]["azimuth_spread_deg"];
+    assert_eq!(spread["value"].as_f64(), Some(0.0));
+    assert_eq!(spread["fixed"], true);
+    let why = spread["fixed_reason"].as_str().unwrap();
+    assert!(why.contains("cannot tell it from 0 (fitted 0."), "{why}");
+    assert!(why.contains("16x cheaper"), "{why}");
+    assert!(text(&o.stdout).contains("azimuth_spread_deg   0.000000 (fixed: held at 0"));
+    // the held fit is the truth's (silk_params: exponent 60, height 0.9) and within the noise
+    let p = &r["parameters"];
+    for (name, truth, tolerance) in [("exponent", 60.0, 0.5), ("height", 0.9, 0.01)] {
+        let v = p[name]["value"].as_f64().unwrap();
+        assert!((v - truth).abs() < tolerance, "{name} {v}");
+    }
+    assert_eq!(r["quality"]["verdict"], "fits within the noise");
+
+    // fibres spread by 4 degrees: the data see it, the spread is kept and measured
+    let data = fibres_at_37_spread(dir.path(), 4.0);
+    let out = dir.path().join("spread.json");
+    fibrefit()
+        .arg("fit")
+        .arg(&data)
+        .args(["--model", "poulin-fournier", "-q", "--out"])
+        .arg(&out)
+        .assert()
+        .success();
+    let spread = &json(&out)["parameters"]["azimuth_spread_deg"];
+    assert_eq!(spread["fixed"], false);
+    let (s, se) = (
+        spread["value"].as_f64().unwrap(),
+        spread["std_error"].as_f64().unwrap(),
+    );
+    assert!((s - 4.0).abs() < 3.0 * se.max(0.05), "spread {s} +/- {se}");
 }
 
 #[test]

@@ -229,6 +229,9 @@ fn raw_photos_fit_as_well_as_an_ideal_capture_of_the_same_directions() {
         "photo route chi2/dof {}",
         stats(&photo)
     );
+    for (route, r) in [("photo route", &photo), ("ideal", &ideal)] {
+        eprintln!("{route}: spread {}", r["parameters"]["azimuth_spread_deg"]);
+    }
     let (p, q) = (fitted(&photo), fitted(&ideal));
     let q: std::collections::HashMap<String, (f64, f64)> =
         q.into_iter().map(|(n, v, se)| (n, (v, se))).collect();

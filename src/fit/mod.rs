@@ -27,6 +27,7 @@ pub mod quality;
 pub mod score;
 pub mod selection;
 pub mod setup;
+pub mod spread_hold;
 pub mod uncertainty;
 
 use crate::load::samples::Samples;
@@ -237,8 +238,31 @@ pub fn fit_with_hints(
         .iter()
         .map(|(th, c)| (full.set_at(th, &template), *c))
         .collect();
-    let mut outcome = finish::finish(&full, samples, channels, &minima, notes)?;
+    let mut outcome = finish::finish(&full, samples, channels, &minima, notes.clone())?;
+    let held = spread_hold::try_hold(
+        spread_hold::Free {
+            full: &full,
+            template: &template,
+            minima: &minima_theta,
+            outcome: &outcome,
+        },
+        samples,
+        cfg,
+        map.clone(),
+        notes,
+        &bar,
+    )?;
     parameters::explain_fixed(&mut outcome.records, cfg, samples, &[]);
+    if let Some((mut o, why)) = held {
+        progress.line(&format!("fit: the fibre-direction spread is {why}"));
+        parameters::explain_fixed(&mut o.records, cfg, samples, &[]);
+        let name = Param::AzimuthSpread.name();
+        if let Some(r) = o.records.iter_mut().find(|r| r.name == name) {
+            r.fixed_reason = Some(why);
+        }
+        o.evaluations += outcome.evaluations;
+        outcome = o;
+    }
     outcome.iterations = iterations;
     outcome.evaluations += evaluations;
     outcome.starts = starts;
