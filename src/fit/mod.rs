@@ -151,15 +151,11 @@ pub fn fit_with_hints(
     } = setup::setup(samples, cfg)?;
     let opt = &cfg.optimizer;
     let all: Vec<_> = samples.samples.iter().collect();
-    let make = |subset: Vec<_>| {
-        FitProblem::new(
-            subset,
-            template.clone(),
-            problem::Settings::of(cfg),
-            map.clone(),
-        )
-        .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
+    let problem_of = |subset: Vec<_>, template: ParamSet| {
+        FitProblem::new(subset, template, problem::Settings::of(cfg), map.clone())
+            .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
     };
+    let make = |subset: Vec<_>| problem_of(subset, template.clone());
     let full = make(all.clone());
     let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed);
     let bar = progress.bar(0, "fit");
@@ -238,30 +234,34 @@ pub fn fit_with_hints(
         .iter()
         .map(|(th, c)| (full.set_at(th, &template), *c))
         .collect();
-    let mut outcome = finish::finish(&full, samples, channels, &minima, notes.clone())?;
+    let free = finish::finish(&full, samples, channels, &minima, notes.clone())?;
     let held = spread_hold::try_hold(
         spread_hold::Free {
             full: &full,
             template: &template,
             minima: &minima_theta,
-            outcome: &outcome,
+            outcome: &free,
         },
+        &|held_template| problem_of(all.clone(), held_template),
         samples,
         cfg,
-        map.clone(),
         notes,
         &bar,
     )?;
+    let (mut outcome, held_why) = match held {
+        Some((mut o, why)) => {
+            o.evaluations += free.evaluations;
+            (o, Some(why))
+        }
+        None => (free, None),
+    };
     parameters::explain_fixed(&mut outcome.records, cfg, samples, &[]);
-    if let Some((mut o, why)) = held {
+    if let Some(why) = held_why {
         progress.line(&format!("fit: the fibre-direction spread is {why}"));
-        parameters::explain_fixed(&mut o.records, cfg, samples, &[]);
         let name = Param::AzimuthSpread.name();
-        if let Some(r) = o.records.iter_mut().find(|r| r.name == name) {
+        if let Some(r) = outcome.records.iter_mut().find(|r| r.name == name) {
             r.fixed_reason = Some(why);
         }
-        o.evaluations += outcome.evaluations;
-        outcome = o;
     }
     outcome.iterations = iterations;
     outcome.evaluations += evaluations;

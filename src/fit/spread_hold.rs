@@ -25,12 +25,10 @@ use super::{finish, parameters, polish, problem, FitOutcome};
 use crate::fit::basins::Basin;
 use crate::fit::config::FitConfig;
 use crate::load::samples::Samples;
-use crate::model::topology::TopologyMap;
 use anyhow::Result;
 use nalgebra::DVector;
 use parameters::{Param, ParamSet};
 use problem::FitProblem;
-use std::sync::Arc;
 
 /// A spread within this many of its standard errors of 0 is tried at 0. Generous: the law is
 /// symmetric, so the rung changes with s^2 near 0 and the linearised standard error there
@@ -54,11 +52,12 @@ pub struct Free<'a> {
 
 /// The fit with the spread held at 0 when the data cannot tell it from 0 (module docs); `None`
 /// when the spread is not free, is clearly above 0 or the data reject 0.
-pub fn try_hold(
-    free: Free,
+/// `problem_of(template)`: the free fit's problem on all samples with another template.
+pub fn try_hold<'a>(
+    free: Free<'a>,
+    problem_of: &dyn Fn(ParamSet) -> FitProblem<'a>,
     samples: &Samples,
     cfg: &FitConfig,
-    map: Option<Arc<TopologyMap>>,
     notes: Vec<String>,
     bar: &indicatif::ProgressBar,
 ) -> Result<Option<(FitOutcome, String)>> {
@@ -81,14 +80,7 @@ pub fn try_hold(
     let mut template = free.template.clone();
     template.shapes[k].vary = false;
     template.shapes[k].value = 0.0;
-    let held = FitProblem::new(
-        samples.samples.iter().collect(),
-        template.clone(),
-        problem::Settings::of(cfg),
-        map,
-    )
-    .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
-    .with_log_floor_of(free.full);
+    let held = problem_of(template.clone());
     let basins: Vec<Basin> = free
         .minima
         .iter()
