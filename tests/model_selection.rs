@@ -8,7 +8,8 @@
 
 use assert_cmd::Command;
 use fibrefit::fit::config::{FitConfig, Metric};
-use fibrefit::fit::selection::{rule_choice, select, table, SelectionOutcome};
+use fibrefit::fit::fit_with_hints;
+use fibrefit::fit::selection::{rule_choice, select, select_with, table, SelectionOutcome};
 use fibrefit::load::samples::Samples;
 use fibrefit::load::{load_data, LoadOptions};
 use std::path::{Path, PathBuf};
@@ -210,6 +211,48 @@ fn a_fibre_truth_with_a_fuzz_layer_picks_a_fibre_rung_with_fuzz() {
         table(&s)
     );
     same_choice_on_every_fold(&s);
+}
+
+#[test]
+fn candidates_are_ranked_with_the_spread_as_fitted_and_the_chosen_fit_holds_it() {
+    // aligned fibres: the spread the data cannot tell from 0 is held in the delivered fit
+    // (`fit::spread_hold`); the candidates are ranked as fitted, else holding it in the anchor
+    // fit holds it in every fold's refit too and changes the held-out errors and choices
+    let dir = tempfile::tempdir().unwrap();
+    let d = synth_text(
+        dir.path(),
+        "aligned",
+        "model = \"poulin-fournier\"\n[params]\nkd = 0.3\nks = 0.4\nexponent = 30\n\
+         spacing = 2.4\nfibre_azimuth_deg = 10\n\
+         [gonio]\nrandom = { count = 300, seed = 3, max_theta_deg = 80 }\n\
+         [noise]\nrelative = 0.01\nseed = 5\n",
+    );
+    let data = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
+    let mut cfg = small_auto("\"poulin-fournier\"");
+    cfg.selection.fuzz = false;
+    let spread_of = |o: &fibrefit::fit::FitOutcome| {
+        o.records
+            .iter()
+            .find(|r| r.name == "azimuth_spread_deg")
+            .map(|r| (r.value[0], r.fixed))
+            .unwrap()
+    };
+    let mut anchors = Vec::new();
+    let quiet = fibrefit::progress::Progress::quiet();
+    let s = select_with(&data, &cfg, &quiet, &mut |d| {
+        anchors.push(d.outcome.map(spread_of))
+    })
+    .unwrap();
+    assert_eq!(s.chosen, "poulin-fournier", "{}", table(&s));
+    let (value, fixed) = anchors[0].unwrap();
+    assert!(!fixed, "the candidate's anchor fit keeps its spread free");
+    let chosen = s.chosen_config.clone().unwrap();
+    let delivered = fit_with_hints(&data, &chosen, &quiet, &s.hints).unwrap();
+    let (held, fixed) = spread_of(&delivered);
+    assert!(
+        fixed && held == 0.0,
+        "delivered spread {held} (fitted {value})"
+    );
 }
 
 #[test]

@@ -207,6 +207,7 @@ pub fn result_from_value(
         notes: Vec::new(),
         metric_follows_data: false,
         metric_reason: None,
+        keep_free_spread: false,
     };
     cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
     let mut set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;

@@ -51,7 +51,8 @@ pub struct Free<'a> {
 }
 
 /// The fit with the spread held at 0 when the data cannot tell it from 0 (module docs); `None`
-/// when the spread is not free, is clearly above 0 or the data reject 0.
+/// when the spread is not free, is clearly above 0, the data reject 0, or the config keeps it
+/// free (`keep_free_spread`: `--model auto`'s candidates, ranked as fitted).
 /// `problem_of(template)`: the free fit's problem on all samples with another template.
 pub fn try_hold<'a>(
     free: Free<'a>,
@@ -61,6 +62,9 @@ pub fn try_hold<'a>(
     notes: Vec<String>,
     bar: &indicatif::ProgressBar,
 ) -> Result<Option<(FitOutcome, String)>> {
+    if cfg.keep_free_spread {
+        return Ok(None);
+    }
     let name = Param::AzimuthSpread.name();
     let Some(k) = free
         .template

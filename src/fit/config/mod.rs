@@ -147,6 +147,11 @@ pub struct FitConfig {
     /// Why the fit uses its metric (said in the report and the result). Not a key of the file.
     #[serde(skip)]
     pub metric_reason: Option<String>,
+    /// Keep a fitted fibre-direction spread free even where the data cannot tell it from 0
+    /// (`fit::spread_hold` not tried): `--model auto`'s candidate fits, which rank each rung as
+    /// fitted; the chosen one's final fit is held. Not a key of the file.
+    #[serde(skip)]
+    pub keep_free_spread: bool,
 }
 
 /// The one parameter with a colour choice (`[parameters] ks = { colour = true }`): the specular

@@ -120,10 +120,14 @@ impl Run<'_> {
         let cfg = self.cfg;
         // a renderer's own material (closed form, cheap) is measured at the config's knobs and
         // starts: its error is reported beside the choice as what that renderer gets
-        let coarse = match cfg.selection.coarse_ranking && id.rung().renderer.is_none() {
+        let mut coarse = match cfg.selection.coarse_ranking && id.rung().renderer.is_none() {
             true => ranking_config(rc),
             false => rc.clone(),
         };
+        // ranked as fitted: a spread the data cannot tell from 0 is held in the chosen rung's
+        // final fit (`fit::spread_hold`), a speed-up for its users, not a different candidate
+        // (held in the anchor, it would also be held in every fold's refit)
+        coarse.keep_free_spread = true;
         let t = Instant::now();
         let quiet = crate::progress::Progress::quiet();
         let result =
