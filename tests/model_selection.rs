@@ -217,7 +217,7 @@ fn a_fibre_truth_with_a_fuzz_layer_picks_a_fibre_rung_with_fuzz() {
 fn candidates_are_ranked_with_the_spread_as_fitted_and_the_chosen_fit_holds_it() {
     // aligned fibres: the spread the data cannot tell from 0 is held in the delivered fit
     // (`fit::spread_hold`); the candidates are ranked as fitted, else holding it in the anchor
-    // fit holds it in every fold's refit too and changes the held-out errors and choices
+    // fit holds it in every fold's refit too: one free parameter fewer counted, other errors
     let dir = tempfile::tempdir().unwrap();
     let d = synth_text(
         dir.path(),
