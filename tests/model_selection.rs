@@ -256,6 +256,62 @@ fn candidates_are_ranked_with_the_spread_as_fitted_and_the_chosen_fit_holds_it()
 }
 
 #[test]
+fn the_final_fit_searches_at_the_ranking_knobs_and_lands_where_the_config_knobs_do() {
+    // fibres spread around their direction: the knobs change the model (spread nodes, the lobe's
+    // quadrature). `--model auto`'s final fit finds its basins at the knobs the candidates were
+    // ranked at and polishes them at the config's; a search at the config's knobs (the slow
+    // way) must land on the same minimum, the truth.
+    let dir = tempfile::tempdir().unwrap();
+    let d = synth_text(
+        dir.path(),
+        "spread",
+        "model = \"poulin-fournier\"\n[params]\nkd = 0.3\nks = 0.5\nexponent = 40\n\
+         spacing = 2.4\nfibre_azimuth_deg = 15\nazimuth_spread_deg = 25\n\
+         [gonio]\nrandom = { count = 300, seed = 4, max_theta_deg = 80 }\n\
+         [noise]\nrelative = 0.01\nseed = 6\n",
+    );
+    let data = load_data(&d.join("gonio.csv"), &LoadOptions::default()).unwrap();
+    let mut cfg = small_auto("\"lambert\", \"poulin-fournier\", \"gltf\"");
+    cfg.selection.fuzz = false;
+    let quiet = fibrefit::progress::Progress::quiet();
+    let s = select(&data, &cfg).unwrap();
+    assert_eq!(s.chosen, "poulin-fournier", "{}", table(&s));
+    let chosen = s.chosen_config.clone().unwrap();
+    let coarse = fibrefit::fit::selection::ranking_config(&chosen).knobs;
+    assert_eq!(chosen.search_knobs.as_ref(), Some(&coarse));
+    assert_ne!(coarse, chosen.knobs, "the ranking knobs are coarser here");
+    let fast = fit_with_hints(&data, &chosen, &quiet, &s.hints).unwrap();
+    let mut slow_cfg = chosen.clone();
+    slow_cfg.search_knobs = None;
+    let slow = fit_with_hints(&data, &slow_cfg, &quiet, &s.hints).unwrap();
+    // the same minimum: chi-squares within 1 of each other (one standard deviation apart)
+    let (a, b) = (fast.statistics.chi_square, slow.statistics.chi_square);
+    assert!((a - b).abs() <= 1.0, "chi-square {a} against {b}");
+    for name in [
+        "exponent",
+        "spacing",
+        "fibre_azimuth_deg",
+        "azimuth_spread_deg",
+        "ks",
+    ] {
+        let of = |o: &fibrefit::fit::FitOutcome| {
+            let r = o.records.iter().find(|r| r.name == name).unwrap();
+            (r.value[0], r.std_error[0].unwrap_or(0.0))
+        };
+        let ((x, sx), (y, _)) = (of(&fast), of(&slow));
+        assert!(
+            (x - y).abs() <= sx.max(1e-9),
+            "{name}: {x} +/- {sx} against {y}"
+        );
+    }
+    // a renderer's material is ranked at the config's knobs: its final fit searches there
+    let mut g = small_auto("\"gltf\"");
+    g.selection.fuzz = false;
+    let s = select(&data, &g).unwrap();
+    assert_eq!(s.chosen_config.unwrap().search_knobs, None);
+}
+
+#[test]
 fn the_no_fuzz_setting_and_the_fuzz_flag_set_the_candidates() {
     let mut cfg = small_auto("\"lambert\", \"ward\"");
     let names = |c: &FitConfig| -> Vec<String> {

@@ -208,6 +208,7 @@ pub fn result_from_value(
         metric_follows_data: false,
         metric_reason: None,
         keep_free_spread: false,
+        search_knobs: None,
     };
     cfg.validate().map_err(|e| anyhow!("{}: {e}", name))?;
     let mut set = ParamSet::from_config(&cfg, channels).map_err(|e| anyhow!("{}: {e}", name))?;

@@ -169,7 +169,23 @@ pub fn fit_with_hints(
         let mut idx: Vec<usize> = (0..all.len()).collect();
         idx.shuffle(&mut rng);
         idx.truncate(opt.global_subsample.max(full.dim() * 4).min(all.len()));
-        let sub = make(idx.iter().map(|&i| all[i]).collect()).with_log_floor_of(&full);
+        let subset = idx.iter().map(|&i| all[i]).collect();
+        let sub = match &cfg.search_knobs {
+            // the global stage at coarser knobs (`FitConfig::search_knobs`)
+            Some(k) => {
+                let mut coarse = cfg.clone();
+                coarse.knobs = k.clone();
+                FitProblem::new(
+                    subset,
+                    template.clone(),
+                    problem::Settings::of(&coarse),
+                    map.clone(),
+                )
+                .with_azimuth_nodes(k.azimuth_nodes)
+            }
+            None => make(subset),
+        }
+        .with_log_floor_of(&full);
         let mut forced = vec![sub.theta_of(&template)];
         for h in hints {
             let mut set = template.clone();

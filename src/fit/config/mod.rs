@@ -152,6 +152,12 @@ pub struct FitConfig {
     /// fitted; the chosen one's final fit is held. Not a key of the file.
     #[serde(skip)]
     pub keep_free_spread: bool,
+    /// The knobs of the global stage's subsample problem, where they differ from `knobs`:
+    /// `--model auto`'s final fit searches at the ranking knobs its candidates were compared at
+    /// (the basins are where they were found; the final stage polishes each at `knobs` on all
+    /// samples). None: the global stage uses `knobs`. Not a key of the file.
+    #[serde(skip)]
+    pub search_knobs: Option<Knobs>,
 }
 
 /// The one parameter with a colour choice (`[parameters] ks = { colour = true }`): the specular

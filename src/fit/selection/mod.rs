@@ -9,7 +9,10 @@
 //! - **Speed.** Candidates are ranked with coarse knobs ([`ranking_config`]: fewer quadrature
 //!   nodes, histogram bins, azimuth nodes and starts) on at most `selection.rank_samples` training
 //!   samples; those within reach of the best (two standard errors) whose model the knobs change
-//!   are refined: refitted at the config's knobs, warm-started from their coarse optimum.
+//!   are refined: refitted at the config's knobs, warm-started from their coarse optimum. The
+//!   chosen candidate's final fit on all samples runs its global stage at those coarse knobs too
+//!   (`FitConfig::search_knobs`; where its anchor was found) and polishes every basin at the
+//!   config's knobs.
 //! - **The one-standard-error rule.** The error of a candidate is the RMS of its held-out
 //!   residuals in the fit's metric (what the fit minimises: log, linear, per sigma or weight);
 //!   its standard error comes from the spread of the per-sample squared residuals. The simplest

@@ -294,7 +294,12 @@ impl Run<'_> {
         let ordered_hints = vec![hints_for(&self.anchors[chosen])];
         let plan = &self.plan;
         let validation = heldout::validation_text(plan, cfg, self.samples.samples.len());
-        let (_, id, fuzz, chosen_config) = self.list.swap_remove(chosen);
+        let (_, id, fuzz, mut chosen_config) = self.list.swap_remove(chosen);
+        // the final fit's global stage searches at the knobs the candidates were ranked at (the
+        // chosen one's anchor was found there); its basins are polished at the config's knobs
+        if cfg.selection.coarse_ranking && id.rung().renderer.is_none() {
+            chosen_config.search_knobs = Some(ranking_config(&chosen_config).knobs);
+        }
         SelectionOutcome {
             chosen: self.candidates[chosen].name.clone(),
             chosen_rung: id.to_string(),
