@@ -150,15 +150,24 @@ fn screen_and_polish(
 ) -> Result<Vec<Basin>> {
     let Stage { sub, template, bar } = stage;
     let metric = Metric::of(sub, template);
-    let costs: Vec<f64> = candidates
-        .par_iter()
-        .map(|c| {
-            sub.evaluate(c, template)
-                .map(|(r, _)| r.norm_squared())
-                .unwrap_or(f64::INFINITY)
-        })
-        .collect();
-    let mut order: Vec<usize> = (forced..candidates.len()).collect();
+    // the costs only rank the design's points that fill the polish budget after the forced
+    // starts: where the forced starts fill it (`--model auto`'s later candidates, started from
+    // every simpler candidate's optimum) no point is polished, so none is costed
+    let costs: Vec<f64> = match polish_count > forced {
+        true => candidates
+            .par_iter()
+            .map(|c| {
+                sub.evaluate(c, template)
+                    .map(|(r, _)| r.norm_squared())
+                    .unwrap_or(f64::INFINITY)
+            })
+            .collect(),
+        false => Vec::new(),
+    };
+    let mut order: Vec<usize> = match polish_count > forced {
+        true => (forced..candidates.len()).collect(),
+        false => Vec::new(),
+    };
     order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
     let mut chosen: Vec<usize> = (0..forced).collect();
     let keyed: Vec<Keyed> = candidates.iter().map(|c| metric.keyed(c.clone())).collect();
