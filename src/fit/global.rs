@@ -153,8 +153,13 @@ fn screen_and_polish(
     // the costs only rank the design's points that fill the polish budget after the forced
     // starts: where the forced starts fill it (`--model auto`'s later candidates, started from
     // every simpler candidate's optimum) no point is polished, so none is costed
-    let costs: Vec<f64> = match polish_count > forced {
-        true => candidates
+    let design = match polish_count > forced {
+        true => forced..candidates.len(),
+        false => 0..0,
+    };
+    let costs: Vec<f64> = match design.is_empty() {
+        true => Vec::new(),
+        false => candidates
             .par_iter()
             .map(|c| {
                 sub.evaluate(c, template)
@@ -162,12 +167,8 @@ fn screen_and_polish(
                     .unwrap_or(f64::INFINITY)
             })
             .collect(),
-        false => Vec::new(),
     };
-    let mut order: Vec<usize> = match polish_count > forced {
-        true => (forced..candidates.len()).collect(),
-        false => Vec::new(),
-    };
+    let mut order: Vec<usize> = design.collect();
     order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
     let mut chosen: Vec<usize> = (0..forced).collect();
     let keyed: Vec<Keyed> = candidates.iter().map(|c| metric.keyed(c.clone())).collect();

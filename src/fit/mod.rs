@@ -151,10 +151,12 @@ pub fn fit_with_hints(
     } = setup::setup(samples, cfg)?;
     let opt = &cfg.optimizer;
     let all: Vec<_> = samples.samples.iter().collect();
-    let problem_of = |subset: Vec<_>, template: ParamSet| {
-        FitProblem::new(subset, template, problem::Settings::of(cfg), map.clone())
-            .with_azimuth_nodes(cfg.knobs.azimuth_nodes)
+    // a problem evaluated at the knobs of `at` (the config, or the global stage's search knobs)
+    let problem_at = |subset: Vec<_>, template: ParamSet, at: &FitConfig| {
+        FitProblem::new(subset, template, problem::Settings::of(at), map.clone())
+            .with_azimuth_nodes(at.knobs.azimuth_nodes)
     };
+    let problem_of = |subset: Vec<_>, template: ParamSet| problem_at(subset, template, cfg);
     let make = |subset: Vec<_>| problem_of(subset, template.clone());
     let full = make(all.clone());
     let mut rng = rand::rngs::StdRng::seed_from_u64(cfg.seed);
@@ -169,23 +171,14 @@ pub fn fit_with_hints(
         let mut idx: Vec<usize> = (0..all.len()).collect();
         idx.shuffle(&mut rng);
         idx.truncate(opt.global_subsample.max(full.dim() * 4).min(all.len()));
+        // the global stage at `FitConfig::search_knobs` where they are given
+        let search = cfg.search_knobs.as_ref().map(|k| FitConfig {
+            knobs: k.clone(),
+            ..cfg.clone()
+        });
         let subset = idx.iter().map(|&i| all[i]).collect();
-        let sub = match &cfg.search_knobs {
-            // the global stage at coarser knobs (`FitConfig::search_knobs`)
-            Some(k) => {
-                let mut coarse = cfg.clone();
-                coarse.knobs = k.clone();
-                FitProblem::new(
-                    subset,
-                    template.clone(),
-                    problem::Settings::of(&coarse),
-                    map.clone(),
-                )
-                .with_azimuth_nodes(k.azimuth_nodes)
-            }
-            None => make(subset),
-        }
-        .with_log_floor_of(&full);
+        let sub = problem_at(subset, template.clone(), search.as_ref().unwrap_or(cfg))
+            .with_log_floor_of(&full);
         let mut forced = vec![sub.theta_of(&template)];
         for h in hints {
             let mut set = template.clone();
