@@ -190,7 +190,8 @@ impl MeshObject {
         (d > 1e-12).then_some((d, u, v))
     }
 
-    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+    /// The nearest triangle `ray` hits: (t, triangle, barycentric u, v).
+    pub fn nearest(&self, ray: &Ray) -> Option<(f64, usize, f64, f64)> {
         let inv = ray.direction.map(|d| 1.0 / d);
         let mut best: Option<(f64, usize, f64, f64)> = None;
         let mut stack = vec![0usize];
@@ -213,7 +214,12 @@ impl MeshObject {
                 stack.push(node.first + 1);
             }
         }
-        let (d, t, u, v) = best?;
+        best
+    }
+
+    /// The nearest hit of `ray`, its frame interpolated over the triangle.
+    pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
+        let (d, t, u, v) = self.nearest(ray)?;
         Some(self.hit(ray, d, t, [1.0 - u - v, u, v]))
     }
 

@@ -482,6 +482,16 @@ fn nearest_indexed(objects: &[Object], ray: &Ray) -> Option<(usize, objects::Hit
         .min_by(|a, b| a.1.t.total_cmp(&b.1.t))
 }
 
+/// The index of the object `ray` hits first (no hit's frame computed: coverage only).
+fn nearest_object(objects: &[Object], ray: &Ray) -> Option<usize> {
+    objects
+        .iter()
+        .enumerate()
+        .filter_map(|(k, o)| o.nearest_t(ray).map(|t| (k, t)))
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(k, _)| k)
+}
+
 /// Render `objects` with `material` under `lights` through `camera`, `supersample` x
 /// `supersample` rays per pixel, shaded adaptively ([`Subsamples::Adaptive`] at
 /// [`ADAPTIVE_TOLERANCE`]).
@@ -542,9 +552,9 @@ pub fn render_with(
                     for sy in 0..s {
                         for sx in 0..s {
                             let ray = camera.ray(sub(x, sx), sub(y, sy), distance);
-                            let hit = nearest_indexed(objects, &ray);
+                            let hit = nearest_object(objects, &ray);
                             hits += hit.is_some() as usize;
-                            interior &= hit.map(|h| h.0) == centre.as_ref().map(|c| c.0);
+                            interior &= hit == centre.as_ref().map(|c| c.0);
                         }
                     }
                 }

@@ -58,6 +58,21 @@ impl Object {
         }
     }
 
+    /// The ray parameter t > 0 of the nearest hit of `ray`, without the hit's frame (what
+    /// coverage needs: `intersect(ray).map(|h| h.t)`, cheaper).
+    pub fn nearest_t(&self, ray: &Ray) -> Option<f64> {
+        match *self {
+            Object::Torus { .. } => torus_t(ray),
+            Object::Mesh(ref m) => m.nearest(ray).map(|n| n.0),
+            Object::Placed {
+                ref inner,
+                offset,
+                scale,
+            } => inner.nearest_t(&placed(ray, offset, scale)).map(|t| t * scale),
+            Object::Sphere { .. } | Object::Swatch { .. } => self.intersect(ray).map(|h| h.t),
+        }
+    }
+
     /// The nearest hit of `ray` with t > 0.
     pub fn intersect(&self, ray: &Ray) -> Option<Hit> {
         match *self {
@@ -70,10 +85,7 @@ impl Object {
                 offset,
                 scale,
             } => {
-                let local = Ray {
-                    origin: (ray.origin - offset) / scale,
-                    direction: ray.direction,
-                };
+                let local = placed(ray, offset, scale);
                 inner.intersect(&local).map(|h| Hit {
                     t: h.t * scale,
                     position: offset + h.position * scale,
@@ -81,6 +93,15 @@ impl Object {
                 })
             }
         }
+    }
+}
+
+/// A world ray in the coordinates of an object placed at `offset`, scaled by `scale` (its t
+/// in those coordinates is the world t / `scale`).
+fn placed(ray: &Ray, offset: Vec3, scale: f64) -> Ray {
+    Ray {
+        origin: (ray.origin - offset) / scale,
+        direction: ray.direction,
     }
 }
 
@@ -207,6 +228,11 @@ pub fn torus_height(v: f64, spacing: f64) -> f64 {
 }
 
 fn torus(ray: &Ray, spacing: f64) -> Option<Hit> {
+    torus_t(ray).map(|t| torus_hit(ray, t, spacing))
+}
+
+/// The t of the ray's first hit on the torus.
+fn torus_t(ray: &Ray) -> Option<f64> {
     let (t0, t1) = sphere_span(ray, TORUS_MAJOR + TORUS_TUBE + 1e-9)?;
     let mut t = t0.max(0.0);
     // sphere tracing never passes the first surface; within TORUS_NEAR of it Newton on the
@@ -240,6 +266,11 @@ fn torus(ray: &Ray, spacing: f64) -> Option<Hit> {
             }
         }
     }
+    Some(t)
+}
+
+/// The torus's hit at `t` on `ray`: its frame, (u, v) and the climbing fibres' height.
+fn torus_hit(ray: &Ray, t: f64, spacing: f64) -> Hit {
     let p = ray.at(t);
     let rho = (p.x * p.x + p.y * p.y).sqrt();
     let u_angle = p.y.atan2(p.x);
@@ -252,7 +283,7 @@ fn torus(ray: &Ray, spacing: f64) -> Option<Hit> {
         -v_angle.sin() * u_angle.sin(),
         v_angle.cos(),
     );
-    Some(Hit {
+    Hit {
         t,
         position: p,
         normal: n,
@@ -263,7 +294,7 @@ fn torus(ray: &Ray, spacing: f64) -> Option<Hit> {
         ],
         height: Some(torus_height(v_angle, spacing)),
         curvature: None,
-    })
+    }
 }
 
 #[cfg(test)]
@@ -295,6 +326,40 @@ mod tests {
             }
         }
         assert!(hits > 300, "{hits}");
+    }
+
+    #[test]
+    fn coverage_finds_the_hits_t_for_every_object_kind() {
+        let placed = |inner: Object| Object::Placed {
+            inner: Box::new(inner),
+            offset: Vec3::new(0.1, -0.2, 0.3),
+            scale: 1.5,
+        };
+        let objects = [
+            Object::Torus { spacing: 2.0 },
+            Object::Sphere { psi_deg: 10.0 },
+            Object::Swatch { psi_deg: 0.0 },
+            placed(Object::Torus { spacing: 2.0 }),
+            placed(Object::Sphere { psi_deg: 0.0 }),
+        ];
+        for o in &objects {
+            let mut hits = 0;
+            for i in 0..60 {
+                for j in 0..60 {
+                    let x = -1.6 + 3.2 * (i as f64 + 0.5) / 60.0;
+                    let y = -1.6 + 3.2 * (j as f64 + 0.5) / 60.0;
+                    let dir = Vec3::new(0.3, -0.5, -1.0).normalize();
+                    let ray = Ray {
+                        origin: Vec3::new(x, y, 0.0) - dir * 5.0,
+                        direction: dir,
+                    };
+                    let t = o.nearest_t(&ray);
+                    assert_eq!(t, o.intersect(&ray).map(|h| h.t), "{o:?} {ray:?}");
+                    hits += t.is_some() as usize;
+                }
+            }
+            assert!(hits > 300, "{o:?}: {hits}");
+        }
     }
 
     #[test]
