@@ -659,8 +659,8 @@ fn presets_render_and_studio_lights_the_rim() {
 /// Adaptive shading of the subsamples (the default) against every subsample shaded
 /// (`--every-subsample`): the same coverage bit for bit, the same radiance wherever a pixel's
 /// rays do not all hit the object (edges are always shaded at every ray), and elsewhere within
-/// a small share of the picture's level (the bound the neighbours' second differences give where
-/// the radiance is smooth; up to half a small jump across the torus's climbing seam).
+/// a small share of the picture's level (the bound the neighbours' second and third differences
+/// give where the radiance is smooth; up to half a small jump across the torus's climbing seam).
 #[test]
 fn adaptive_subsamples_match_every_subsample_shaded() {
     let dir = tempfile::tempdir().unwrap();

@@ -182,9 +182,11 @@ pub fn write(out: &Path, run: &RenderRun, command: &str, total_s: f64) -> Result
          and the fill, {0} x {0} pixels, supersample 2 (4 rays per pixel), through `fibrefit \
          render`'s own path; the median of {1} renders of each kind, the two kinds alternating. \
          **Adaptive** (the default): every ray is traced, but an interior pixel whose radiance is \
-         smooth is shaded once at its centre (the neighbours' second differences bound how far \
-         the subsamples' mean can be from it: within {2:e} of the picture's level, the 99.5th \
-         percentile of the lit pixels that `--exposure auto` maps to 0.8). **Every**: every ray \
+         smooth is shaded once at its centre, and the subsamples' mean estimated from it and the \
+         neighbouring centres' second differences, where their third differences bound the \
+         estimate within {2:e} of the picture's level, the 99.5th percentile of the lit pixels \
+         that `--exposure auto` maps to 0.8 (nearer an edge: the centre's value itself, where \
+         the second differences bound it within {5:e}). **Every**: every ray \
          shaded (`--every-subsample`, the exact box filter). The difference is between the two \
          pictures: the largest over pixels and channels, in units of the level, and in the \
          PNGs' 8-bit codes at the exact picture's auto exposure. Goal (issue 41): at most {3} s \
@@ -201,6 +203,7 @@ pub fn write(out: &Path, run: &RenderRun, command: &str, total_s: f64) -> Result
         } else {
             "**goal missed**"
         },
+        ADAPTIVE_TOLERANCE / crate::render::NARROW_SAFETY,
     );
     for r in &run.rows {
         let _ = writeln!(

@@ -63,10 +63,11 @@ pub struct RenderArgs {
     #[arg(long, value_name = "N", default_value_t = 2)]
     pub supersample: usize,
     /// Shade every one of the N x N rays of every pixel (the exact box filter). By default an
-    /// interior pixel whose radiance is smooth (its neighbours' second differences bound the
-    /// subsamples' mean within 2e-4 of the picture's level) is shaded once, at its centre; edges,
-    /// highlights and texture are shaded at every ray (`fibrefit bench render` measures the time and
-    /// the difference)
+    /// interior pixel whose radiance is smooth is shaded once, at its centre, and its rays' mean
+    /// estimated from the neighbouring pixels' second differences where their third differences
+    /// bound the estimate within 5e-4 of the picture's level; edges, highlights, creases and
+    /// texture are shaded at every ray (`fibrefit bench render` measures the time and the
+    /// difference)
     #[arg(long)]
     pub every_subsample: bool,
     /// PNG only: radiance factor before sRGB encoding (clipped at 1), or `auto` (the 99.5th
