@@ -155,28 +155,27 @@ fn screen_and_polish(
     // every simpler candidate's optimum) no point is polished, so none is costed
     let design = match polish_count > forced {
         true => forced..candidates.len(),
-        false => 0..0,
+        false => forced..forced,
     };
-    let costs: Vec<f64> = match design.is_empty() {
-        true => Vec::new(),
-        false => candidates
-            .par_iter()
-            .map(|c| {
-                sub.evaluate(c, template)
-                    .map(|(r, _)| r.norm_squared())
-                    .unwrap_or(f64::INFINITY)
-            })
-            .collect(),
-    };
+    // the design's costs: candidate k's at k - forced
+    let costs: Vec<f64> = candidates[design.clone()]
+        .par_iter()
+        .map(|c| {
+            sub.evaluate(c, template)
+                .map(|(r, _)| r.norm_squared())
+                .unwrap_or(f64::INFINITY)
+        })
+        .collect();
+    let cost = |k: usize| costs[k - forced];
     let mut order: Vec<usize> = design.collect();
-    order.sort_by(|&a, &b| costs[a].total_cmp(&costs[b]));
+    order.sort_by(|&a, &b| cost(a).total_cmp(&cost(b)));
     let mut chosen: Vec<usize> = (0..forced).collect();
     let keyed: Vec<Keyed> = candidates.iter().map(|c| metric.keyed(c.clone())).collect();
     for &k in &order {
         if chosen.len() >= polish_count.max(forced) {
             break;
         }
-        if costs[k].is_finite()
+        if cost(k).is_finite()
             && chosen
                 .iter()
                 .all(|&c| metric.distance(&keyed[k], &keyed[c]) > START_SEPARATION)

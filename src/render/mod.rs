@@ -461,7 +461,7 @@ pub const ADAPTIVE_TOLERANCE: f64 = 5e-4;
 /// difference reaches ~15x the bound), the fuller bound does.
 pub const NARROW_SAFETY: f64 = 2.5;
 
-/// The subsamples' mean of the pixel at `(x, y)` of a `size` picture from the centres (`s`
+/// The subsamples' mean of the pixel at `(x, y)` of a `w` x `h` picture from the centres (`s`
 /// subsamples along each axis), where [`Subsamples::Adaptive`]'s bound keeps it within `tol`
 /// (radiance units); `None` where every subsample must be shaded.
 fn centre_estimate(
@@ -677,10 +677,8 @@ pub fn render_with(
         Subsamples::Adaptive { tolerance } if adaptive => Some(tolerance * level(&centres)),
         _ => None,
     };
-    let estimate = |x: usize, y: usize| match tolerance {
-        Some(tol) => centre_estimate(&centres, (w, h), (x, y), s, tol),
-        None => None,
-    };
+    let estimate =
+        |x: usize, y: usize| tolerance.and_then(|tol| centre_estimate(&centres, (w, h), (x, y), s, tol));
     // pass 2: the pixels' values, every subsample shaded where the centre does not stand for them
     let rows: Vec<Vec<(PixelOut, bool)>> = (0..h)
         .into_par_iter()

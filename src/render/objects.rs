@@ -301,28 +301,32 @@ fn torus_hit(ray: &Ray, t: f64, spacing: f64) -> Hit {
 mod tests {
     use super::*;
 
+    /// Parallel rays along a fixed oblique direction through an n x n grid of points filling
+    /// [-half, half]^2 in the plane z = 0, started 5 units before it.
+    fn oblique_rays(n: usize, half: f64) -> impl Iterator<Item = Ray> {
+        let dir = Vec3::new(0.3, -0.5, -1.0).normalize();
+        (0..n * n).map(move |k| {
+            let at = |i: usize| -half + 2.0 * half * (i as f64 + 0.5) / n as f64;
+            Ray {
+                origin: Vec3::new(at(k / n), at(k % n), 0.0) - dir * 5.0,
+                direction: dir,
+            }
+        })
+    }
+
     #[test]
     fn torus_hits_lie_on_the_torus_with_unit_perpendicular_frames() {
         let o = Object::Torus { spacing: 2.0 };
         let mut hits = 0;
-        for i in 0..40 {
-            for j in 0..40 {
-                let x = -1.0 + 2.0 * (i as f64 + 0.5) / 40.0;
-                let y = -1.0 + 2.0 * (j as f64 + 0.5) / 40.0;
-                let dir = Vec3::new(0.3, -0.5, -1.0).normalize();
-                let ray = Ray {
-                    origin: Vec3::new(x, y, 0.0) - dir * 5.0,
-                    direction: dir,
-                };
-                if let Some(h) = o.intersect(&ray) {
-                    hits += 1;
-                    assert!(torus_distance(&h.position).abs() < 1e-9);
-                    assert!((h.normal.norm() - 1.0).abs() < 1e-12);
-                    assert!((h.tangent.norm() - 1.0).abs() < 1e-12);
-                    assert!(h.normal.dot(&h.tangent).abs() < 1e-12);
-                    // visible from the ray's side
-                    assert!(h.normal.dot(&dir) < 1e-9);
-                }
+        for ray in oblique_rays(40, 1.0) {
+            if let Some(h) = o.intersect(&ray) {
+                hits += 1;
+                assert!(torus_distance(&h.position).abs() < 1e-9);
+                assert!((h.normal.norm() - 1.0).abs() < 1e-12);
+                assert!((h.tangent.norm() - 1.0).abs() < 1e-12);
+                assert!(h.normal.dot(&h.tangent).abs() < 1e-12);
+                // visible from the ray's side
+                assert!(h.normal.dot(&ray.direction) < 1e-9);
             }
         }
         assert!(hits > 300, "{hits}");
@@ -344,19 +348,10 @@ mod tests {
         ];
         for o in &objects {
             let mut hits = 0;
-            for i in 0..60 {
-                for j in 0..60 {
-                    let x = -1.6 + 3.2 * (i as f64 + 0.5) / 60.0;
-                    let y = -1.6 + 3.2 * (j as f64 + 0.5) / 60.0;
-                    let dir = Vec3::new(0.3, -0.5, -1.0).normalize();
-                    let ray = Ray {
-                        origin: Vec3::new(x, y, 0.0) - dir * 5.0,
-                        direction: dir,
-                    };
-                    let t = o.nearest_t(&ray);
-                    assert_eq!(t, o.intersect(&ray).map(|h| h.t), "{o:?} {ray:?}");
-                    hits += t.is_some() as usize;
-                }
+            for ray in oblique_rays(60, 1.6) {
+                let t = o.nearest_t(&ray);
+                assert_eq!(t, o.intersect(&ray).map(|h| h.t), "{o:?} {ray:?}");
+                hits += t.is_some() as usize;
             }
             assert!(hits > 300, "{o:?}: {hits}");
         }
