@@ -134,7 +134,9 @@ impl GaussSection {
     ///    without branches;
     /// 3. the asin of every gap end, in lanes ([`elementary::asin_in_place`]);
     /// 4. per visit, scalar: the seen-and-lit arcs (merge of the two gap lists), each queued for
-    ///    the diffuse kernel and, clipped to the lobe window, for the lobe;
+    ///    the diffuse kernel and, clipped to the lobe window, for the lobe: once per pair, the
+    ///    lobe being the same at every height (a narrow lobe's window lies inside most heights'
+    ///    arcs: 59-86 % of the clipped arcs repeat one of their pair's at exponents 30-1000);
     /// 5. the diffuse kernels ([`DiffuseArcs::kernels`]), the substrate fractions
     ///    ([`substrate_fractions`]) and the lobe integrals ([`LobeRule::integrals`]), each in
     ///    lanes, summed back per visit in the order of step 4.
@@ -214,6 +216,8 @@ impl GaussSection {
             arcs.clear();
             dest.clear();
             let (mut at, mut problem) = (0, 0);
+            // (pair, its first arc in `arcs`): visits come pair by pair
+            let pair_arcs = &mut (usize::MAX, 0);
             for (v, visit) in visits.iter_mut().enumerate() {
                 let (sp, lobe) = &prepared[visit.pair];
                 let (pattern, weight) = (&visit.pattern, &visit.weight);
@@ -234,8 +238,22 @@ impl GaussSection {
                         diffuse_dest.push((v, count));
                     },
                     &mut |arc, factor| {
-                        arcs.push(arc);
-                        dest.push((visit.pair, factor));
+                        // the pair's lobe is the same at every height: an arc it already has
+                        // (most often the whole window) has the same integral
+                        if pair_arcs.0 != visit.pair {
+                            *pair_arcs = (visit.pair, arcs.len());
+                        }
+                        let same = arcs[pair_arcs.1..]
+                            .iter()
+                            .position(|a| a.a == arc.a && a.b == arc.b);
+                        let k = match same {
+                            Some(j) => pair_arcs.1 + j,
+                            None => {
+                                arcs.push(arc);
+                                arcs.len() - 1
+                            }
+                        };
+                        dest.push((visit.pair, factor, k));
                     },
                 );
             }
@@ -264,8 +282,8 @@ impl GaussSection {
             }
             let integrals = grown(values, arcs.len());
             self.lobe_rule.integrals(arcs, integrals);
-            for (&(i, factor), v) in dest.iter().zip(integrals.iter()) {
-                out[i].specular += factor * v;
+            for &(i, factor, k) in dest.iter() {
+                out[i].specular += factor * integrals[k];
             }
         })
     }
@@ -499,8 +517,9 @@ struct BatchScratch {
     /// Seen-and-lit arcs for the diffuse kernel, with (visit, count).
     diffuse_arcs: DiffuseArcs,
     diffuse_dest: Vec<(usize, f64)>,
+    /// The distinct lobe arcs of each pair, and per arc found (pair, factor, its arc in `arcs`).
     arcs: Vec<LobeArc>,
-    dest: Vec<(usize, f64)>,
+    dest: Vec<(usize, f64, usize)>,
     values: Vec<f64>,
 }
 
@@ -628,6 +647,43 @@ mod tests {
             }
             assert_eq!(sp.cos_lv.to_bits(), want.cos_lv.to_bits());
             assert_eq!(*lobe, section.lobe(&want), "{pair:?}");
+        }
+    }
+
+    #[test]
+    fn a_lobe_arc_shared_by_heights_is_integrated_once_with_the_same_result() {
+        // the mean over 16 heights, where most heights' clipped arcs are the whole lobe window,
+        // against each height evaluated alone and weighted: one integral per distinct arc of a
+        // pair must give every visit its own arc's integral
+        let frame = FibreFrame::from_azimuth(0.3);
+        for exponent in [30.0, 1000.0] {
+            let heights: Vec<(f64, f64)> = (0..16).map(|k| (0.05 * k as f64, 1.0 / 16.0)).collect();
+            let model = VaryingTopology::new(2.4, exponent, 16, heights.clone());
+            let mut pairs = vec![];
+            for i in 0..30 {
+                for j in 0..30 {
+                    let l = direction_from_angles((i as f64 / 30.0) * 1.5, j as f64 * 0.37);
+                    let v = direction_from_angles((j as f64 / 30.0) * 1.5, i as f64 * 0.71 + 1.0);
+                    pairs.push(DirectionPair::new(&frame, &l, &v));
+                }
+            }
+            let mut together = vec![Basis::default(); pairs.len()];
+            model.basis_many(&pairs, &mut together);
+            let mut alone = vec![Basis::default(); pairs.len()];
+            let mut one = vec![Basis::default(); pairs.len()];
+            for &(h, w) in &heights {
+                model.basis_many_at_height(&pairs, h, &mut one);
+                for (a, o) in alone.iter_mut().zip(&one) {
+                    *a = *a + o.scaled(w);
+                }
+            }
+            let peak = together.iter().map(|b| b.specular).fold(0.0, f64::max);
+            assert!(peak > 0.0);
+            for ((t, a), pair) in together.iter().zip(&alone).zip(&pairs) {
+                let tol = 1e-12 * t.specular.abs().max(1e-9 * peak);
+                assert!((t.specular - a.specular).abs() <= tol, "{pair:?}: {t:?} {a:?}");
+                assert!((t.diffuse - a.diffuse).abs() <= 1e-12 * t.diffuse.abs().max(1e-12));
+            }
         }
     }
 }
