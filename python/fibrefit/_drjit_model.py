@@ -909,7 +909,16 @@ class DrJitModel:
             dif = dif + dr.select(arc, self._diffuse_kernel(lo, hi, lp[0], vp[0], sp["cos_delta"]), 0.0)
             wa, wb = dr.maximum(lo, sp["win"][0]), dr.minimum(hi, sp["win"][1])
             lobe = arc & sp["has"] & (wb > wa)
-            spec = spec + self._lobe_where(lobe, wa, wb, sp)
+            if "whole" in sp:
+                # an arc over the whole window: the pair's integral over it, made once
+                whole = (wa == sp["win"][0]) & (wb == sp["win"][1])
+                if self._scalar:
+                    spec = spec + (sp["whole"] if lobe and whole else self._lobe_where(lobe, wa, wb, sp))
+                else:
+                    spec = spec + dr.select(lobe & whole, sp["whole"], 0.0)
+                    spec = spec + self._lobe_where(lobe & ~whole, wa, wb, sp)
+            else:
+                spec = spec + self._lobe_where(lobe, wa, wb, sp)
             adv = xb < yb
             return dr.select(adv, i + 1.0, i), dr.select(adv, j, j + 1.0), dif, spec
 
@@ -924,6 +933,12 @@ class DrJitModel:
         import mitsuba as mi
 
         sp = self._pair(l, v)
+        if texel is None and len(self.jobs) > 1:
+            # the lobe is the same for every height, and a narrow lobe's window lies inside
+            # most heights' arcs: its integral over the whole window once per pair (as the
+            # Rust model integrates each distinct arc of a pair once)
+            w0, w1 = sp["win"]
+            sp = dict(sp, whole=self._lobe_where(sp["has"] & (w1 > w0), w0, w1, sp))
         lp, vp = sp["l"], sp["v"]
         zero = 0.0 * l.z
         cols = self._job_cols if texel is None else self._texel_cols
