@@ -26,6 +26,7 @@ fn torus(c: &mut Criterion) {
         fibre_azimuth_deg: 0.0,
         lobe: params.gltf.lobe(),
         ward_curvature: None,
+        correction: None,
     };
     let lights = [Light::Directional {
         direction: direction_from_angles(40f64.to_radians(), 120f64.to_radians()),
