@@ -118,7 +118,8 @@ fn intro(command: &str, seconds: f64) -> String {
          Log error: RMS of ln(m + eps) - ln(y + eps), eps = 1 % of the channel's median. Chosen: what \
          `--model auto`'s rule picks on this one split under the log metric, among the candidates \
          it tries by default (each rung with its spread where it has one, without and with the \
-         fuzz layer; no Fresnel factor): the simplest whose held-out log error is at most the \
+         fuzz layer, principled and openpbr without it, as their renderers show them; no Fresnel \
+         factor): the simplest whose held-out log error is at most the \
          best's plus its standard error (`fibrefit fit --model auto` itself cross-validates below \
          2000 samples: reports/selection.md). The ratio column is the \
          held-out log error over plain Ward's (same metric). Grazing fwd and near normal: held-out sum \
