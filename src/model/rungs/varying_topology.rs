@@ -217,7 +217,7 @@ impl GaussSection {
             dest.clear();
             let (mut at, mut problem) = (0, 0);
             // (pair, its first arc in `arcs`): visits come pair by pair
-            let pair_arcs = &mut (usize::MAX, 0);
+            let mut pair_arcs = (usize::MAX, 0);
             for (v, visit) in visits.iter_mut().enumerate() {
                 let (sp, lobe) = &prepared[visit.pair];
                 let (pattern, weight) = (&visit.pattern, &visit.weight);
@@ -241,7 +241,7 @@ impl GaussSection {
                         // the pair's lobe is the same at every height: an arc it already has
                         // (most often the whole window) has the same integral
                         if pair_arcs.0 != visit.pair {
-                            *pair_arcs = (visit.pair, arcs.len());
+                            pair_arcs = (visit.pair, arcs.len());
                         }
                         let same = arcs[pair_arcs.1..]
                             .iter()
@@ -618,18 +618,26 @@ mod tests {
     use super::*;
     use crate::model::frame::{direction_from_angles, FibreFrame};
 
-    #[test]
-    fn lane_preparation_equals_the_scalar_definitions_bit_for_bit() {
-        let section = GaussSection::new(60.0, 16);
+    /// n x n pairs in the fibre frame of azimuth 0.3: theta of l and v up to `theta_max` (radians)
+    /// on a grid, their azimuths spread by incommensurate steps.
+    fn grid_pairs(n: usize, theta_max: f64) -> Vec<DirectionPair> {
         let frame = FibreFrame::from_azimuth(0.3);
         let mut pairs = vec![];
-        for i in 0..40 {
-            for j in 0..40 {
-                let l = direction_from_angles((i as f64 / 40.0) * 1.57, j as f64 * 0.37);
-                let v = direction_from_angles((j as f64 / 40.0) * 1.57, i as f64 * 0.71 + 1.0);
+        for i in 0..n {
+            for j in 0..n {
+                let (a, b) = (i as f64, j as f64);
+                let l = direction_from_angles((a / n as f64) * theta_max, b * 0.37);
+                let v = direction_from_angles((b / n as f64) * theta_max, a * 0.71 + 1.0);
                 pairs.push(DirectionPair::new(&frame, &l, &v));
             }
         }
+        pairs
+    }
+
+    #[test]
+    fn lane_preparation_equals_the_scalar_definitions_bit_for_bit() {
+        let section = GaussSection::new(60.0, 16);
+        let mut pairs = grid_pairs(40, 1.57);
         // a batch length that is not a multiple of the lane count
         pairs.truncate(1597);
         let mut prepared = vec![];
@@ -655,18 +663,10 @@ mod tests {
         // the mean over 16 heights, where most heights' clipped arcs are the whole lobe window,
         // against each height evaluated alone and weighted: one integral per distinct arc of a
         // pair must give every visit its own arc's integral
-        let frame = FibreFrame::from_azimuth(0.3);
+        let pairs = grid_pairs(30, 1.5);
         for exponent in [30.0, 1000.0] {
             let heights: Vec<(f64, f64)> = (0..16).map(|k| (0.05 * k as f64, 1.0 / 16.0)).collect();
             let model = VaryingTopology::new(2.4, exponent, 16, heights.clone());
-            let mut pairs = vec![];
-            for i in 0..30 {
-                for j in 0..30 {
-                    let l = direction_from_angles((i as f64 / 30.0) * 1.5, j as f64 * 0.37);
-                    let v = direction_from_angles((j as f64 / 30.0) * 1.5, i as f64 * 0.71 + 1.0);
-                    pairs.push(DirectionPair::new(&frame, &l, &v));
-                }
-            }
             let mut together = vec![Basis::default(); pairs.len()];
             model.basis_many(&pairs, &mut together);
             let mut alone = vec![Basis::default(); pairs.len()];
