@@ -2,7 +2,9 @@
 //! direction, its exact pdf over the whole mixture and the rung's evaluation at it) per
 //! iteration over a fixed set of views and uniforms (`sample`), the same draws as one block
 //! (`with_eval_batch`: `Sampler::sample_many`, the evaluations at once), and the sampler alone
-//! with a constant model (`sampler_only`). The variance the sampler buys is `fibrefit bench
+//! with a constant model (`sampler_only`), and one instance of the material per draw where it
+//! mixes several (`one_instance`: `Sampler::sample_instance`, a spread node and a histogram
+//! height drawn with a third uniform). The variance the sampler buys is `fibrefit bench
 //! --sampling` (reports/sampling.md).
 
 use criterion::{criterion_group, criterion_main, BenchmarkId, Criterion, Throughput};
@@ -102,6 +104,29 @@ fn sampling(c: &mut Criterion) {
                 })
             },
         );
+        // one instance of the material per draw (a spread node and a histogram height, drawn
+        // with the third uniform): where the material has more than one
+        if sampler.instances_given(per_draw) > 1 {
+            let aligned = model::build_instance(*id, &p).unwrap();
+            g.bench_with_input(BenchmarkId::new("one_instance", name), &d, |b, d| {
+                b.iter(|| {
+                    d.iter()
+                        .map(|(v, u, r)| {
+                            let inst = sampler.instance(*r, height(*r));
+                            sampler
+                                .sample_instance(
+                                    aligned.as_ref(),
+                                    &p.albedos,
+                                    &inst,
+                                    black_box(v),
+                                    *u,
+                                )
+                                .map_or(0.0, |s| s.weight[0])
+                        })
+                        .sum::<f64>()
+                })
+            });
+        }
         g.bench_with_input(BenchmarkId::new("sampler_only", name), &d, |b, d| {
             b.iter(|| {
                 d.iter()

@@ -14,6 +14,11 @@
 //!   most 1 and 1 where nothing falls below the horizon (every rung but ward and gltf).
 //! - Determinism; the zero-variance cases (hast-diffuse, max-normal's diffuse); the variance gain
 //!   over cosine sampling at exponent 1000.
+//! - One instance per draw (`Sampler::sample_instance`): the instances weighted by their
+//!   probabilities are the exact model (1e-12), they are drawn with those probabilities, an
+//!   instance's weight is its f cos / pdf and a batch equals each draw alone, chi-square tests of
+//!   one instance's directions and of an instance drawn per sample, the albedo estimate unbiased
+//!   against the exact sampler's; `Material`'s instance API likewise.
 
 mod common;
 
@@ -414,32 +419,46 @@ fn chi_square(case: &Case, samples: usize, seed: u64) -> ChiSquare {
     // the directions do not depend on the model (it only gives the weight): a cheap one
     let cheap = Lambert;
     let mut rng = Rng::new(seed);
+    // lobes narrower than a bin's Gauss nodes (exponent 1e4, ward's alpha 0.01)
+    let sharp = case.text.contains("exponent = 10000") || case.text.contains("alpha_x = 0.01");
+    chi_square_of(
+        &mut || {
+            let u = [rng.uniform(), rng.uniform()];
+            sampler
+                .sample(&cheap, &albedos, case.height, &case.v, u)
+                .map(|s| (s.l, s.pdf))
+        },
+        &|l| sampler.pdf(&albedos, &case.v, l),
+        samples,
+        sharp,
+        &case.name,
+    )
+}
+
+/// Chi-square test of `samples` directions from `draw` (with their densities; `None`: a
+/// rejected draw) against the density `pdf`.
+fn chi_square_of(
+    draw: &mut dyn FnMut() -> Option<(Local, f64)>,
+    pdf: &dyn Fn(&Local) -> f64,
+    samples: usize,
+    sharp: bool,
+    name: &str,
+) -> ChiSquare {
     let mut observed = vec![0usize; MU_BINS * PHI_BINS];
     let mut rejected = 0usize;
     for _ in 0..samples {
-        let u = [rng.uniform(), rng.uniform()];
-        match sampler.sample(&cheap, &albedos, case.height, &case.v, u) {
-            Some(s) => {
-                assert!(
-                    s.l.n > 0.0 && s.pdf > 0.0 && s.pdf.is_finite(),
-                    "{}",
-                    case.name
-                );
-                let i = ((s.l.n * MU_BINS as f64) as usize).min(MU_BINS - 1);
-                let phi = s.l.b.atan2(s.l.t).rem_euclid(TAU);
+        match draw() {
+            Some((l, density)) => {
+                assert!(l.n > 0.0 && density > 0.0 && density.is_finite(), "{name}");
+                let i = ((l.n * MU_BINS as f64) as usize).min(MU_BINS - 1);
+                let phi = l.b.atan2(l.t).rem_euclid(TAU);
                 let j = ((phi / TAU * PHI_BINS as f64) as usize).min(PHI_BINS - 1);
                 observed[i * PHI_BINS + j] += 1;
             }
             None => rejected += 1,
         }
     }
-    // lobes narrower than a bin's Gauss nodes (exponent 1e4, ward's alpha 0.01)
-    let sharp = case.text.contains("exponent = 10000") || case.text.contains("alpha_x = 0.01");
-    let probs = expected(
-        &|l| sampler.pdf(&albedos, &case.v, l),
-        samples,
-        if sharp { 2 } else { 0 },
-    );
+    let probs = expected(pdf, samples, if sharp { 2 } else { 0 });
     let integral: f64 = probs.iter().sum();
     let n = samples as f64;
     // the draws that returned None are one more bin, expected 1 - integral
@@ -776,6 +795,30 @@ fn the_lobe_lowers_the_variance_tenfold_at_exponent_1000() {
 /// what `sample` gives it alone, bit for bit: every rung but the reference, the speed table's
 /// variants, draws at random views with and without a height each (varying-topology draws at
 /// its texels' heights, the others ignore them), albedos varying per draw.
+/// `n` random views (rows of unit vectors) up to `max_deg` from the normal, every azimuth.
+fn view_rows(rng: &mut Rng, n: usize, max_deg: f64) -> Vec<[f64; 3]> {
+    (0..n)
+        .map(|_| {
+            let d = view(max_deg * rng.uniform(), 360.0 * rng.uniform());
+            [d.t, d.b, d.n]
+        })
+        .collect()
+}
+
+/// A sample's direction, density and weights as bits, to compare draws exactly.
+fn sample_bits(s: &fibrefit::model::sampling::Sample) -> [u64; 7] {
+    [
+        s.l.t,
+        s.l.b,
+        s.l.n,
+        s.pdf,
+        s.weight[0],
+        s.weight[1],
+        s.weight[2],
+    ]
+    .map(f64::to_bits)
+}
+
 #[test]
 fn a_batch_of_draws_is_each_draw_alone_bit_for_bit() {
     use fibrefit::bench::sampling::SPEED_VARIANTS;
@@ -818,19 +861,7 @@ fn a_batch_of_draws_is_each_draw_alone_bit_for_bit() {
                 (None, None) => {}
                 (Some(a), Some(b)) => {
                     drawn += 1;
-                    let bits = |s: &fibrefit::model::sampling::Sample| {
-                        [
-                            s.l.t,
-                            s.l.b,
-                            s.l.n,
-                            s.pdf,
-                            s.weight[0],
-                            s.weight[1],
-                            s.weight[2],
-                        ]
-                        .map(f64::to_bits)
-                    };
-                    assert_eq!(bits(&a), bits(b), "{id} {text:?}: {d:?}");
+                    assert_eq!(sample_bits(&a), sample_bits(b), "{id} {text:?}: {d:?}");
                 }
                 (a, b) => panic!("{id} {text:?}: {d:?}: alone {a:?}, in the batch {b:?}"),
             }
@@ -877,16 +908,11 @@ fn a_materials_rows_sampled_at_once_are_each_row_alone_bit_for_bit() {
         ("corrected", &corrected, false),
     ] {
         let n = 700; // more than two blocks
-        let v: Vec<[f64; 3]> = (0..n)
-            .map(|_| {
-                let d = view(88.0 * rng.uniform(), 360.0 * rng.uniform());
-                [d.t, d.b, d.n]
-            })
-            .collect();
+        let v = view_rows(&mut rng, n, 88.0);
         let u: Vec<[f64; 2]> = (0..n).map(|_| [rng.uniform(), rng.uniform()]).collect();
         let uv: Vec<[f64; 2]> = (0..n).map(|_| [rng.uniform(), rng.uniform()]).collect();
         let uv = with_uv.then_some(&uv[..]);
-        let many = m.sample_many(&v, &u, uv).unwrap();
+        let many = m.sample_many(&v, &u, uv, None).unwrap();
         let mut drawn = 0;
         for i in 0..n {
             // as `sample_many` takes a row: divided by its length
@@ -934,15 +960,10 @@ fn a_texels_own_lobe_is_in_the_sampled_weight() {
     let m = Material::load(&params, Some(&maps)).unwrap().0;
     let mut rng = Rng::new(3);
     let rows = 300;
-    let v: Vec<[f64; 3]> = (0..rows)
-        .map(|_| {
-            let d = view(85.0 * rng.uniform(), 360.0 * rng.uniform());
-            [d.t, d.b, d.n]
-        })
-        .collect();
+    let v = view_rows(&mut rng, rows, 85.0);
     let u: Vec<[f64; 2]> = (0..rows).map(|_| [rng.uniform(), rng.uniform()]).collect();
     let uv: Vec<[f64; 2]> = (0..rows).map(|_| [rng.uniform(), rng.uniform()]).collect();
-    let many = m.sample_many(&v, &u, Some(&uv)).unwrap();
+    let many = m.sample_many(&v, &u, Some(&uv), None).unwrap();
     let mut checked = 0;
     for i in 0..rows {
         let d = Vec3::new(v[i][0], v[i][1], v[i][2]);
@@ -965,4 +986,353 @@ fn a_texels_own_lobe_is_in_the_sampled_weight() {
         }
     }
     assert!(checked > rows / 2, "{checked}");
+}
+
+// ---- one instance of the material per draw (issue 41 item 2) ----
+
+/// Materials that mix several instances: spreads (partial, isotropic, with the fuzz layer and
+/// the Fresnel factor), varying-topology's height histogram, and both at once.
+fn instance_cases() -> Vec<(String, ModelId, String)> {
+    let with = |id: ModelId, extra: &str| (format!("{id} {extra:?}"), id, base_text(id) + extra);
+    vec![
+        with(ModelId::MaxNormal, "azimuth_spread_deg = 180\n"),
+        with(ModelId::HastDiffuse, "azimuth_spread_deg = 40\n"),
+        with(ModelId::PoulinFournier, "azimuth_spread_deg = 20\n"),
+        with(
+            ModelId::PoulinFournier,
+            "azimuth_spread_deg = 180\nfuzz = 0.5\nfuzz_depth = 0.3\nfresnel_ior = 1.5\nfibre_azimuth_deg = 30\n",
+        ),
+        with(ModelId::VaryingTopology, ""),
+        with(
+            ModelId::VaryingTopology,
+            "azimuth_spread_deg = 30\nfuzz = 0.5\nfuzz_depth = 0.3\nhistogram_bins = 6\n",
+        ),
+    ]
+}
+
+/// Views and lights over the hemisphere, grazing included.
+fn instance_pairs() -> Vec<DirectionPair> {
+    let mut pairs = Vec::new();
+    for tv in [0.0, 35.0, 70.0, 88.0] {
+        for pv in [0.0, 50.0, 130.0] {
+            for tl in [10.0, 45.0, 80.0] {
+                for pl in [20.0, 110.0, 200.0, 290.0] {
+                    pairs.push(DirectionPair {
+                        l: view(tl, pl),
+                        v: view(tv, pv),
+                    });
+                }
+            }
+        }
+    }
+    pairs
+}
+
+#[test]
+fn the_instances_weighted_by_their_probabilities_are_the_exact_model() {
+    for (name, id, text) in instance_cases() {
+        let p = params(&text, id);
+        let exact = model::build(id, &p).unwrap();
+        let aligned = model::build_instance(id, &p).unwrap();
+        let sampler = Sampler::new(id, &p);
+        let all = sampler.instances_with_probabilities();
+        assert_eq!(all.len(), sampler.instances(), "{name}");
+        assert!(sampler.instances() > 1, "{name}");
+        let total: f64 = all.iter().map(|a| a.1).sum();
+        assert!((total - 1.0).abs() < 1e-12, "{name}: {total}");
+        for pair in instance_pairs() {
+            let want = exact.basis(&pair);
+            let mut got = model::Basis::default();
+            for (inst, w) in &all {
+                got = got + inst.basis(aligned.as_ref(), &pair).scaled(*w);
+            }
+            for (g, w, part) in [
+                (got.diffuse, want.diffuse, "diffuse"),
+                (got.specular, want.specular, "specular"),
+                (got.substrate, want.substrate, "substrate"),
+                (got.fuzz, want.fuzz, "fuzz"),
+            ] {
+                assert!(
+                    (g - w).abs() <= 1e-12 * w.abs().max(1e-6),
+                    "{name} {part} at {pair:?}: instances {g}, exact {w}"
+                );
+            }
+        }
+    }
+}
+
+#[test]
+fn instances_are_picked_with_their_probabilities() {
+    for (name, id, text) in instance_cases() {
+        let p = params(&text, id);
+        let sampler = Sampler::new(id, &p);
+        let all = sampler.instances_with_probabilities();
+        // evenly spaced uniforms: each instance's share within one step of its probability
+        let n = 200_000;
+        let mut counts = vec![0usize; all.len()];
+        for k in 0..n {
+            let inst = sampler.instance((k as f64 + 0.5) / n as f64, None);
+            let i = all
+                .iter()
+                .position(|a| a.0 == inst)
+                .expect("a listed instance");
+            counts[i] += 1;
+        }
+        for ((inst, w), c) in all.iter().zip(&counts) {
+            let share = *c as f64 / n as f64;
+            assert!(
+                (share - w).abs() <= 2.0 / n as f64,
+                "{name}: {inst:?} drawn {share}, probability {w}"
+            );
+        }
+        // a texel's height is kept; only the direction is drawn
+        if id.has_topology() {
+            let inst = sampler.instance(0.7, Some(0.42));
+            assert_eq!(inst.height, Some(0.42), "{name}");
+        }
+    }
+}
+
+#[test]
+fn an_instances_weight_is_its_f_cos_over_its_pdf_and_a_batch_is_each_draw_alone() {
+    use fibrefit::model::sampling::Draw;
+    for (name, id, text) in instance_cases() {
+        let p = params(&text, id);
+        let aligned = model::build_instance(id, &p).unwrap();
+        let sampler = Sampler::new(id, &p);
+        let mut rng = Rng::new(41);
+        let (mut draws, mut insts, mut alone) = (Vec::new(), Vec::new(), Vec::new());
+        for _ in 0..400 {
+            let v = view(88.0 * rng.uniform(), 360.0 * rng.uniform());
+            let u = [rng.uniform(), rng.uniform()];
+            let inst = sampler.instance(rng.uniform(), None);
+            let s = sampler.sample_instance(aligned.as_ref(), &p.albedos, &inst, &v, u);
+            if let Some(s) = s {
+                let pdf = sampler.pdf_instance(&p.albedos, &inst, &v, &s.l);
+                assert!(
+                    (pdf - s.pdf).abs() <= 1e-10 * s.pdf,
+                    "{name}: pdf {pdf} against the draw's {}",
+                    s.pdf
+                );
+                let f = inst.basis(aligned.as_ref(), &DirectionPair { l: s.l, v });
+                for c in 0..3 {
+                    let want = f.brdf(&p.albedos, c) * s.l.n / s.pdf;
+                    assert!(
+                        (s.weight[c] - want).abs() <= 1e-12 * want.abs().max(1e-300),
+                        "{name}: weight {} against f cos / pdf {want}",
+                        s.weight[c]
+                    );
+                }
+            }
+            draws.push(Draw {
+                albedos: p.albedos,
+                height: None,
+                v,
+                u,
+            });
+            insts.push(inst);
+            alone.push(s);
+        }
+        let mut many = vec![None; draws.len()];
+        sampler.sample_many_instances(aligned.as_ref(), &draws, &insts, &mut many);
+        let bits = |s: &Option<fibrefit::model::sampling::Sample>| s.as_ref().map(sample_bits);
+        for (i, (a, m)) in alone.iter().zip(&many).enumerate() {
+            assert_eq!(bits(a), bits(m), "{name}, draw {i}");
+        }
+    }
+}
+
+#[test]
+fn an_instances_directions_follow_its_pdf_chi_square() {
+    // one instance held (a turned node, a drawn height), and an instance drawn per sample
+    // against the probability-weighted sum of the instances' densities
+    let cases = instance_cases();
+    let alpha = 0.01 / (2 * cases.len()) as f64;
+    let samples = 100_000;
+    for (k, (name, id, text)) in cases.iter().enumerate() {
+        let p = params(text, *id);
+        let sampler = Sampler::new(*id, &p);
+        let a = p.albedos;
+        let v = view(60.0, 35.0);
+        let inst = sampler.instance(0.37, None);
+        let mut rng = Rng::new(500 + k as u64);
+        let held = chi_square_of(
+            &mut || {
+                let u = [rng.uniform(), rng.uniform()];
+                sampler
+                    .sample_instance(&Lambert, &a, &inst, &v, u)
+                    .map(|s| (s.l, s.pdf))
+            },
+            &|l| sampler.pdf_instance(&a, &inst, &v, l),
+            samples,
+            false,
+            name,
+        );
+        let all = sampler.instances_with_probabilities();
+        let mut rng = Rng::new(600 + k as u64);
+        let drawn = chi_square_of(
+            &mut || {
+                let u = [rng.uniform(), rng.uniform()];
+                let inst = sampler.instance(rng.uniform(), None);
+                sampler
+                    .sample_instance(&Lambert, &a, &inst, &v, u)
+                    .map(|s| (s.l, s.pdf))
+            },
+            &|l| {
+                all.iter()
+                    .map(|(i, w)| w * sampler.pdf_instance(&a, i, &v, l))
+                    .sum()
+            },
+            samples,
+            false,
+            name,
+        );
+        for (what, r) in [("held", held), ("drawn", drawn)] {
+            eprintln!(
+                "{name} {what}: chi2 {:.1} dof {} p {:.3e} int {:.6}",
+                r.statistic, r.dof, r.p_value, r.integral
+            );
+            assert!(r.p_value >= alpha, "{name} {what}: p = {:.3e}", r.p_value);
+            assert!(
+                (r.integral - 1.0).abs() < 2e-3,
+                "{name} {what}: {}",
+                r.integral
+            );
+            assert_eq!(r.rejected, 0, "{name} {what}");
+        }
+    }
+}
+
+#[test]
+fn one_instance_per_draw_estimates_the_exact_albedo() {
+    // both estimators of the directional albedo at exponent 200 agree within 4.5 standard
+    // errors; the instance's weight variance is larger, but by a bounded factor
+    for (name, id, text) in instance_cases() {
+        let p = params(&text, id);
+        let exact = model::build(id, &p).unwrap();
+        let aligned = model::build_instance(id, &p).unwrap();
+        let sampler = Sampler::new(id, &p);
+        let n = if id == ModelId::VaryingTopology {
+            20_000
+        } else {
+            100_000
+        };
+        for v in [view(20.0, 10.0), view(70.0, 80.0)] {
+            let mut rng = Rng::new(7);
+            let moments = |w: &mut dyn FnMut() -> f64| {
+                let (mut s, mut s2) = (0.0, 0.0);
+                for _ in 0..n {
+                    let x = w();
+                    s += x;
+                    s2 += x * x;
+                }
+                let mean = s / n as f64;
+                (mean, (s2 / n as f64 - mean * mean).max(0.0))
+            };
+            let (m_exact, var_exact) = moments(&mut || {
+                let u = [rng.uniform(), rng.uniform()];
+                sampler
+                    .sample(exact.as_ref(), &p.albedos, None, &v, u)
+                    .map_or(0.0, |s| s.weight[0])
+            });
+            let (m_inst, var_inst) = moments(&mut || {
+                let u = [rng.uniform(), rng.uniform()];
+                let inst = sampler.instance(rng.uniform(), None);
+                sampler
+                    .sample_instance(aligned.as_ref(), &p.albedos, &inst, &v, u)
+                    .map_or(0.0, |s| s.weight[0])
+            });
+            let se = ((var_exact + var_inst) / n as f64).sqrt();
+            assert!(
+                (m_exact - m_inst).abs() <= 4.5 * se,
+                "{name} at {v:?}: exact {m_exact}, one instance {m_inst} (se {se})"
+            );
+            assert!(
+                var_inst < 20.0 * var_exact + 1e-12,
+                "{name}: {var_inst} vs {var_exact}"
+            );
+        }
+    }
+}
+
+/// `Material`'s instance API: the mean over instance uniforms of `eval_instance` is `eval`,
+/// `sample_instance`'s weight is `eval_instance` cos / `pdf_instance` of the same uniform, and
+/// rows sampled at once equal each row alone.
+#[test]
+fn a_materials_instances_average_to_it_and_weigh_their_samples() {
+    use fibrefit::api::material::Material;
+    use fibrefit::model::Vec3;
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("felt.toml");
+    std::fs::write(
+        &file,
+        format!(
+            "model = \"poulin-fournier\"\n{}azimuth_spread_deg = 180\nfuzz = 0.4\nfuzz_depth = 0.2\n",
+            base_text(ModelId::PoulinFournier)
+        ),
+    )
+    .unwrap();
+    let m = Material::load(&file, None).unwrap().0;
+    assert_eq!(m.instances(), 16);
+    let n = m.instances();
+    let mut rng = Rng::new(19);
+    for _ in 0..50 {
+        let (l, v) = (
+            view(80.0 * rng.uniform(), 360.0 * rng.uniform()),
+            view(80.0 * rng.uniform(), 360.0 * rng.uniform()),
+        );
+        let (l, v) = (Vec3::new(l.t, l.b, l.n), Vec3::new(v.t, v.b, v.n));
+        let want = m.eval(&l, &v, None);
+        // the nodes' weights are equal in the isotropic limit: one uniform per node
+        let mut mean = [0.0; 3];
+        for k in 0..n {
+            let f = m.eval_instance(&l, &v, None, Some((k as f64 + 0.5) / n as f64));
+            for c in 0..3 {
+                mean[c] += f[c] / n as f64;
+            }
+        }
+        for c in 0..3 {
+            assert!(
+                (mean[c] - want[c]).abs() <= 1e-12 * want[c].abs().max(1e-9),
+                "{mean:?} vs {want:?}"
+            );
+        }
+    }
+    let rows = 600;
+    let v = view_rows(&mut rng, rows, 85.0);
+    let u: Vec<[f64; 2]> = (0..rows).map(|_| [rng.uniform(), rng.uniform()]).collect();
+    let r: Vec<f64> = (0..rows).map(|_| rng.uniform()).collect();
+    let many = m.sample_many(&v, &u, None, Some(&r)).unwrap();
+    let mut checked = 0;
+    for i in 0..rows {
+        // as `sample_many` takes a row: divided by its length
+        let d = Vec3::new(v[i][0], v[i][1], v[i][2]);
+        let d = d / d.norm();
+        let alone = m.sample_instance(&d, u[i], None, Some(r[i]));
+        assert_eq!(alone, many[i], "row {i}");
+        if alone.pdf > 0.0 {
+            let l = Vec3::new(alone.l[0], alone.l[1], alone.l[2]);
+            let pdf = m.pdf_instance(&d, &l, None, Some(r[i]));
+            assert!(
+                (pdf - alone.pdf).abs() <= 1e-10 * pdf,
+                "row {i}: {pdf} vs {}",
+                alone.pdf
+            );
+            let f = m.eval_instance(&l, &d, None, Some(r[i]));
+            for c in 0..3 {
+                let want = f[c] * l.z / alone.pdf;
+                assert!(
+                    (alone.weight[c] - want).abs() <= 1e-9 * want.abs().max(1e-12),
+                    "row {i}"
+                );
+            }
+            checked += 1;
+        }
+    }
+    assert!(checked > rows / 2, "{checked}");
+    // a uniform outside [0, 1) is refused, naming the row
+    let e = m
+        .sample_many(&v[..2], &u[..2], None, Some(&[0.5, 1.0]))
+        .unwrap_err();
+    assert!(e.to_string().contains("instance row 1"), "{e}");
 }

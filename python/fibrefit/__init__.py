@@ -115,6 +115,23 @@ def _f64(name: str, a: Any, width: int) -> np.ndarray:
     return arr
 
 
+def _instance(a: Any) -> Optional[np.ndarray]:
+    """The instance uniforms as a C-contiguous float64 (N,) array (None stays None)."""
+    if a is None:
+        return None
+    if np.iscomplexobj(a):
+        raise FibrefitError("instance: complex values; expected real numbers in [0, 1)")
+    try:
+        arr = np.ascontiguousarray(a, dtype=np.float64)
+    except (TypeError, ValueError) as e:
+        raise FibrefitError(f"instance: not an array of numbers ({e})") from None
+    if arr.ndim == 0:
+        arr = arr.reshape(1)
+    if arr.ndim != 1:
+        raise FibrefitError(f"instance: expected an (N,) array, got shape {arr.shape}")
+    return arr
+
+
 class Material:
     """A fitted material: BRDF, importance sampler and pdf (see the module docs for frames).
 
@@ -125,27 +142,51 @@ class Material:
     def __init__(self, native: "_native.Material"):
         self._m = native
 
-    def eval(self, l: Any, v: Any, uv: Any = None) -> np.ndarray:
+    def eval(self, l: Any, v: Any, uv: Any = None, instance: Any = None) -> np.ndarray:
         """The BRDF f(l, v) in 1/sr: an (N, C) array (C = 3 for RGB results, 1 for grey).
 
         ``l``, ``v``: (N, 3) unit vectors (light, view); ``uv``: (N, 2) texture coordinates
         into the maps (None: the global parameters). Zero where either direction is at or
-        below the horizon.
+        below the horizon. ``instance``: (N,) uniforms in [0, 1), each picking one instance of
+        the material (see :attr:`instances`): that instance's value.
         """
-        return self._m.eval(_f64("l", l, 3), _f64("v", v, 3), None if uv is None else _f64("uv", uv, 2))
+        return self._m.eval(
+            _f64("l", l, 3), _f64("v", v, 3), None if uv is None else _f64("uv", uv, 2), _instance(instance)
+        )
 
-    def sample(self, v: Any, u: Any, uv: Any = None) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
+    def sample(
+        self, v: Any, u: Any, uv: Any = None, instance: Any = None
+    ) -> Tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Importance-sample light directions for views ``v`` from uniforms ``u`` ((N, 2) in [0, 1)).
 
         Returns ``(l, weight, pdf)``: ``l`` (N, 3) unit vectors, ``weight`` (N, C) =
         f(l, v) cos(theta_l) / pdf, ``pdf`` (N,) in 1/sr (solid angle). A failed sample (the view
         or the sampled direction below the horizon) has l = 0, weight 0, pdf 0.
-        """
-        return self._m.sample(_f64("v", v, 3), _f64("u", u, 2), None if uv is None else _f64("uv", uv, 2))
 
-    def pdf(self, v: Any, l: Any, uv: Any = None) -> np.ndarray:
-        """The density (1/sr) with which :meth:`sample` picks ``l`` given ``v``: an (N,) array."""
-        return self._m.pdf(_f64("v", v, 3), _f64("l", l, 3), None if uv is None else _f64("uv", uv, 2))
+        ``instance``: (N,) uniforms in [0, 1). A material with a fibre-direction spread or a
+        height histogram mixes :attr:`instances` instances (fibres turned by one spread node, at
+        one height); each row then draws from, and is weighed by, the instance its uniform
+        picks (f and pdf of that instance: :meth:`eval` and :meth:`pdf` with the same
+        uniform). The mean is the material's, the cost that of one instance (16-256 times
+        less), the variance larger (``reports/sampling.md``). Use one uniform per shading point
+        for its light samples and its BSDF sample alike.
+        """
+        return self._m.sample(
+            _f64("v", v, 3), _f64("u", u, 2), None if uv is None else _f64("uv", uv, 2), _instance(instance)
+        )
+
+    def pdf(self, v: Any, l: Any, uv: Any = None, instance: Any = None) -> np.ndarray:
+        """The density (1/sr) with which :meth:`sample` picks ``l`` given ``v``: an (N,) array
+        (with ``instance``: the density of each row's instance's sampler)."""
+        return self._m.pdf(
+            _f64("v", v, 3), _f64("l", l, 3), None if uv is None else _f64("uv", uv, 2), _instance(instance)
+        )
+
+    @property
+    def instances(self) -> int:
+        """How many instances the material mixes: a fibre-direction spread's nodes times a
+        height histogram's heights (1: none)."""
+        return self._m.instances
 
     def render_capture(self, capture_toml: PathLike, image_index: int) -> np.ndarray:
         """Image ``image_index`` of a capture as this material renders it, noise-free: an

@@ -8,14 +8,32 @@ import numpy.typing as npt
 class FibrefitError(ValueError): ...
 
 class Material:
-    def eval(self, l: npt.NDArray[np.float64], v: npt.NDArray[np.float64], uv: Optional[npt.NDArray[np.float64]] = None) -> npt.NDArray[np.float64]: ...
+    def eval(
+        self,
+        l: npt.NDArray[np.float64],
+        v: npt.NDArray[np.float64],
+        uv: Optional[npt.NDArray[np.float64]] = None,
+        instance: Optional[npt.NDArray[np.float64]] = None,
+    ) -> npt.NDArray[np.float64]: ...
     def sample(
-        self, v: npt.NDArray[np.float64], u: npt.NDArray[np.float64], uv: Optional[npt.NDArray[np.float64]] = None
+        self,
+        v: npt.NDArray[np.float64],
+        u: npt.NDArray[np.float64],
+        uv: Optional[npt.NDArray[np.float64]] = None,
+        instance: Optional[npt.NDArray[np.float64]] = None,
     ) -> Tuple[npt.NDArray[np.float64], npt.NDArray[np.float64], npt.NDArray[np.float64]]: ...
-    def pdf(self, v: npt.NDArray[np.float64], l: npt.NDArray[np.float64], uv: Optional[npt.NDArray[np.float64]] = None) -> npt.NDArray[np.float64]: ...
+    def pdf(
+        self,
+        v: npt.NDArray[np.float64],
+        l: npt.NDArray[np.float64],
+        uv: Optional[npt.NDArray[np.float64]] = None,
+        instance: Optional[npt.NDArray[np.float64]] = None,
+    ) -> npt.NDArray[np.float64]: ...
     def render_capture(self, capture: str, index: int) -> npt.NDArray[np.float32]: ...
     @property
     def model(self) -> str: ...
+    @property
+    def instances(self) -> int: ...
     @property
     def channels(self) -> int: ...
     @property

@@ -95,45 +95,75 @@ impl Material {
     fn uv(uv: Option<PyReadonlyArrayDyn<'_, f64>>) -> PyResult<Option<Vec<[f64; 2]>>> {
         uv.map(|a| rows::<2>(&a, "uv")).transpose()
     }
+
+    /// The instance uniforms: an (N,) array.
+    fn instance(instance: Option<PyReadonlyArrayDyn<'_, f64>>) -> PyResult<Option<Vec<f64>>> {
+        let Some(a) = instance else {
+            return Ok(None);
+        };
+        let shape = a.shape().to_vec();
+        if shape.len() != 1 {
+            return Err(FibrefitError::new_err(format!(
+                "instance: expected an (N,) array, got shape {shape:?}"
+            )));
+        }
+        Ok(Some(a.as_array().iter().copied().collect()))
+    }
 }
 
 #[pymethods]
 impl Material {
     /// The BRDF (1/sr), an (N, C) array (C = 3 for RGB results, 1 for grey), of the light
-    /// directions `l` and view directions `v`, (N, 3) arrays of unit vectors.
-    #[pyo3(signature = (l, v, uv=None))]
+    /// directions `l` and view directions `v`, (N, 3) arrays of unit vectors. `instance`, an
+    /// (N,) array of uniforms in [0, 1): each row's value of the instance of the material its
+    /// uniform picks (see `instances`; the same uniform picks the same instance in `pdf` and
+    /// `sample`, and the mean over uniforms is the material's value).
+    #[pyo3(signature = (l, v, uv=None, instance=None))]
     fn eval<'py>(
         &self,
         py: Python<'py>,
         l: PyReadonlyArrayDyn<'py, f64>,
         v: PyReadonlyArrayDyn<'py, f64>,
         uv: Option<PyReadonlyArrayDyn<'py, f64>>,
+        instance: Option<PyReadonlyArrayDyn<'py, f64>>,
     ) -> PyResult<Bound<'py, PyArray2<f64>>> {
         let (l, v, uv) = (rows::<3>(&l, "l")?, rows::<3>(&v, "v")?, Self::uv(uv)?);
+        let instance = Self::instance(instance)?;
         let out = py
-            .detach(|| self.inner.eval_many(&l, &v, uv.as_deref()))
+            .detach(|| {
+                self.inner
+                    .eval_many(&l, &v, uv.as_deref(), instance.as_deref())
+            })
             .map_err(err)?;
         table(py, &out, self.inner.channels)
     }
 
     /// Sample light directions for the views `v` ((N, 3)) from uniforms `u` ((N, 2) in
     /// [0, 1)): returns (l (N, 3), weight (N, C) = f cos(theta_l) / pdf, pdf (N,) in 1/sr). A
-    /// failed sample (below the horizon) has l = 0, weight 0, pdf 0.
-    #[pyo3(signature = (v, u, uv=None))]
+    /// failed sample (below the horizon) has l = 0, weight 0, pdf 0. `instance` ((N,) uniforms
+    /// in [0, 1)): each row draws from, and weighs by, the instance of the material its uniform
+    /// picks (one fibre direction of a spread, one height of a histogram): many times faster
+    /// where the material mixes many, its mean the same, its variance larger.
+    #[pyo3(signature = (v, u, uv=None, instance=None))]
     fn sample<'py>(
         &self,
         py: Python<'py>,
         v: PyReadonlyArrayDyn<'py, f64>,
         u: PyReadonlyArrayDyn<'py, f64>,
         uv: Option<PyReadonlyArrayDyn<'py, f64>>,
+        instance: Option<PyReadonlyArrayDyn<'py, f64>>,
     ) -> PyResult<(
         Bound<'py, PyArray2<f64>>,
         Bound<'py, PyArray2<f64>>,
         Bound<'py, PyArray1<f64>>,
     )> {
         let (v, u, uv) = (rows::<3>(&v, "v")?, rows::<2>(&u, "u")?, Self::uv(uv)?);
+        let instance = Self::instance(instance)?;
         let out: Vec<Sampled> = py
-            .detach(|| self.inner.sample_many(&v, &u, uv.as_deref()))
+            .detach(|| {
+                self.inner
+                    .sample_many(&v, &u, uv.as_deref(), instance.as_deref())
+            })
             .map_err(err)?;
         let l: Vec<[f64; 3]> = out.iter().map(|s| s.l).collect();
         let w: Vec<[f64; 3]> = out.iter().map(|s| s.weight).collect();
@@ -146,18 +176,23 @@ impl Material {
     }
 
     /// The sampler's density (1/sr, solid angle) of the light directions `l` given the views
-    /// `v`, an (N,) array.
-    #[pyo3(signature = (v, l, uv=None))]
+    /// `v`, an (N,) array; with `instance`, the density of each row's instance's sampler.
+    #[pyo3(signature = (v, l, uv=None, instance=None))]
     fn pdf<'py>(
         &self,
         py: Python<'py>,
         v: PyReadonlyArrayDyn<'py, f64>,
         l: PyReadonlyArrayDyn<'py, f64>,
         uv: Option<PyReadonlyArrayDyn<'py, f64>>,
+        instance: Option<PyReadonlyArrayDyn<'py, f64>>,
     ) -> PyResult<Bound<'py, PyArray1<f64>>> {
         let (v, l, uv) = (rows::<3>(&v, "v")?, rows::<3>(&l, "l")?, Self::uv(uv)?);
+        let instance = Self::instance(instance)?;
         let out = py
-            .detach(|| self.inner.pdf_many(&v, &l, uv.as_deref()))
+            .detach(|| {
+                self.inner
+                    .pdf_many(&v, &l, uv.as_deref(), instance.as_deref())
+            })
             .map_err(err)?;
         Ok(out.into_pyarray(py))
     }
@@ -184,6 +219,13 @@ impl Material {
     #[getter]
     fn model(&self) -> &'static str {
         self.inner.model.as_str()
+    }
+
+    /// How many instances the material mixes: a fibre-direction spread's nodes times a height
+    /// histogram's heights (1: none; `eval`, `pdf` and `sample` take `instance` uniforms).
+    #[getter]
+    fn instances(&self) -> usize {
+        self.inner.instances()
     }
 
     /// 3 for RGB results, 1 for grey.

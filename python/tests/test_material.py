@@ -94,6 +94,40 @@ def test_sampled_albedo_agrees_with_quadrature(tmp_path, rng):
     assert np.all(np.abs(est - ref) < 4 * np.hypot(se, ref_se)), (est, ref, se, ref_se)
 
 
+def test_one_instance_per_sample_is_consistent_and_unbiased(tmp_path, rng):
+    # PF's spread of 10 degrees mixes 16 turned fibre directions: with `instance` uniforms each
+    # row is one of them, its weight that instance's eval cos / pdf, the same uniform picking
+    # the same instance in eval, pdf and sample; the mean over instances is the material
+    m = fibrefit.load(write_params(tmp_path, "pf.json", PF))
+    assert m.instances == 16
+    n = 2000
+    v = hemisphere(n, rng, 85)
+    u, r = rng.random((n, 2)), rng.random(n)
+    l, w, pdf = m.sample(v, u, instance=r)
+    ok = pdf > 0
+    assert ok.mean() > 0.5
+    f = m.eval(l[ok], v[ok], instance=r[ok])
+    np.testing.assert_allclose(w[ok], f * l[ok][:, 2:3] / pdf[ok][:, None], rtol=1e-9, atol=1e-14)
+    np.testing.assert_allclose(m.pdf(v[ok], l[ok], instance=r[ok]), pdf[ok], rtol=1e-9)
+    # the instances' values differ, and their mean over many uniforms is eval's (all 16 drawn)
+    l1 = hemisphere(1, rng, 80)
+    k = 200_000
+    vals = m.eval(np.repeat(l1, k, axis=0), np.repeat(v[:1], k, axis=0), instance=rng.random(k))
+    assert np.unique(vals[:, 0]).size == 16
+    exact = m.eval(l1, v[:1])[0]
+    assert np.all(np.abs(vals.mean(axis=0) - exact) < 5 * vals.std(axis=0) / np.sqrt(k) + 1e-15)
+    # the albedo estimate: one instance per row against the exact sampler
+    v0 = np.repeat(direction(40, 75)[None], 100_000, axis=0)
+    _, w_exact, _ = m.sample(v0, rng.random((100_000, 2)))
+    _, w_inst, _ = m.sample(v0, rng.random((100_000, 2)), instance=rng.random(100_000))
+    se = np.hypot(w_exact.std(axis=0), w_inst.std(axis=0)) / np.sqrt(100_000)
+    assert np.all(np.abs(w_exact.mean(axis=0) - w_inst.mean(axis=0)) < 4.5 * se)
+    with pytest.raises(fibrefit.FibrefitError, match="instance row 1"):
+        m.sample(v[:2], u[:2], instance=[0.2, 1.5])
+    with pytest.raises(fibrefit.FibrefitError, match="instance"):
+        m.eval(v[:2], v[:2], instance=[0.2])
+
+
 def test_pdf_integrates_to_at_most_one(tmp_path, rng):
     m = fibrefit.load(write_params(tmp_path, "pf.json", PF))
     n = 400_000

@@ -63,7 +63,7 @@ pub fn furnace(m: &Material, strata: usize) -> Vec<ViewAlbedo> {
         }
     }
     let samples = m
-        .sample_many(&rows_v, &rows_u, None)
+        .sample_many(&rows_v, &rows_u, None, None)
         .expect("unit views and uniforms in [0, 1)");
     views
         .iter()

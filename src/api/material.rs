@@ -15,7 +15,7 @@ use crate::load::image_io::LinearImage;
 use crate::load::texel_maps::TexelMapsIn;
 use crate::model::frame::{Local, Vec3};
 use crate::model::params::ModelParams;
-use crate::model::sampling::{Draw, Sampler};
+use crate::model::sampling::{Draw, Instance, Sampler};
 use crate::model::{self, ModelId, ShadingModel};
 use crate::render::objects::Hit;
 use crate::render::{Material as Shading, ShadingPoint};
@@ -67,6 +67,9 @@ pub struct Material {
     pub undetermined: Vec<crate::api::Undetermined>,
     shading: Box<dyn ShadingModel>,
     sampler: Sampler,
+    /// The model one instance at a time ([`crate::model::build_instance`]), where the material
+    /// mixes several (a spread, a height histogram).
+    instance_model: Option<Box<dyn ShadingModel>>,
     texel_maps: Option<TexelMapsIn>,
 }
 
@@ -173,6 +176,10 @@ impl Material {
         };
         let shading = model::build(id, &params)?;
         let sampler = Sampler::new(id, &params);
+        let instance_model = match sampler.instances() > 1 {
+            true => Some(model::build_instance(id, &params)?),
+            false => None,
+        };
         Ok((
             Self {
                 model: id,
@@ -183,6 +190,7 @@ impl Material {
                 undetermined: Vec::new(),
                 shading,
                 sampler,
+                instance_model,
                 texel_maps,
             },
             warnings,
@@ -342,27 +350,99 @@ impl Material {
     /// The BRDF per channel (1/sr) for the light `l` and view `v` (unit, swatch frame); zero
     /// when either is at or below the horizon.
     pub fn eval(&self, l: &Vec3, v: &Vec3, uv: Option<[f64; 2]>) -> [f64; 3] {
+        self.eval_instance(l, v, uv, None)
+    }
+
+    /// How many instances the material mixes (`model::sampling::Instance`: a
+    /// fibre-direction spread's nodes times a height histogram's heights); 1 where its exact
+    /// evaluation is one. A texel's own height (a map) fixes the height.
+    pub fn instances(&self) -> usize {
+        self.sampler.instances()
+    }
+
+    /// The instance the uniform `instance` picks at the point `sp` (`None`: the material
+    /// itself, or a material of one instance).
+    fn instance_at(&self, sp: &ShadingPoint, instance: Option<f64>) -> Option<Instance> {
+        self.instance_model.as_ref()?;
+        instance.map(|u| self.sampler.instance(u, sp.height))
+    }
+
+    /// [`Material::eval`] of one instance of the material, the one the uniform `instance` in
+    /// [0, 1) picks (`None`: the material itself): the same uniform picks the same instance in
+    /// [`Material::pdf_instance`] and [`Material::sample_instance`], and the mean over uniform
+    /// `instance` is [`Material::eval`] exactly.
+    pub fn eval_instance(
+        &self,
+        l: &Vec3,
+        v: &Vec3,
+        uv: Option<[f64; 2]>,
+        instance: Option<f64>,
+    ) -> [f64; 3] {
         let shading = self.shading();
         let sp = self.point(&shading, uv);
-        shading.brdf(&sp, l, v)
+        let (Some(inst), Some(m)) = (self.instance_at(&sp, instance), &self.instance_model) else {
+            return shading.brdf(&sp, l, v);
+        };
+        let pair = model::DirectionPair {
+            l: local(&sp, l),
+            v: local(&sp, v),
+        };
+        let basis = inst.basis(m.as_ref(), &pair);
+        let factor = shading.factor(&pair);
+        std::array::from_fn(|c| basis.brdf(&sp.albedos, c.min(self.channels - 1)) * factor[c])
     }
 
     /// The sampler's density (1/sr) of `l` given `v`.
     pub fn pdf(&self, v: &Vec3, l: &Vec3, uv: Option<[f64; 2]>) -> f64 {
+        self.pdf_instance(v, l, uv, None)
+    }
+
+    /// [`Material::pdf`] of the instance the uniform `instance` picks (`None`: the material's).
+    pub fn pdf_instance(
+        &self,
+        v: &Vec3,
+        l: &Vec3,
+        uv: Option<[f64; 2]>,
+        instance: Option<f64>,
+    ) -> f64 {
         let shading = self.shading();
         let sp = self.point(&shading, uv);
-        self.sampler
-            .pdf(&sp.albedos, &local(&sp, v), &local(&sp, l))
+        let (v, l) = (local(&sp, v), local(&sp, l));
+        match self.instance_at(&sp, instance) {
+            Some(inst) => self.sampler.pdf_instance(&sp.albedos, &inst, &v, &l),
+            None => self.sampler.pdf(&sp.albedos, &v, &l),
+        }
     }
 
     /// A light direction sampled for the view `v` from the uniforms `u` in [0, 1)^2.
     pub fn sample(&self, v: &Vec3, u: [f64; 2], uv: Option<[f64; 2]>) -> Sampled {
+        self.sample_instance(v, u, uv, None)
+    }
+
+    /// [`Material::sample`] from the instance the uniform `instance` picks (`None`: the
+    /// material's exact sampler): its weight is the instance's f cos / pdf, with
+    /// [`Material::eval_instance`] and [`Material::pdf_instance`] of the same uniform.
+    pub fn sample_instance(
+        &self,
+        v: &Vec3,
+        u: [f64; 2],
+        uv: Option<[f64; 2]>,
+        instance: Option<f64>,
+    ) -> Sampled {
         let shading = self.shading();
         let sp = self.point(&shading, uv);
         let v = local(&sp, v);
-        let own = self.texel_model(&sp);
-        let model = own.as_deref().unwrap_or(self.shading.as_ref());
-        let s = self.sampler.sample(model, &sp.albedos, sp.height, &v, u);
+        let s = match (self.instance_at(&sp, instance), &self.instance_model) {
+            (Some(inst), Some(m)) => {
+                self.sampler
+                    .sample_instance(m.as_ref(), &sp.albedos, &inst, &v, u)
+            }
+            _ => {
+                let own = self.texel_model(&sp);
+                let model = own.as_deref().unwrap_or(self.shading.as_ref());
+                self.sampler.sample(model, &sp.albedos, sp.height, &v, u)
+            }
+        };
         self.sampled(&shading, &sp, &v, s)
     }
 
@@ -376,7 +456,13 @@ impl Material {
 
     /// [`Material::sample`] of a block of rows, the rung evaluated at all of them at once
     /// ([`Sampler::sample_many`]): the same values, bit for bit.
-    fn sample_block(&self, v: &[Vec3], u: &[[f64; 2]], uv: Option<&[[f64; 2]]>) -> Vec<Sampled> {
+    fn sample_block(
+        &self,
+        v: &[Vec3],
+        u: &[[f64; 2]],
+        uv: Option<&[[f64; 2]]>,
+        instance: Option<&[f64]>,
+    ) -> Vec<Sampled> {
         let shading = self.shading();
         let points: Vec<ShadingPoint> = (0..v.len())
             .map(|i| self.point(&shading, uv.map(|c| c[i])))
@@ -394,7 +480,15 @@ impl Material {
         let own: Vec<Option<Box<dyn ShadingModel>>> =
             points.iter().map(|sp| self.texel_model(sp)).collect();
         let mut drawn = vec![None; draws.len()];
-        if own.iter().all(Option::is_none) {
+        if let (Some(r), Some(m)) = (instance, &self.instance_model) {
+            let insts: Vec<Instance> = points
+                .iter()
+                .zip(r)
+                .map(|(sp, &r)| self.sampler.instance(r, sp.height))
+                .collect();
+            self.sampler
+                .sample_many_instances(m.as_ref(), &draws, &insts, &mut drawn);
+        } else if own.iter().all(Option::is_none) {
             self.sampler
                 .sample_many(self.shading.as_ref(), &draws, &mut drawn);
         } else {
@@ -449,44 +543,50 @@ impl Material {
         }
     }
 
-    /// [`Material::eval`] of every row (in parallel), the directions checked first.
+    /// [`Material::eval_instance`] of every row (in parallel), the inputs checked first;
+    /// `instance`: a uniform per row picking its instance (`None`: the material itself).
     pub fn eval_many(
         &self,
         l: &[[f64; 3]],
         v: &[[f64; 3]],
         uv: Option<&[[f64; 2]]>,
+        instance: Option<&[f64]>,
     ) -> Result<Vec<[f64; 3]>> {
         let (l, v) = (directions(l, "l")?, directions(v, "v")?);
         same_rows(&[("l", l.len()), ("v", v.len())])?;
         let uv = coordinates(uv, l.len())?;
+        let instance = instance_uniforms(instance, l.len())?;
         Ok((0..l.len())
             .into_par_iter()
-            .map(|i| self.eval(&l[i], &v[i], uv.map(|u| u[i])))
+            .map(|i| self.eval_instance(&l[i], &v[i], uv.map(|u| u[i]), instance.map(|r| r[i])))
             .collect())
     }
 
-    /// [`Material::pdf`] of every row (in parallel), the directions checked first.
+    /// [`Material::pdf_instance`] of every row (in parallel), the inputs checked first.
     pub fn pdf_many(
         &self,
         v: &[[f64; 3]],
         l: &[[f64; 3]],
         uv: Option<&[[f64; 2]]>,
+        instance: Option<&[f64]>,
     ) -> Result<Vec<f64>> {
         let (v, l) = (directions(v, "v")?, directions(l, "l")?);
         same_rows(&[("v", v.len()), ("l", l.len())])?;
         let uv = coordinates(uv, v.len())?;
+        let instance = instance_uniforms(instance, v.len())?;
         Ok((0..v.len())
             .into_par_iter()
-            .map(|i| self.pdf(&v[i], &l[i], uv.map(|u| u[i])))
+            .map(|i| self.pdf_instance(&v[i], &l[i], uv.map(|u| u[i]), instance.map(|r| r[i])))
             .collect())
     }
 
-    /// [`Material::sample`] of every row (in parallel), the inputs checked first.
+    /// [`Material::sample_instance`] of every row (in parallel), the inputs checked first.
     pub fn sample_many(
         &self,
         v: &[[f64; 3]],
         u: &[[f64; 2]],
         uv: Option<&[[f64; 2]]>,
+        instance: Option<&[f64]>,
     ) -> Result<Vec<Sampled>> {
         let v = directions(v, "v")?;
         same_rows(&[("v", v.len()), ("u", u.len())])?;
@@ -502,13 +602,20 @@ impl Material {
             );
         }
         let uv = coordinates(uv, v.len())?;
+        let instance = instance_uniforms(instance, v.len())?;
         // blocks of rows in parallel, each block's rung evaluated at once (in lanes)
         Ok(v.par_chunks(SAMPLE_BLOCK)
             .zip(u.par_chunks(SAMPLE_BLOCK))
             .enumerate()
             .flat_map_iter(|(k, (v, u))| {
                 let at = k * SAMPLE_BLOCK;
-                self.sample_block(v, u, uv.map(|c| &c[at..at + v.len()]))
+                let rows = at..at + v.len();
+                self.sample_block(
+                    v,
+                    u,
+                    uv.map(|c| &c[rows.clone()]),
+                    instance.map(|r| &r[rows]),
+                )
             })
             .collect())
     }
@@ -606,6 +713,23 @@ fn same_rows(arrays: &[(&str, usize)]) -> Result<()> {
         }
     }
     Ok(())
+}
+
+/// The instance uniforms, one per row in [0, 1), checked.
+fn instance_uniforms(instance: Option<&[f64]>, rows: usize) -> Result<Option<&[f64]>> {
+    let Some(r) = instance else {
+        return Ok(None);
+    };
+    if r.len() != rows {
+        bail!(
+            "the directions have {rows} rows but instance has {}; one uniform per row is expected",
+            r.len()
+        );
+    }
+    if let Some((i, x)) = r.iter().enumerate().find(|(_, x)| !(0.0..1.0).contains(*x)) {
+        bail!("instance row {i}: {x} is not in [0, 1) (uniform random numbers are expected)");
+    }
+    Ok(Some(r))
 }
 
 fn coordinates(uv: Option<&[[f64; 2]]>, rows: usize) -> Result<Option<&[[f64; 2]]>> {

@@ -50,7 +50,8 @@ pub struct SpeedRow {
     pub sampler_only_per_second: f64,
     /// The rung's evaluation alone (`basis`), for comparison.
     pub evals_per_second: f64,
-    /// `Sampler::new` (the cross-section rungs tabulate their cone law there), milliseconds.
+    /// `Sampler::new` (the cross-section rungs tabulate their cone law there), milliseconds:
+    /// the median of 5.
     pub construct_ms: f64,
     /// `Sampler::sample` with the evaluation on [`SPEED_THREADS`] threads at once (their
     /// samples summed over the same wall time): what 2 cores draw. Goal (issue 41): at least
@@ -59,6 +60,21 @@ pub struct SpeedRow {
     /// `Sampler::sample_many` in blocks of [`BATCH`] draws on [`SPEED_THREADS`] threads: what
     /// a renderer drawing a wavefront of samples (Mitsuba, `Material.sample` on arrays) gets.
     pub batched_samples_per_second: f64,
+    /// How many instances the material mixes (spread nodes times histogram heights,
+    /// [`crate::model::sampling::Instance`]); 1: the exact evaluation is one instance, and the
+    /// instance columns are empty.
+    pub instances: usize,
+    /// `Sampler::sample_instance`, one instance drawn per sample (a third uniform), on
+    /// [`SPEED_THREADS`] threads, as `parallel_samples_per_second`.
+    pub instance_samples_per_second: Option<f64>,
+    /// `Sampler::sample_many_instances` in blocks of [`BATCH`], as `batched_samples_per_second`.
+    pub instance_batched_per_second: Option<f64>,
+    /// The per-sample variance of the albedo estimate with one instance per sample over the
+    /// exact sampler's, geometric mean over the views (exponent as the row's).
+    pub instance_variance_ratio: Option<f64>,
+    /// The largest difference over the views between the two estimates of the albedo, in
+    /// standard errors of the difference (unbiased: |z| of a few at most).
+    pub instance_albedo_z: Option<f64>,
 }
 
 /// Draws per block of the batched speed measure (as `Material.sample`'s blocks).
@@ -230,11 +246,20 @@ fn speed_row(
     p: &ModelParams,
     heights: Option<(f64, f64)>,
     budget: f64,
+    quick: bool,
 ) -> Result<SpeedRow> {
     let m = model::build(id, p)?;
-    let t = Instant::now();
-    let sampler = Sampler::new(id, p);
-    let construct_ms = 1e3 * t.elapsed().as_secs_f64();
+    // the median of 5 constructions (one alone varied 2-5x between runs)
+    let mut made = Vec::new();
+    let mut construct = [0.0; 5];
+    for c in &mut construct {
+        let t = Instant::now();
+        made.push(Sampler::new(id, p));
+        *c = 1e3 * t.elapsed().as_secs_f64();
+    }
+    construct.sort_by(f64::total_cmp);
+    let construct_ms = construct[2];
+    let sampler = made.pop().expect("a sampler");
     let a = p.albedos;
     let views: Vec<Local> = VIEWS.iter().map(|&(t, f)| view(t, f)).collect();
     // run until `budget` seconds have passed, in rounds over the views; the count
@@ -306,6 +331,69 @@ fn speed_row(
         };
         m.basis(&DirectionPair { l, v: *v }).specular
     });
+    let instances = sampler.instances_given(heights.is_some());
+    let (mut instance_samples_per_second, mut instance_batched_per_second) = (None, None);
+    let (mut instance_variance_ratio, mut instance_albedo_z) = (None, None);
+    if instances > 1 {
+        let aligned = model::build_instance(id, p)?;
+        let aligned = aligned.as_ref();
+        let with_instance = |v: &Local, u: [f64; 2], r: f64| {
+            let inst = sampler.instance(r, height(r));
+            sampler
+                .sample_instance(aligned, &a, &inst, v, u)
+                .map_or(0.0, |s| s.weight[0])
+        };
+        instance_samples_per_second = Some(on_speed_threads(|seed| run(seed, &with_instance)));
+        let batched = |seed: u64| {
+            let mut u = Uniforms::new(seed);
+            let (mut draws, mut insts) = (Vec::with_capacity(BATCH), Vec::with_capacity(BATCH));
+            let mut out = vec![None; BATCH];
+            let (mut count, mut sink) = (0usize, 0.0);
+            let t = Instant::now();
+            while t.elapsed().as_secs_f64() < budget || count == 0 {
+                draws.clear();
+                insts.clear();
+                for k in 0..BATCH {
+                    let u2 = [u.next(), u.next()];
+                    let r = u.next();
+                    draws.push(Draw {
+                        albedos: a,
+                        height: height(r),
+                        v: views[k % views.len()],
+                        u: u2,
+                    });
+                    insts.push(sampler.instance(r, height(r)));
+                }
+                sampler.sample_many_instances(aligned, &draws, &insts, &mut out);
+                sink += out.iter().flatten().map(|s| s.weight[0]).sum::<f64>();
+                count += BATCH;
+            }
+            std::hint::black_box(sink);
+            (count, t.elapsed().as_secs_f64())
+        };
+        instance_batched_per_second = Some(on_speed_threads(batched));
+        // the price in variance, and a check of the mean, view by view (the exact sampler's
+        // draws are the cost: a tenth of the variance study's)
+        let n = (samples_for(id, quick) / 10).max(2_000);
+        let (mut log_ratio, mut z_max) = (0.0, 0.0f64);
+        for (k, v) in views.iter().enumerate() {
+            let mut u = Uniforms::new(100 + k as u64);
+            let (exact, var_exact) = moments(n, || {
+                sampler
+                    .sample(m.as_ref(), &a, height(u.next()), v, [u.next(), u.next()])
+                    .map_or(0.0, |s| s.weight[0])
+            });
+            let mut u = Uniforms::new(200 + k as u64);
+            let (mean, var) = moments(n, || {
+                let r = u.next();
+                with_instance(v, [u.next(), u.next()], r)
+            });
+            log_ratio += (var / var_exact).ln();
+            z_max = z_max.max((mean - exact).abs() / ((var + var_exact) / n as f64).sqrt());
+        }
+        instance_variance_ratio = Some((log_ratio / views.len() as f64).exp());
+        instance_albedo_z = Some(z_max);
+    }
     Ok(SpeedRow {
         rung: id.to_string(),
         variant: variant.to_string(),
@@ -315,6 +403,11 @@ fn speed_row(
         construct_ms,
         parallel_samples_per_second,
         batched_samples_per_second,
+        instances,
+        instance_samples_per_second,
+        instance_batched_per_second,
+        instance_variance_ratio,
+        instance_albedo_z,
     })
 }
 
@@ -469,6 +562,7 @@ fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
             &params(id, &params_text(id, e))?,
             None,
             budget,
+            quick,
         )?);
         bar.inc(1);
     }
@@ -478,7 +572,7 @@ fn speed_rows(e: f64, quick: bool, bar: &ProgressBar) -> Result<Vec<SpeedRow>> {
         // a per-texel height map: every draw at its own height over the whole range
         let top = crate::model::topology::max_height(p.spacing);
         let heights = (variant == HEIGHT_PER_DRAW).then_some((0.0, top));
-        speed.push(speed_row(id, variant, &p, heights, budget)?);
+        speed.push(speed_row(id, variant, &p, heights, budget, quick)?);
         bar.inc(1);
     }
     Ok(speed)

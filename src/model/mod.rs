@@ -395,6 +395,21 @@ pub fn build(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingMode
     ))
 }
 
+/// The model one [`sampling::Instance`] at a time: [`build`] without the fibre-direction spread
+/// (the instance turns the pair itself; the Fresnel factor and the fuzz layer are kept: both
+/// depend on the pair only through angles a turn about N keeps). The `reference` integrates its
+/// spread adaptively and has no instances: [`build`] itself.
+pub fn build_instance(id: ModelId, p: &ModelParams) -> anyhow::Result<Box<dyn ShadingModel>> {
+    if id.rung().cost == rung::Cost::Adaptive {
+        return build(id, p);
+    }
+    Ok(with_fuzz(
+        with_fresnel(build_aligned(id, p), p.fresnel_ior),
+        p.fuzz_depth,
+        p.fuzz_asymmetry,
+    ))
+}
+
 /// `m` under a fuzz layer of optical depth `depth` and phase asymmetry `g` (any rung; `depth` 0:
 /// `m` itself).
 pub fn with_fuzz(m: Box<dyn ShadingModel>, depth: f64, g: f64) -> Box<dyn ShadingModel> {

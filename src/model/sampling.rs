@@ -158,19 +158,32 @@
 //! in `tests/sampling.rs` by chi-square goodness-of-fit tests of the directions against `pdf`.
 //! Directions with N.l <= [`HORIZON_COS`] count as at the horizon in both.
 //!
+//! # One instance per draw
+//!
+//! A spread's N nodes and varying-topology's K heights make `sample`'s weight cost N K
+//! evaluations of the aligned rung. [`Sampler::sample_instance`] draws one of those instances
+//! with its weight (a third uniform, [`Sampler::instance`]) and samples and weighs it alone, its
+//! density that instance's mixture (this one with a single node, in the turned frame): an
+//! unbiased estimate of the same reflected radiance at the cost of one instance, with a larger
+//! variance (`instance.rs` says why it is sound and how a path tracer uses it).
+//!
 //! Here: the sampler and its mixture (weights, draw, density); the fibre lobe and its cone table
-//! in `lobe.rs`, the other components' closed-form draws and densities in `directions.rs`.
+//! in `lobe.rs`, the other components' closed-form draws and densities in `directions.rs`, one
+//! instance per draw in `instance.rs`.
 
 use super::azimuth_spread::spread_nodes;
 use super::frame::Local;
 use super::fresnel::schlick;
 use super::params::ModelParams;
-use super::rung::{LobeAlbedo, LobeSampling};
+use super::rung::{Cost, LobeAlbedo, LobeSampling};
 use super::{Ability, Albedos, Basis, DirectionPair, ModelId, ShadingModel};
 use std::f64::consts::{FRAC_1_PI, PI};
 
 mod directions;
+mod instance;
 mod lobe;
+
+pub use instance::Instance;
 
 use directions::{
     cosine_direction, ggx_direction, ggx_pdf, rescale, tube_direction, tube_pdf, turn, unturn,
@@ -245,6 +258,11 @@ pub struct Sampler {
     kd_cos: f64,
     /// Directional albedo per unit kd going to the lobe technique (glTF's metal).
     kd_lobe: f64,
+    /// The histogram's heights an instance is drawn from ([`Instance`]).
+    heights: instance::Heights,
+    /// The sampler of one instance (this one with the single node of the fibres), where this
+    /// one has a spread's nodes.
+    aligned: Option<Box<Sampler>>,
 }
 
 /// Lanes of the mixture density's node loop.
@@ -299,6 +317,30 @@ struct Weights {
     cos: f64,
     tube: f64,
     lobe: f64,
+}
+
+/// The bases of `plain` pairs (`basis_many`) and of `high` pairs each at its height
+/// (`basis_many_at_each_height`), in groups of `group` pairs: a batch's evaluations, in lanes.
+fn evaluate_in_groups(
+    model: &dyn ShadingModel,
+    plain: &[DirectionPair],
+    high: &[DirectionPair],
+    heights: &[f64],
+    group: usize,
+) -> (Vec<Basis>, Vec<Basis>) {
+    let mut bases = vec![Basis::default(); plain.len()];
+    for (p, b) in plain.chunks(group).zip(bases.chunks_mut(group)) {
+        model.basis_many(p, b);
+    }
+    let mut high_bases = vec![Basis::default(); high.len()];
+    for ((p, h), b) in high
+        .chunks(group)
+        .zip(heights.chunks(group))
+        .zip(high_bases.chunks_mut(group))
+    {
+        model.basis_many_at_each_height(p, h, b);
+    }
+    (bases, high_bases)
 }
 
 impl Sampler {
@@ -361,18 +403,57 @@ impl Sampler {
         } else {
             vec![(1.0, 0.0, 1.0)]
         };
-        let mut acc = 0.0;
-        let mut cumulative: Vec<f64> = nodes
-            .iter()
-            .map(|n| {
-                acc += n.2;
-                acc
-            })
-            .collect();
-        if let Some(last) = cumulative.last_mut() {
-            *last = 1.0;
+        let cumulative = instance::cumulative(nodes.iter().map(|n| n.2));
+        let node_blocks = Self::node_blocks(&nodes);
+        // directional albedo per unit kd of the diffuse term, by technique; glTF's base colour
+        // is Lambertian for the dielectric, the metal's Fresnel on its GGX lobe for the metal
+        let (kd_tube, mut kd_cos) = (rung.diffuse_tube, rung.diffuse_cosine);
+        let mut kd_lobe = 0.0;
+        if let Lobe::Ggx { metal, .. } = lobe {
+            (kd_cos, kd_lobe) = (kd_cos * (1.0 - metal), metal);
         }
-        let node_blocks = nodes
+        let fresnel = p.fresnel_ior > 0.0 && id.has(Ability::Fresnel);
+        let cone = rung.cone_from.and_then(|from| ConeTable::new(from, p));
+        // the instances (`Instance`): not the reference's, which integrates its spread and
+        // heights adaptively
+        let exact_sums = id.rung().cost != Cost::Adaptive;
+        let heights = if exact_sums && id.has(Ability::HeightHistogram) {
+            instance::Heights::new(p.topology.discretise(p.spacing, p.histogram_bins))
+        } else {
+            instance::Heights::default()
+        };
+        let mut sampler = Sampler {
+            lobe_albedo: rung.lobe_albedo,
+            lobe,
+            cone,
+            exponent: p.exponent,
+            fresnel_ior: if fresnel { p.fresnel_ior } else { 0.0 },
+            fuzz_depth: p.fuzz_depth,
+            nodes,
+            cumulative,
+            node_blocks,
+            kd_tube,
+            kd_cos,
+            kd_lobe,
+            heights,
+            aligned: None,
+        };
+        if exact_sums && sampler.nodes.len() > 1 {
+            let one = vec![(1.0, 0.0, 1.0)];
+            sampler.aligned = Some(Box::new(Sampler {
+                node_blocks: Self::node_blocks(&one),
+                nodes: one,
+                cumulative: vec![1.0],
+                aligned: None,
+                ..sampler.clone()
+            }));
+        }
+        sampler
+    }
+
+    /// `nodes` in blocks of [`NODE_LANES`] for the density's lane loop.
+    fn node_blocks(nodes: &[(f64, f64, f64)]) -> Vec<NodeBlock> {
+        nodes
             .chunks(NODE_LANES)
             .map(|chunk| {
                 let mut b = NodeBlock {
@@ -386,30 +467,7 @@ impl Sampler {
                 }
                 b
             })
-            .collect();
-        // directional albedo per unit kd of the diffuse term, by technique; glTF's base colour
-        // is Lambertian for the dielectric, the metal's Fresnel on its GGX lobe for the metal
-        let (kd_tube, mut kd_cos) = (rung.diffuse_tube, rung.diffuse_cosine);
-        let mut kd_lobe = 0.0;
-        if let Lobe::Ggx { metal, .. } = lobe {
-            (kd_cos, kd_lobe) = (kd_cos * (1.0 - metal), metal);
-        }
-        let fresnel = p.fresnel_ior > 0.0 && id.has(Ability::Fresnel);
-        let cone = rung.cone_from.and_then(|from| ConeTable::new(from, p));
-        Sampler {
-            lobe_albedo: rung.lobe_albedo,
-            lobe,
-            cone,
-            exponent: p.exponent,
-            fresnel_ior: if fresnel { p.fresnel_ior } else { 0.0 },
-            fuzz_depth: p.fuzz_depth,
-            nodes,
-            cumulative,
-            node_blocks,
-            kd_tube,
-            kd_cos,
-            kd_lobe,
-        }
+            .collect()
     }
 
     /// The same sampler with the fibre lobe's Cauchy width c / sqrt(exponent) (default
@@ -419,6 +477,7 @@ impl Sampler {
         if let Lobe::Fibre { gamma } = &mut self.lobe {
             *gamma = c / self.exponent.max(1.0).sqrt();
         }
+        self.aligned = self.aligned.map(|a| Box::new(a.with_lobe_width(c)));
         self
     }
 
@@ -478,18 +537,8 @@ impl Sampler {
         // in groups of about EVAL_PAIRS pairs as the rung sees them (a spread turns each pair
         // into one per node): larger groups only spill the rung's buffers out of the caches
         let group = (EVAL_PAIRS / self.nodes.len().max(1)).max(1);
-        let mut bases = vec![Basis::default(); plain_pairs.len()];
-        for (p, b) in plain_pairs.chunks(group).zip(bases.chunks_mut(group)) {
-            model.basis_many(p, b);
-        }
-        let mut high_bases = vec![Basis::default(); high_pairs.len()];
-        for ((p, h), b) in high_pairs
-            .chunks(group)
-            .zip(heights.chunks(group))
-            .zip(high_bases.chunks_mut(group))
-        {
-            model.basis_many_at_each_height(p, h, b);
-        }
+        let (bases, high_bases) =
+            evaluate_in_groups(model, &plain_pairs, &high_pairs, &heights, group);
         let done = plain
             .iter()
             .zip(plain_pairs.iter().zip(&bases))
