@@ -1062,6 +1062,16 @@ fn the_instances_weighted_by_their_probabilities_are_the_exact_model() {
 }
 
 #[test]
+fn the_reference_is_one_instance_itself() {
+    // it integrates its spread and heights adaptively: no node of its sampler is an instance
+    let text = base_text(ModelId::Reference) + "azimuth_spread_deg = 30\n";
+    let sampler = Sampler::new(ModelId::Reference, &params(&text, ModelId::Reference));
+    assert_eq!(sampler.instances(), 1);
+    let inst = sampler.instance(0.7, None);
+    assert_eq!((inst.cos, inst.sin, inst.height), (1.0, 0.0, None));
+}
+
+#[test]
 fn instances_are_picked_with_their_probabilities() {
     for (name, id, text) in instance_cases() {
         let p = params(&text, id);

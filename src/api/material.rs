@@ -355,7 +355,8 @@ impl Material {
 
     /// How many instances the material mixes (`model::sampling::Instance`: a
     /// fibre-direction spread's nodes times a height histogram's heights); 1 where its exact
-    /// evaluation is one. A texel's own height (a map) fixes the height.
+    /// evaluation is one. Where a texel has its own height (a map), only its spread node is
+    /// drawn.
     pub fn instances(&self) -> usize {
         self.sampler.instances()
     }
@@ -387,9 +388,7 @@ impl Material {
             l: local(&sp, l),
             v: local(&sp, v),
         };
-        let basis = inst.basis(m.as_ref(), &pair);
-        let factor = shading.factor(&pair);
-        std::array::from_fn(|c| basis.brdf(&sp.albedos, c.min(self.channels - 1)) * factor[c])
+        shading.brdf_of(&sp, &pair, &inst.basis(m.as_ref(), &pair))
     }
 
     /// The sampler's density (1/sr) of `l` given `v`.
@@ -477,8 +476,6 @@ impl Material {
                 u: *u,
             })
             .collect();
-        let own: Vec<Option<Box<dyn ShadingModel>>> =
-            points.iter().map(|sp| self.texel_model(sp)).collect();
         let mut drawn = vec![None; draws.len()];
         if let (Some(r), Some(m)) = (instance, &self.instance_model) {
             let insts: Vec<Instance> = points
@@ -488,15 +485,19 @@ impl Material {
                 .collect();
             self.sampler
                 .sample_many_instances(m.as_ref(), &draws, &insts, &mut drawn);
-        } else if own.iter().all(Option::is_none) {
-            self.sampler
-                .sample_many(self.shading.as_ref(), &draws, &mut drawn);
         } else {
-            // texels with their own lobe (lobe maps: a renderer's material, whose evaluation
-            // gains nothing from a batch): row by row, each with its texel's model
-            for ((d, m), o) in draws.iter().zip(&own).zip(drawn.iter_mut()) {
-                let m = m.as_deref().unwrap_or(self.shading.as_ref());
-                *o = self.sampler.sample(m, &d.albedos, d.height, &d.v, d.u);
+            let own: Vec<Option<Box<dyn ShadingModel>>> =
+                points.iter().map(|sp| self.texel_model(sp)).collect();
+            if own.iter().all(Option::is_none) {
+                self.sampler
+                    .sample_many(self.shading.as_ref(), &draws, &mut drawn);
+            } else {
+                // texels with their own lobe (lobe maps: a renderer's material, whose
+                // evaluation gains nothing from a batch): row by row, each with its texel's model
+                for ((d, m), o) in draws.iter().zip(&own).zip(drawn.iter_mut()) {
+                    let m = m.as_deref().unwrap_or(self.shading.as_ref());
+                    *o = self.sampler.sample(m, &d.albedos, d.height, &d.v, d.u);
+                }
             }
         }
         points

@@ -12,7 +12,7 @@
 use crate::model::frame::Local;
 use crate::model::params::{ModelParams, RawParams};
 use crate::model::rungs::Cost;
-use crate::model::sampling::{Draw, Sampler, LOBE_WIDTH};
+use crate::model::sampling::{Draw, Instance, Sample, Sampler, LOBE_WIDTH};
 use crate::model::{self, lambert::Lambert, DirectionPair, ModelId};
 use anyhow::{anyhow, Result};
 use indicatif::ProgressBar;
@@ -290,29 +290,39 @@ fn speed_row(
     let parallel_samples_per_second = on_speed_threads(|seed| run(seed, &with_eval));
     // the same draws in blocks (`sample_many`: the rung evaluated at a block at once), as a
     // wavefront renderer or `Material.sample` on arrays asks for them, on SPEED_THREADS threads
-    let batched = |seed: u64| {
+    // blocks of BATCH draws (uniforms u0, u1, then r for the height and the instance), each
+    // drawn at once by `draw_block`, until `budget` seconds have passed: (count, seconds)
+    let in_blocks = |seed: u64, draw_block: &dyn Fn(&[Draw], &[f64], &mut [Option<Sample>])| {
         let mut u = Uniforms::new(seed);
-        let mut draws = Vec::with_capacity(BATCH);
+        let (mut draws, mut rs) = (Vec::with_capacity(BATCH), Vec::with_capacity(BATCH));
         let mut out = vec![None; BATCH];
         let (mut count, mut sink) = (0usize, 0.0);
         let t = Instant::now();
         while t.elapsed().as_secs_f64() < budget || count == 0 {
             draws.clear();
+            rs.clear();
             for k in 0..BATCH {
                 let u2 = [u.next(), u.next()];
+                let r = u.next();
                 draws.push(Draw {
                     albedos: a,
-                    height: height(u.next()),
+                    height: height(r),
                     v: views[k % views.len()],
                     u: u2,
                 });
+                rs.push(r);
             }
-            sampler.sample_many(m.as_ref(), &draws, &mut out);
+            draw_block(&draws, &rs, &mut out);
             sink += out.iter().flatten().map(|s| s.weight[0]).sum::<f64>();
             count += BATCH;
         }
         std::hint::black_box(sink);
         (count, t.elapsed().as_secs_f64())
+    };
+    let batched = |seed: u64| {
+        in_blocks(seed, &|draws, _, out| {
+            sampler.sample_many(m.as_ref(), draws, out)
+        })
     };
     let batched_samples_per_second = on_speed_threads(batched);
     let samples_per_second = time(&with_eval);
@@ -345,31 +355,14 @@ fn speed_row(
         };
         instance_samples_per_second = Some(on_speed_threads(|seed| run(seed, &with_instance)));
         let batched = |seed: u64| {
-            let mut u = Uniforms::new(seed);
-            let (mut draws, mut insts) = (Vec::with_capacity(BATCH), Vec::with_capacity(BATCH));
-            let mut out = vec![None; BATCH];
-            let (mut count, mut sink) = (0usize, 0.0);
-            let t = Instant::now();
-            while t.elapsed().as_secs_f64() < budget || count == 0 {
-                draws.clear();
-                insts.clear();
-                for k in 0..BATCH {
-                    let u2 = [u.next(), u.next()];
-                    let r = u.next();
-                    draws.push(Draw {
-                        albedos: a,
-                        height: height(r),
-                        v: views[k % views.len()],
-                        u: u2,
-                    });
-                    insts.push(sampler.instance(r, height(r)));
-                }
-                sampler.sample_many_instances(aligned, &draws, &insts, &mut out);
-                sink += out.iter().flatten().map(|s| s.weight[0]).sum::<f64>();
-                count += BATCH;
-            }
-            std::hint::black_box(sink);
-            (count, t.elapsed().as_secs_f64())
+            in_blocks(seed, &|draws, rs, out| {
+                let insts: Vec<Instance> = draws
+                    .iter()
+                    .zip(rs)
+                    .map(|(d, &r)| sampler.instance(r, d.height))
+                    .collect();
+                sampler.sample_many_instances(aligned, draws, &insts, out)
+            })
         };
         instance_batched_per_second = Some(on_speed_threads(batched));
         // the price in variance, and a check of the mean, view by view (the exact sampler's

@@ -258,8 +258,8 @@ pub struct Sampler {
     kd_cos: f64,
     /// Directional albedo per unit kd going to the lobe technique (glTF's metal).
     kd_lobe: f64,
-    /// The histogram's heights an instance is drawn from ([`Instance`]).
-    heights: instance::Heights,
+    /// The instances one is drawn from ([`Instance`]).
+    instance_set: instance::Instances,
     /// The sampler of one instance (this one with the single node of the fibres), where this
     /// one has a spread's nodes.
     aligned: Option<Box<Sampler>>,
@@ -414,13 +414,16 @@ impl Sampler {
         }
         let fresnel = p.fresnel_ior > 0.0 && id.has(Ability::Fresnel);
         let cone = rung.cone_from.and_then(|from| ConeTable::new(from, p));
-        // the instances (`Instance`): not the reference's, which integrates its spread and
-        // heights adaptively
+        // the instances (`Instance`): the reference has one, itself (it integrates its spread
+        // and heights adaptively)
         let exact_sums = id.rung().cost != Cost::Adaptive;
-        let heights = if exact_sums && id.has(Ability::HeightHistogram) {
-            instance::Heights::new(p.topology.discretise(p.spacing, p.histogram_bins))
-        } else {
-            instance::Heights::default()
+        let instance_set = match exact_sums {
+            true if id.has(Ability::HeightHistogram) => instance::Instances::new(
+                nodes.clone(),
+                p.topology.discretise(p.spacing, p.histogram_bins),
+            ),
+            true => instance::Instances::new(nodes.clone(), Vec::new()),
+            false => instance::Instances::whole(),
         };
         let mut sampler = Sampler {
             lobe_albedo: rung.lobe_albedo,
@@ -435,7 +438,7 @@ impl Sampler {
             kd_tube,
             kd_cos,
             kd_lobe,
-            heights,
+            instance_set,
             aligned: None,
         };
         if exact_sums && sampler.nodes.len() > 1 {

@@ -296,13 +296,14 @@ impl Material<'_> {
     /// below the horizon).
     pub fn brdf(&self, sp: &ShadingPoint, l: &Vec3, v: &Vec3) -> [f64; 3] {
         let pair = DirectionPair::new(&FibreFrame::from_azimuth(0.0), &sp.local(l), &sp.local(v));
-        let basis = self.basis(sp, &pair);
-        let factor = self.factor(&pair);
-        let mut out = [0.0; 3];
-        for (c, o) in out.iter_mut().enumerate() {
-            *o = basis.brdf(&sp.albedos, c.min(self.channels - 1)) * factor[c];
-        }
-        out
+        self.brdf_of(sp, &pair, &self.basis(sp, &pair))
+    }
+
+    /// The BRDF per channel (1/sr) of `basis` at a shading point's `pair`: its albedos, the
+    /// correction's factor, a grey result's channel repeated.
+    pub fn brdf_of(&self, sp: &ShadingPoint, pair: &DirectionPair, basis: &Basis) -> [f64; 3] {
+        let factor = self.factor(pair);
+        std::array::from_fn(|c| basis.brdf(&sp.albedos, c.min(self.channels - 1)) * factor[c])
     }
 
     /// The correction's factor per channel at a pair (1 without one).

@@ -27,7 +27,7 @@
 //! that spread adds to each sample's; `fibrefit bench sampling` measures both, and the cost per
 //! unit of variance, side by side with the exact sampler. With a texel's own height (a map),
 //! only the direction is drawn. The `reference` has no instances (it integrates the spread and
-//! heights adaptively): its instance is the whole model.
+//! heights adaptively): its one instance is the whole model, sampled by the whole mixture.
 
 use super::directions::{rescale, turn, unturn};
 use super::{evaluate_in_groups, Draw, Sample, Sampler, EVAL_PAIRS};
@@ -47,13 +47,6 @@ pub struct Instance {
 }
 
 impl Instance {
-    /// The aligned fibres (no turn) at the model's own height.
-    pub const ALIGNED: Instance = Instance {
-        cos: 1.0,
-        sin: 0.0,
-        height: None,
-    };
-
     /// `pair` as the instance's turned fibres see it.
     pub fn turned(&self, pair: &DirectionPair) -> DirectionPair {
         DirectionPair {
@@ -75,26 +68,41 @@ impl Instance {
     }
 }
 
-/// What the sampler draws instances from: its spread nodes' cumulative weights (the sampler's
-/// own) and the histogram's heights with theirs.
-#[derive(Clone, Debug, Default)]
-pub(super) struct Heights {
-    /// (height, weight) of each bin, weights summing to 1; empty where the model has no
-    /// histogram to draw from (one height, or none).
-    pub bins: Vec<(f64, f64)>,
-    /// Cumulative weights (the last is 1).
-    pub cumulative: Vec<f64>,
+/// The instances a sampler draws from: the spread's nodes (cos delta, sin delta, weight) and
+/// the histogram's (height, weight) bins, each with cumulative weights.
+#[derive(Clone, Debug)]
+pub(super) struct Instances {
+    nodes: Vec<(f64, f64, f64)>,
+    node_cumulative: Vec<f64>,
+    /// Weights summing to 1; empty where the model has no histogram to draw from (one height,
+    /// or none).
+    heights: Vec<(f64, f64)>,
+    height_cumulative: Vec<f64>,
 }
 
-impl Heights {
-    pub fn new(bins: Vec<(f64, f64)>) -> Self {
-        if bins.len() < 2 {
-            return Self::default();
+impl Instances {
+    /// The instances of `nodes` (weights summing to 1) times the histogram `bins` (weights in
+    /// any scale; fewer than two: none drawn).
+    pub fn new(nodes: Vec<(f64, f64, f64)>, bins: Vec<(f64, f64)>) -> Self {
+        let node_cumulative = cumulative(nodes.iter().map(|n| n.2));
+        let heights: Vec<(f64, f64)> = if bins.len() < 2 {
+            Vec::new()
+        } else {
+            let total: f64 = bins.iter().map(|b| b.1).sum();
+            bins.into_iter().map(|(h, w)| (h, w / total)).collect()
+        };
+        let height_cumulative = cumulative(heights.iter().map(|b| b.1));
+        Self {
+            nodes,
+            node_cumulative,
+            heights,
+            height_cumulative,
         }
-        let total: f64 = bins.iter().map(|b| b.1).sum();
-        let bins: Vec<(f64, f64)> = bins.into_iter().map(|(h, w)| (h, w / total)).collect();
-        let cumulative = cumulative(bins.iter().map(|b| b.1));
-        Self { bins, cumulative }
+    }
+
+    /// One instance: the whole model (the reference's adaptive spread and heights).
+    pub fn whole() -> Self {
+        Self::new(vec![(1.0, 0.0, 1.0)], Vec::new())
     }
 }
 
@@ -126,14 +134,15 @@ impl Sampler {
     /// How many instances the material has (spread nodes times histogram heights): 1 where
     /// the exact evaluation is already one instance.
     pub fn instances(&self) -> usize {
-        self.nodes.len() * self.heights.bins.len().max(1)
+        let set = &self.instance_set;
+        set.nodes.len() * set.heights.len().max(1)
     }
 
     /// [`Sampler::instances`] where draws come with a texel's own height (`texel_height`: a
     /// map), which fixes the height: the spread's nodes only.
     pub fn instances_given(&self, texel_height: bool) -> usize {
         if texel_height {
-            self.nodes.len()
+            self.instance_set.nodes.len()
         } else {
             self.instances()
         }
@@ -143,11 +152,11 @@ impl Sampler {
     /// then (with `u` rescaled within the node) a histogram height with the histogram's
     /// weights, unless `height` (a texel's, from a map) fixes it.
     pub fn instance(&self, u: f64, height: Option<f64>) -> Instance {
-        let (j, r) = pick(&self.cumulative, u.clamp(0.0, super::ONE_BELOW));
-        let (cos, sin, _) = self.nodes[j];
+        let set = &self.instance_set;
+        let (j, r) = pick(&set.node_cumulative, u.clamp(0.0, super::ONE_BELOW));
+        let (cos, sin, _) = set.nodes[j];
         let height = height.or_else(|| {
-            (!self.heights.bins.is_empty())
-                .then(|| self.heights.bins[pick(&self.heights.cumulative, r).0].0)
+            (!set.heights.is_empty()).then(|| set.heights[pick(&set.height_cumulative, r).0].0)
         });
         Instance { cos, sin, height }
     }
@@ -156,12 +165,13 @@ impl Sampler {
     /// texel height): the terms of the exact evaluation, in the spread's node order, heights
     /// within a node.
     pub fn instances_with_probabilities(&self) -> Vec<(Instance, f64)> {
+        let set = &self.instance_set;
         let mut all = Vec::with_capacity(self.instances());
-        for &(cos, sin, nu) in &self.nodes {
-            if self.heights.bins.is_empty() {
+        for &(cos, sin, nu) in &set.nodes {
+            if set.heights.is_empty() {
                 all.push((Instance { cos, sin, height: None }, nu));
             }
-            for &(h, w) in &self.heights.bins {
+            for &(h, w) in &set.heights {
                 all.push((Instance { cos, sin, height: Some(h) }, nu * w));
             }
         }
